@@ -1,0 +1,249 @@
+#include "common/cmd/scene_commands.h"
+
+#include <cstdio>
+#include <iostream>
+
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include "common/core/error.h"
+#include "common/core/log.h"
+#include "common/core/parse.h"
+#include "common/core/timer.h"
+#include "common/generate/generate.h"
+#include "common/generate/path.h"
+#include "common/generate/scene_spec.h"
+#include "common/raycast/ray_query.h"
+#include "common/raycast/sampled_visibility.h"
+#include "common/scene/effects.h"
+
+namespace vistream {
+namespace {
+
+using nlohmann::json;
+
+json boxJson(const Box3d& b) {
+  return json{{"min", {b.lo.x, b.lo.y, b.lo.z}}, {"max", {b.hi.x, b.hi.y, b.hi.z}}};
+}
+
+void printRow(const std::string& key, const std::string& value) {
+  fmt::print("  {:<28} {}\n", key, value);
+}
+
+int cmdGenerate(const std::string& type, const std::string& preset, uint64_t seed,
+                const std::string& out, bool asJson) {
+  std::string chosen = type;
+  if (type == "city") chosen = preset.empty() ? "city1" : preset;
+  else if (!preset.empty()) throwInputError("--preset applies to 'city' only, not '{}'", type);
+  Stopwatch clock;
+  const PolygonScene polygons = generate(chosen, seed);
+  const double genMs = clock.ms();
+  clock.reset();
+  writeObj(polygons, out);
+  const double writeMs = clock.ms();
+  const Scene scene = toScene(polygons);
+  const Box3d b = scene.fileBounds();
+  if (asJson) {
+    std::cout << json{{"type", chosen}, {"seed", seed}, {"out", out}, {"objects", scene.objects.size()},
+                      {"faces", scene.faceCount}, {"triangles", scene.triangleCount()},
+                      {"bounds", boxJson(b)}, {"generate_ms", genMs}, {"write_ms", writeMs}}
+                     .dump(2)
+              << "\n";
+  } else {
+    fmt::print("generated {} (seed {}) -> {}\n", chosen, seed, out);
+    printRow("objects", fmt::format("{}", scene.objects.size()));
+    printRow("faces", fmt::format("{}", scene.faceCount));
+    printRow("triangles", fmt::format("{}", scene.triangleCount()));
+    printRow("size (m)", fmt::format("{:.1f} x {:.1f} x {:.1f}", b.extent().x, b.extent().y, b.extent().z));
+    printRow("generate / write (ms)", fmt::format("{:.1f} / {:.1f}", genMs, writeMs));
+  }
+  return 0;
+}
+
+struct StaticWorld {
+  FlatTriangles triangles;
+  std::unique_ptr<RayQuery> rays;
+};
+
+StaticWorld buildStaticWorld(const Scene& scene) {
+  StaticWorld w;
+  w.triangles = flattenScene(scene, /*staticOnly=*/true);
+  w.rays = makeEmbreeRayQuery(w.triangles);
+  return w;
+}
+
+int cmdInfo(const std::string& spec, bool asJson) {
+  Stopwatch clock;
+  const Scene scene = openScene(spec);
+  const double loadMs = clock.ms();
+  const StaticWorld world = buildStaticWorld(scene);
+  const FreeSpace fs = FreeSpace::build(*world.rays, scene.bounds());
+  const SceneEffects effects = decideEffects(scene, *world.rays, fs);
+  const Box3d b = scene.fileBounds();
+  size_t dynamicTris = 0;
+  for (const Object& o : scene.objects) if (o.dynamic) dynamicTris += o.mesh.triangleCount();
+
+  if (asJson) {
+    json objects = json::array();
+    for (const Object& o : scene.objects)
+      objects.push_back({{"name", o.name}, {"triangles", o.mesh.triangleCount()}, {"dynamic", o.dynamic}});
+    json decisions = json::array();
+    for (const auto& d : effects.decisions)
+      decisions.push_back({{"effect", d.effect}, {"enabled", d.enabled}, {"reason", d.reason}});
+    std::cout << json{{"scene", scene.name},
+                      {"objects", scene.objects.size()},
+                      {"dynamic_objects", scene.dynamicObjectCount()},
+                      {"faces", scene.faceCount},
+                      {"triangles", scene.triangleCount()},
+                      {"degenerate_triangles", scene.diagnostics.degenerateTriangles},
+                      {"bounds", boxJson(b)},
+                      {"local_origin", {scene.origin.x, scene.origin.y, scene.origin.z}},
+                      {"materials", scene.materials.size()},
+                      {"skins", scene.skins.size()},
+                      {"animations", scene.animations.size()},
+                      {"free_space", {{"cell_size", fs.cellSize()}, {"walkable_columns", fs.walkableCount()},
+                                      {"open_sky_fraction", effects.openSkyFraction}}},
+                      {"effects", decisions},
+                      {"object_list", objects},
+                      {"load_ms", loadMs}}
+                     .dump(2)
+              << "\n";
+    return 0;
+  }
+  fmt::print("scene {}\n", scene.name);
+  printRow("objects", fmt::format("{} ({} dynamic, {} triangles)", scene.objects.size(), scene.dynamicObjectCount(), dynamicTris));
+  printRow("faces", fmt::format("{}", scene.faceCount));
+  printRow("triangles", fmt::format("{}", scene.triangleCount()));
+  printRow("degenerate triangles", fmt::format("{}", scene.diagnostics.degenerateTriangles));
+  printRow("bounds min", fmt::format("{:.3f}, {:.3f}, {:.3f}", b.lo.x, b.lo.y, b.lo.z));
+  printRow("bounds max", fmt::format("{:.3f}, {:.3f}, {:.3f}", b.hi.x, b.hi.y, b.hi.z));
+  printRow("size (m)", fmt::format("{:.1f} x {:.1f} x {:.1f}", b.extent().x, b.extent().y, b.extent().z));
+  printRow("materials / skins / anims", fmt::format("{} / {} / {}", scene.materials.size(), scene.skins.size(), scene.animations.size()));
+  printRow("free space", fmt::format("{} columns of {:.2f} m", fs.walkableCount(), fs.cellSize()));
+  printRow("load time (ms)", fmt::format("{:.1f}", loadMs));
+  fmt::print("effects the scene calls for:\n");
+  for (const auto& d : effects.decisions)
+    fmt::print("  {:<24} {:<4} {}\n", d.effect, d.enabled ? "on" : "off", d.reason);
+  return 0;
+}
+
+int cmdPath(const std::string& spec, double speed, size_t frames, uint64_t seed, double fps,
+            const std::string& out) {
+  if (frames == 0) throwInputError("--frames must be at least 1");
+  if (!(fps > 0.0)) throwInputError("--fps must be positive");
+  const Scene scene = openScene(spec);
+  const StaticWorld world = buildStaticWorld(scene);
+  const FreeSpace fs = FreeSpace::build(*world.rays, scene.bounds());
+  PathOptions options;
+  options.speed = speed;
+  options.frames = frames;
+  options.seed = seed;
+  options.fps = fps;
+  const auto samples = generatePath(scene, fs, options);
+  writePath(samples, out);
+  spdlog::info("wrote {} frames ({:.1f} s at {:.2f} m/s) to {}", samples.size(),
+               samples.back().t, kWalkingSpeed * speed, out);
+  return 0;
+}
+
+int cmdVisible(const std::string& spec, const std::string& cellText, size_t points, int res,
+               uint64_t seed, bool asJson) {
+  const auto v = parseNumberList(cellText, 6, "--cell");
+  if (v[0] > v[3] || v[1] > v[4] || v[2] > v[5])
+    throwInputError("--cell: expected x0,y0,z0,x1,y1,z1 with x0<=x1, y0<=y1, z0<=z1, got '{}'", cellText);
+  if (points == 0) throwInputError("--points must be at least 1");
+  if (res < 1 || res > 4096) throwInputError("--res must be in 1..4096, got {}", res);
+  const Scene scene = openScene(spec);
+  const StaticWorld world = buildStaticWorld(scene);
+  const Box3f cell(scene.toLocal({v[0], v[1], v[2]}), scene.toLocal({v[3], v[4], v[5]}));
+  SampledVisibilityOptions options;
+  options.points = points;
+  options.resolution = res;
+  options.seed = seed;
+  const SampledVisibility vis = sampleVisibleFaces(*world.rays, world.triangles, cell, options);
+  if (asJson) {
+    std::cout << json{{"faces", vis.faces},
+                      {"stats", {{"viewpoints", vis.viewpoints}, {"inside_solid", vis.insideSolid},
+                                 {"rays", vis.rays}, {"hits", vis.hits}, {"visible_faces", vis.faces.size()},
+                                 {"total_faces", scene.faceCount}, {"time_ms", vis.timeMs}}}}
+                     .dump()
+              << "\n";
+  } else {
+    fmt::print("{} of {} faces visible from {} viewpoints ({} inside solid skipped), {} rays in {:.1f} ms\n",
+               vis.faces.size(), scene.faceCount, vis.viewpoints, vis.insideSolid, vis.rays, vis.timeMs);
+    fmt::print("{}\n", fmt::join(vis.faces, " "));
+  }
+  return 0;
+}
+
+}  // namespace
+
+int runSceneTool(int argc, char** argv) {
+  CLI::App app{"vistream-scene: generate, inspect and sample scenes.\n"
+               "A SCENE is a file (.obj, .gltf, .glb, .json manifest) or a built-in name "
+               "(city1, city2, bigcity, interior, terrain; 'city1@SEED' picks a seed)."};
+  app.require_subcommand(1);
+  std::string logLevel;
+  app.add_option("--log-level", logLevel, "trace, debug, info, warn, error, critical, off");
+
+  auto* gen = app.add_subcommand("generate", "write a procedural scene as OBJ");
+  std::string genType, preset, out;
+  uint64_t seed = 1;
+  bool asJson = false;
+  gen->add_option("type", genType, "city, city1, city2, bigcity, interior, terrain")->required();
+  gen->add_option("--preset", preset, "for 'city': city1 (dense) or city2 (sparse)");
+  gen->add_option("--seed", seed, "random seed (same seed, same scene)");
+  gen->add_option("--out,-o", out, "output OBJ file")->required();
+  gen->add_flag("--json", asJson, "print statistics as JSON");
+
+  auto* info = app.add_subcommand("info", "objects, faces, bounds and the effects a scene calls for");
+  std::string scene;
+  info->add_option("scene", scene, "SCENE")->required();
+  info->add_flag("--json", asJson, "one JSON object on stdout");
+
+  auto* path = app.add_subcommand("path", "generate a walkthrough path through the free space");
+  double speed = 1.0, fps = 30.0;
+  size_t frames = 300;
+  path->add_option("--scene", scene, "SCENE")->required();
+  path->add_option("--speed", speed, "relative speed, 1.0 = walking (1.4 m/s)");
+  path->add_option("--frames", frames, "number of frames");
+  path->add_option("--fps", fps, "frames per second (default 30)");
+  path->add_option("--seed", seed, "random seed");
+  path->add_option("--out,-o", out, "output CSV (t,x,y,z,yaw_deg,pitch_deg)")->required();
+
+  auto* visible = app.add_subcommand("visible", "sampled ground truth: faces seen from a view cell");
+  std::string cell;
+  size_t points = 32;
+  int res = 128;
+  visible->add_option("--scene", scene, "SCENE")->required();
+  visible->add_option("--cell", cell, "x0,y0,z0,x1,y1,z1 in file coordinates")->required();
+  visible->add_option("--points", points, "viewpoints (8 corners, 6 face centres, centre, then random)");
+  visible->add_option("--res", res, "rays per cube-map face side");
+  visible->add_option("--seed", seed, "seed for the random viewpoints");
+  visible->add_flag("--json", asJson, "one JSON object on stdout: faces, stats");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : 2;
+  }
+  try {
+    initLogging(logLevel);
+    if (*gen) return cmdGenerate(genType, preset, seed, out, asJson);
+    if (*info) return cmdInfo(scene, asJson);
+    if (*path) return cmdPath(scene, speed, frames, seed, fps, out);
+    if (*visible) return cmdVisible(scene, cell, points, res, seed, asJson);
+  } catch (const InputError& e) {
+    std::fprintf(stderr, "vistream-scene: error: %s\n", e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "vistream-scene: error: %s\n", e.what());
+    return 1;
+  }
+  return 2;
+}
+
+}  // namespace vistream

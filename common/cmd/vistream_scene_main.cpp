@@ -1,1 +1,3 @@
-int main() { return 0; }
+#include "common/cmd/scene_commands.h"
+
+int main(int argc, char** argv) { return vistream::runSceneTool(argc, argv); }

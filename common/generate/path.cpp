@@ -1,0 +1,226 @@
+#include "common/generate/path.h"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <deque>
+#include <fstream>
+#include <numbers>
+#include <random>
+#include <sstream>
+
+#include <fmt/format.h>
+
+#include "common/core/error.h"
+
+namespace vistream {
+namespace {
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+double uniform01(std::mt19937_64& rng) { return double(rng() >> 11) * 0x1.0p-53; }
+
+// Shortest 8-connected grid path (BFS with diagonal steps only where both
+// side columns are walkable, so paths never cut a corner).
+std::vector<glm::ivec2> gridPath(const FreeSpace& fs, glm::ivec2 from, glm::ivec2 to) {
+  const int nx = fs.columnsX(), nz = fs.columnsZ();
+  std::vector<int32_t> parent(size_t(nx) * size_t(nz), -1);
+  auto idx = [nx](glm::ivec2 c) { return size_t(c.y) * size_t(nx) + size_t(c.x); };
+  std::deque<glm::ivec2> queue{from};
+  parent[idx(from)] = int32_t(idx(from));
+  const int di[8] = {1, -1, 0, 0, 1, 1, -1, -1}, dk[8] = {0, 0, 1, -1, 1, -1, 1, -1};
+  while (!queue.empty()) {
+    const glm::ivec2 c = queue.front();
+    queue.pop_front();
+    if (c == to) break;
+    for (int d = 0; d < 8; ++d) {
+      const glm::ivec2 n{c.x + di[d], c.y + dk[d]};
+      if (!fs.walkable(n.x, n.y) || parent[idx(n)] >= 0) continue;
+      if (std::abs(fs.floorHeight(n.x, n.y) - fs.floorHeight(c.x, c.y)) > fs.maxStep()) continue;
+      if (d >= 4 && (!fs.walkable(c.x + di[d], c.y) || !fs.walkable(c.x, c.y + dk[d]))) continue;
+      parent[idx(n)] = int32_t(idx(c));
+      queue.push_back(n);
+    }
+  }
+  std::vector<glm::ivec2> path;
+  if (parent[idx(to)] < 0) return path;
+  for (size_t c = idx(to);; c = size_t(parent[c])) {
+    path.emplace_back(int(c % size_t(nx)), int(c / size_t(nx)));
+    if (c == idx(from)) break;
+  }
+  std::reverse(path.begin(), path.end());
+  return path;
+}
+
+// True if every column the segment passes over is walkable (sampled at a
+// quarter of the column size, with the viewer radius already in the grid).
+bool lineOfSight(const FreeSpace& fs, glm::vec2 a, glm::vec2 b) {
+  const float len = glm::length(b - a);
+  const int steps = std::max(1, int(std::ceil(len / (0.25f * fs.cellSize()))));
+  float prevFloor = *fs.floorAt(a);
+  for (int s = 1; s <= steps; ++s) {
+    const auto f = fs.floorAt(a + (b - a) * (float(s) / float(steps)));
+    if (!f || std::abs(*f - prevFloor) > fs.maxStep()) return false;
+    prevFloor = *f;
+  }
+  return true;
+}
+
+}  // namespace
+
+glm::dvec3 viewDirection(double yawDeg, double pitchDeg) {
+  const double y = yawDeg * kDeg, p = pitchDeg * kDeg;
+  return {-std::sin(y) * std::cos(p), std::sin(p), -std::cos(y) * std::cos(p)};
+}
+
+std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& fs,
+                                     const PathOptions& options) {
+  if (fs.walkableCount() == 0)
+    throwInputError("scene '{}' has no free space to walk through", scene.name);
+  if (!(options.speed > 0.0) || !std::isfinite(options.speed))
+    throwInputError("speed must be a positive number, got {}", options.speed);
+  const std::vector<glm::ivec2> columns = fs.walkableColumns();
+  std::mt19937_64 rng(options.seed);
+  auto randomColumn = [&] { return columns[size_t(uniform01(rng) * double(columns.size())) % columns.size()]; };
+
+  const double step = kWalkingSpeed * options.speed / options.fps;  // metres per frame
+  std::vector<PathSample> out;
+  out.reserve(options.frames);
+  glm::ivec2 at = randomColumn();
+  glm::dvec2 pos = glm::dvec2(fs.columnCentre(at.x, at.y));
+  double yaw = uniform01(rng) * 360.0;
+  std::vector<glm::dvec2> waypoints;
+  size_t nextWaypoint = 0;
+  int failures = 0;
+
+  while (out.size() < options.frames) {
+    if (nextWaypoint >= waypoints.size()) {
+      // A new goal at least a few metres away, reached by a smoothed shortest path.
+      const glm::ivec2 goal = randomColumn();
+      const glm::ivec2 from = fs.columnOf(glm::vec2(pos));
+      std::vector<glm::ivec2> grid = gridPath(fs, fs.walkable(from.x, from.y) ? from : at, goal);
+      if (grid.size() < 2) {
+        if (++failures > 1000) throwInputError("scene '{}': no room to walk in its free space", scene.name);
+        continue;
+      }
+      waypoints.clear();
+      size_t anchor = 0;
+      waypoints.push_back(glm::dvec2(fs.columnCentre(grid[0].x, grid[0].y)));
+      while (anchor + 1 < grid.size()) {
+        size_t far = anchor + 1;
+        const glm::vec2 a = fs.columnCentre(grid[anchor].x, grid[anchor].y);
+        while (far + 1 < grid.size() &&
+               lineOfSight(fs, a, fs.columnCentre(grid[far + 1].x, grid[far + 1].y)))
+          ++far;
+        waypoints.push_back(glm::dvec2(fs.columnCentre(grid[far].x, grid[far].y)));
+        anchor = far;
+      }
+      nextWaypoint = 1;
+      at = goal;
+    }
+    // Advance one frame along the polyline.
+    double remaining = step;
+    while (remaining > 0.0 && nextWaypoint < waypoints.size()) {
+      const glm::dvec2 d = waypoints[nextWaypoint] - pos;
+      const double len = glm::length(d);
+      if (len <= remaining) {
+        pos = waypoints[nextWaypoint++];
+        remaining -= len;
+      } else {
+        pos += d * (remaining / len);
+        remaining = 0.0;
+      }
+    }
+    // The gaze turns towards the walking direction at a bounded rate.
+    if (nextWaypoint < waypoints.size()) {
+      const glm::dvec2 d = waypoints[nextWaypoint] - pos;
+      if (glm::length(d) > 1e-9) {
+        const double target = std::atan2(-d.x, -d.y) / kDeg;
+        double delta = std::remainder(target - yaw, 360.0);
+        const double maxTurn = options.maxTurnDegPerS / options.fps;
+        yaw += std::clamp(delta, -maxTurn, maxTurn);
+        yaw = std::remainder(yaw, 360.0);
+      }
+    }
+    const auto floor = fs.floorAt(glm::vec2(pos));
+    const glm::ivec2 c = fs.columnOf(glm::vec2(pos));
+    const double y = floor ? *floor : fs.floorHeight(std::clamp(c.x, 0, fs.columnsX() - 1), std::clamp(c.y, 0, fs.columnsZ() - 1));
+    PathSample s;
+    s.t = double(out.size()) / options.fps;
+    s.position = scene.toFile(glm::vec3(float(pos.x), float(y + options.eyeHeight), float(pos.y)));
+    s.yawDeg = yaw;
+    s.pitchDeg = 0.0;
+    out.push_back(s);
+  }
+  return out;
+}
+
+std::vector<PathSample> readPath(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in) throwInputError("{}: cannot open path file", path.string());
+  std::string line;
+  size_t lineNo = 0;
+  std::vector<PathSample> out;
+  bool header = false;
+  while (std::getline(in, line)) {
+    ++lineNo;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.find_first_not_of(" \t") == std::string::npos) continue;
+    if (!header) {
+      std::string compact;
+      for (char ch : line) if (ch != ' ' && ch != '\t') compact += ch;
+      if (compact != "t,x,y,z,yaw_deg,pitch_deg")
+        throwInputError("{}:{}: expected the header 't,x,y,z,yaw_deg,pitch_deg', got '{}'",
+                        path.string(), lineNo, line);
+      header = true;
+      continue;
+    }
+    double v[6];
+    size_t field = 0, pos = 0;
+    while (field < 6) {
+      size_t comma = line.find(',', pos);
+      std::string_view tok = std::string_view(line).substr(pos, comma == std::string::npos ? std::string::npos : comma - pos);
+      while (!tok.empty() && (tok.front() == ' ' || tok.front() == '\t')) tok.remove_prefix(1);
+      while (!tok.empty() && (tok.back() == ' ' || tok.back() == '\t')) tok.remove_suffix(1);
+      const auto [ptr, ec] = std::from_chars(tok.data(), tok.data() + tok.size(), v[field]);
+      if (ec != std::errc() || ptr != tok.data() + tok.size() || !std::isfinite(v[field]))
+        throwInputError("{}:{}: field {} ('{}') is not a finite number", path.string(), lineNo,
+                        field + 1, tok);
+      ++field;
+      if (comma == std::string::npos) break;
+      pos = comma + 1;
+      if (field == 6)
+        throwInputError("{}:{}: more than 6 fields", path.string(), lineNo);
+    }
+    if (field != 6)
+      throwInputError("{}:{}: {} fields, expected 6 (t,x,y,z,yaw_deg,pitch_deg)", path.string(), lineNo, field);
+    if (!out.empty() && v[0] < out.back().t)
+      throwInputError("{}:{}: t goes backwards ({} after {})", path.string(), lineNo, v[0], out.back().t);
+    if (std::abs(v[5]) > 90.0)
+      throwInputError("{}:{}: pitch {} is outside [-90, 90] (the viewer is upright)", path.string(), lineNo, v[5]);
+    out.push_back(PathSample{v[0], {v[1], v[2], v[3]}, v[4], v[5]});
+  }
+  if (!header) throwInputError("{}: empty path file (no header)", path.string());
+  if (out.empty()) throwInputError("{}: path has no samples", path.string());
+  return out;
+}
+
+void writePath(const std::vector<PathSample>& samples, const std::filesystem::path& path) {
+  fmt::memory_buffer buf;
+  fmt::format_to(std::back_inserter(buf), "t,x,y,z,yaw_deg,pitch_deg\n");
+  for (const PathSample& s : samples)
+    fmt::format_to(std::back_inserter(buf), "{:.6f},{:.6f},{:.6f},{:.6f},{:.4f},{:.4f}\n", s.t,
+                   s.position.x, s.position.y, s.position.z, s.yawDeg, s.pitchDeg);
+  const std::filesystem::path tmp = path.string() + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) throwInputError("{}: cannot open for writing", tmp.string());
+    out.write(buf.data(), std::streamsize(buf.size()));
+    if (!out) throwInputError("{}: write failed", tmp.string());
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) throwInputError("{}: cannot rename into place: {}", path.string(), ec.message());
+}
+
+}  // namespace vistream

@@ -1,0 +1,105 @@
+#include "common/raycast/sampled_visibility.h"
+
+#include <algorithm>
+#include <mutex>
+#include <random>
+
+#include <tbb/parallel_for.h>
+
+#include "common/core/timer.h"
+
+namespace vistream {
+
+std::vector<glm::vec3> cellViewpoints(const Box3f& cell, size_t points, uint64_t seed) {
+  std::vector<glm::vec3> out;
+  const glm::vec3 lo = cell.lo, hi = cell.hi, c = cell.center();
+  for (int i = 0; i < 8; ++i)
+    out.emplace_back((i & 1) ? hi.x : lo.x, (i & 2) ? hi.y : lo.y, (i & 4) ? hi.z : lo.z);
+  out.emplace_back(lo.x, c.y, c.z);
+  out.emplace_back(hi.x, c.y, c.z);
+  out.emplace_back(c.x, lo.y, c.z);
+  out.emplace_back(c.x, hi.y, c.z);
+  out.emplace_back(c.x, c.y, lo.z);
+  out.emplace_back(c.x, c.y, hi.z);
+  out.push_back(c);
+  std::mt19937_64 rng(seed);
+  auto u = [&] { return float(double(rng() >> 11) * 0x1.0p-53); };
+  while (out.size() < points) out.push_back(lo + (hi - lo) * glm::vec3(u(), u(), u()));
+  if (out.size() > points && points >= 1) out.resize(std::max<size_t>(points, 1));
+  return out;
+}
+
+bool insideSolid(const RayQuery& rays, const glm::vec3& p) {
+  // Majority vote over the six axis rays: a box resting on the ground has its
+  // bottom face coincide with the ground, so one ray may see a front face at
+  // a tie even from inside.
+  static const glm::vec3 dirs[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  int back = 0, front = 0;
+  for (const glm::vec3& d : dirs) {
+    const Hit h = rays.firstHit(Ray{p, d, 0.0f, std::numeric_limits<float>::infinity()});
+    if (!h.valid()) continue;
+    if (h.t == 0.0f) return false;  // on a surface: outside by convention
+    (glm::dot(h.normal, d) > 0.0f ? back : front) += 1;
+  }
+  return back > front;
+}
+
+SampledVisibility sampleVisibleFaces(const RayQuery& rays, const FlatTriangles& triangles,
+                                     const Box3f& cell, const SampledVisibilityOptions& options) {
+  Stopwatch clock;
+  SampledVisibility result;
+  const std::vector<glm::vec3> points = cellViewpoints(cell, options.points, options.seed);
+  const int res = std::max(1, options.resolution);
+  std::vector<uint8_t> seen(triangles.size(), 0);
+  std::mutex merge;  // guards result counters while merging per-viewpoint results
+
+  tbb::parallel_for(size_t(0), points.size(), [&](size_t pi) {
+    const glm::vec3 origin = points[pi];
+    if (insideSolid(rays, origin)) {
+      std::lock_guard lock(merge);
+      ++result.insideSolid;
+      return;
+    }
+    std::vector<Ray> batch(size_t(res) * size_t(res));
+    std::vector<Hit> hits(batch.size());
+    std::vector<uint32_t> local;
+    uint64_t hitCount = 0;
+    for (int face = 0; face < 6; ++face) {
+      const int axis = face / 2;
+      const float sign = (face & 1) ? -1.0f : 1.0f;
+      for (int j = 0; j < res; ++j)
+        for (int i = 0; i < res; ++i) {
+          const float s = (float(i) + 0.5f) / float(res) * 2.0f - 1.0f;
+          const float t = (float(j) + 0.5f) / float(res) * 2.0f - 1.0f;
+          glm::vec3 d;
+          d[axis] = sign;
+          d[(axis + 1) % 3] = s;
+          d[(axis + 2) % 3] = t;
+          batch[size_t(j) * size_t(res) + size_t(i)] =
+              Ray{origin, d, 0.0f, std::numeric_limits<float>::infinity()};
+        }
+      rays.firstHits(batch, hits);
+      for (const Hit& h : hits)
+        if (h.valid()) {
+          ++hitCount;
+          local.push_back(h.triangle);
+        }
+    }
+    std::sort(local.begin(), local.end());
+    local.erase(std::unique(local.begin(), local.end()), local.end());
+    std::lock_guard lock(merge);
+    for (uint32_t tri : local) seen[tri] = 1;
+    ++result.viewpoints;
+    result.rays += uint64_t(batch.size()) * 6;
+    result.hits += hitCount;
+  });
+
+  for (size_t t = 0; t < triangles.size(); ++t)
+    if (seen[t]) result.faces.push_back(triangles.faceIds[t]);
+  std::sort(result.faces.begin(), result.faces.end());
+  result.faces.erase(std::unique(result.faces.begin(), result.faces.end()), result.faces.end());
+  result.timeMs = clock.ms();
+  return result;
+}
+
+}  // namespace vistream

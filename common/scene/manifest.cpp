@@ -1,0 +1,185 @@
+#include "common/scene/manifest.h"
+
+#include <fstream>
+
+#include <nlohmann/json.hpp>
+
+#include "common/core/error.h"
+#include "common/scene/scene_loader.h"
+
+namespace vistream {
+namespace {
+
+using nlohmann::json;
+
+glm::vec3 readVec3(const json& j, const std::string& where) {
+  if (!j.is_array() || j.size() != 3 || !j[0].is_number() || !j[1].is_number() || !j[2].is_number())
+    throwInputError("{}: expected an array of three numbers", where);
+  glm::vec3 v(j[0].get<float>(), j[1].get<float>(), j[2].get<float>());
+  if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
+    throwInputError("{}: numbers must be finite", where);
+  return v;
+}
+
+void rejectUnknownKeys(const json& j, std::initializer_list<const char*> known, const std::string& where) {
+  for (const auto& [key, value] : j.items()) {
+    bool ok = false;
+    for (const char* k : known) ok = ok || key == k;
+    if (!ok) throwInputError("{}: unknown key '{}'", where, key);
+  }
+}
+
+}  // namespace
+
+void appendScene(Scene& scene, Scene part) {
+  if (scene.objects.empty() && scene.faceCount == 0) {
+    const std::string name = scene.name;
+    const Environment env = scene.environment;
+    scene = std::move(part);
+    if (!name.empty()) scene.name = name;
+    scene.environment = env;
+    return;
+  }
+  // New common origin: the centre of both file-space bounds.
+  Box3d all = scene.fileBounds();
+  all.extend(part.fileBounds());
+  const glm::dvec3 origin = all.empty() ? scene.origin : glm::floor(all.center());
+  auto rebase = [&](Scene& s) {
+    const glm::dvec3 shift = s.origin - origin;
+    for (Object& o : s.objects)
+      for (glm::vec3& p : o.mesh.positions) p = glm::vec3(glm::dvec3(p) + shift);
+    s.origin = origin;
+  };
+  rebase(scene);
+  rebase(part);
+  const uint32_t faceOffset = scene.faceCount;
+  const uint32_t materialOffset = uint32_t(scene.materials.size());
+  const int32_t skinOffset = int32_t(scene.skins.size());
+  const int32_t nodeOffset = int32_t(scene.nodes.size());
+  for (Material& m : part.materials) scene.materials.push_back(std::move(m));
+  for (Node n : part.nodes) {
+    if (n.parent >= 0) n.parent += nodeOffset;
+    scene.nodes.push_back(std::move(n));
+  }
+  for (Skin s : part.skins) {
+    for (int32_t& j : s.joints) j += nodeOffset;
+    scene.skins.push_back(std::move(s));
+  }
+  for (Animation a : part.animations) {
+    for (auto& c : a.channels) c.node += nodeOffset;
+    scene.animations.push_back(std::move(a));
+  }
+  for (Object& o : part.objects) {
+    for (uint32_t& f : o.mesh.faceIds) f += faceOffset;
+    for (uint32_t& m : o.mesh.materials) m += materialOffset;
+    if (o.skin >= 0) o.skin += skinOffset;
+    scene.objects.push_back(std::move(o));
+  }
+  for (auto& s : part.sources) scene.sources.push_back(std::move(s));
+  for (auto& w : part.diagnostics.warnings) scene.diagnostics.warnings.push_back(std::move(w));
+  scene.faceCount = faceOffset + part.faceCount;
+  finalizeScene(scene);
+}
+
+Scene loadManifest(const std::filesystem::path& path) {
+  const std::string file = path.string();
+  std::ifstream in(path);
+  if (!in) throwInputError("{}: cannot open manifest", file);
+  json j;
+  try {
+    j = json::parse(in);
+  } catch (const json::parse_error& e) {
+    throwInputError("{}: not valid JSON: {}", file, e.what());
+  }
+  if (!j.is_object()) throwInputError("{}: the manifest must be a JSON object", file);
+  rejectUnknownKeys(j, {"name", "geometry", "environment", "near_field_radius"}, file);
+
+  Scene scene;
+  scene.name = j.contains("name") && j["name"].is_string() ? j["name"].get<std::string>() : path.stem().string();
+  const std::filesystem::path dir = path.parent_path();
+
+  if (j.contains("near_field_radius")) {
+    const json& r = j["near_field_radius"];
+    if (!r.is_number() || !(r.get<double>() > 0.0))
+      throwInputError("{}: near_field_radius must be a positive number", file);
+    scene.environment.nearFieldRadius = r.get<float>();
+  }
+  if (j.contains("environment")) {
+    const json& e = j["environment"];
+    const std::string where = file + ": environment";
+    if (!e.is_object()) throwInputError("{}: must be an object", where);
+    rejectUnknownKeys(e, {"hdr", "sky", "sky_color"}, where);
+    if (e.contains("hdr")) {
+      if (!e["hdr"].is_string()) throwInputError("{}.hdr: must be a path", where);
+      scene.environment.hdrImage = dir / e["hdr"].get<std::string>();
+      std::error_code ec;
+      if (!std::filesystem::exists(scene.environment.hdrImage, ec))
+        throwInputError("{}.hdr: {}: no such file", where, scene.environment.hdrImage.string());
+    }
+    if (e.contains("sky")) {
+      const std::string sky = e["sky"].is_string() ? e["sky"].get<std::string>() : "";
+      if (sky == "auto") scene.environment.sky = SkyMode::Auto;
+      else if (sky == "open") scene.environment.sky = SkyMode::Open;
+      else if (sky == "none") scene.environment.sky = SkyMode::None;
+      else throwInputError("{}.sky: expected \"auto\", \"open\" or \"none\"", where);
+    }
+    if (e.contains("sky_color")) scene.environment.skyColor = readVec3(e["sky_color"], where + ".sky_color");
+  }
+
+  if (!j.contains("geometry") || !j["geometry"].is_array() || j["geometry"].empty())
+    throwInputError("{}: 'geometry' must be a non-empty array of files", file);
+  const Environment env = scene.environment;
+  size_t index = 0;
+  for (const json& g : j["geometry"]) {
+    const std::string where = fmt::format("{}: geometry[{}]", file, index++);
+    std::string name, relative;
+    bool dynamic = false;
+    glm::vec3 translate(0.0f);
+    double scale = 1.0;
+    if (g.is_string()) {
+      relative = g.get<std::string>();
+    } else if (g.is_object()) {
+      rejectUnknownKeys(g, {"file", "dynamic", "name", "translate", "scale"}, where);
+      if (!g.contains("file") || !g["file"].is_string()) throwInputError("{}: needs a 'file' path", where);
+      relative = g["file"].get<std::string>();
+      if (g.contains("dynamic")) {
+        if (!g["dynamic"].is_boolean()) throwInputError("{}.dynamic: must be true or false", where);
+        dynamic = g["dynamic"].get<bool>();
+      }
+      if (g.contains("name")) {
+        if (!g["name"].is_string()) throwInputError("{}.name: must be a string", where);
+        name = g["name"].get<std::string>();
+      }
+      if (g.contains("translate")) translate = readVec3(g["translate"], where + ".translate");
+      if (g.contains("scale")) {
+        if (!g["scale"].is_number() || !(g["scale"].get<double>() > 0.0))
+          throwInputError("{}.scale: must be a positive number", where);
+        scale = g["scale"].get<double>();
+      }
+    } else {
+      throwInputError("{}: expected a path or an object", where);
+    }
+    const std::filesystem::path geomPath = dir / relative;
+    std::string ext = geomPath.extension().string();
+    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    if (ext == ".json") throwInputError("{}: manifests cannot include manifests", where);
+    Scene part = loadScene(geomPath);
+    if (scale != 1.0 || translate != glm::vec3(0.0f)) {
+      // Place the part: p_file' = p_file * scale + translate, kept in double.
+      const glm::dvec3 newOrigin = part.origin * scale + glm::dvec3(translate);
+      for (Object& o : part.objects)
+        for (glm::vec3& p : o.mesh.positions) p = glm::vec3(glm::dvec3(p) * scale);
+      part.origin = newOrigin;
+      finalizeScene(part);
+    }
+    for (Object& o : part.objects) {
+      if (dynamic) o.dynamic = true;
+      if (!name.empty()) o.name = name + "/" + o.name;
+    }
+    appendScene(scene, std::move(part));
+  }
+  scene.environment = env;
+  return scene;
+}
+
+}  // namespace vistream

@@ -1,0 +1,271 @@
+// OBJ loading: tinyobjloader parses, a line scan of our own validates.
+//
+// tinyobjloader is lenient in ways that would silently corrupt face IDs or
+// geometry: it reads "nan" as 0, drops faces with fewer than three vertices
+// and keeps out-of-range indices. So a first pass over the text records the
+// line of every `v` and `f` statement and rejects what is wrong with a
+// file:line message; tinyobjloader then does the parsing proper (groups,
+// materials, index forms) and the two passes are cross-checked.
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include <spdlog/spdlog.h>
+#include <tiny_obj_loader.h>
+
+#include "common/core/error.h"
+#include "common/scene/scene_loader.h"
+#include "common/scene/triangulate.h"
+
+namespace vistream {
+namespace {
+
+// tinyobjloader stores the vertex count of a face in an unsigned char.
+constexpr size_t kMaxFaceVertices = 255;
+
+bool isSpace(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
+
+struct LineScan {
+  size_t vertexCount = 0;
+  size_t faceCount = 0;
+  std::vector<uint32_t> faceLines;  // 1-based line of each face, in order
+};
+
+// Splits a line into whitespace-separated tokens (views into the line).
+void tokenize(std::string_view line, std::vector<std::string_view>& tokens) {
+  tokens.clear();
+  size_t i = 0;
+  while (i < line.size()) {
+    while (i < line.size() && isSpace(line[i])) ++i;
+    size_t j = i;
+    while (j < line.size() && !isSpace(line[j])) ++j;
+    if (j > i) tokens.push_back(line.substr(i, j - i));
+    i = j;
+  }
+}
+
+LineScan scanLines(std::string_view text, const std::string& name) {
+  LineScan scan;
+  std::vector<std::string_view> tokens;
+  std::vector<long long> pendingIndices;  // positive indices, checked once all vertices are known
+  std::vector<uint32_t> pendingLines;
+  uint32_t lineNo = 0;
+  size_t pos = 0;
+  while (pos < text.size()) {
+    size_t end = text.find('\n', pos);
+    if (end == std::string_view::npos) end = text.size();
+    std::string_view line = text.substr(pos, end - pos);
+    pos = end + 1;
+    ++lineNo;
+    const size_t hash = line.find('#');
+    if (hash != std::string_view::npos) line = line.substr(0, hash);
+    tokenize(line, tokens);
+    if (tokens.empty()) continue;
+    const std::string_view key = tokens[0];
+    if (key == "v") {
+      if (tokens.size() < 4)
+        throwInputError("{}:{}: vertex has {} coordinates, expected 3", name, lineNo,
+                        tokens.size() - 1);
+      for (int k = 1; k <= 3; ++k) {
+        double value = 0.0;
+        const auto [ptr, ec] =
+            std::from_chars(tokens[k].data(), tokens[k].data() + tokens[k].size(), value);
+        if (ec != std::errc() || ptr != tokens[k].data() + tokens[k].size() || !std::isfinite(value))
+          throwInputError("{}:{}: vertex coordinate '{}' is not a finite number", name, lineNo,
+                          tokens[k]);
+      }
+      ++scan.vertexCount;
+    } else if (key == "f") {
+      const size_t n = tokens.size() - 1;
+      if (n < 3)
+        throwInputError("{}:{}: face has {} vertices, at least 3 are needed", name, lineNo, n);
+      if (n > kMaxFaceVertices)
+        throwInputError("{}:{}: face has {} vertices, at most {} are supported", name, lineNo, n,
+                        kMaxFaceVertices);
+      for (size_t k = 1; k <= n; ++k) {
+        const std::string_view tok = tokens[k].substr(0, tokens[k].find('/'));
+        long long idx = 0;
+        const auto [ptr, ec] = std::from_chars(tok.data(), tok.data() + tok.size(), idx);
+        if (ec != std::errc() || ptr != tok.data() + tok.size() || idx == 0)
+          throwInputError("{}:{}: face vertex '{}' is not a valid index", name, lineNo, tokens[k]);
+        if (idx < 0) {
+          if (-idx > (long long)scan.vertexCount)
+            throwInputError("{}:{}: relative face index {} refers before the first vertex", name,
+                            lineNo, idx);
+        } else {
+          pendingIndices.push_back(idx);
+          pendingLines.push_back(lineNo);
+        }
+      }
+      scan.faceLines.push_back(lineNo);
+      ++scan.faceCount;
+    }
+  }
+  for (size_t i = 0; i < pendingIndices.size(); ++i)
+    if (pendingIndices[i] > (long long)scan.vertexCount)
+      throwInputError("{}:{}: face index {} is out of range ({} vertices in the file)", name,
+                      pendingLines[i], pendingIndices[i], scan.vertexCount);
+  if (scan.faceCount == 0) {
+    if (lineNo == 0 || text.find_first_not_of(" \t\r\n") == std::string_view::npos)
+      throwInputError("{}: file is empty", name);
+    throwInputError("{}: file has no faces ({} vertices, {} lines)", name, scan.vertexCount, lineNo);
+  }
+  return scan;
+}
+
+Material toMaterial(const tinyobj::material_t& m) {
+  Material out;
+  out.name = m.name;
+  out.diffuse = glm::vec3(float(m.diffuse[0]), float(m.diffuse[1]), float(m.diffuse[2]));
+  out.baseColor = glm::vec4(out.diffuse, float(m.dissolve));
+  out.baseColorTexture = m.diffuse_texname;
+  return out;
+}
+
+}  // namespace
+
+Scene loadObjFromMemory(std::string_view objText, const std::string& displayName,
+                        std::string_view mtlText) {
+  const LineScan scan = scanLines(objText, displayName);
+
+  tinyobj::ObjReaderConfig config;
+  config.triangulate = false;  // we triangulate concave polygons ourselves
+  config.vertex_color = false;
+  tinyobj::ObjReader reader;
+  if (!reader.ParseFromString(std::string(objText), std::string(mtlText), config))
+    throwInputError("{}: {}", displayName, reader.Error());
+  const tinyobj::attrib_t& attrib = reader.GetAttrib();
+  const auto& shapes = reader.GetShapes();
+
+  size_t parsedFaces = 0;
+  for (const auto& s : shapes) parsedFaces += s.mesh.num_face_vertices.size();
+  if (parsedFaces != scan.faceCount || attrib.vertices.size() != 3 * scan.vertexCount)
+    throwInputError("{}: parser disagrees with line scan ({} of {} faces, {} of {} vertices)",
+                    displayName, parsedFaces, scan.faceCount, attrib.vertices.size() / 3,
+                    scan.vertexCount);
+
+  Scene scene;
+  scene.name = displayName;
+  for (const auto& m : reader.GetMaterials()) scene.materials.push_back(toMaterial(m));
+  const uint32_t defaultMaterial = uint32_t(scene.materials.size());
+  scene.materials.push_back(Material::named("default"));
+
+  // Local origin at the centre of the bounds of all vertices.
+  Box3d bounds;
+  const size_t nv = attrib.vertices.size() / 3;
+  for (size_t i = 0; i < nv; ++i)
+    bounds.extend(glm::dvec3(attrib.vertices[3 * i], attrib.vertices[3 * i + 1],
+                             attrib.vertices[3 * i + 2]));
+  scene.origin = bounds.empty() ? glm::dvec3(0.0) : glm::floor(bounds.center());
+  auto filePosition = [&](int idx) {
+    return glm::dvec3(attrib.vertices[3 * size_t(idx)], attrib.vertices[3 * size_t(idx) + 1],
+                      attrib.vertices[3 * size_t(idx) + 2]);
+  };
+
+  uint32_t faceId = 0;
+  std::vector<glm::dvec3> polygon;
+  std::vector<uint32_t> polygonLocal;
+  std::vector<glm::uvec3> tris;
+  std::vector<int32_t> localOf(nv, -1);
+  std::vector<uint32_t> touched;
+  for (const auto& shape : shapes) {
+    if (shape.mesh.num_face_vertices.empty()) continue;
+    // Consecutive shapes with one name (an `o` split by `g` or `usemtl`) form one object.
+    if (scene.objects.empty() || scene.objects.back().name != shape.name || shape.name.empty()) {
+      // Vertex sharing is per object: forget the previous object's mapping.
+      for (uint32_t v : touched) localOf[v] = -1;
+      touched.clear();
+      scene.objects.emplace_back();
+      scene.objects.back().name =
+          shape.name.empty() ? fmt::format("object_{}", scene.objects.size() - 1) : shape.name;
+    }
+    Object* object = &scene.objects.back();
+    TriangleMesh& mesh = object->mesh;
+    size_t offset = 0;
+    for (size_t f = 0; f < shape.mesh.num_face_vertices.size(); ++f, ++faceId) {
+      const size_t n = shape.mesh.num_face_vertices[f];
+      polygon.clear();
+      polygonLocal.clear();
+      for (size_t k = 0; k < n; ++k) {
+        const int vi = shape.mesh.indices[offset + k].vertex_index;
+        if (vi < 0 || size_t(vi) >= nv)
+          throwInputError("{}:{}: face index out of range", displayName, scan.faceLines[faceId]);
+        polygon.push_back(filePosition(vi));
+        if (localOf[size_t(vi)] < 0) {
+          localOf[size_t(vi)] = int32_t(mesh.positions.size());
+          touched.push_back(uint32_t(vi));
+          mesh.positions.push_back(glm::vec3(polygon.back() - scene.origin));
+        }
+        polygonLocal.push_back(uint32_t(localOf[size_t(vi)]));
+      }
+      offset += n;
+      tris.clear();
+      triangulatePolygon(polygon, tris);
+      const int mat = f < shape.mesh.material_ids.size() ? shape.mesh.material_ids[f] : -1;
+      const uint32_t material =
+          mat >= 0 && size_t(mat) < defaultMaterial ? uint32_t(mat) : defaultMaterial;
+      for (const glm::uvec3& t : tris) {
+        mesh.triangles.emplace_back(polygonLocal[t.x], polygonLocal[t.y], polygonLocal[t.z]);
+        mesh.faceIds.push_back(faceId);
+        mesh.materials.push_back(material);
+      }
+    }
+  }
+  scene.faceCount = faceId;
+  finalizeScene(scene);
+  if (scene.diagnostics.degenerateTriangles > 0)
+    spdlog::warn("{}: {} degenerate triangles ({} with repeated vertices, {} of zero area) kept "
+                 "as visible geometry, never used as occluders",
+                 displayName, scene.diagnostics.degenerateTriangles,
+                 scene.diagnostics.repeatedVertexTriangles, scene.diagnostics.zeroAreaTriangles);
+  return scene;
+}
+
+namespace {
+
+std::string readWholeFile(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) throwInputError("{}: no such file", path.string());
+  if (std::filesystem::is_directory(path, ec))
+    throwInputError("{}: is a directory, expected a file", path.string());
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throwInputError("{}: cannot open for reading", path.string());
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  if (in.bad()) throwInputError("{}: read error", path.string());
+  return std::move(ss).str();
+}
+
+}  // namespace
+
+Scene loadObj(const std::filesystem::path& path) {
+  const std::string text = readWholeFile(path);
+  // The material library is optional: a missing one is a warning, not an error.
+  std::string mtl;
+  for (size_t at = text.find("mtllib"); at != std::string::npos; at = text.find("mtllib", at + 1)) {
+    if (at != 0 && text[at - 1] != '\n') continue;
+    std::vector<std::string_view> tokens;
+    const size_t end = text.find('\n', at);
+    tokenize(std::string_view(text).substr(at, end == std::string::npos ? end : end - at), tokens);
+    if (tokens.size() < 2) break;
+    const auto mtlPath = path.parent_path() / std::string(tokens[1]);
+    std::ifstream in(mtlPath, std::ios::binary);
+    if (in) {
+      std::ostringstream ss;
+      ss << in.rdbuf();
+      mtl = std::move(ss).str();
+    } else {
+      spdlog::warn("{}: material library {} not found; using default materials", path.string(),
+                   mtlPath.string());
+    }
+    break;
+  }
+  Scene scene = loadObjFromMemory(text, path.string(), mtl);
+  scene.name = path.stem().string();
+  scene.sources = {path};
+  return scene;
+}
+
+}  // namespace vistream

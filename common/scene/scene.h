@@ -34,6 +34,12 @@ struct Material {
   glm::vec3 diffuse{0.8f, 0.8f, 0.8f};         // linear RGB, what every renderer shades with
   glm::vec4 baseColor{0.8f, 0.8f, 0.8f, 1.0f};  // glTF baseColorFactor (RGBA)
   std::string baseColorTexture;               // file path or glTF image name; empty if none
+
+  static Material named(std::string name) {
+    Material m;
+    m.name = std::move(name);
+    return m;
+  }
 };
 
 struct TriangleMesh {

@@ -1,0 +1,174 @@
+#include "common/generate/path.h"
+
+#include <filesystem>
+#include <fstream>
+#include <unistd.h>
+
+#include <gtest/gtest.h>
+
+#include "common/core/error.h"
+#include "common/raycast/sampled_visibility.h"
+#include "tests/common/support/box_scenes.h"
+
+namespace vistream {
+namespace {
+
+using testing::addBox;
+using testing::addGround;
+
+// A small town: ground and a 4 x 4 grid of buildings with 8 m streets,
+// placed 50 km from the origin to exercise the local frame.
+struct Town {
+  Scene scene;
+  FlatTriangles triangles;
+  std::unique_ptr<RayQuery> rays;
+  std::unique_ptr<RayQuery> oracle;
+  FreeSpace freeSpace;
+  std::vector<Box3f> buildings;
+
+  Town() {
+    scene.origin = {50000.0, 0.0, -50000.0};
+    addGround(scene, -40, -40, 40, 40);
+    for (int i = 0; i < 4; ++i)
+      for (int k = 0; k < 4; ++k) {
+        const glm::vec3 lo(-36.0f + 20.0f * float(i), 0.0f, -36.0f + 20.0f * float(k));
+        const glm::vec3 hi = lo + glm::vec3(12.0f, 6.0f + float(i + k), 12.0f);
+        addBox(scene, "b", lo, hi);
+        buildings.emplace_back(lo, hi);
+      }
+    finalizeScene(scene);
+    triangles = flattenScene(scene);
+    rays = makeEmbreeRayQuery(triangles);
+    oracle = makeBruteForceRayQuery(triangles);
+    freeSpace = FreeSpace::build(*rays, scene.bounds());
+  }
+};
+
+const Town& town() {
+  static const Town t;
+  return t;
+}
+
+std::vector<PathSample> walk(double speed, size_t frames, uint64_t seed) {
+  PathOptions o;
+  o.speed = speed;
+  o.frames = frames;
+  o.seed = seed;
+  return generatePath(town().scene, town().freeSpace, o);
+}
+
+TEST(WalkthroughPath, StaysAtEyeHeightAboveTheGroundInTheStreets) {
+  const auto path = walk(1.0, 600, 1);
+  ASSERT_EQ(path.size(), 600u);
+  for (const auto& s : path) {
+    const glm::vec3 p = town().scene.toLocal(s.position);
+    const Hit down = town().oracle->firstHit(Ray{p, {0, -1, 0}, 0.0f, 100.0f});
+    ASSERT_TRUE(down.valid());
+    EXPECT_NEAR(down.t, 1.7f, 1e-3f);
+    EXPECT_GT(down.normal.y, 0.0f);  // standing on an upward-facing floor
+    for (const Box3f& b : town().buildings)
+      EXPECT_FALSE(p.x > b.lo.x && p.x < b.hi.x && p.z > b.lo.z && p.z < b.hi.z);
+  }
+}
+
+TEST(WalkthroughPath, MovesAtTheRequestedSpeedWithoutPassingThroughWalls) {
+  for (const double speed : {0.5, 1.0, 3.0}) {
+    const auto path = walk(speed, 300, 2);
+    const double step = kWalkingSpeed * speed / 30.0;
+    double total = 0.0;
+    for (size_t i = 1; i < path.size(); ++i) {
+      const glm::dvec3 d = path[i].position - path[i - 1].position;
+      const double len = glm::length(d);
+      EXPECT_LE(len, step + 1e-3) << "frame " << i;
+      total += len;
+      EXPECT_NEAR(path[i].t - path[i - 1].t, 1.0 / 30.0, 1e-9);
+      if (len > 1e-6) {
+        const glm::vec3 a = town().scene.toLocal(path[i - 1].position);
+        const glm::vec3 b = town().scene.toLocal(path[i].position);
+        EXPECT_FALSE(town().oracle->occluded(Ray{a, b - a, 0.0f, 1.0f})) << "frame " << i;
+      }
+    }
+    // Corners shorten a few steps; on average the walker keeps its pace.
+    EXPECT_GT(total, 0.9 * step * double(path.size() - 1)) << "speed " << speed;
+  }
+}
+
+TEST(WalkthroughPath, TurnsTheGazeAtABoundedRateAndStaysUpright) {
+  const auto path = walk(1.0, 600, 3);
+  for (size_t i = 1; i < path.size(); ++i) {
+    EXPECT_LE(std::abs(std::remainder(path[i].yawDeg - path[i - 1].yawDeg, 360.0)), 120.0 / 30.0 + 1e-9);
+    EXPECT_EQ(path[i].pitchDeg, 0.0);
+  }
+}
+
+TEST(WalkthroughPath, IsDeterministicBySeed) {
+  const auto a = walk(1.0, 100, 9), b = walk(1.0, 100, 9), c = walk(1.0, 100, 10);
+  ASSERT_EQ(a.size(), b.size());
+  for (size_t i = 0; i < a.size(); ++i) EXPECT_EQ(a[i].position, b[i].position);
+  EXPECT_NE(a.front().position, c.front().position);
+}
+
+TEST(ViewDirection, FollowsThePathFileConvention) {
+  const glm::dvec3 ahead = viewDirection(0, 0), left = viewDirection(90, 0), up = viewDirection(0, 90);
+  EXPECT_NEAR(ahead.z, -1.0, 1e-12);
+  EXPECT_NEAR(left.x, -1.0, 1e-12);
+  EXPECT_NEAR(up.y, 1.0, 1e-12);
+}
+
+class PathFile : public ::testing::Test {
+ protected:
+  std::filesystem::path file = std::filesystem::temp_directory_path() / ("vistream_path_" + std::to_string(::getpid()) + ".csv");
+  void write(const std::string& text) { std::ofstream(file) << text; }
+  void TearDown() override { std::filesystem::remove(file); }
+  std::string errorOf() {
+    try {
+      readPath(file);
+    } catch (const InputError& e) {
+      return e.what();
+    }
+    return "";
+  }
+};
+
+TEST_F(PathFile, RoundTripsThroughWriteAndRead) {
+  const auto path = walk(1.0, 50, 4);
+  writePath(path, file);
+  const auto back = readPath(file);
+  ASSERT_EQ(back.size(), path.size());
+  for (size_t i = 0; i < path.size(); ++i) {
+    EXPECT_NEAR(back[i].t, path[i].t, 1e-6);
+    EXPECT_NEAR(glm::length(back[i].position - path[i].position), 0.0, 1e-5);
+    EXPECT_NEAR(back[i].yawDeg, path[i].yawDeg, 1e-4);
+  }
+}
+
+TEST_F(PathFile, RejectsAWrongHeaderNamingTheLine) {
+  write("\nt,x,y,z,yaw,pitch\n0,0,0,0,0,0\n");
+  EXPECT_NE(errorOf().find(":2: expected the header"), std::string::npos) << errorOf();
+}
+
+TEST_F(PathFile, RejectsNonNumericAndNonFiniteFields) {
+  write("t,x,y,z,yaw_deg,pitch_deg\n0,1,2,3,4,5\n0.1,1,nan,3,4,5\n");
+  EXPECT_NE(errorOf().find(":3: field 3"), std::string::npos) << errorOf();
+  write("t,x,y,z,yaw_deg,pitch_deg\n0,1,2,3,abc,5\n");
+  EXPECT_NE(errorOf().find(":2: field 5"), std::string::npos) << errorOf();
+}
+
+TEST_F(PathFile, RejectsMissingFieldsTimeGoingBackwardsAndPitchBeyondVertical) {
+  write("t,x,y,z,yaw_deg,pitch_deg\n0,1,2,3,4\n");
+  EXPECT_NE(errorOf().find(":2: 5 fields"), std::string::npos) << errorOf();
+  write("t,x,y,z,yaw_deg,pitch_deg\n1,1,2,3,4,5\n0.5,1,2,3,4,5\n");
+  EXPECT_NE(errorOf().find(":3: t goes backwards"), std::string::npos) << errorOf();
+  write("t,x,y,z,yaw_deg,pitch_deg\n0,1,2,3,4,95\n");
+  EXPECT_NE(errorOf().find(":2: pitch"), std::string::npos) << errorOf();
+}
+
+TEST_F(PathFile, RejectsAnEmptyFileAndAFileWithOnlyAHeader) {
+  write("");
+  EXPECT_NE(errorOf().find("empty path file"), std::string::npos) << errorOf();
+  write("t,x,y,z,yaw_deg,pitch_deg\n");
+  EXPECT_NE(errorOf().find("no samples"), std::string::npos) << errorOf();
+}
+
+}  // namespace
+}  // namespace vistream

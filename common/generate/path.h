@@ -1,0 +1,55 @@
+// Walkthrough paths: generation through a scene's free space, and the path
+// file format.
+//
+// Path file: CSV with the header `t,x,y,z,yaw_deg,pitch_deg`, one row per
+// frame; t in seconds (non-decreasing), x,y,z the eye position in the scene
+// file's coordinates (metres, Y up). yaw 0 looks along -Z, positive yaw turns
+// left (towards -X, counter-clockwise seen from above); positive pitch looks
+// up. The view direction is (-sin(yaw)cos(pitch), sin(pitch), -cos(yaw)cos(pitch)).
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "common/scene/scene.h"
+#include "common/spatial/free_space.h"
+
+namespace vistream {
+
+struct PathSample {
+  double t = 0.0;
+  glm::dvec3 position{0.0};  // file coordinates
+  double yawDeg = 0.0;
+  double pitchDeg = 0.0;
+};
+
+// The unit view direction of a yaw/pitch pair, as documented above.
+glm::dvec3 viewDirection(double yawDeg, double pitchDeg);
+
+struct PathOptions {
+  double speed = 1.0;          // relative: 1.0 = walking, 1.4 m/s
+  size_t frames = 300;
+  double fps = 30.0;
+  double eyeHeight = 1.7;      // metres above the floor under the viewer
+  double maxTurnDegPerS = 120.0;  // how fast the gaze follows the walking direction
+  uint64_t seed = 1;
+};
+
+inline constexpr double kWalkingSpeed = 1.4;  // m/s at relative speed 1.0
+
+// Generates an upright path through the free space: random goals reached by
+// shortest grid paths, smoothed by line-of-sight shortcuts, walked at the
+// given speed. Throws InputError if the scene has no free space.
+std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& freeSpace,
+                                     const PathOptions& options);
+
+// Reads a path file; throws InputError naming the file and line on a bad
+// header, a non-numeric or non-finite field, a missing column or t going backwards.
+std::vector<PathSample> readPath(const std::filesystem::path& path);
+// Writes atomically (temporary file, then rename).
+void writePath(const std::vector<PathSample>& samples, const std::filesystem::path& path);
+
+}  // namespace vistream

@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# Installs what is missing, builds and runs the whole test suite with ctest:
+# first a Release build with warnings as errors (binaries in build/bin), then
+# the same tests under AddressSanitizer + UndefinedBehaviorSanitizer (clang),
+# which also builds the fuzzers and runs each on its seed corpus.
+#
+#   deploy/test.sh               everything (what CI runs)
+#   deploy/test.sh --no-sanitize only the Release build and its tests
+#   deploy/test.sh --sanitize    only the sanitizer build and its tests
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+release=1
+sanitize=1
+case "${1:-}" in
+  --no-sanitize) sanitize=0 ;;
+  --sanitize) release=0 ;;
+  "") ;;
+  -h|--help) sed -n '2,10p' "$0"; exit 0 ;;
+  *) echo "test.sh: unknown option '$1' (try --help)" >&2; exit 2 ;;
+esac
+
+deploy/install-deps.sh
+
+start=$(date +%s)
+if [ "$release" = 1 ]; then
+  echo "== Release build (warnings are errors) =="
+  cmake --preset ci >/dev/null
+  cmake --build --preset ci
+  echo "== Release tests =="
+  ctest --preset ci
+fi
+if [ "$sanitize" = 1 ]; then
+  echo "== AddressSanitizer + UndefinedBehaviorSanitizer build (clang) =="
+  cmake --preset asan >/dev/null
+  cmake --build --preset asan
+  echo "== Sanitizer tests =="
+  ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 ctest --preset asan
+fi
+echo "== all tests passed in $(( $(date +%s) - start )) s =="

@@ -1,0 +1,53 @@
+// Hand-built test scenes made of closed boxes and quads, independent of the
+// procedural generators, so tests of spatial code have known answers.
+#pragma once
+
+#include <string>
+
+#include "common/scene/scene.h"
+
+namespace vistream::testing {
+
+// Adds a closed axis-aligned box as one object: 6 quads (12 triangles, two
+// per face ID), wound counter-clockwise seen from outside. Face order:
+// -x, +x, -y, +y, -z, +z. Returns the first face ID.
+inline uint32_t addBox(Scene& scene, const std::string& name, glm::vec3 lo, glm::vec3 hi,
+                       bool dynamic = false) {
+  Object o;
+  o.name = name;
+  o.dynamic = dynamic;
+  const uint32_t first = scene.faceCount;
+  auto quad = [&](glm::vec3 a, glm::vec3 b, glm::vec3 c, glm::vec3 d) {
+    const uint32_t base = uint32_t(o.mesh.positions.size());
+    o.mesh.positions.insert(o.mesh.positions.end(), {a, b, c, d});
+    o.mesh.triangles.emplace_back(base, base + 1, base + 2);
+    o.mesh.triangles.emplace_back(base, base + 2, base + 3);
+    o.mesh.faceIds.insert(o.mesh.faceIds.end(), {scene.faceCount, scene.faceCount});
+    ++scene.faceCount;
+  };
+  const glm::vec3 l = lo, h = hi;
+  quad({l.x, l.y, l.z}, {l.x, l.y, h.z}, {l.x, h.y, h.z}, {l.x, h.y, l.z});  // -x
+  quad({h.x, l.y, l.z}, {h.x, h.y, l.z}, {h.x, h.y, h.z}, {h.x, l.y, h.z});  // +x
+  quad({l.x, l.y, l.z}, {h.x, l.y, l.z}, {h.x, l.y, h.z}, {l.x, l.y, h.z});  // -y
+  quad({l.x, h.y, l.z}, {l.x, h.y, h.z}, {h.x, h.y, h.z}, {h.x, h.y, l.z});  // +y
+  quad({l.x, l.y, l.z}, {l.x, h.y, l.z}, {h.x, h.y, l.z}, {h.x, l.y, l.z});  // -z
+  quad({l.x, l.y, h.z}, {h.x, l.y, h.z}, {h.x, h.y, h.z}, {l.x, h.y, h.z});  // +z
+  scene.objects.push_back(std::move(o));
+  return first;
+}
+
+// An upward-facing ground quad at y over [x0,x1] x [z0,z1]. Returns its face ID.
+inline uint32_t addGround(Scene& scene, float x0, float z0, float x1, float z1, float y = 0.0f) {
+  Object o;
+  o.name = "ground";
+  o.mesh.positions = {{x0, y, z0}, {x0, y, z1}, {x1, y, z1}, {x1, y, z0}};
+  o.mesh.triangles = {{0, 1, 2}, {0, 2, 3}};
+  o.mesh.faceIds = {scene.faceCount, scene.faceCount};
+  scene.objects.push_back(std::move(o));
+  return scene.faceCount++;
+}
+
+// Face IDs of a box added by addBox, by side.
+enum BoxSide : uint32_t { kMinusX = 0, kPlusX, kMinusY, kPlusY, kMinusZ, kPlusZ };
+
+}  // namespace vistream::testing

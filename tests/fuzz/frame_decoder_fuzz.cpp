@@ -1,0 +1,24 @@
+// libFuzzer target: FrameDecoder must reject or accept any byte stream
+// without crashing, and every frame it returns must be readable.
+#include <cstddef>
+#include <cstdint>
+#include <span>
+
+#include "protocol/wire/framing.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  vistream::wire::FrameDecoder decoder(1u << 16);
+  // Feed in two pieces to exercise reassembly.
+  const size_t half = size / 2;
+  for (auto piece : {std::span<const uint8_t>(data, half), std::span<const uint8_t>(data + half, size - half)}) {
+    if (!decoder.feed(piece)) break;
+    while (auto frame = decoder.next()) {
+      const auto* env = vistream::wire::envelopeOf(*frame);
+      if (const auto* hello = env->payload_as_Hello())
+        if (hello->auth_token()) (void)hello->auth_token()->size();
+      if (const auto* err = env->payload_as_Error())
+        if (err->text()) (void)err->text()->str();
+    }
+  }
+  return 0;
+}
