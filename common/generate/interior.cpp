@@ -208,15 +208,16 @@ class FloorBuilder {
       const double height = random_.uniform(1.8, 2.1);
       const bool alongX = wall >= 2;  // the shelf's width runs along x
       const double span0 = alongX ? room.x0 : room.z0, span1 = alongX ? room.x1 : room.z1;
-      if (span1 - span0 < width) continue;
-      const double u0 = random_.uniform(span0, span1 - width);
+      // 1 cm clear of the walls at its ends; flush (exactly) with the wall behind.
+      if (span1 - span0 < width + 0.02) continue;
+      const double u0 = random_.uniform(span0 + 0.01, span1 - width - 0.01);
       Rect footprint{};
       if (alongX) {
-        const double z0 = wall == 2 ? room.z0 : room.z1 - depth;
-        footprint = {u0, u0 + width, z0, z0 + depth};
+        footprint = wall == 2 ? Rect{u0, u0 + width, room.z0, room.z0 + depth}
+                              : Rect{u0, u0 + width, room.z1 - depth, room.z1};
       } else {
-        const double x0 = wall == 0 ? room.x0 : room.x1 - depth;
-        footprint = {x0, x0 + depth, u0, u0 + width};
+        footprint = wall == 0 ? Rect{room.x0, room.x0 + depth, u0, u0 + width}
+                              : Rect{room.x1 - depth, room.x1, u0, u0 + width};
       }
       if (std::any_of(taken.begin(), taken.end(),
                       [&](const Rect& o) { return o.overlaps(footprint); }))

@@ -222,7 +222,9 @@ void KdTree::traverseRay(const glm::vec3& org, const glm::vec3& dir, float tnear
         n = &nodes_[size_t(nearChild)];
         continue;
       }
-      const bool belowFirst = org[a] < p || (org[a] == p && dir[a] > 0.0f);
+      // The child the line is in before it crosses the plane (at ts) comes
+      // first; that is the origin's side only when ts >= 0.
+      const bool belowFirst = dir[a] > 0.0f;
       nearChild = n->children[belowFirst ? 0 : 1];
       farChild = n->children[belowFirst ? 1 : 0];
       const float ts = (p - org[a]) / dir[a];

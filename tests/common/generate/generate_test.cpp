@@ -61,27 +61,32 @@ std::vector<const PolygonObject*> objectsNamed(const PolygonScene& scene, const 
   return found;
 }
 
-// Faces [first, first + 6) of `o` form a closed box: their loops use 8
-// vertices, every directed edge is matched by its reverse, and every face's
-// normal points away from the box centre.
+// Faces [first, first + 6) of `o` form a closed box: six quads over 8
+// vertices, every directed edge matched by its reverse, and every face's
+// normal pointing away from the box centre.
 ::testing::AssertionResult isClosedOutwardBox(const PolygonObject& o, size_t first) {
-  std::set<uint32_t> corners;
-  std::map<std::pair<uint32_t, uint32_t>, int> edges;
-  for (size_t f = first; f < first + 6; ++f)
-    for (size_t i = 0; i < o.faces[f].size(); ++i) {
-      const uint32_t a = o.faces[f][i], b = o.faces[f][(i + 1) % o.faces[f].size()];
-      corners.insert(a);
-      ++edges[{a, b}];
+  std::array<std::pair<uint32_t, uint32_t>, 24> edges;
+  std::array<uint32_t, 24> corners;
+  size_t e = 0;
+  for (size_t f = first; f < first + 6; ++f) {
+    if (o.faces[f].size() != 4)
+      return ::testing::AssertionFailure() << o.name << " face " << f << " is not a quad";
+    for (size_t i = 0; i < 4; ++i, ++e) {
+      corners[e] = o.faces[f][i];
+      edges[e] = {o.faces[f][i], o.faces[f][(i + 1) % 4]};
     }
-  if (corners.size() != 8)
-    return ::testing::AssertionFailure() << o.name << " box at face " << first << " uses "
-                                         << corners.size() << " vertices";
-  for (const auto& [edge, count] : edges)
-    if (count != 1 || edges.count({edge.second, edge.first}) != 1)
+  }
+  std::sort(corners.begin(), corners.end());
+  if (std::unique(corners.begin(), corners.end()) - corners.begin() != 8)
+    return ::testing::AssertionFailure() << o.name << " box at face " << first
+                                         << " does not use 8 vertices";
+  for (const auto& [a, b] : edges)
+    if (std::count(edges.begin(), edges.end(), std::pair{a, b}) != 1 ||
+        std::count(edges.begin(), edges.end(), std::pair{b, a}) != 1)
       return ::testing::AssertionFailure() << o.name << " box at face " << first
                                            << " is not closed";
   glm::dvec3 centre(0.0);
-  for (uint32_t v : corners) centre += o.vertices[v];
+  for (size_t k = 0; k < 8; ++k) centre += o.vertices[corners[k]];  // unique() moved them first
   centre /= 8.0;
   for (size_t f = first; f < first + 6; ++f)
     if (glm::dot(areaNormal(o, o.faces[f]), centroid(o, o.faces[f]) - centre) <= 0.0)
@@ -108,29 +113,32 @@ void expectNoDegenerateFaces(const PolygonScene& scene) {
       ASSERT_GT(0.5 * glm::length(areaNormal(o, o.faces[f])), 1e-6) << o.name << " face " << f;
 }
 
-// Two faces with the same corner positions (in any order) are duplicates.
+// Two faces with the same corner positions (in any order, on a millimetre
+// grid) are duplicates. Faces here have at most four corners.
 void expectNoDuplicatedFaces(const PolygonScene& scene) {
+  using Key = std::array<int64_t, 12>;
   struct Hash {
-    size_t operator()(const std::vector<int64_t>& key) const {
-      size_t h = 1469598103934665603ull;
-      for (int64_t k : key) h = (h ^ size_t(k)) * 1099511628211ull;
-      return h;
+    size_t operator()(const Key& key) const {
+      uint64_t h = 1469598103934665603ull;
+      for (int64_t k : key) h = (h ^ uint64_t(k)) * 1099511628211ull;
+      return size_t(h ^ (h >> 29));
     }
   };
-  std::unordered_set<std::vector<int64_t>, Hash> seen;
+  std::unordered_set<Key, Hash> seen;
   seen.reserve(scene.faceCount());
-  std::vector<std::array<int64_t, 3>> corners;
   for (const PolygonObject& o : scene.objects)
     for (const std::vector<uint32_t>& face : o.faces) {
-      corners.clear();
-      for (uint32_t v : face) {  // millimetre grid
-        const glm::dvec3 p = o.vertices[v] * 1000.0;
-        corners.push_back({std::llround(p.x), std::llround(p.y), std::llround(p.z)});
+      ASSERT_LE(face.size(), 4u);
+      std::array<std::array<int64_t, 3>, 4> corners{};
+      for (size_t i = 0; i < face.size(); ++i) {
+        const glm::dvec3 p = o.vertices[face[i]] * 1000.0;
+        corners[i] = {std::llround(p.x), std::llround(p.y), std::llround(p.z)};
       }
-      std::sort(corners.begin(), corners.end());
-      std::vector<int64_t> key;
-      for (const auto& c : corners) key.insert(key.end(), c.begin(), c.end());
-      ASSERT_TRUE(seen.insert(std::move(key)).second) << "duplicated face in " << o.name;
+      std::sort(corners.begin(), corners.begin() + std::ptrdiff_t(face.size()));
+      Key key{};
+      for (size_t i = 0; i < 4; ++i)
+        for (size_t k = 0; k < 3; ++k) key[3 * i + k] = corners[i][k];
+      ASSERT_TRUE(seen.insert(key).second) << "duplicated face in " << o.name;
     }
 }
 
@@ -376,8 +384,9 @@ TEST(InteriorGenerator, HasFloorCeilingWallsAndDoorsOnOneStorey) {
     EXPECT_NEAR(std::max(lintel.extent().x, lintel.extent().z), 1.0, 1e-9);
     const glm::dvec3 doorway(lintel.center().x, 1.0, lintel.center().z);
     for (const PolygonObject& o : floor.objects)
-      if (&o != floors[0] && &o != ceilings[0])
+      if (&o != floors[0] && &o != ceilings[0]) {
         EXPECT_FALSE(boundsOf(o).contains(doorway)) << o.name << " blocks " << l->name;
+      }
   }
 }
 
@@ -524,7 +533,7 @@ TEST(TerrainGenerator, SameSeedGivesTheSameLandAndAnotherSeedAnotherOne) {
 
 TEST(SceneTypes, ListsTheFiveGeneratorsAndEachGeneratesANamedScene) {
   EXPECT_EQ(sceneTypes(), (std::vector<std::string>{"city1", "city2", "bigcity", "interior", "terrain"}));
-  for (const std::string& type : {"city1", "interior", "terrain"}) {
+  for (const char* type : {"city1", "interior", "terrain"}) {
     const PolygonScene scene = generate(type, 1);
     EXPECT_EQ(scene.name, type);
     EXPECT_FALSE(scene.materials.empty());

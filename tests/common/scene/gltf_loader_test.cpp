@@ -1,0 +1,704 @@
+// Tests for the glTF loader (loadGltf in scene_loader.h).
+//
+// Two kinds of input:
+// - Fox.glb from shared/data, checked against the counts in its README and
+//   against the file's own JSON chunk, read here with nlohmann::json (accessor
+//   min/max, sampler input ranges, node children);
+// - small .gltf files written by the tests, with an embedded base64 buffer,
+//   whose transformed positions are worked out by hand.
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <set>
+#include <string>
+#include <unistd.h>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "common/core/error.h"
+#include "common/scene/scene_loader.h"
+
+namespace vistream {
+namespace {
+
+using ::testing::HasSubstr;
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+const fs::path kFox = fs::path(VISTREAM_SHARED_DIR) / "data" / "Fox.glb";
+
+template <typename F>
+std::string inputErrorOf(F&& f) {
+  try {
+    f();
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "<no InputError thrown>";
+}
+
+class TempDir {
+ public:
+  TempDir() {
+    static std::atomic<int> counter{0};
+    const auto* info = testing::UnitTest::GetInstance()->current_test_info();
+    path_ = fs::temp_directory_path() /
+            ("vistream_gltf_" + std::string(info ? info->name() : "x") + "_" +
+             std::to_string(::getpid()) + "_" + std::to_string(counter++));
+    fs::remove_all(path_);
+    fs::create_directories(path_);
+  }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+
+  fs::path write(const std::string& name, const std::string& bytes) const {
+    const fs::path p = path_ / name;
+    std::ofstream(p, std::ios::binary) << bytes;
+    return p;
+  }
+  const fs::path& path() const { return path_; }
+
+ private:
+  fs::path path_;
+};
+
+void expectNear(const glm::dvec3& actual, const glm::dvec3& expected, double tolerance) {
+  EXPECT_NEAR(actual.x, expected.x, tolerance);
+  EXPECT_NEAR(actual.y, expected.y, tolerance);
+  EXPECT_NEAR(actual.z, expected.z, tolerance);
+}
+
+const Object* findObject(const Scene& scene, const std::string& name) {
+  for (const Object& o : scene.objects)
+    if (o.name == name) return &o;
+  return nullptr;
+}
+
+// Triangle t of an object, in file coordinates, in the stored vertex order.
+std::array<glm::dvec3, 3> fileTriangle(const Scene& scene, const Object& o, size_t t) {
+  const glm::uvec3 tri = o.mesh.triangles.at(t);
+  return {scene.toFile(o.mesh.positions.at(tri.x)), scene.toFile(o.mesh.positions.at(tri.y)),
+          scene.toFile(o.mesh.positions.at(tri.z))};
+}
+
+// ---- writing glTF files ----------------------------------------------------------
+
+std::string base64(const std::vector<uint8_t>& bytes) {
+  static const char* table = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  size_t i = 0;
+  for (; i + 2 < bytes.size(); i += 3) {
+    const uint32_t v = uint32_t(bytes[i]) << 16 | uint32_t(bytes[i + 1]) << 8 | bytes[i + 2];
+    out += table[v >> 18 & 63];
+    out += table[v >> 12 & 63];
+    out += table[v >> 6 & 63];
+    out += table[v & 63];
+  }
+  if (i + 1 == bytes.size()) {
+    const uint32_t v = uint32_t(bytes[i]) << 16;
+    out += table[v >> 18 & 63];
+    out += table[v >> 12 & 63];
+    out += "==";
+  } else if (i + 2 == bytes.size()) {
+    const uint32_t v = uint32_t(bytes[i]) << 16 | uint32_t(bytes[i + 1]) << 8;
+    out += table[v >> 18 & 63];
+    out += table[v >> 12 & 63];
+    out += table[v >> 6 & 63];
+    out += '=';
+  }
+  return out;
+}
+
+TEST(Base64ForTests, MatchesRfc4648Vectors) {
+  auto enc = [](const std::string& s) { return base64(std::vector<uint8_t>(s.begin(), s.end())); };
+  EXPECT_EQ(enc(""), "");
+  EXPECT_EQ(enc("f"), "Zg==");
+  EXPECT_EQ(enc("fo"), "Zm8=");
+  EXPECT_EQ(enc("foo"), "Zm9v");
+  EXPECT_EQ(enc("foob"), "Zm9vYg==");
+  EXPECT_EQ(enc("fooba"), "Zm9vYmE=");
+  EXPECT_EQ(enc("foobar"), "Zm9vYmFy");
+}
+
+constexpr int kUnsignedByte = 5121, kUnsignedShort = 5123, kUnsignedInt = 5125, kFloat = 5126;
+
+// Builds a glTF 2.0 document with one embedded buffer.
+class GltfDoc {
+ public:
+  GltfDoc() {
+    doc_["asset"] = {{"version", "2.0"}};
+    doc_["bufferViews"] = json::array();
+    doc_["accessors"] = json::array();
+    doc_["meshes"] = json::array();
+    doc_["nodes"] = json::array();
+  }
+
+  // Appends raw bytes as a buffer view (4-byte aligned); returns its index.
+  int addView(const void* data, size_t size) {
+    while (bin_.size() % 4 != 0) bin_.push_back(0);
+    const size_t offset = bin_.size();
+    const auto* p = static_cast<const uint8_t*>(data);
+    bin_.insert(bin_.end(), p, p + size);
+    doc_["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", offset}, {"byteLength", size}});
+    return int(doc_["bufferViews"].size() - 1);
+  }
+
+  int addAccessor(int view, int componentType, size_t count, const char* type) {
+    doc_["accessors"].push_back(
+        {{"bufferView", view}, {"componentType", componentType}, {"count", count}, {"type", type}});
+    return int(doc_["accessors"].size() - 1);
+  }
+
+  int addPositions(const std::vector<glm::vec3>& p) {
+    const int a = addAccessor(addView(p.data(), p.size() * sizeof(glm::vec3)), kFloat, p.size(),
+                              "VEC3");
+    glm::vec3 lo(1e30f), hi(-1e30f);
+    for (const glm::vec3& v : p) {
+      lo = glm::min(lo, v);
+      hi = glm::max(hi, v);
+    }
+    doc_["accessors"][size_t(a)]["min"] = {lo.x, lo.y, lo.z};
+    doc_["accessors"][size_t(a)]["max"] = {hi.x, hi.y, hi.z};
+    return a;
+  }
+
+  int addScalars(const std::vector<float>& v) {
+    const int a = addAccessor(addView(v.data(), v.size() * 4), kFloat, v.size(), "SCALAR");
+    doc_["accessors"][size_t(a)]["min"] = {*std::min_element(v.begin(), v.end())};
+    doc_["accessors"][size_t(a)]["max"] = {*std::max_element(v.begin(), v.end())};
+    return a;
+  }
+
+  int addVec3s(const std::vector<glm::vec3>& v) {
+    return addAccessor(addView(v.data(), v.size() * sizeof(glm::vec3)), kFloat, v.size(), "VEC3");
+  }
+
+  int addIndices(const std::vector<uint32_t>& idx, int componentType) {
+    std::vector<uint8_t> bytes;
+    for (uint32_t i : idx) {
+      if (componentType == kUnsignedByte) {
+        bytes.push_back(uint8_t(i));
+      } else if (componentType == kUnsignedShort) {
+        const uint16_t s = uint16_t(i);
+        bytes.insert(bytes.end(), reinterpret_cast<const uint8_t*>(&s),
+                     reinterpret_cast<const uint8_t*>(&s) + 2);
+      } else {
+        bytes.insert(bytes.end(), reinterpret_cast<const uint8_t*>(&i),
+                     reinterpret_cast<const uint8_t*>(&i) + 4);
+      }
+    }
+    return addAccessor(addView(bytes.data(), bytes.size()), componentType, idx.size(), "SCALAR");
+  }
+
+  // A primitive; indices -1 for none; mode 4 triangles, 5 strip, 6 fan.
+  static json primitive(int positions, int indices = -1, int mode = 4) {
+    json p = {{"attributes", {{"POSITION", positions}}}, {"mode", mode}};
+    if (indices >= 0) p["indices"] = indices;
+    return p;
+  }
+
+  int addMesh(const std::string& name, const std::vector<json>& primitives) {
+    doc_["meshes"].push_back({{"name", name}, {"primitives", primitives}});
+    return int(doc_["meshes"].size() - 1);
+  }
+
+  int addNode(json node) {
+    doc_["nodes"].push_back(std::move(node));
+    return int(doc_["nodes"].size() - 1);
+  }
+
+  void setRoots(const std::vector<int>& roots) {
+    doc_["scenes"] = json::array({{{"nodes", roots}}});
+    doc_["scene"] = 0;
+  }
+
+  json& doc() { return doc_; }
+
+  std::string text() {
+    json d = doc_;
+    d["buffers"] = json::array(
+        {{{"byteLength", bin_.size()},
+          {"uri", "data:application/octet-stream;base64," + base64(bin_)}}});
+    return d.dump(1);
+  }
+
+ private:
+  json doc_;
+  std::vector<uint8_t> bin_;
+};
+
+// The unit right triangle (0,0,0) (1,0,0) (0,1,0).
+const std::vector<glm::vec3> kUnitTriangle{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+
+// ---- node hierarchy and transforms -------------------------------------------------
+
+// A parent translated by (10,0,0) with three mesh children: one scaled by 2,
+// one placed by a matrix (90 degrees about +z, then up 5), one by TRS
+// (scale x by 3, rotate 90 degrees about +y, translate z by -3).
+Scene loadHierarchy(const TempDir& dir) {
+  GltfDoc g;
+  const int pos = g.addPositions(kUnitTriangle);
+  const int idx = g.addIndices({0, 1, 2}, kUnsignedShort);
+  const int mesh = g.addMesh("tri", {GltfDoc::primitive(pos, idx)});
+  const double h = std::sqrt(0.5);
+  g.addNode({{"name", "parent"}, {"translation", {10, 0, 0}}, {"children", {1, 2, 3}}});
+  g.addNode({{"name", "scaled"}, {"mesh", mesh}, {"scale", {2, 2, 2}}});
+  g.addNode({{"name", "matrix"},
+             {"mesh", mesh},
+             // Column-major: x -> +y, y -> -x, translation (0, 5, 0).
+             {"matrix", {0, 1, 0, 0, -1, 0, 0, 0, 0, 0, 1, 0, 0, 5, 0, 1}}});
+  g.addNode({{"name", "trs"},
+             {"mesh", mesh},
+             {"translation", {0, 0, -3}},
+             {"rotation", {0, h, 0, h}},
+             {"scale", {3, 1, 1}}});
+  g.setRoots({0});
+  return loadGltf(dir.write("hierarchy.gltf", g.text()));
+}
+
+TEST(GltfLoader, AppliesAParentTranslationToAScaledChild) {
+  const TempDir dir;
+  const Scene scene = loadHierarchy(dir);
+  const Object* o = findObject(scene, "scaled");
+  ASSERT_NE(o, nullptr);
+  ASSERT_EQ(o->mesh.triangleCount(), 1u);
+  const auto t = fileTriangle(scene, *o, 0);
+  expectNear(t[0], {10, 0, 0}, 1e-5);
+  expectNear(t[1], {12, 0, 0}, 1e-5);
+  expectNear(t[2], {10, 2, 0}, 1e-5);
+}
+
+TEST(GltfLoader, AppliesAColumnMajorMatrixNodeUnderItsParent) {
+  const TempDir dir;
+  const Scene scene = loadHierarchy(dir);
+  const Object* o = findObject(scene, "matrix");
+  ASSERT_NE(o, nullptr);
+  const auto t = fileTriangle(scene, *o, 0);
+  // (0,0,0) -> (0,5,0); (1,0,0) -> (0,1,0)+(0,5,0); (0,1,0) -> (-1,0,0)+(0,5,0); then +10 x.
+  expectNear(t[0], {10, 5, 0}, 1e-5);
+  expectNear(t[1], {10, 6, 0}, 1e-5);
+  expectNear(t[2], {9, 5, 0}, 1e-5);
+}
+
+TEST(GltfLoader, AppliesTranslationRotationScaleInThatOrder) {
+  const TempDir dir;
+  const Scene scene = loadHierarchy(dir);
+  const Object* o = findObject(scene, "trs");
+  ASSERT_NE(o, nullptr);
+  const auto t = fileTriangle(scene, *o, 0);
+  // p' = T R S p: (1,0,0) -> S (3,0,0) -> R (0,0,-3) -> T (0,0,-6) -> parent (10,0,-6).
+  expectNear(t[0], {10, 0, -3}, 1e-5);
+  expectNear(t[1], {10, 0, -6}, 1e-5);
+  expectNear(t[2], {10, 1, -3}, 1e-5);
+}
+
+TEST(GltfLoader, NumbersFacesInNodeTraversalOrderAndKeepsTheHierarchy) {
+  const TempDir dir;
+  const Scene scene = loadHierarchy(dir);
+  ASSERT_EQ(scene.objects.size(), 3u);
+  EXPECT_EQ(scene.faceCount, 3u);
+  EXPECT_EQ(findObject(scene, "scaled")->mesh.faceIds, std::vector<uint32_t>{0});
+  EXPECT_EQ(findObject(scene, "matrix")->mesh.faceIds, std::vector<uint32_t>{1});
+  EXPECT_EQ(findObject(scene, "trs")->mesh.faceIds, std::vector<uint32_t>{2});
+  EXPECT_EQ(scene.dynamicObjectCount(), 0u) << "nothing is skinned or animated";
+  ASSERT_EQ(scene.nodes.size(), 4u);
+  EXPECT_EQ(scene.nodes[0].name, "parent");
+  EXPECT_EQ(scene.nodes[0].parent, -1);
+  for (int i = 1; i < 4; ++i) EXPECT_EQ(scene.nodes[size_t(i)].parent, 0);
+  EXPECT_EQ(scene.nodes[0].translation, glm::vec3(10, 0, 0));
+  EXPECT_EQ(scene.nodes[1].scale, glm::vec3(2, 2, 2));
+}
+
+// ---- index types, primitives, strips and fans --------------------------------------
+
+TEST(GltfLoader, NumbersFacesInPrimitiveOrderWithU8U16AndU32Indices) {
+  const TempDir dir;
+  GltfDoc g;
+  // Primitive 0: a unit square at z=0 as two triangles, u8 indices.
+  const int square = g.addPositions({{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}});
+  const int i8 = g.addIndices({0, 1, 2, 0, 2, 3}, kUnsignedByte);
+  // Primitive 1: one triangle at z=1, u16 indices listed in reverse.
+  const int tri = g.addPositions({{0, 0, 1}, {2, 0, 1}, {0, 2, 1}});
+  const int i16 = g.addIndices({2, 1, 0}, kUnsignedShort);
+  // Primitive 2: one triangle at z=2, u32 indices.
+  const int tri2 = g.addPositions({{0, 0, 2}, {3, 0, 2}, {0, 3, 2}});
+  const int i32 = g.addIndices({0, 1, 2}, kUnsignedInt);
+  const int mesh = g.addMesh("parts", {GltfDoc::primitive(square, i8), GltfDoc::primitive(tri, i16),
+                                       GltfDoc::primitive(tri2, i32)});
+  g.addNode({{"name", "thing"}, {"mesh", mesh}});
+  g.setRoots({0});
+  const Scene scene = loadGltf(dir.write("parts.gltf", g.text()));
+  ASSERT_EQ(scene.objects.size(), 1u);
+  const Object& o = scene.objects[0];
+  ASSERT_EQ(o.mesh.triangleCount(), 4u);
+  EXPECT_EQ(o.mesh.faceIds, (std::vector<uint32_t>{0, 1, 2, 3}));
+  EXPECT_EQ(scene.faceCount, 4u);
+  auto t = fileTriangle(scene, o, 1);
+  expectNear(t[0], {0, 0, 0}, 1e-6);
+  expectNear(t[1], {1, 1, 0}, 1e-6);
+  expectNear(t[2], {0, 1, 0}, 1e-6);
+  t = fileTriangle(scene, o, 2);
+  expectNear(t[0], {0, 2, 1}, 1e-6);
+  expectNear(t[1], {2, 0, 1}, 1e-6);
+  expectNear(t[2], {0, 0, 1}, 1e-6);
+  t = fileTriangle(scene, o, 3);
+  expectNear(t[1], {3, 0, 2}, 1e-6);
+}
+
+TEST(GltfLoader, ReadsNonIndexedPrimitivesAsConsecutiveTriples) {
+  const TempDir dir;
+  GltfDoc g;
+  const int pos = g.addPositions({{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {5, 0, 0}, {6, 0, 0}, {5, 1, 0}});
+  g.addNode({{"name", "soup"}, {"mesh", g.addMesh("soup", {GltfDoc::primitive(pos)})}});
+  g.setRoots({0});
+  const Scene scene = loadGltf(dir.write("soup.gltf", g.text()));
+  ASSERT_EQ(scene.triangleCount(), 2u);
+  const auto t = fileTriangle(scene, scene.objects[0], 1);
+  expectNear(t[0], {5, 0, 0}, 1e-6);
+  expectNear(t[2], {5, 1, 0}, 1e-6);
+}
+
+// Every triangle of the object, by its set of vertex positions in file space,
+// and with its normal.
+std::vector<std::pair<std::array<glm::dvec3, 3>, glm::dvec3>> withNormals(const Scene& scene) {
+  std::vector<std::pair<std::array<glm::dvec3, 3>, glm::dvec3>> out;
+  const Object& o = scene.objects.at(0);
+  for (size_t t = 0; t < o.mesh.triangleCount(); ++t) {
+    const auto v = fileTriangle(scene, o, t);
+    out.push_back({v, glm::cross(v[1] - v[0], v[2] - v[0])});
+  }
+  return out;
+}
+
+TEST(GltfLoader, UnrollsATriangleStripWithConsistentWinding) {
+  const TempDir dir;
+  GltfDoc g;
+  // Zig-zag strip over [0,2]x[0,1]: 5 vertices, 3 triangles of area 1/2.
+  const int pos = g.addPositions({{0, 0, 0}, {0, 1, 0}, {1, 0, 0}, {1, 1, 0}, {2, 0, 0}});
+  g.addNode({{"name", "strip"},
+             {"mesh", g.addMesh("strip", {GltfDoc::primitive(pos, -1, 5)})}});
+  g.setRoots({0});
+  const Scene scene = loadGltf(dir.write("strip.gltf", g.text()));
+  const auto tris = withNormals(scene);
+  ASSERT_EQ(tris.size(), 3u);
+  EXPECT_EQ(scene.objects[0].mesh.faceIds, (std::vector<uint32_t>{0, 1, 2}));
+  // Triangle k of a strip is made of vertices k, k+1, k+2 ...
+  const std::vector<glm::dvec3> v{{0, 0, 0}, {0, 1, 0}, {1, 0, 0}, {1, 1, 0}, {2, 0, 0}};
+  for (size_t k = 0; k < 3; ++k) {
+    for (size_t c = 0; c < 3; ++c) {
+      const auto& corners = tris[k].first;
+      EXPECT_TRUE(std::any_of(corners.begin(), corners.end(),
+                              [&](const glm::dvec3& p) { return glm::length(p - v[k + c]) < 1e-6; }))
+          << "triangle " << k << " misses strip vertex " << k + c;
+    }
+    // ... and every one winds like the first, (v0, v1, v2): normal -z.
+    expectNear(tris[k].second, {0, 0, -1}, 1e-6);
+  }
+}
+
+TEST(GltfLoader, UnrollsATriangleFanAroundItsFirstVertex) {
+  const TempDir dir;
+  GltfDoc g;
+  // A fan over the unit square: centre-free, 4 vertices, 2 triangles.
+  const int pos = g.addPositions({{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}});
+  g.addNode({{"name", "fan"}, {"mesh", g.addMesh("fan", {GltfDoc::primitive(pos, -1, 6)})}});
+  g.setRoots({0});
+  const Scene scene = loadGltf(dir.write("fan.gltf", g.text()));
+  const auto tris = withNormals(scene);
+  ASSERT_EQ(tris.size(), 2u);
+  double areaSum = 0.0;
+  for (const auto& [corners, n] : tris) {
+    expectNear(corners[0], {0, 0, 0}, 1e-6);
+    expectNear(glm::normalize(n), {0, 0, 1}, 1e-6);
+    areaSum += 0.5 * glm::length(n);
+  }
+  EXPECT_NEAR(areaSum, 1.0, 1e-6);
+}
+
+TEST(GltfLoader, FlagsAnAnimatedNodeAndItsChildrenDynamicButNotTheirSiblings) {
+  const TempDir dir;
+  GltfDoc g;
+  const int pos = g.addPositions(kUnitTriangle);
+  const int mesh = g.addMesh("tri", {GltfDoc::primitive(pos)});
+  g.addNode({{"name", "door"}, {"mesh", mesh}, {"children", {1}}});
+  g.addNode({{"name", "handle"}, {"mesh", mesh}, {"translation", {0, 0, 1}}});
+  g.addNode({{"name", "wall"}, {"mesh", mesh}, {"translation", {0, 0, 5}}});
+  g.setRoots({0, 2});
+  const int times = g.addScalars({0.0f, 2.5f});
+  const int values = g.addVec3s({{0, 0, 0}, {1, 0, 0}});
+  g.doc()["animations"] = json::array(
+      {{{"name", "open"},
+        {"samplers", json::array({{{"input", times}, {"output", values}}})},
+        {"channels", json::array({{{"sampler", 0}, {"target", {{"node", 0}, {"path", "translation"}}}}})}}});
+  const Scene scene = loadGltf(dir.write("door.gltf", g.text()));
+  ASSERT_EQ(scene.objects.size(), 3u);
+  EXPECT_TRUE(findObject(scene, "door")->dynamic);
+  EXPECT_TRUE(findObject(scene, "handle")->dynamic);
+  EXPECT_FALSE(findObject(scene, "wall")->dynamic);
+  ASSERT_EQ(scene.animations.size(), 1u);
+  EXPECT_EQ(scene.animations[0].name, "open");
+  EXPECT_FLOAT_EQ(scene.animations[0].duration, 2.5f);
+  ASSERT_EQ(scene.animations[0].channels.size(), 1u);
+  const AnimationChannel& ch = scene.animations[0].channels[0];
+  EXPECT_EQ(ch.node, 0);
+  EXPECT_EQ(ch.path, AnimationChannel::Path::Translation);
+  EXPECT_EQ(ch.times, (std::vector<float>{0.0f, 2.5f}));
+  ASSERT_EQ(ch.values.size(), 2u);
+  EXPECT_EQ(glm::vec3(ch.values[1]), glm::vec3(1, 0, 0));
+}
+
+// ---- bad input ------------------------------------------------------------------------
+
+TEST(GltfLoader, RejectsAnIndexOutOfRangeNamingTheMeshAndPrimitive) {
+  const TempDir dir;
+  GltfDoc g;
+  const int pos = g.addPositions(kUnitTriangle);
+  const int good = g.addIndices({0, 1, 2}, kUnsignedShort);
+  const int bad = g.addIndices({0, 1, 3}, kUnsignedShort);
+  g.addNode({{"name", "n"},
+             {"mesh", g.addMesh("roof", {GltfDoc::primitive(pos, good), GltfDoc::primitive(pos, bad)})}});
+  g.setRoots({0});
+  const fs::path p = dir.write("range.gltf", g.text());
+  const std::string msg = inputErrorOf([&] { loadGltf(p); });
+  EXPECT_THAT(msg, HasSubstr("range.gltf"));
+  EXPECT_THAT(msg, HasSubstr("roof"));
+  EXPECT_THAT(msg, HasSubstr("primitive 1"));
+}
+
+TEST(GltfLoader, RejectsAnAccessorReadingPastItsBuffer) {
+  const TempDir dir;
+  GltfDoc g;
+  const int pos = g.addPositions(kUnitTriangle);
+  g.doc()["accessors"][size_t(pos)]["count"] = 1000;  // the view holds 3 elements
+  g.addNode({{"name", "n"}, {"mesh", g.addMesh("m", {GltfDoc::primitive(pos)})}});
+  g.setRoots({0});
+  const fs::path p = dir.write("past.gltf", g.text());
+  EXPECT_THAT(inputErrorOf([&] { loadGltf(p); }), HasSubstr("past.gltf"));
+}
+
+TEST(GltfLoader, RejectsAnAccessorOffsetBeyondItsView) {
+  const TempDir dir;
+  GltfDoc g;
+  const int pos = g.addPositions(kUnitTriangle);
+  g.doc()["accessors"][size_t(pos)]["byteOffset"] = 4;  // last element runs 4 bytes past the view
+  g.addNode({{"name", "n"}, {"mesh", g.addMesh("m", {GltfDoc::primitive(pos)})}});
+  g.setRoots({0});
+  const fs::path p = dir.write("offset.gltf", g.text());
+  EXPECT_THAT(inputErrorOf([&] { loadGltf(p); }), HasSubstr("offset.gltf"));
+}
+
+TEST(GltfLoader, RejectsANanPosition) {
+  const TempDir dir;
+  GltfDoc g;
+  const int pos = g.addPositions({{0, 0, 0}, {std::nanf(""), 0, 0}, {0, 1, 0}});
+  g.doc()["accessors"][size_t(pos)]["min"] = {0, 0, 0};
+  g.doc()["accessors"][size_t(pos)]["max"] = {1, 1, 0};
+  g.addNode({{"name", "n"}, {"mesh", g.addMesh("m", {GltfDoc::primitive(pos)})}});
+  g.setRoots({0});
+  const fs::path p = dir.write("nan.gltf", g.text());
+  EXPECT_THAT(inputErrorOf([&] { loadGltf(p); }), HasSubstr("nan.gltf"));
+}
+
+TEST(GltfLoader, RejectsANodeCycleWithoutHanging) {
+  const TempDir dir;
+  GltfDoc g;
+  const int pos = g.addPositions(kUnitTriangle);
+  const int mesh = g.addMesh("m", {GltfDoc::primitive(pos)});
+  g.addNode({{"name", "a"}, {"mesh", mesh}, {"children", {1}}});
+  g.addNode({{"name", "b"}, {"mesh", mesh}, {"children", {0}}});
+  g.setRoots({0});
+  const fs::path p = dir.write("cycle.gltf", g.text());
+  EXPECT_THAT(inputErrorOf([&] { loadGltf(p); }), HasSubstr("cycle.gltf"));
+}
+
+TEST(GltfLoader, RejectsAFileWithoutTriangles) {
+  const TempDir dir;
+  GltfDoc g;
+  const int pos = g.addPositions(kUnitTriangle);
+  g.addNode({{"name", "points"}, {"mesh", g.addMesh("m", {GltfDoc::primitive(pos, -1, 0)})}});
+  g.setRoots({0});
+  const fs::path p = dir.write("points.gltf", g.text());
+  EXPECT_THAT(inputErrorOf([&] { loadGltf(p); }), HasSubstr("points.gltf"));
+}
+
+TEST(GltfLoader, RejectsFilesThatAreNotGltf) {
+  const TempDir dir;
+  for (const auto& [name, bytes] : std::vector<std::pair<std::string, std::string>>{
+           {"text.gltf", "this is not json"},
+           {"object.gltf", "{\"hello\": 1}"},
+           {"random.glb", std::string("glTF\x02\0\0\0\xff\xff\xff\x7f garbage", 24)},
+           {"obj.glb", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"},
+           {"empty.gltf", ""}}) {
+    SCOPED_TRACE(name);
+    const fs::path p = dir.write(name, bytes);
+    EXPECT_THAT(inputErrorOf([&] { loadGltf(p); }), HasSubstr(name));
+  }
+  const fs::path missing = dir.path() / "missing.glb";
+  EXPECT_THAT(inputErrorOf([&] { loadGltf(missing); }), HasSubstr("missing.glb"));
+}
+
+TEST(GltfLoader, NeverThrowsAnythingButInputErrorOnATruncatedOrFlippedFox) {
+  // Truncations and byte flips of a real binary file: each either loads or
+  // throws InputError.
+  std::ifstream in(kFox, std::ios::binary);
+  const std::string fox((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_GT(fox.size(), 1000u);
+  const TempDir dir;
+  std::vector<std::string> variants;
+  for (size_t cut : {size_t(12), size_t(20), size_t(100), fox.size() / 2, fox.size() - 1})
+    variants.push_back(fox.substr(0, cut));
+  for (size_t at : {size_t(9), size_t(13), size_t(30), size_t(200), size_t(2000)}) {
+    std::string v = fox;
+    v[at] = char(v[at] ^ 0x5a);
+    variants.push_back(v);
+  }
+  for (size_t i = 0; i < variants.size(); ++i) {
+    const fs::path p = dir.write("variant" + std::to_string(i) + ".glb", variants[i]);
+    try {
+      const Scene s = loadGltf(p);
+      for (const Object& o : s.objects)
+        for (const glm::uvec3& t : o.mesh.triangles)
+          ASSERT_LT(glm::max(t.x, glm::max(t.y, t.z)), o.mesh.positions.size());
+    } catch (const InputError&) {
+    }
+  }
+}
+
+// ---- real data: Fox.glb ------------------------------------------------------------------
+
+// The JSON chunk of a .glb file.
+json readGlbJson(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  uint32_t magic = 0, chunkLength = 0, chunkType = 0;
+  std::memcpy(&magic, bytes.data(), 4);
+  std::memcpy(&chunkLength, bytes.data() + 12, 4);
+  std::memcpy(&chunkType, bytes.data() + 16, 4);
+  EXPECT_EQ(magic, 0x46546C67u);      // "glTF"
+  EXPECT_EQ(chunkType, 0x4E4F534Au);  // "JSON"
+  return json::parse(bytes.substr(20, chunkLength));
+}
+
+class Fox : public testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    scene_ = new Scene(loadGltf(kFox));
+    json_ = new json(readGlbJson(kFox));
+  }
+  static void TearDownTestSuite() {
+    delete scene_;
+    delete json_;
+  }
+  static const Scene* scene_;
+  static const json* json_;
+};
+const Scene* Fox::scene_ = nullptr;
+const json* Fox::json_ = nullptr;
+
+// shared/data/README.md: 576 triangles, one skin with 24 joints, clips Survey, Walk, Run.
+TEST_F(Fox, Has576TrianglesWithOneFaceIdEach) {
+  EXPECT_EQ(scene_->triangleCount(), 576u);
+  EXPECT_EQ(scene_->faceCount, 576u);
+  std::vector<int> uses(576, 0);
+  for (const Object& o : scene_->objects)
+    for (uint32_t f : o.mesh.faceIds) {
+      ASSERT_LT(f, 576u);
+      ++uses[f];
+    }
+  EXPECT_EQ(std::count(uses.begin(), uses.end(), 1), 576);
+}
+
+TEST_F(Fox, HasOneSkinOf24JointsWithInverseBindMatrices) {
+  ASSERT_EQ(scene_->skins.size(), 1u);
+  const Skin& skin = scene_->skins[0];
+  EXPECT_EQ(skin.joints.size(), 24u);
+  EXPECT_EQ(skin.inverseBindMatrices.size(), 24u);
+  for (int32_t j : skin.joints) {
+    ASSERT_GE(j, 0);
+    ASSERT_LT(size_t(j), scene_->nodes.size());
+  }
+  // An inverse bind matrix is invertible (a rigid transform here, up to scale).
+  for (const glm::mat4& m : skin.inverseBindMatrices) EXPECT_GT(std::abs(glm::determinant(m)), 1e-6f);
+}
+
+TEST_F(Fox, HasTheThreeClipsWithTheDurationsOfTheirSamplers) {
+  ASSERT_EQ(scene_->animations.size(), 3u);
+  const std::vector<std::string> names{"Survey", "Walk", "Run"};
+  for (size_t a = 0; a < 3; ++a) {
+    const Animation& anim = scene_->animations[a];
+    EXPECT_EQ(anim.name, names[a]);
+    // Oracle: the largest "max" of the sampler input accessors in the JSON.
+    double expected = 0.0;
+    for (const json& s : (*json_)["animations"][a]["samplers"])
+      expected = std::max(expected, (*json_)["accessors"][s["input"].get<size_t>()]["max"][0].get<double>());
+    EXPECT_GT(anim.duration, 0.0f);
+    EXPECT_NEAR(anim.duration, expected, 1e-5) << anim.name;
+    EXPECT_FALSE(anim.channels.empty());
+    for (const AnimationChannel& ch : anim.channels) {
+      EXPECT_EQ(ch.times.size(), ch.values.size());
+      EXPECT_TRUE(std::is_sorted(ch.times.begin(), ch.times.end()));
+    }
+  }
+}
+
+TEST_F(Fox, IsOneDynamicSkinnedObjectWithPerVertexAttributes) {
+  ASSERT_EQ(scene_->objects.size(), 1u);
+  const Object& fox = scene_->objects[0];
+  EXPECT_TRUE(fox.dynamic);
+  EXPECT_EQ(fox.skin, 0);
+  const size_t nv = fox.mesh.positions.size();
+  ASSERT_GT(nv, 0u);
+  EXPECT_EQ(fox.mesh.texcoords.size(), nv);
+  EXPECT_EQ(fox.mesh.joints.size(), nv);
+  EXPECT_EQ(fox.mesh.weights.size(), nv);
+  for (size_t v = 0; v < nv; ++v) {
+    const glm::vec4 w = fox.mesh.weights[v];
+    ASSERT_NEAR(w.x + w.y + w.z + w.w, 1.0f, 1e-3f) << "skin weights sum to one at vertex " << v;
+    for (int k = 0; k < 4; ++k) ASSERT_LT(fox.mesh.joints[v][k], 24) << "joint of vertex " << v;
+  }
+}
+
+TEST_F(Fox, UsesAMaterialWithABaseColourTexture) {
+  const Object& fox = scene_->objects.at(0);
+  ASSERT_FALSE(fox.mesh.materials.empty());
+  const uint32_t m = fox.mesh.materials[0];
+  ASSERT_LT(m, scene_->materials.size());
+  EXPECT_EQ(scene_->materials[m].name, "fox_material");
+  EXPECT_FALSE(scene_->materials[m].baseColorTexture.empty());
+}
+
+TEST_F(Fox, HasTheBoundsOfItsPositionAccessor) {
+  // The skinned mesh is in bind space: its bounds are the accessor's min/max.
+  const json& mesh = (*json_)["meshes"][0]["primitives"][0];
+  const json& acc = (*json_)["accessors"][mesh["attributes"]["POSITION"].get<size_t>()];
+  const Box3d b = scene_->fileBounds();
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_NEAR(b.lo[k], acc["min"][size_t(k)].get<double>(), 1e-3);
+    EXPECT_NEAR(b.hi[k], acc["max"][size_t(k)].get<double>(), 1e-3);
+  }
+}
+
+TEST_F(Fox, KeepsTheNodeHierarchyOfTheFile) {
+  const json& nodes = (*json_)["nodes"];
+  ASSERT_EQ(scene_->nodes.size(), nodes.size());
+  std::vector<int> parentOf(nodes.size(), -1);
+  for (size_t i = 0; i < nodes.size(); ++i)
+    if (nodes[i].contains("children"))
+      for (const json& c : nodes[i]["children"]) parentOf[c.get<size_t>()] = int(i);
+  for (size_t i = 0; i < nodes.size(); ++i) {
+    EXPECT_EQ(scene_->nodes[i].parent, parentOf[i]) << "node " << i;
+    EXPECT_EQ(scene_->nodes[i].name, nodes[i]["name"].get<std::string>());
+  }
+}
+
+}  // namespace
+}  // namespace vistream

@@ -1,0 +1,150 @@
+// End-to-end tests of the vistream-scene executable: arguments in, exit
+// status and stdout/stderr out.
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct ToolRun {
+  int status = -1;
+  std::string out;
+  std::string err;
+};
+
+ToolRun runTool(const std::string& args) {
+  const fs::path errFile = fs::temp_directory_path() / ("vistream_tool_err_" + std::to_string(::getpid()));
+  const std::string cmd = std::string(VISTREAM_BIN_DIR) + "/vistream-scene " + args + " 2>" + errFile.string();
+  ToolRun r;
+  FILE* pipe = ::popen(cmd.c_str(), "r");
+  if (!pipe) return r;
+  std::array<char, 4096> buf{};
+  size_t n;
+  while ((n = std::fread(buf.data(), 1, buf.size(), pipe)) > 0) r.out.append(buf.data(), n);
+  const int st = ::pclose(pipe);
+  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  std::ifstream e(errFile);
+  r.err.assign(std::istreambuf_iterator<char>(e), {});
+  fs::remove(errFile);
+  return r;
+}
+
+// A wall in front of a hidden box, 50 km from the origin, as OBJ quads.
+// Face IDs: 0 ground; wall faces 1..6 (-x,+x,-y,+y,-z,+z); hidden box 7..12.
+fs::path writeWallScene() {
+  const fs::path dir = fs::temp_directory_path() / ("vistream_tool_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const fs::path file = dir / "wall.obj";
+  std::ofstream o(file);
+  const double X = 50000.0, Z = -50000.0;
+  int base = 1;
+  auto v = [&](double x, double y, double z) { o << "v " << std::setprecision(17) << x + X << " " << y << " " << z + Z << "\n"; };
+  o << "o ground\n";
+  v(-50, 0, -50); v(-50, 0, 50); v(50, 0, 50); v(50, 0, -50);
+  o << "f 1 2 3 4\n";
+  base = 5;
+  auto box = [&](const char* name, double x0, double y0, double z0, double x1, double y1, double z1) {
+    o << "o " << name << "\n";
+    v(x0, y0, z0); v(x1, y0, z0); v(x1, y1, z0); v(x0, y1, z0);
+    v(x0, y0, z1); v(x1, y0, z1); v(x1, y1, z1); v(x0, y1, z1);
+    const int b = base;
+    auto f = [&](int a, int c, int d, int e) { o << "f " << b + a << " " << b + c << " " << b + d << " " << b + e << "\n"; };
+    f(0, 4, 7, 3);  // -x
+    f(1, 2, 6, 5);  // +x
+    f(0, 1, 5, 4);  // -y
+    f(3, 7, 6, 2);  // +y
+    f(0, 3, 2, 1);  // -z
+    f(4, 5, 6, 7);  // +z
+    base += 8;
+  };
+  box("wall", -10, 0, -5, 10, 10.3, -4.83);
+  box("hidden", -1, 0, -10, 1, 2, -8);
+  return file;
+}
+
+TEST(SceneTool, HelpListsTheSubcommandsAndExitsZero) {
+  const ToolRun r = runTool("--help");
+  EXPECT_EQ(r.status, 0);
+  for (const char* sub : {"generate", "info", "path", "visible"})
+    EXPECT_NE(r.out.find(sub), std::string::npos) << sub;
+}
+
+TEST(SceneTool, VisibleSpeaksInFileCoordinatesAndFaceIdsFarFromTheOrigin) {
+  const fs::path scene = writeWallScene();
+  const ToolRun r = runTool("visible --scene " + scene.string() + " --cell 49999,1,-50000,50001,2,-49998 --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["faces"].get<std::vector<uint32_t>>(), (std::vector<uint32_t>{0, 6}));
+  EXPECT_EQ(j["stats"]["viewpoints"].get<int>(), 32);
+  fs::remove_all(scene.parent_path());
+}
+
+TEST(SceneTool, InfoReportsCountsBoundsAndEffectsAsJson) {
+  const fs::path scene = writeWallScene();
+  const ToolRun r = runTool("info " + scene.string() + " --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["objects"].get<int>(), 3);
+  EXPECT_EQ(j["faces"].get<int>(), 13);
+  EXPECT_EQ(j["triangles"].get<int>(), 26);
+  EXPECT_EQ(j["degenerate_triangles"].get<int>(), 0);
+  EXPECT_DOUBLE_EQ(j["bounds"]["min"][0].get<double>(), 49950.0);
+  EXPECT_DOUBLE_EQ(j["bounds"]["max"][2].get<double>(), -49950.0);
+  bool sawHorizon = false;
+  for (const auto& d : j["effects"])
+    if (d["effect"] == "horizon_tracing") {
+      sawHorizon = true;
+      EXPECT_TRUE(d["enabled"].get<bool>());
+    }
+  EXPECT_TRUE(sawHorizon);
+  fs::remove_all(scene.parent_path());
+}
+
+TEST(SceneTool, BadArgumentsGiveAClearErrorAndANonZeroExit) {
+  const fs::path scene = writeWallScene();
+  ToolRun r = runTool("visible --scene " + scene.string() + " --cell 1,2,3");
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("--cell: expected 6"), std::string::npos) << r.err;
+  r = runTool("visible --scene " + scene.string() + " --cell 2,0,0,1,1,1");
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("x0<=x1"), std::string::npos) << r.err;
+  r = runTool("info /nonexistent/scene.obj");
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("/nonexistent/scene.obj"), std::string::npos) << r.err;
+  r = runTool("info nosuchscene");
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("not a built-in scene"), std::string::npos) << r.err;
+  r = runTool("path --scene " + scene.string() + " --frames 0 --out /tmp/x.csv");
+  EXPECT_EQ(r.status, 1);
+  r = runTool("frobnicate");
+  EXPECT_EQ(r.status, 2);
+  fs::remove_all(scene.parent_path());
+}
+
+TEST(SceneTool, GeneratesAPathFileThatStartsWithTheHeader) {
+  const fs::path scene = writeWallScene();
+  const fs::path out = scene.parent_path() / "p.csv";
+  const ToolRun r = runTool("path --scene " + scene.string() + " --frames 10 --out " + out.string());
+  ASSERT_EQ(r.status, 0) << r.err;
+  std::ifstream in(out);
+  std::string header;
+  std::getline(in, header);
+  EXPECT_EQ(header, "t,x,y,z,yaw_deg,pitch_deg");
+  size_t rows = 0;
+  for (std::string line; std::getline(in, line);) ++rows;
+  EXPECT_EQ(rows, 10u);
+  fs::remove_all(scene.parent_path());
+}
+
+}  // namespace
