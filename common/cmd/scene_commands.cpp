@@ -186,6 +186,7 @@ int runSceneTool(int argc, char** argv) {
                "A SCENE is a file (.obj, .gltf, .glb, .json manifest) or a built-in name "
                "(city1, city2, bigcity, interior, terrain; 'city1@SEED' picks a seed)."};
   app.require_subcommand(1);
+  app.fallthrough();  // --log-level may follow the subcommand
   std::string logLevel;
   app.add_option("--log-level", logLevel, "trace, debug, info, warn, error, critical, off");
 

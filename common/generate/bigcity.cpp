@@ -32,12 +32,12 @@
 // (window frames, sills and shop windows, in glass), then "monument_NN" per
 // square. Buildings are numbered from 1 in block order (row-major from -Z,
 // -X), and within a block south, north, west and east side.
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
 #include <utility>
 #include <vector>
-
-#include <fmt/format.h>
 
 #include "common/generate/generate.h"
 #include "common/generate/polygon_builder.h"
@@ -55,10 +55,10 @@ constexpr double kExtent = 2000.0;  // metres, the city is kExtent x kExtent
 constexpr int kBlocksPerSide = 18;
 constexpr int kSquares = 6;
 constexpr double kAvenueWidth = 20.0;
-constexpr double kSetback = 1.0;         // body behind the block edge; details stay in the block
-constexpr double kBuildingGap = 1.5;     // between neighbouring buildings
-constexpr double kGroundFloor = 4.2;     // metres, shop floor
-constexpr double kFloor = 3.2;           // metres, upper floors
+constexpr double kSetback = 1.0;      // body behind the block edge; details stay in the block
+constexpr double kBuildingGap = 1.5;  // between neighbouring buildings
+constexpr double kGroundFloor = 4.2;  // metres, shop floor
+constexpr double kFloor = 3.2;        // metres, upper floors
 
 enum BigCityMaterial : uint32_t {
   kAsphalt,
@@ -178,8 +178,8 @@ void decorateFacade(PolygonObject& body, PolygonObject& windows, const Facade& f
 
 // One building on footprint [lo, hi] (x, z), its street facades listed by
 // outward direction.
-void addBuilding(PolygonScene& scene, SceneRandom& random, int number, glm::dvec2 lo,
-                 glm::dvec2 hi, const std::vector<glm::dvec3>& streetSides) {
+void addBuilding(PolygonScene& scene, SceneRandom& random, int number, glm::dvec2 lo, glm::dvec2 hi,
+                 const std::vector<glm::dvec3>& streetSides) {
   const glm::dvec2 centre = 0.5 * (lo + hi);
   const double r = glm::length(centre);
   BuildingStyle style{};
@@ -220,8 +220,8 @@ void addBuilding(PolygonScene& scene, SceneRandom& random, int number, glm::dvec
     const glm::dvec2 housing(random.uniform(3.0, 6.0), random.uniform(3.0, 6.0));
     const glm::dvec2 at(random.uniform(lo.x + 1.5, hi.x - 1.5 - housing.x),
                         random.uniform(lo.y + 1.5, hi.y - 1.5 - housing.y));
-    addBox(body, {at.x, height, at.y}, {at.x + housing.x, height + random.uniform(2.5, 3.5),
-                                        at.y + housing.y});
+    addBox(body, {at.x, height, at.y},
+           {at.x + housing.x, height + random.uniform(2.5, 3.5), at.y + housing.y});
   }
   scene.objects.push_back(std::move(body));
   scene.objects.push_back(std::move(windows));
@@ -257,7 +257,8 @@ PolygonScene generateBigCity(uint64_t seed) {
   // Open squares: interior blocks, no two touching.
   std::vector<glm::ivec2> squares;
   while (int(squares.size()) < kSquares) {
-    const glm::ivec2 b(random.integer(2, kBlocksPerSide - 3), random.integer(2, kBlocksPerSide - 3));
+    const glm::ivec2 b(random.integer(2, kBlocksPerSide - 3),
+                       random.integer(2, kBlocksPerSide - 3));
     bool free = true;
     for (const glm::ivec2& s : squares)
       free = free && std::max(std::abs(s.x - b.x), std::abs(s.y - b.y)) > 1;
@@ -330,7 +331,8 @@ PolygonScene generateBigCity(uint64_t seed) {
     const glm::dvec2 c(0.5 * (x.lo + x.hi), 0.5 * (z.lo + z.hi));
     PolygonObject monument = makeObject(fmt::format("monument_{:02d}", s + 1), kStone);
     addBox(monument, {c.x - 4.0, 0.0, c.y - 4.0}, {c.x + 4.0, 1.5, c.y + 4.0});
-    addBox(monument, {c.x - 1.0, 1.5, c.y - 1.0}, {c.x + 1.0, random.uniform(10.0, 18.0), c.y + 1.0});
+    addBox(monument, {c.x - 1.0, 1.5, c.y - 1.0},
+           {c.x + 1.0, random.uniform(10.0, 18.0), c.y + 1.0});
     scene.objects.push_back(std::move(monument));
   }
   return scene;

@@ -15,7 +15,7 @@
 //  - Every box is closed (the paper's occluders are convex closed objects);
 //    a building is one object, its boxes in order from the ground up.
 //  - Dense city: 24 m lots, 8 m streets, footprints filling 70-100% of the lot
-//    side (about 45% of the ground built up). Sparse city: 38 m lots, 10 m
+//    side (about 41% of the ground built up). Sparse city: 38 m lots, 10 m
 //    streets, 14-22 m footprints placed anywhere in the lot (about 14%).
 //  - Heights 8-40 m for simple boxes, 4-14 m per stacked box, each upper box
 //    inset by 10-20% of the lower one's side on each side.
@@ -26,11 +26,11 @@
 // "building_0001" .. "building_2128" in the same lot order. Streets run along
 // x and z between the lot rows and columns and are free of geometry above the
 // ground.
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <utility>
 #include <vector>
-
-#include <fmt/format.h>
 
 #include "common/generate/generate.h"
 #include "common/generate/polygon_builder.h"
@@ -109,9 +109,11 @@ PolygonScene generateCity(bool dense, uint64_t seed) {
     for (int column = 0; column < kLotColumns; ++column) {
       const int index = row * kLotColumns + column;
       const double cellX = x0 + column * pitch, cellZ = z0 + row * pitch;
-      // Ground tile over the whole cell, wound to face up.
-      addQuad(ground, {cellX, 0.0, cellZ}, {cellX, 0.0, cellZ + pitch},
-              {cellX + pitch, 0.0, cellZ + pitch}, {cellX + pitch, 0.0, cellZ});
+      // Ground tile over the whole cell, wound to face up; neighbours share
+      // edges exactly (same expression), so the ground has no cracks.
+      const double nextX = x0 + (column + 1) * pitch, nextZ = z0 + (row + 1) * pitch;
+      addQuad(ground, {cellX, 0.0, cellZ}, {cellX, 0.0, nextZ}, {nextX, 0.0, nextZ},
+              {nextX, 0.0, cellZ});
 
       // Footprint somewhere inside the lot (the cell minus half a street on each side).
       const double lotX = cellX + 0.5 * layout.street, lotZ = cellZ + 0.5 * layout.street;
@@ -121,9 +123,8 @@ PolygonScene generateCity(bool dense, uint64_t seed) {
                     lotZ + random.uniform(0.0, layout.lot - depth)};
       glm::dvec2 hi = lo + glm::dvec2(width, depth);
 
-      PolygonObject building = makeObject(
-          fmt::format("building_{:04d}", index + 1),
-          kFirstFacade + uint32_t(random.below(kFacadeMaterials)));
+      PolygonObject building = makeObject(fmt::format("building_{:04d}", index + 1),
+                                          kFirstFacade + uint32_t(random.below(kFacadeMaterials)));
       if (!stacked[size_t(index)]) {
         addBox(building, {lo.x, 0.0, lo.y}, {hi.x, random.uniform(8.0, 40.0), hi.y});
       } else {

@@ -4,9 +4,11 @@
 // and Discussion": the fifth floor of Soda Hall, whose kD-tree "consisted of
 // 1187 nodes". The Soda Hall model itself is not ours to ship, so this floor
 // only matches its kind and size: about 40 m x 40 m, two long corridors joined
-// by a cross corridor, about 26 offices with a door each, and a few hundred
-// objects (walls, lintels, tables, chairs, shelves), so that a kD-tree over
-// its objects or triangles has on the order of a thousand nodes.
+// by a cross corridor, 26 offices with a door each, and about 440 objects
+// (walls, lintels, tables, desks, chairs, shelves; about 13,000 faces). The
+// amount of furniture was tuned so that the kD-tree over the objects
+// (KdTree::buildOverObjects, default options) has 1,120-1,160 nodes on seeds
+// 1-6, against the paper's 1,187.
 //
 // Plan (x to the east, z to the north, Y up, metres, floor at y = 0):
 //
@@ -28,20 +30,22 @@
 // no two wall boxes overlap (walls running along z stop at the faces of walls
 // running along x). Each office has one door: a 1 m gap in its corridor wall
 // with a lintel box from 2.1 m to the 3 m ceiling. Furniture (tables with
-// chairs, shelves flush against walls) keeps a clear zone behind each door.
+// chairs in the room, desks with a chair and shelves flush against the walls)
+// keeps a clear zone behind each door.
 // Floor and ceiling are 2 m tiles (floor facing up, ceiling facing down), so
 // visibility can cull them piecewise.
 //
 // Object order: "floor", "ceiling", then walls and lintels line by line
 // ("wall_NNN", "lintel_NNN"), then furniture room by room ("table_NNN",
-// "chair_NNN", "shelf_NNN").
+// "chair_NNN", "desk_NNN", "shelf_NNN").
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <optional>
 #include <utility>
 #include <vector>
-
-#include <fmt/format.h>
 
 #include "common/generate/generate.h"
 #include "common/generate/polygon_builder.h"
@@ -55,9 +59,9 @@ using generate_detail::addQuad;
 using generate_detail::makeObject;
 using generate_detail::SceneRandom;
 
-constexpr double kHalfSize = 20.0;      // outer wall centre lines at +-20 m
-constexpr double kHalfWall = 0.1;       // walls are 0.2 m thick
-constexpr double kStorey = 3.0;         // floor to ceiling
+constexpr double kHalfSize = 20.0;  // outer wall centre lines at +-20 m
+constexpr double kHalfWall = 0.1;   // walls are 0.2 m thick
+constexpr double kStorey = 3.0;     // floor to ceiling
 constexpr double kDoorWidth = 1.0;
 constexpr double kDoorHeight = 2.1;
 constexpr double kCrossCorridor = 1.0;  // cross corridor wall centre lines at +-1 m
@@ -73,8 +77,8 @@ std::vector<Material> interiorMaterials() {
     m.baseColor = glm::vec4(diffuse, 1.0f);
     return m;
   };
-  return {material("floor", {0.50f, 0.46f, 0.40f}), material("ceiling", {0.90f, 0.90f, 0.88f}),
-          material("wall", {0.82f, 0.80f, 0.74f}),  material("wood", {0.55f, 0.38f, 0.22f}),
+  return {material("floor", {0.50f, 0.46f, 0.40f}),  material("ceiling", {0.90f, 0.90f, 0.88f}),
+          material("wall", {0.82f, 0.80f, 0.74f}),   material("wood", {0.55f, 0.38f, 0.22f}),
           material("fabric", {0.22f, 0.30f, 0.45f}), material("shelf", {0.42f, 0.30f, 0.20f})};
 }
 
@@ -127,6 +131,8 @@ class FloorBuilder {
     const double area = (r.x1 - r.x0) * (r.z1 - r.z0);
     const int tables = area > 45.0 ? 2 : 1;
     for (int t = 0; t < tables; ++t) placeTableWithChairs(r, taken);
+    const int desks = random_.integer(2, 3);
+    for (int d = 0; d < desks; ++d) placeDeskWithChair(r, taken);
     const int shelves = random_.integer(1, 3);
     for (int s = 0; s < shelves; ++s) placeShelf(r, taken);
   }
@@ -199,55 +205,107 @@ class FloorBuilder {
     scene_.objects.push_back(std::move(chair));
   }
 
-  // A shelf flush against one of the room's walls: two sides, a back, top,
-  // bottom and three boards, 0.4 m deep.
-  void placeShelf(const Rect& room, std::vector<Rect>& taken) {
+  // A place flush against one of the room's walls, `width` along it and
+  // `depth` into the room, with `clearance` more in front kept free (for a
+  // chair); 1 cm clear of the walls at its ends.
+  struct WallSpot {
+    Rect footprint;  // the piece itself
+    int wall;        // -X, +X, -Z, +Z side of the room
+    double u0;       // where the piece starts along the wall
+    double wallCoordinate;
+
+    bool alongX() const { return wall >= 2; }
+    // Direction from the wall into the room, in (x, z).
+    glm::dvec2 intoRoom() const {
+      const double sign = (wall == 0 || wall == 2) ? 1.0 : -1.0;
+      return alongX() ? glm::dvec2(0.0, sign) : glm::dvec2(sign, 0.0);
+    }
+    // Local frame: u along the wall, v from the wall into the room.
+    glm::dvec3 at(double u, double y, double v) const {
+      const glm::dvec2 into = intoRoom();
+      const double w = wallCoordinate + v * (alongX() ? into.y : into.x);
+      return alongX() ? glm::dvec3(u0 + u, y, w) : glm::dvec3(w, y, u0 + u);
+    }
+  };
+
+  std::optional<WallSpot> findWallSpot(const Rect& room, std::vector<Rect>& taken, double width,
+                                       double depth, double clearance) {
     for (int attempt = 0; attempt < 40; ++attempt) {
-      const int wall = random_.integer(0, 3);  // -X, +X, -Z, +Z
-      const double width = random_.uniform(0.9, 1.8), depth = 0.4;
-      const double height = random_.uniform(1.8, 2.1);
-      const bool alongX = wall >= 2;  // the shelf's width runs along x
-      const double span0 = alongX ? room.x0 : room.z0, span1 = alongX ? room.x1 : room.z1;
-      // 1 cm clear of the walls at its ends; flush (exactly) with the wall behind.
+      WallSpot spot{};
+      spot.wall = random_.integer(0, 3);
+      const double span0 = spot.alongX() ? room.x0 : room.z0;
+      const double span1 = spot.alongX() ? room.x1 : room.z1;
       if (span1 - span0 < width + 0.02) continue;
-      const double u0 = random_.uniform(span0 + 0.01, span1 - width - 0.01);
-      Rect footprint{};
-      if (alongX) {
-        footprint = wall == 2 ? Rect{u0, u0 + width, room.z0, room.z0 + depth}
-                              : Rect{u0, u0 + width, room.z1 - depth, room.z1};
-      } else {
-        footprint = wall == 0 ? Rect{room.x0, room.x0 + depth, u0, u0 + width}
-                              : Rect{room.x1 - depth, room.x1, u0, u0 + width};
+      spot.u0 = random_.uniform(span0 + 0.01, span1 - width - 0.01);
+      const double u1 = spot.u0 + width;
+      // Flush (exactly) with the wall: the wall side takes the room's own coordinate.
+      Rect reserved{};
+      switch (spot.wall) {
+        case 0:
+          spot.wallCoordinate = room.x0;
+          spot.footprint = {room.x0, room.x0 + depth, spot.u0, u1};
+          reserved = {room.x0, room.x0 + depth + clearance, spot.u0, u1};
+          break;
+        case 1:
+          spot.wallCoordinate = room.x1;
+          spot.footprint = {room.x1 - depth, room.x1, spot.u0, u1};
+          reserved = {room.x1 - depth - clearance, room.x1, spot.u0, u1};
+          break;
+        case 2:
+          spot.wallCoordinate = room.z0;
+          spot.footprint = {spot.u0, u1, room.z0, room.z0 + depth};
+          reserved = {spot.u0, u1, room.z0, room.z0 + depth + clearance};
+          break;
+        default:
+          spot.wallCoordinate = room.z1;
+          spot.footprint = {spot.u0, u1, room.z1 - depth, room.z1};
+          reserved = {spot.u0, u1, room.z1 - depth - clearance, room.z1};
+          break;
       }
       if (std::any_of(taken.begin(), taken.end(),
-                      [&](const Rect& o) { return o.overlaps(footprint); }))
+                      [&](const Rect& o) { return o.overlaps(reserved); }))
         continue;
-      taken.push_back(footprint);
-
-      // Local frame: u along the wall, v from the wall into the room.
-      const bool fromLow = wall == 0 || wall == 2;
-      auto at = [&](double u, double y, double v) {
-        const double w = fromLow ? (alongX ? footprint.z0 : footprint.x0) + v
-                                 : (alongX ? footprint.z1 : footprint.x1) - v;
-        return alongX ? glm::dvec3(u0 + u, y, w) : glm::dvec3(w, y, u0 + u);
-      };
-      PolygonObject shelf = makeObject(fmt::format("shelf_{:03d}", ++shelves_), kShelf);
-      const double side = 0.03, board = 0.03;
-      addBox(shelf, at(0.0, 0.0, 0.0), at(side, height, depth));
-      addBox(shelf, at(width - side, 0.0, 0.0), at(width, height, depth));
-      addBox(shelf, at(side, 0.0, 0.0), at(width - side, height, 0.02));  // back
-      for (int b = 0; b < 5; ++b) {  // bottom, three boards, top
-        const double y = b == 4 ? height - board : b * (height - board) / 4.0;
-        addBox(shelf, at(side, y, 0.02), at(width - side, y + board, depth));
-      }
-      scene_.objects.push_back(std::move(shelf));
-      return;
+      taken.push_back(reserved);
+      return spot;
     }
+    return std::nullopt;
+  }
+
+  // A shelf against a wall: two sides, a back, bottom, three boards and top.
+  void placeShelf(const Rect& room, std::vector<Rect>& taken) {
+    const double width = random_.uniform(0.9, 1.8), depth = 0.4;
+    const double height = random_.uniform(1.8, 2.1);
+    const std::optional<WallSpot> spot = findWallSpot(room, taken, width, depth, 0.0);
+    if (!spot) return;
+    PolygonObject shelf = makeObject(fmt::format("shelf_{:03d}", ++shelves_), kShelf);
+    const double side = 0.03, board = 0.03;
+    addBox(shelf, spot->at(0.0, 0.0, 0.0), spot->at(side, height, depth));
+    addBox(shelf, spot->at(width - side, 0.0, 0.0), spot->at(width, height, depth));
+    addBox(shelf, spot->at(side, 0.0, 0.0), spot->at(width - side, height, 0.02));  // back
+    for (int b = 0; b < 5; ++b) {
+      const double y = b == 4 ? height - board : b * (height - board) / 4.0;
+      addBox(shelf, spot->at(side, y, 0.02), spot->at(width - side, y + board, depth));
+    }
+    scene_.objects.push_back(std::move(shelf));
+  }
+
+  // A desk against a wall (top on two side panels) with its chair in front.
+  void placeDeskWithChair(const Rect& room, std::vector<Rect>& taken) {
+    const double width = random_.uniform(1.2, 1.6), depth = 0.7;
+    const std::optional<WallSpot> spot = findWallSpot(room, taken, width, depth, 0.9);
+    if (!spot) return;
+    PolygonObject desk = makeObject(fmt::format("desk_{:03d}", ++desks_), kWood);
+    addBox(desk, spot->at(0.0, 0.72, 0.0), spot->at(width, 0.75, depth));
+    addBox(desk, spot->at(0.0, 0.0, 0.0), spot->at(0.03, 0.72, depth));
+    addBox(desk, spot->at(width - 0.03, 0.0, 0.0), spot->at(width, 0.72, depth));
+    scene_.objects.push_back(std::move(desk));
+    const glm::dvec3 seat = spot->at(0.5 * width, 0.0, depth + 0.35);
+    addChair({seat.x, seat.z}, spot->intoRoom());
   }
 
   PolygonScene& scene_;
   SceneRandom& random_;
-  int walls_ = 0, lintels_ = 0, tables_ = 0, chairs_ = 0, shelves_ = 0;
+  int walls_ = 0, lintels_ = 0, tables_ = 0, desks_ = 0, chairs_ = 0, shelves_ = 0;
 };
 
 // Splits [lo, hi] (wall centre lines) into rooms of about 4.5-7 m.
@@ -257,7 +315,8 @@ std::vector<double> roomLines(SceneRandom& random, double lo, double hi) {
   double total = 0.0;
   for (double& w : weight) total += (w = random.uniform(0.8, 1.25));
   std::vector<double> lines{lo};
-  for (int i = 0; i + 1 < rooms; ++i) lines.push_back(lines.back() + weight[size_t(i)] / total * (hi - lo));
+  for (int i = 0; i + 1 < rooms; ++i)
+    lines.push_back(lines.back() + weight[size_t(i)] / total * (hi - lo));
   lines.push_back(hi);
   return lines;
 }
@@ -276,7 +335,9 @@ PolygonScene generateInterior(uint64_t seed) {
   PolygonObject ceiling = makeObject("ceiling", kCeiling);
   for (int j = 0; j < kTilesPerSide; ++j)
     for (int i = 0; i < kTilesPerSide; ++i) {
-      const double x0 = -outer + i * tile, x1 = x0 + tile, z0 = -outer + j * tile, z1 = z0 + tile;
+      // Shared edges come from the same expression: no cracks between tiles.
+      const double x0 = -outer + i * tile, x1 = -outer + (i + 1) * tile;
+      const double z0 = -outer + j * tile, z1 = -outer + (j + 1) * tile;
       addQuad(floor, {x0, 0.0, z0}, {x0, 0.0, z1}, {x1, 0.0, z1}, {x1, 0.0, z0});
       addQuad(ceiling, {x0, kStorey, z0}, {x1, kStorey, z0}, {x1, kStorey, z1}, {x0, kStorey, z1});
     }
@@ -334,13 +395,15 @@ PolygonScene generateInterior(uint64_t seed) {
     std::vector<double> doors;
     for (const Office& o : offices) {
       const double doorZ = o.doorAtLowZ ? o.inside.z0 - kHalfWall : o.inside.z1 + kHalfWall;
-      if (std::abs(doorZ - z) < 1e-6 && o.doorCentre > x0 && o.doorCentre < x1) doors.push_back(o.doorCentre);
+      if (std::abs(doorZ - z) < 1e-6 && o.doorCentre > x0 && o.doorCentre < x1)
+        doors.push_back(o.doorCentre);
     }
     return doors;
   };
   const double inner = kHalfSize - kHalfWall;
   const double crossOuter = kCrossCorridor + kHalfWall;
-  for (const double z : {-9.0, 9.0}) builder.wallAlongX(z, -inner, inner, doorsOn(z, -inner, inner));
+  for (const double z : {-9.0, 9.0})
+    builder.wallAlongX(z, -inner, inner, doorsOn(z, -inner, inner));
   for (const double z : {-7.0, 0.0, 7.0}) {
     builder.wallAlongX(z, -inner, -crossOuter, doorsOn(z, -inner, -crossOuter));
     builder.wallAlongX(z, crossOuter, inner, doorsOn(z, crossOuter, inner));
@@ -349,7 +412,8 @@ PolygonScene generateInterior(uint64_t seed) {
   for (const double x : {-kCrossCorridor, kCrossCorridor})
     builder.wallAlongZ(x, -7.0 - kHalfWall, 7.0 + kHalfWall);
   // Office dividers stop at the faces of the walls along x.
-  for (const Divider& d : dividers) builder.wallAlongZ(d.x, d.band->z0 + kHalfWall, d.band->z1 - kHalfWall);
+  for (const Divider& d : dividers)
+    builder.wallAlongZ(d.x, d.band->z0 + kHalfWall, d.band->z1 - kHalfWall);
 
   for (const Office& office : offices) builder.furnish(office);
   return scene;

@@ -13,10 +13,9 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <glm/glm.hpp>
 #include <string>
 #include <utility>
-
-#include <glm/glm.hpp>
 
 #include "common/core/check.h"
 #include "common/generate/generate.h"

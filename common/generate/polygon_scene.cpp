@@ -1,12 +1,13 @@
 // Polygon scenes: dispatch by type name, triangulation into a Scene, OBJ output.
+#include <fmt/format.h>
+#include <tbb/parallel_for.h>
+
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <iterator>
-#include <numeric>
-
-#include <fmt/format.h>
-#include <tbb/parallel_for.h>
+#include <system_error>
+#include <utility>
 
 #include "common/core/error.h"
 #include "common/generate/generate.h"
@@ -70,7 +71,8 @@ Scene toScene(const PolygonScene& polygons) {
     object.dynamic = source.dynamic;
     TriangleMesh& mesh = object.mesh;
     mesh.positions.reserve(source.vertices.size());
-    for (const glm::dvec3& v : source.vertices) mesh.positions.push_back(glm::vec3(v - scene.origin));
+    for (const glm::dvec3& v : source.vertices)
+      mesh.positions.push_back(glm::vec3(v - scene.origin));
 
     std::vector<glm::dvec3> loop;
     std::vector<glm::uvec3> local;
@@ -125,7 +127,8 @@ class AtomicTextFile {
     flush();
     const bool closed = std::fclose(file_) == 0;
     file_ = nullptr;
-    if (!closed) throwInputError("cannot write '{}': {}", temporary_.string(), std::strerror(errno));
+    if (!closed)
+      throwInputError("cannot write '{}': {}", temporary_.string(), std::strerror(errno));
     std::error_code error;
     std::filesystem::rename(temporary_, path_, error);
     if (error)
@@ -137,7 +140,8 @@ class AtomicTextFile {
   static constexpr size_t kFlushBytes = size_t(4) << 20;
 
   void flush() {
-    if (buffer_.size() > 0 && std::fwrite(buffer_.data(), 1, buffer_.size(), file_) != buffer_.size())
+    if (buffer_.size() > 0 &&
+        std::fwrite(buffer_.data(), 1, buffer_.size(), file_) != buffer_.size())
       throwInputError("cannot write '{}': {}", temporary_.string(), std::strerror(errno));
     buffer_.clear();
   }

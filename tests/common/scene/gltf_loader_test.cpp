@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <map>
@@ -456,7 +457,118 @@ TEST(GltfLoader, FlagsAnAnimatedNodeAndItsChildrenDynamicButNotTheirSiblings) {
   EXPECT_EQ(glm::vec3(ch.values[1]), glm::vec3(1, 0, 0));
 }
 
+TEST(GltfLoader, LeavesTexcoordsEmptyWhenThePrimitiveHasNone) {
+  // LOADER BUG (reported, not fixed here): scene.h says texcoords are "empty if
+  // the source had none", but loadGltf fills one (0,0) per vertex for a
+  // primitive without TEXCOORD_0.
+  const TempDir dir;
+  GltfDoc g;
+  const int pos = g.addPositions(kUnitTriangle);
+  g.addNode({{"name", "bare"}, {"mesh", g.addMesh("bare", {GltfDoc::primitive(pos)})}});
+  g.setRoots({0});
+  const Scene scene = loadGltf(dir.write("bare.gltf", g.text()));
+  ASSERT_EQ(scene.objects.size(), 1u);
+  EXPECT_TRUE(scene.objects[0].mesh.texcoords.empty());
+  EXPECT_TRUE(scene.objects[0].mesh.joints.empty());
+  EXPECT_TRUE(scene.objects[0].mesh.weights.empty());
+}
+
+TEST(GltfLoader, ReadsTexcoordsPerVertex) {
+  const TempDir dir;
+  GltfDoc g;
+  const int pos = g.addPositions(kUnitTriangle);
+  const std::vector<glm::vec2> uv{{0.0f, 0.0f}, {1.0f, 0.0f}, {0.0f, 1.0f}};
+  const int tex = g.addAccessor(g.addView(uv.data(), uv.size() * sizeof(glm::vec2)), kFloat, 3, "VEC2");
+  json prim = GltfDoc::primitive(pos);
+  prim["attributes"]["TEXCOORD_0"] = tex;
+  g.addNode({{"name", "uv"}, {"mesh", g.addMesh("uv", {prim})}});
+  g.setRoots({0});
+  const Scene scene = loadGltf(dir.write("uv.gltf", g.text()));
+  const TriangleMesh& m = scene.objects.at(0).mesh;
+  ASSERT_EQ(m.texcoords.size(), m.positions.size());
+  // Each position keeps its own texcoord: here uv equals the position's xy.
+  for (size_t v = 0; v < m.positions.size(); ++v) {
+    const glm::dvec3 p = scene.toFile(m.positions[v]);
+    EXPECT_NEAR(m.texcoords[v].x, p.x, 1e-6);
+    EXPECT_NEAR(m.texcoords[v].y, p.y, 1e-6);
+  }
+}
+
+TEST(GltfLoader, KeepsJointsPerVertexWhenOnlySomePrimitivesAreSkinned) {
+  // LOADER BUG (reported, not fixed here): joints/weights are appended only for
+  // primitives that have JOINTS_0/WEIGHTS_0, so with an unskinned primitive
+  // first they no longer line up with positions (3 joints for 6 vertices).
+  const TempDir dir;
+  GltfDoc g;
+  const int plain = g.addPositions(kUnitTriangle);
+  const int skinned = g.addPositions({{5, 0, 0}, {6, 0, 0}, {5, 1, 0}});
+  const std::vector<uint16_t> joints{1, 0, 0, 0, 2, 0, 0, 0, 3, 0, 0, 0};
+  const int j = g.addAccessor(g.addView(joints.data(), joints.size() * 2), kUnsignedShort, 3, "VEC4");
+  const std::vector<glm::vec4> weights(3, glm::vec4(1, 0, 0, 0));
+  const int w = g.addAccessor(g.addView(weights.data(), weights.size() * sizeof(glm::vec4)), kFloat, 3, "VEC4");
+  json prim = GltfDoc::primitive(skinned);
+  prim["attributes"]["JOINTS_0"] = j;
+  prim["attributes"]["WEIGHTS_0"] = w;
+  g.addNode({{"name", "mixed"}, {"mesh", g.addMesh("mixed", {GltfDoc::primitive(plain), prim})}});
+  g.setRoots({0});
+  const Scene scene = loadGltf(dir.write("mixed.gltf", g.text()));
+  const TriangleMesh& m = scene.objects.at(0).mesh;
+  ASSERT_EQ(m.positions.size(), 6u);
+  ASSERT_EQ(m.joints.size(), m.positions.size());
+  ASSERT_EQ(m.weights.size(), m.positions.size());
+  // The skinned triangle's vertices carry joints 1, 2, 3.
+  const glm::uvec3 t = m.triangles.at(1);
+  EXPECT_EQ(m.joints[t.x].x, 1);
+  EXPECT_EQ(m.joints[t.y].x, 2);
+  EXPECT_EQ(m.joints[t.z].x, 3);
+}
+
 // ---- bad input ------------------------------------------------------------------------
+
+// A one-triangle file whose TEXCOORD_0 accessor claims `count` elements of a
+// 36-byte view.
+std::string fileWithTexcoordCount(uint64_t count) {
+  GltfDoc g;
+  const int pos = g.addPositions(kUnitTriangle);
+  const std::vector<glm::vec2> uv(3, glm::vec2(0.0f));
+  const int tex = g.addAccessor(g.addView(uv.data(), uv.size() * sizeof(glm::vec2)), kFloat, 3, "VEC2");
+  g.doc()["accessors"][size_t(tex)]["count"] = count;
+  json prim = GltfDoc::primitive(pos);
+  prim["attributes"]["TEXCOORD_0"] = tex;
+  g.addNode({{"name", "n"}, {"mesh", g.addMesh("m", {prim})}});
+  g.setRoots({0});
+  return g.text();
+}
+
+TEST(GltfLoader, RejectsAnAccessorWithAnAbsurdCountAsInputError) {
+  // LOADER BUG (reported, not fixed here): AccessorReader::read allocates
+  // count * components doubles before the bounds check, so count = 2^60 throws
+  // std::length_error (and a count of a few hundred million would allocate
+  // gigabytes) instead of InputError.
+  const TempDir dir;
+  const fs::path p = dir.write("absurd.gltf", fileWithTexcoordCount(uint64_t(1) << 60));
+  EXPECT_THAT(inputErrorOf([&] { loadGltf(p); }), HasSubstr("absurd.gltf"));
+}
+
+TEST(GltfLoaderDeathTest, SurvivesAnAccessorCountWhoseByteSizeOverflows) {
+  // LOADER BUG (reported, not fixed here): with count = 2^63 on a VEC2 float
+  // accessor, count * components and stride * (count - 1) + elemSize both wrap
+  // to 0, the bounds check passes, and the read loop writes past an empty
+  // vector: a segmentation fault. Run in a child process so the crash fails
+  // only this test.
+  const TempDir dir;
+  const fs::path p = dir.write("wrap.gltf", fileWithTexcoordCount(uint64_t(1) << 63));
+  EXPECT_EXIT(
+      {
+        try {
+          loadGltf(p);
+        } catch (const InputError&) {
+          std::_Exit(0);
+        }
+        std::_Exit(1);
+      },
+      testing::ExitedWithCode(0), "");
+}
 
 TEST(GltfLoader, RejectsAnIndexOutOfRangeNamingTheMeshAndPrimitive) {
   const TempDir dir;

@@ -96,12 +96,6 @@ glm::dvec3 normal(const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c)
   return glm::normalize(glm::cross(b - a, c - a));
 }
 
-const Object* findObject(const Scene& scene, const std::string& name) {
-  for (const Object& o : scene.objects)
-    if (o.name == name) return &o;
-  return nullptr;
-}
-
 void expectNear(const glm::dvec3& actual, const glm::dvec3& expected, double tolerance) {
   EXPECT_NEAR(actual.x, expected.x, tolerance);
   EXPECT_NEAR(actual.y, expected.y, tolerance);
@@ -184,8 +178,9 @@ TEST(ObjLoader, TriangulatesAConcavePolygonFaceUnderOneFaceId) {
     if (t.faceId != 0) continue;
     ++lTriangles;
     lArea += area(t.v[0], t.v[1], t.v[2]);
-    // The hexagon winds counter-clockwise seen from +y.
-    expectNear(normal(t.v[0], t.v[1], t.v[2]), {0, 1, 0}, 1e-9);
+    // The hexagon's own winding has normal -y (its first corner: (0,0,-2) x
+    // (1,0,0) = (0,-2,0)); every triangle must keep it.
+    expectNear(normal(t.v[0], t.v[1], t.v[2]), {0, -1, 0}, 1e-9);
   }
   EXPECT_EQ(lTriangles, 4);
   EXPECT_NEAR(lArea, 3.0, 1e-9);
@@ -240,6 +235,59 @@ TEST(ObjLoader, IgnoresCommentsBlankLinesAndCarriageReturns) {
   ASSERT_EQ(scene.triangleCount(), 1u);
   const FileTriangle t = fileTriangles(scene).at(0);
   expectNear(t.v[1], {1, 0, 0}, 1e-9);
+}
+
+TEST(ObjLoader, AcceptsATrailingCommentOnAFaceLine) {
+  // LOADER BUG (reported, not fixed here): the line scan strips the comment,
+  // but tinyobjloader then reads '#' as a face index and the load fails with
+  // "Failed parse `f' line" (no file:line prefix), while the same comment
+  // after a `v` line is accepted.
+  const std::string msg = inputErrorOf([] {
+    const Scene scene =
+        loadObjFromMemory("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3 # the only face\n", "tail.obj");
+    EXPECT_EQ(scene.faceCount, 1u);
+    EXPECT_EQ(scene.triangleCount(), 1u);
+  });
+  EXPECT_EQ(msg, "<no InputError thrown>");
+}
+
+TEST(ObjLoader, AcceptsExplicitPlusSignsOnCoordinates) {
+  // LOADER BUG (reported, not fixed here): std::from_chars rejects a leading
+  // '+', so "v +1 0 0" (valid C float syntax, read fine by tinyobjloader) is
+  // refused as "not a finite number".
+  const std::string msg = inputErrorOf([] {
+    const Scene scene = loadObjFromMemory("v +1 0 0\nv 2 0 0\nv 1 +1.5e0 0\nf 1 2 3\n", "plus.obj");
+    const FileTriangle t = fileTriangles(scene).at(0);
+    expectNear(t.v[0], {1, 0, 0}, 1e-9);
+    expectNear(t.v[2], {1, 1.5, 0}, 1e-9);
+  });
+  EXPECT_EQ(msg, "<no InputError thrown>");
+}
+
+TEST(ObjLoader, AcceptsVertexColoursAndWeightsAfterTheCoordinates) {
+  const Scene scene = loadObjFromMemory(
+      "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 1\nv 0 0 1 1.0\nf 1 2 3\nf 1 2 4\n", "extra.obj");
+  ASSERT_EQ(scene.triangleCount(), 2u);
+  std::map<uint32_t, FileTriangle> byFace;
+  for (const FileTriangle& t : fileTriangles(scene)) byFace.emplace(t.faceId, t);
+  expectNear(byFace.at(0).v[2], {0, 1, 0}, 1e-9);
+  expectNear(byFace.at(1).v[2], {0, 0, 1}, 1e-9);
+}
+
+TEST(ObjLoader, KeepsTexcoordsPerVertexWhenTheFileHasThem) {
+  // LOADER BUG (reported, not fixed here; possibly a known gap): scene.h says
+  // TriangleMesh::texcoords is "per vertex, empty if the source had none", but
+  // the OBJ loader never reads `vt`, so texcoords stay empty.
+  const Scene scene = loadObjFromMemory(
+      "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n", "uv.obj");
+  const TriangleMesh& m = scene.objects.at(0).mesh;
+  ASSERT_EQ(m.texcoords.size(), m.positions.size());
+  // Here every vertex's uv equals its xy.
+  for (size_t v = 0; v < m.positions.size(); ++v) {
+    const glm::dvec3 p = scene.toFile(m.positions[v]);
+    EXPECT_NEAR(m.texcoords[v].x, p.x, 1e-6);
+    EXPECT_NEAR(m.texcoords[v].y, p.y, 1e-6);
+  }
 }
 
 // ---- errors: the message names the file and the line to blame ----------------

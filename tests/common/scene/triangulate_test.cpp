@@ -290,6 +290,15 @@ TEST(TriangulatePolygon, ToleratesRepeatedVertices) {
   expectValidTriangulation(l, triangulate2d(l));
 }
 
+TEST(TriangulatePolygon, CoversAKeyholePolygonWhoseBridgeEdgesCoincide) {
+  // A 4x4 square with a 2x2 hole, joined by a zero-width bridge from (0,2) to
+  // (1,2): how a wall with a window often arrives as one OBJ face. Area 12.
+  const Polygon2 p{{0, 0}, {4, 0}, {4, 4}, {0, 4}, {0, 2}, {1, 2},
+                   {1, 3}, {3, 3}, {3, 1}, {1, 1}, {1, 2}, {0, 2}};
+  EXPECT_DOUBLE_EQ(shoelaceArea(p), 12.0);
+  expectValidTriangulation(p, triangulate2d(p), 80);
+}
+
 TEST(TriangulatePolygon, TriangulatesTheSamePolygonInAnyPlane) {
   const double s = std::sqrt(0.5);
   const glm::dvec3 tu = glm::normalize(glm::dvec3(1.0, 2.0, -0.5));

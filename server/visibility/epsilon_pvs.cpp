@@ -1,0 +1,444 @@
+// Cohen-Or and Zadicario 1998, "Visibility Streaming for Network-based
+// Walkthroughs": the conservative epsilon-visibility test (section 3), ray
+// shooting through a space subdivision with an incremental candidate set
+// (section 4) and the optimisations of Table 2.
+//
+// Why the reduced set of lines is enough (the "redundant rays" of the paper,
+// made exact). Let C be the cell, V the occludee's vertices, O the open
+// convex occluder region. Suppose every kept line (c, v) crosses O but some
+// segment [x, y], x in C, y in hull(V), misses it. Then a plane separates the
+// segment from O: a closed half-space {n.p <= k} holds the segment and not
+// one point of O. Let c* minimise n.p over C and v* over V (perturbing n to
+// break ties keeps them minimisers of the original n). n.c* <= n.x <= k and
+// n.v* <= n.y <= k, so all of [c*, v*] lies in the half-space and misses O.
+// But (c*, v*) is a kept line by construction (c*'s normal cone, an octant,
+// meets v*'s normal cone in n), a contradiction. So blocking every kept line
+// blocks every line from the cell to the occludee.
+#include "server/visibility/epsilon_pvs.h"
+
+#include <algorithm>
+#include <array>
+#include <map>
+#include <span>
+#include <numeric>
+
+#include "common/core/check.h"
+#include "common/core/timer.h"
+
+namespace vistream {
+
+struct EpsilonPvs::Face {
+  uint32_t id = 0;
+  std::vector<glm::dvec3> vertices;
+  std::vector<std::pair<uint8_t, uint8_t>> keptLines;  // (cell corner pattern, vertex index)
+};
+
+// A spatially compact group of one object's faces with its bounding box:
+// the occludee of the bounding-box stage. Small objects are one group; large
+// ones (a ground made of 2,000 tiles) are split so that the box stage can
+// cull their far parts.
+struct OccludeeGroup {
+  std::array<glm::dvec3, 8> boxCorners{};
+  Box3f bounds;
+  uint32_t firstFace = 0, faceCount = 0;  // range in ObjectEntry::faces
+};
+
+struct EpsilonPvs::ObjectEntry {
+  uint32_t object = 0;
+  bool dynamic = false;
+  Box3f bounds;
+  std::vector<Face> faces;
+  std::vector<OccludeeGroup> groups;
+};
+
+namespace {
+
+// Cell corner for pattern s: bit i set takes the upper bound on axis i.
+glm::dvec3 cellCorner(const Box3f& cell, int s) {
+  return {(s & 1) ? cell.hi.x : cell.lo.x, (s & 2) ? cell.hi.y : cell.lo.y, (s & 4) ? cell.hi.z : cell.lo.z};
+}
+
+// Is there a nonzero n with a.n >= 0 for every a in `constraints`? Decided by
+// the extreme rays of the cone (pairwise cross products), with a tolerance
+// that errs towards "yes" (keeping a line is always safe).
+bool coneNonEmpty(const std::vector<glm::dvec3>& constraints) {
+  auto feasible = [&](const glm::dvec3& r) {
+    const double rl = glm::length(r);
+    if (!(rl > 0.0)) return false;
+    for (const glm::dvec3& a : constraints)
+      if (glm::dot(a, r) < -1e-9 * glm::length(a) * rl) return false;
+    return true;
+  };
+  for (size_t i = 0; i < constraints.size(); ++i)
+    for (size_t j = i + 1; j < constraints.size(); ++j) {
+      const glm::dvec3 r = glm::cross(constraints[i], constraints[j]);
+      if (feasible(r) || feasible(-r)) return true;
+    }
+  return false;
+}
+
+// The lines (cell corner pattern, vertex) that can lie on the convex hull of
+// an axis-aligned cell and the vertex set; see the proof at the top.
+std::vector<std::pair<uint8_t, uint8_t>> keptLinesFor(const std::vector<glm::dvec3>& verts) {
+  std::vector<std::pair<uint8_t, uint8_t>> out;
+  std::vector<glm::dvec3> constraints;
+  for (size_t k = 0; k < verts.size(); ++k) {
+    for (int s = 0; s < 8; ++s) {
+      constraints.clear();
+      // The corner with pattern s minimises n.p over the cell iff n_i <= 0
+      // on axes where it takes the upper bound and n_i >= 0 elsewhere.
+      for (int i = 0; i < 3; ++i) {
+        glm::dvec3 a(0.0);
+        a[i] = (s >> i & 1) ? -1.0 : 1.0;
+        constraints.push_back(a);
+      }
+      // v_k minimises n.p over the occludee iff n.(w - v_k) >= 0 for all w.
+      for (size_t w = 0; w < verts.size(); ++w)
+        if (w != k && verts[w] != verts[k]) constraints.push_back(verts[w] - verts[k]);
+      if (coneNonEmpty(constraints)) out.emplace_back(uint8_t(s), uint8_t(k));
+    }
+  }
+  return out;
+}
+
+// At most this many faces per box-stage group: tuned on city1, where the
+// ground's 2,128 tiles dominate the face stage when tested one by one.
+constexpr size_t kMaxFacesPerGroup = 16;
+
+// Splits faces [first, first+count) at the median centroid of the longest
+// axis until groups are small, reordering `faces` in place.
+void splitGroups(std::vector<EpsilonPvs::Face>& faces, uint32_t first, uint32_t count,
+                 std::vector<OccludeeGroup>& out);
+
+}  // namespace
+
+EpsilonPvs::EpsilonPvs(const Scene& scene, const OccluderOptions& occluderOptions) : scene_(scene) {
+  Stopwatch clock;
+  occluders_ = extractOccluders(scene, occluderOptions);
+  std::vector<Box3f> bounds;
+  bounds.reserve(occluders_.occluders.size());
+  for (const auto& o : occluders_.occluders) bounds.push_back(o.bounds);
+  occluderTree_ = KdTree::build(bounds);
+
+  objects_.reserve(scene.objects.size());
+  for (uint32_t oi = 0; oi < scene.objects.size(); ++oi) {
+    const Object& o = scene.objects[oi];
+    ObjectEntry e;
+    e.object = oi;
+    e.dynamic = o.dynamic;
+    e.bounds = o.bounds;
+    std::map<uint32_t, std::vector<glm::dvec3>> byFace;
+    for (size_t t = 0; t < o.mesh.triangles.size(); ++t) {
+      auto& verts = byFace[o.mesh.faceIds[t]];
+      for (int k = 0; k < 3; ++k) {
+        const glm::dvec3 v(o.mesh.positions[o.mesh.triangles[t][k]]);
+        if (std::find(verts.begin(), verts.end(), v) == verts.end()) verts.push_back(v);
+      }
+    }
+    for (auto& [id, verts] : byFace) {
+      Face f;
+      f.id = id;
+      f.vertices = std::move(verts);
+      VS_CHECK_LE(f.vertices.size(), 255u * 3u);
+      if (f.vertices.size() <= 255) f.keptLines = keptLinesFor(f.vertices);
+      e.faces.push_back(std::move(f));
+    }
+    splitGroups(e.faces, 0, uint32_t(e.faces.size()), e.groups);
+    objects_.push_back(std::move(e));
+  }
+  prepareMs_ = clock.ms();
+}
+
+EpsilonPvs::~EpsilonPvs() = default;
+
+namespace {
+
+Box3f faceBounds(const EpsilonPvs::Face& f) {
+  Box3f b;
+  for (const glm::dvec3& v : f.vertices) b.extend(glm::vec3(v));
+  return b;
+}
+
+void splitGroups(std::vector<EpsilonPvs::Face>& faces, uint32_t first, uint32_t count,
+                 std::vector<OccludeeGroup>& out) {
+  Box3f bounds;
+  for (uint32_t i = first; i < first + count; ++i) bounds.extend(faceBounds(faces[i]));
+  if (count <= kMaxFacesPerGroup) {
+    OccludeeGroup g;
+    g.bounds = bounds;
+    for (int s = 0; s < 8; ++s) g.boxCorners[size_t(s)] = cellCorner(bounds, s);
+    g.firstFace = first;
+    g.faceCount = count;
+    if (count > 0) out.push_back(g);
+    return;
+  }
+  const int axis = bounds.longestAxis();
+  const auto begin = faces.begin() + first, end = begin + count, mid = begin + count / 2;
+  std::nth_element(begin, mid, end, [axis](const EpsilonPvs::Face& a, const EpsilonPvs::Face& b) {
+    return faceBounds(a).center()[axis] < faceBounds(b).center()[axis];
+  });
+  splitGroups(faces, first, count / 2, out);
+  splitGroups(faces, first + count / 2, count - count / 2, out);
+}
+
+}  // namespace
+
+// One cell's computation: scratch state and the occlusion test.
+struct PvsQuery {
+  const EpsilonPvs& pvs;
+  const PvsOptions& options;
+  Box3f cell;
+  std::array<glm::dvec3, 8> corners{};
+  std::vector<uint32_t> stamp;        // per occluder: last line that tested it
+  uint32_t lineId = 0;
+  std::vector<uint8_t> allowed;       // per occluder
+  std::vector<uint8_t> used;          // per occluder: culled something
+  std::vector<uint32_t> candidates, survivors, found;
+  static constexpr uint32_t kNone = 0xffffffffu;
+  std::array<uint32_t, 4> recent{kNone, kNone, kNone, kNone};  // most recently successful occluders
+  PvsStats& stats;
+
+  void markUsed(uint32_t c) {
+    used[c] = 1;
+    if (recent[0] == c) return;
+    const auto it = std::find(recent.begin(), recent.end(), c);
+    std::rotate(recent.begin(), it == recent.end() ? recent.end() - 1 : it, it == recent.end() ? recent.end() : it + 1);
+    recent[0] = c;
+  }
+
+  PvsQuery(const EpsilonPvs& p, const PvsOptions& o, const Box3f& c, PvsStats& s)
+      : pvs(p), options(o), cell(c), stats(s) {
+    for (int i = 0; i < 8; ++i) corners[size_t(i)] = cellCorner(cell, i);
+    const size_t n = pvs.occluders_.occluders.size();
+    stamp.assign(n, 0);
+    allowed.assign(n, 1);
+    used.assign(n, 0);
+    if (options.largeOccluders > 0 && options.largeOccluders < n) {
+      // Solid angle of each occluder from the cell centre, area / distance^2.
+      const glm::dvec3 centre(cell.center());
+      std::vector<std::pair<double, uint32_t>> score(n);
+      for (uint32_t i = 0; i < n; ++i) {
+        const auto& oc = pvs.occluders_.occluders[i];
+        const glm::dvec3 d = oc.centre - centre;
+        score[i] = {oc.area / (glm::dot(d, d) + 1e-6), i};
+      }
+      std::nth_element(score.begin(), score.begin() + std::ptrdiff_t(options.largeOccluders), score.end(),
+                       [](const auto& a, const auto& b) { return a.first > b.first; });
+      allowed.assign(n, 0);
+      for (size_t i = 0; i < options.largeOccluders; ++i) allowed[score[i].second] = 1;
+    }
+    stats.occluders = options.largeOccluders > 0 ? std::min(options.largeOccluders, n) : n;
+  }
+
+  // Every allowed occluder blocking the segment a-b, found through the kD-tree.
+  void collect(const glm::dvec3& a, const glm::dvec3& b, uint64_t& tests, std::vector<uint32_t>& out) {
+    out.clear();
+    ++lineId;
+    ++stats.linesCast;
+    const auto& occ = pvs.occluders_.occluders;
+    pvs.occluderTree_.traverseRay(glm::vec3(a), glm::vec3(b - a), 0.0f, 1.0f,
+                                  [&](int32_t leaf, float, float) {
+                                    for (uint32_t i : pvs.occluderTree_.items(leaf)) {
+                                      if (!allowed[i] || stamp[i] == lineId) continue;
+                                      stamp[i] = lineId;
+                                      ++tests;
+                                      if (occluderBlocksSegment(occ[i], a, b)) out.push_back(i);
+                                    }
+                                    return true;
+                                  });
+  }
+
+  // True if one occluder blocks every listed line. `firstOnly` reports
+  // whether the first candidate was the one.
+  bool hidden(std::span<const glm::dvec3> points, std::span<const std::pair<uint8_t, uint8_t>> lines,
+              uint64_t& tests, bool* byFirst) {
+    if (lines.empty()) return false;
+    const auto& occ = pvs.occluders_.occluders;
+    auto lineEnds = [&](const std::pair<uint8_t, uint8_t>& l) {
+      return std::pair{corners[l.first], points[l.second]};
+    };
+    if (options.incremental) {
+      // Occluders that just culled a neighbour are tried first: adjacent
+      // faces and groups are usually hidden by the same building.
+      bool first = true;
+      auto blocksAll = [&](uint32_t c, size_t from) {
+        for (size_t l = from; l < lines.size(); ++l) {
+          const auto [a, b] = lineEnds(lines[l]);
+          ++tests;
+          if (!occluderBlocksSegment(occ[c], a, b)) return false;
+        }
+        return true;
+      };
+      for (uint32_t c : recent) {
+        if (c == kNone || !allowed[c]) continue;
+        if (blocksAll(c, 0)) {
+          markUsed(c);
+          if (byFirst) *byFirst = first;
+          return true;
+        }
+        first = false;
+      }
+      // The first line collects candidates front to back through the
+      // kD-tree; each is checked against the remaining lines at once, so
+      // the traversal stops at the first occluder that blocks them all.
+      const auto [a0, b0] = lineEnds(lines[0]);
+      ++stats.linesCast;
+      stats.linesCast += lines.size() - 1;
+      ++lineId;
+      uint32_t winner = kNone;
+      pvs.occluderTree_.traverseRay(glm::vec3(a0), glm::vec3(b0 - a0), 0.0f, 1.0f,
+                                    [&](int32_t leaf, float, float) {
+                                      for (uint32_t i : pvs.occluderTree_.items(leaf)) {
+                                        if (!allowed[i] || stamp[i] == lineId) continue;
+                                        stamp[i] = lineId;
+                                        ++tests;
+                                        if (!occluderBlocksSegment(occ[i], a0, b0)) continue;
+                                        if (blocksAll(i, 1)) {
+                                          winner = i;
+                                          return false;
+                                        }
+                                        first = false;
+                                      }
+                                      return true;
+                                    });
+      if (winner == kNone) return false;
+      markUsed(winner);
+      if (byFirst) *byFirst = first;
+      return true;
+    }
+    // Without the incremental set every line traverses the space on its own;
+    // the answer is the intersection of the per-line sets.
+    for (size_t l = 0; l < lines.size(); ++l) {
+      const auto [a, b] = lineEnds(lines[l]);
+      collect(a, b, tests, found);
+      std::sort(found.begin(), found.end());
+      if (l == 0) {
+        candidates = found;
+      } else {
+        survivors.clear();
+        std::set_intersection(candidates.begin(), candidates.end(), found.begin(), found.end(),
+                              std::back_inserter(survivors));
+        candidates.swap(survivors);
+      }
+      if (candidates.empty()) return false;
+    }
+    markUsed(candidates.front());
+    if (byFirst) *byFirst = false;
+    return true;
+  }
+};
+
+PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) const {
+  Stopwatch total;
+  PvsResult result;
+  PvsStats& stats = result.stats;
+  PvsQuery q(*this, options, cell, stats);
+
+  // Every line pair between the cell's 8 corners and n points.
+  static const auto allPairs = [] {
+    std::vector<std::pair<uint8_t, uint8_t>> v;
+    for (int k = 0; k < 255; ++k)
+      for (int s = 0; s < 8; ++s) v.emplace_back(uint8_t(s), uint8_t(k));
+    return v;
+  }();
+  static const auto boxPairs = [] {
+    std::vector<std::pair<uint8_t, uint8_t>> v;
+    for (int s = 0; s < 8; ++s) v.emplace_back(uint8_t(s), uint8_t(s));
+    return v;
+  }();
+
+  // Near to far, so that hidden near objects stop serving as occluders early.
+  const glm::vec3 centre = cell.center();
+  std::vector<uint32_t> order(objects_.size());
+  std::iota(order.begin(), order.end(), 0u);
+  std::vector<float> dist(objects_.size());
+  for (size_t i = 0; i < objects_.size(); ++i) {
+    const Box3f& b = objects_[i].bounds;
+    const glm::vec3 d = glm::max(glm::max(b.lo - centre, centre - b.hi), glm::vec3(0.0f));
+    dist[i] = glm::dot(d, d);
+  }
+  std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return dist[a] < dist[b]; });
+
+  std::vector<uint8_t> objectHidden(objects_.size(), 0);
+  std::vector<std::vector<uint32_t>> occludersOf;  // object -> its occluders, for dropping
+  if (options.dropOccludedOccluders) {
+    occludersOf.resize(scene_.objects.size());
+    for (uint32_t i = 0; i < occluders_.occluders.size(); ++i)
+      occludersOf[occluders_.occluders[i].object].push_back(i);
+  }
+  auto isCandidate = [&](uint32_t face) {
+    return !options.candidateFaces ||
+           std::binary_search(options.candidateFaces->begin(), options.candidateFaces->end(), face);
+  };
+
+  double boxMs = 0.0, faceMs = 0.0;
+  for (uint32_t idx : order) {
+    const ObjectEntry& e = objects_[idx];
+    stats.faces += e.faces.size();
+    if (e.dynamic) {
+      for (const Face& f : e.faces) result.faces.push_back(f.id);
+      continue;
+    }
+    bool anyVisible = false;
+    for (const OccludeeGroup& g : e.groups) {
+      if (options.boxStage) {
+        Stopwatch sw;
+        ++stats.boxes;
+        bool byFirst = false;
+        const bool boxHidden = q.hidden(
+            g.boxCorners, options.removeRedundantLines ? std::span(boxPairs) : std::span(allPairs).first(64),
+            stats.lineBoxTests, &byFirst);
+        boxMs += sw.ms();
+        if (boxHidden) {
+          ++stats.boxesOccluded;
+          stats.boxesOccludedByFirst += byFirst;
+          stats.facesCulledByBoxStage += g.faceCount;
+          stats.facesOccluded += g.faceCount;
+          continue;
+        }
+      }
+      Stopwatch sw;
+      for (uint32_t fi = g.firstFace; fi < g.firstFace + g.faceCount; ++fi) {
+        const Face& f = e.faces[fi];
+        if (!isCandidate(f.id)) {
+          ++stats.facesOccluded;
+          continue;
+        }
+        const bool reduced = options.removeRedundantLines && !f.keptLines.empty();
+        const std::span<const std::pair<uint8_t, uint8_t>> lines =
+            reduced ? std::span(f.keptLines)
+                    : std::span(allPairs).first(8 * std::min<size_t>(f.vertices.size(), 255));
+        if (f.vertices.size() <= 255 && q.hidden(f.vertices, lines, stats.linePolygonTests, nullptr)) {
+          ++stats.facesOccluded;
+        } else {
+          result.faces.push_back(f.id);
+          anyVisible = true;
+        }
+      }
+      faceMs += sw.ms();
+    }
+    // A hidden object hides nothing that its occluders would: drop them.
+    if (!anyVisible) {
+      objectHidden[idx] = 1;
+      if (options.dropOccludedOccluders)
+        for (uint32_t oc : occludersOf[e.object]) q.allowed[oc] = 0;
+    }
+  }
+
+  std::sort(result.faces.begin(), result.faces.end());
+  result.faces.erase(std::unique(result.faces.begin(), result.faces.end()), result.faces.end());
+  // Objects with a face in the PVS.
+  for (const ObjectEntry& e : objects_)
+    for (const Face& f : e.faces)
+      if (std::binary_search(result.faces.begin(), result.faces.end(), f.id)) {
+        result.objects.push_back(e.object);
+        break;
+      }
+  stats.occludersUsed = size_t(std::count(q.used.begin(), q.used.end(), uint8_t(1)));
+  stats.boxStageMs = boxMs;
+  stats.faceStageMs = faceMs;
+  stats.timeMs = total.ms();
+  return result;
+}
+
+}  // namespace vistream

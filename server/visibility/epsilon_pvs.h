@@ -1,0 +1,113 @@
+// The conservative visibility superset of an epsilon-neighbourhood: Cohen-Or
+// and Zadicario, "Visibility Streaming for Network-based Walkthroughs" (1998),
+// sections 3-4.
+//
+// A view cell is a closed axis-aligned box. An occludee (an object's bounding
+// box, or a face) is culled only if ONE convex occluder blocks every line of
+// sight from the cell to the occludee. For convex occluders the set of
+// viewpoints from which a point is hidden is convex, and so is the set of
+// points hidden from a viewpoint, so blocking the lines between the cell's
+// corners and the occludee's vertices hides the occludee from every point of
+// the cell. The PVS is therefore valid for any viewpoint in the closed cell
+// and any view direction (frustum culling stays on the client).
+//
+// The paper's accelerations, each switchable (PvsOptions):
+//  - bounding-box stage: an object whose bounding box is hidden is culled
+//    with all its faces before any face is tested;
+//  - incremental candidate set: the first line collects every occluder it
+//    crosses through a kD-tree over the occluders; later lines only test the
+//    survivors;
+//  - occluded objects are dropped as occluders (objects are processed near
+//    to far, so hidden near objects stop being tried for far ones);
+//  - redundant lines removed: of the corner-vertex lines only those that can
+//    lie on the convex hull of cell and occludee are cast. A line (c, v) is
+//    kept if some direction n has c among the cell's minimisers of n.x and v
+//    among the occludee's; if another line were blocked and this one not, a
+//    plane separating it from the occluder would give such an n (see the
+//    proof in epsilon_pvs.cpp). The pairs depend only on the occludee's shape,
+//    so they are computed once per face, not per cell;
+//  - large-occluder selection: only the K occluders with the largest solid
+//    angle seen from the cell centre;
+//  - coarse-to-fine cells: a fine cell inside a coarse one only tests the
+//    faces of the coarse cell's PVS (PvsOptions::candidateFaces).
+//
+// Dynamic objects are never culled and never occlude: their faces are always
+// in the PVS. Thread safety: compute() is const and may run concurrently.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "common/core/box.h"
+#include "common/scene/scene.h"
+#include "common/spatial/kdtree.h"
+#include "server/visibility/occluders.h"
+
+namespace vistream {
+
+struct PvsOptions {
+  bool boxStage = true;            // --no-bbox turns it off
+  bool incremental = true;         // --no-incremental
+  bool dropOccludedOccluders = true;  // --no-redundant-occluders
+  bool removeRedundantLines = true;   // --no-redundant-rays
+  size_t largeOccluders = 0;       // 0: every occluder; K: the K largest by solid angle
+  // Coarse-to-fine: when non-null, only these faces (sorted) can be in the PVS.
+  const std::vector<uint32_t>* candidateFaces = nullptr;
+};
+
+struct PvsStats {
+  double timeMs = 0.0;
+  double boxStageMs = 0.0;
+  double faceStageMs = 0.0;
+  size_t occluders = 0;            // occluders available to this cell
+  size_t occludersUsed = 0;        // distinct occluders that culled something
+  uint64_t linesCast = 0;          // lines of sight cast (traversed or tested)
+  uint64_t lineBoxTests = 0;       // line/occluder tests in the bounding-box stage
+  uint64_t linePolygonTests = 0;   // line/occluder tests in the face stage
+  size_t boxes = 0;                // objects tested in the box stage
+  size_t boxesOccluded = 0;
+  size_t boxesOccludedByFirst = 0; // hidden by the first candidate tried
+  size_t faces = 0;                // faces considered
+  size_t facesOccluded = 0;        // culled in total (box stage included)
+  size_t facesCulledByBoxStage = 0;
+};
+
+struct PvsResult {
+  std::vector<uint32_t> faces;     // sorted face IDs of the PVS
+  std::vector<uint32_t> objects;   // sorted indices of objects with a face in the PVS
+  PvsStats stats;
+};
+
+class EpsilonPvs {
+ public:
+  // Prepares occluders, their kD-tree and per-face line pairs. The scene must
+  // outlive this object.
+  explicit EpsilonPvs(const Scene& scene, const OccluderOptions& occluderOptions = {});
+  ~EpsilonPvs();
+  EpsilonPvs(const EpsilonPvs&) = delete;
+  EpsilonPvs& operator=(const EpsilonPvs&) = delete;
+
+  // `cell` in the scene's local frame.
+  PvsResult compute(const Box3f& cell, const PvsOptions& options = {}) const;
+
+  const OccluderSet& occluders() const { return occluders_; }
+  const Scene& scene() const { return scene_; }
+  double prepareMs() const { return prepareMs_; }
+
+ public:
+  struct Face;  // an occludee face: its vertices and the lines worth casting
+
+ private:
+  struct ObjectEntry;
+  const Scene& scene_;
+  OccluderSet occluders_;
+  KdTree occluderTree_;
+  std::vector<ObjectEntry> objects_;
+  double prepareMs_ = 0.0;
+
+  friend struct PvsQuery;
+};
+
+}  // namespace vistream
