@@ -48,6 +48,10 @@
 //    accurate pair of edges for the cross product).
 #include "common/raycast/embree_ray_query.h"
 
+#include <embree3/rtcore.h>
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -56,10 +60,6 @@
 #include <mutex>
 #include <stdexcept>
 #include <type_traits>
-
-#include <embree3/rtcore.h>
-#include <fmt/format.h>
-#include <spdlog/spdlog.h>
 
 #include "common/core/check.h"
 #include "common/raycast/ray_query.h"
@@ -87,13 +87,20 @@ std::atomic<uint64_t> gEmbreeErrors{0};
 
 const char* errorName(RTCError code) {
   switch (code) {
-    case RTC_ERROR_NONE: return "none";
-    case RTC_ERROR_UNKNOWN: return "unknown";
-    case RTC_ERROR_INVALID_ARGUMENT: return "invalid argument";
-    case RTC_ERROR_INVALID_OPERATION: return "invalid operation";
-    case RTC_ERROR_OUT_OF_MEMORY: return "out of memory";
-    case RTC_ERROR_UNSUPPORTED_CPU: return "unsupported CPU";
-    case RTC_ERROR_CANCELLED: return "cancelled";
+    case RTC_ERROR_NONE:
+      return "none";
+    case RTC_ERROR_UNKNOWN:
+      return "unknown";
+    case RTC_ERROR_INVALID_ARGUMENT:
+      return "invalid argument";
+    case RTC_ERROR_INVALID_OPERATION:
+      return "invalid operation";
+    case RTC_ERROR_OUT_OF_MEMORY:
+      return "out of memory";
+    case RTC_ERROR_UNSUPPORTED_CPU:
+      return "unsupported CPU";
+    case RTC_ERROR_CANCELLED:
+      return "cancelled";
   }
   return "unrecognised";
 }
@@ -155,8 +162,12 @@ int traversalVariants(const Ray& ray, std::array<Ray, 4>& variants) {
   return count;
 }
 
-float widenDown(float t) { return t - std::abs(t) * kBoundSlack; }
-float widenUp(float t) { return t + std::abs(t) * kBoundSlack; }  // inf stays inf
+float widenDown(float t) {
+  return t - std::abs(t) * kBoundSlack;
+}
+float widenUp(float t) {
+  return t + std::abs(t) * kBoundSlack;
+}  // inf stays inf
 
 RTCRay toEmbreeRay(const Ray& ray, float tnear, float tfar, unsigned id) {
   RTCRay r;
@@ -258,8 +269,9 @@ class EmbreeRayQuery final : public RayQuery {
     // Embree indexes vertices with 32 bits.
     VS_CHECK_LE(triangles.positions.size(), size_t(std::numeric_limits<uint32_t>::max()));
 
-    const size_t degenerate = size_t(std::count_if(
-        triangles.degenerate.begin(), triangles.degenerate.end(), [](uint8_t d) { return d != 0; }));
+    const size_t degenerate =
+        size_t(std::count_if(triangles.degenerate.begin(), triangles.degenerate.end(),
+                             [](uint8_t d) { return d != 0; }));
     indices_.reserve(n - degenerate);
     if (degenerate > 0) primToTriangle_.reserve(n - degenerate);
     for (size_t i = 0; i < n; ++i) {
@@ -482,14 +494,16 @@ class EmbreeRayQuery final : public RayQuery {
   const FlatTriangles& triangles_;
   std::shared_ptr<RTCDeviceTy> device_;
   RTCScene scene_ = nullptr;
-  std::vector<float> vertices_;         // FlatTriangles::positions + 1 float of padding
-  std::vector<glm::uvec3> indices_;     // the non-degenerate triangles
+  std::vector<float> vertices_;           // FlatTriangles::positions + 1 float of padding
+  std::vector<glm::uvec3> indices_;       // the non-degenerate triangles
   std::vector<uint32_t> primToTriangle_;  // Embree primID -> triangle; empty if the identity
 };
 
 }  // namespace
 
-uint64_t embreeErrorCount() { return gEmbreeErrors.load(std::memory_order_relaxed); }
+uint64_t embreeErrorCount() {
+  return gEmbreeErrors.load(std::memory_order_relaxed);
+}
 
 std::unique_ptr<RayQuery> makeEmbreeRayQuery(const FlatTriangles& triangles) {
   return std::make_unique<EmbreeRayQuery>(triangles);

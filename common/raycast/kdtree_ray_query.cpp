@@ -1,8 +1,8 @@
 // RayQuery back end on the project's own kD-tree (common/spatial/kdtree.h):
 // a triangle kD-tree with split clipping, traversed front to back along the
-// ray (Havran's thesis, 2000, section 4.6, the recursive "TA_B" algorithm in
-// its stack form), with triangles tested by the same double-precision
-// watertight test as the brute-force oracle, so both decide seams alike.
+// ray (the recursive ray traversal of Havran's PhD thesis, 2000, in its stack
+// form), with triangles tested by the same double-precision watertight test
+// as the brute-force oracle, so both decide seams alike.
 //
 // Leaves share their boundary planes and a triangle may be referenced by
 // several leaves, so:

@@ -46,6 +46,13 @@ class AccessorReader {
     if (compSize <= 0)
       throwInputError("{}: {}: accessor {} has unknown component type {}", file_, what,
                       accessorIndex, acc.componentType);
+    // Bound the element count by the bytes that could back it before
+    // allocating anything: a count is untrusted and can be absurd.
+    size_t limit = 0;
+    for (const auto& buf : model_.buffers) limit += buf.data.size();
+    if (acc.count > limit || acc.count > (size_t(1) << 32))
+      throwInputError("{}: {}: accessor {} claims {} elements, more than the file's buffers can hold",
+                      file_, what, accessorIndex, acc.count);
     std::vector<double> out(acc.count * size_t(components), 0.0);
     if (acc.bufferView < 0) return out;  // all zeros, per the specification
     if (size_t(acc.bufferView) >= model_.bufferViews.size())
@@ -289,9 +296,17 @@ Scene loadGltf(const std::filesystem::path& path) {
         const auto uv = attr("TEXCOORD_0", 2);
         const auto joints = attr("JOINTS_0", 4);
         const auto weights = attr("WEIGHTS_0", 4);
-        for (size_t v = 0; v < nv; ++v) {
-          obj.texcoords.push_back(uv.empty() ? glm::vec2(0.0f) : glm::vec2(float(uv[2 * v]), float(uv[2 * v + 1])));
-          if (!joints.empty() || !weights.empty()) {
+        // Per-vertex attributes stay aligned with positions across
+        // primitives: a primitive without one pads it when another has it.
+        if (!uv.empty() || !obj.texcoords.empty()) {
+          obj.texcoords.resize(base, glm::vec2(0.0f));
+          for (size_t v = 0; v < nv; ++v)
+            obj.texcoords.push_back(uv.empty() ? glm::vec2(0.0f) : glm::vec2(float(uv[2 * v]), float(uv[2 * v + 1])));
+        }
+        if (!joints.empty() || !weights.empty() || !obj.joints.empty()) {
+          obj.joints.resize(base, glm::u16vec4(0));
+          obj.weights.resize(base, glm::vec4(0.0f));
+          for (size_t v = 0; v < nv; ++v) {
             obj.joints.push_back(joints.empty() ? glm::u16vec4(0) : glm::u16vec4(uint16_t(joints[4 * v]), uint16_t(joints[4 * v + 1]), uint16_t(joints[4 * v + 2]), uint16_t(joints[4 * v + 3])));
             obj.weights.push_back(weights.empty() ? glm::vec4(0.0f) : glm::vec4(float(weights[4 * v]), float(weights[4 * v + 1]), float(weights[4 * v + 2]), float(weights[4 * v + 3])));
           }

@@ -12,10 +12,10 @@ namespace {
 
 using nlohmann::json;
 
-glm::vec3 readVec3(const json& j, const std::string& where) {
+glm::dvec3 readVec3(const json& j, const std::string& where) {
   if (!j.is_array() || j.size() != 3 || !j[0].is_number() || !j[1].is_number() || !j[2].is_number())
     throwInputError("{}: expected an array of three numbers", where);
-  glm::vec3 v(j[0].get<float>(), j[1].get<float>(), j[2].get<float>());
+  glm::dvec3 v(j[0].get<double>(), j[1].get<double>(), j[2].get<double>());
   if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
     throwInputError("{}: numbers must be finite", where);
   return v;
@@ -95,7 +95,8 @@ Scene loadManifest(const std::filesystem::path& path) {
   rejectUnknownKeys(j, {"name", "geometry", "environment", "near_field_radius"}, file);
 
   Scene scene;
-  scene.name = j.contains("name") && j["name"].is_string() ? j["name"].get<std::string>() : path.stem().string();
+  if (j.contains("name") && !j["name"].is_string()) throwInputError("{}: 'name' must be a string", file);
+  scene.name = j.contains("name") ? j["name"].get<std::string>() : path.stem().string();
   const std::filesystem::path dir = path.parent_path();
 
   if (j.contains("near_field_radius")) {
@@ -123,7 +124,7 @@ Scene loadManifest(const std::filesystem::path& path) {
       else if (sky == "none") scene.environment.sky = SkyMode::None;
       else throwInputError("{}.sky: expected \"auto\", \"open\" or \"none\"", where);
     }
-    if (e.contains("sky_color")) scene.environment.skyColor = readVec3(e["sky_color"], where + ".sky_color");
+    if (e.contains("sky_color")) scene.environment.skyColor = glm::vec3(readVec3(e["sky_color"], where + ".sky_color"));
   }
 
   if (!j.contains("geometry") || !j["geometry"].is_array() || j["geometry"].empty())
@@ -134,7 +135,7 @@ Scene loadManifest(const std::filesystem::path& path) {
     const std::string where = fmt::format("{}: geometry[{}]", file, index++);
     std::string name, relative;
     bool dynamic = false;
-    glm::vec3 translate(0.0f);
+    glm::dvec3 translate(0.0);
     double scale = 1.0;
     if (g.is_string()) {
       relative = g.get<std::string>();
@@ -164,9 +165,9 @@ Scene loadManifest(const std::filesystem::path& path) {
     for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
     if (ext == ".json") throwInputError("{}: manifests cannot include manifests", where);
     Scene part = loadScene(geomPath);
-    if (scale != 1.0 || translate != glm::vec3(0.0f)) {
+    if (scale != 1.0 || translate != glm::dvec3(0.0)) {
       // Place the part: p_file' = p_file * scale + translate, kept in double.
-      const glm::dvec3 newOrigin = part.origin * scale + glm::dvec3(translate);
+      const glm::dvec3 newOrigin = part.origin * scale + translate;
       for (Object& o : part.objects)
         for (glm::vec3& p : o.mesh.positions) p = glm::vec3(glm::dvec3(p) * scale);
       part.origin = newOrigin;

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <fstream>
 #include <sstream>
+#include <unordered_map>
 
 #include <spdlog/spdlog.h>
 #include <tiny_obj_loader.h>
@@ -70,9 +71,10 @@ LineScan scanLines(std::string_view text, const std::string& name) {
                         tokens.size() - 1);
       for (int k = 1; k <= 3; ++k) {
         double value = 0.0;
-        const auto [ptr, ec] =
-            std::from_chars(tokens[k].data(), tokens[k].data() + tokens[k].size(), value);
-        if (ec != std::errc() || ptr != tokens[k].data() + tokens[k].size() || !std::isfinite(value))
+        std::string_view num = tokens[k];
+        if (num.size() > 1 && num.front() == '+') num.remove_prefix(1);  // from_chars rejects '+'
+        const auto [ptr, ec] = std::from_chars(num.data(), num.data() + num.size(), value);
+        if (ec != std::errc() || ptr != num.data() + num.size() || !std::isfinite(value))
           throwInputError("{}:{}: vertex coordinate '{}' is not a finite number", name, lineNo,
                           tokens[k]);
       }
@@ -85,7 +87,8 @@ LineScan scanLines(std::string_view text, const std::string& name) {
         throwInputError("{}:{}: face has {} vertices, at most {} are supported", name, lineNo, n,
                         kMaxFaceVertices);
       for (size_t k = 1; k <= n; ++k) {
-        const std::string_view tok = tokens[k].substr(0, tokens[k].find('/'));
+        std::string_view tok = tokens[k].substr(0, tokens[k].find('/'));
+        if (tok.size() > 1 && tok.front() == '+') tok.remove_prefix(1);
         long long idx = 0;
         const auto [ptr, ec] = std::from_chars(tok.data(), tok.data() + tok.size(), idx);
         if (ec != std::errc() || ptr != tok.data() + tok.size() || idx == 0)
@@ -134,7 +137,15 @@ Scene loadObjFromMemory(std::string_view objText, const std::string& displayName
   config.triangulate = false;  // we triangulate concave polygons ourselves
   config.vertex_color = false;
   tinyobj::ObjReader reader;
-  if (!reader.ParseFromString(std::string(objText), std::string(mtlText), config))
+  // tinyobjloader reads a comment after a face as indices: blank every
+  // comment out (the line scan above already ignores them).
+  std::string text(objText);
+  for (size_t at = text.find('#'); at != std::string::npos; at = text.find('#', at)) {
+    const size_t end = text.find('\n', at);
+    std::fill(text.begin() + std::ptrdiff_t(at), end == std::string::npos ? text.end() : text.begin() + std::ptrdiff_t(end), ' ');
+    at = end == std::string::npos ? text.size() : end;
+  }
+  if (!reader.ParseFromString(text, std::string(mtlText), config))
     throwInputError("{}: {}", displayName, reader.Error());
   const tinyobj::attrib_t& attrib = reader.GetAttrib();
   const auto& shapes = reader.GetShapes();
@@ -168,15 +179,17 @@ Scene loadObjFromMemory(std::string_view objText, const std::string& displayName
   std::vector<glm::dvec3> polygon;
   std::vector<uint32_t> polygonLocal;
   std::vector<glm::uvec3> tris;
-  std::vector<int32_t> localOf(nv, -1);
-  std::vector<uint32_t> touched;
+  // Per object: (position, texcoord) index pair -> local vertex. Corners that
+  // share a position but not a texcoord become separate vertices.
+  const size_t nt = attrib.texcoords.size() / 2;
+  const bool withTexcoords = nt > 0;
+  std::unordered_map<uint64_t, uint32_t> localOf;
   for (const auto& shape : shapes) {
     if (shape.mesh.num_face_vertices.empty()) continue;
     // Consecutive shapes with one name (an `o` split by `g` or `usemtl`) form one object.
     if (scene.objects.empty() || scene.objects.back().name != shape.name || shape.name.empty()) {
       // Vertex sharing is per object: forget the previous object's mapping.
-      for (uint32_t v : touched) localOf[v] = -1;
-      touched.clear();
+      localOf.clear();
       scene.objects.emplace_back();
       scene.objects.back().name =
           shape.name.empty() ? fmt::format("object_{}", scene.objects.size() - 1) : shape.name;
@@ -192,13 +205,21 @@ Scene loadObjFromMemory(std::string_view objText, const std::string& displayName
         const int vi = shape.mesh.indices[offset + k].vertex_index;
         if (vi < 0 || size_t(vi) >= nv)
           throwInputError("{}:{}: face index out of range", displayName, scan.faceLines[faceId]);
+        int ti = withTexcoords ? shape.mesh.indices[offset + k].texcoord_index : -1;
+        if (ti >= 0 && size_t(ti) >= nt)
+          throwInputError("{}:{}: texture coordinate index {} is out of range ({} in the file)", displayName,
+                          scan.faceLines[faceId], ti + 1, nt);
         polygon.push_back(filePosition(vi));
-        if (localOf[size_t(vi)] < 0) {
-          localOf[size_t(vi)] = int32_t(mesh.positions.size());
-          touched.push_back(uint32_t(vi));
+        const uint64_t key = uint64_t(vi) * (uint64_t(nt) + 1) + uint64_t(ti + 1);
+        auto [it, inserted] = localOf.try_emplace(key, uint32_t(mesh.positions.size()));
+        if (inserted) {
           mesh.positions.push_back(glm::vec3(polygon.back() - scene.origin));
+          if (withTexcoords)
+            mesh.texcoords.push_back(ti >= 0 ? glm::vec2(float(attrib.texcoords[2 * size_t(ti)]),
+                                                         float(attrib.texcoords[2 * size_t(ti) + 1]))
+                                             : glm::vec2(0.0f));
         }
-        polygonLocal.push_back(uint32_t(localOf[size_t(vi)]));
+        polygonLocal.push_back(it->second);
       }
       offset += n;
       tris.clear();

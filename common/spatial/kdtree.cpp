@@ -1,21 +1,24 @@
 // kD-tree build, ropes and statistics.
 //
-// Splits follow the surface area heuristic as in Havran, "Heuristic Ray
-// Shooting Algorithms", PhD thesis, CTU Prague 2000 (section 4.3): candidate
-// planes are the item box boundaries on all three axes, evaluated by a sweep
-// over sorted boundaries, so each node costs O(n log n) (here O(n) with a
-// radix sort) and the build O(n log^2 n). Items lying in a candidate plane are
-// counted on whichever side is cheaper, as in Wald and Havran, "On building
-// fast kd-Trees for Ray Tracing, and on doing that in O(N log N)", RT 2006,
-// section 4.1. Straddling items are clipped to the child boxes ("split
-// clipping", thesis section 4.4; "perfect splits" in Wald and Havran).
+// The tree is the spatial hierarchy of Bittner and Havran 2001, "Exploiting
+// coherence in hierarchical visibility algorithms" (section "Spatial
+// Hierarchy": a kD-tree with arbitrarily placed planes whose leaves list the
+// objects intersecting their box). Splits follow the surface area heuristic
+// as in Havran, "Heuristic Ray Shooting Algorithms", PhD thesis, CTU Prague
+// 2000: candidate planes are the item box boundaries on all three axes,
+// evaluated by a sweep over sorted boundaries, so each node costs O(n log n)
+// (here O(n) with a radix sort) and the build O(n log^2 n). Items lying in a
+// candidate plane are counted on whichever side is cheaper, and straddling
+// items are clipped to the child boxes ("perfect splits"), both as in Wald and
+// Havran, "On building fast kd-Trees for Ray Tracing, and on doing that in
+// O(N log N)", IEEE RT 2006.
 //
-// Ropes follow Bittner and Havran 2001, "Exploiting coherence in hierarchical
-// visibility algorithms" (section "Visibility Propagation", Figure 6), after
-// Havran, Bittner and Zara 1998, "Ray tracing with rope trees": each face of
-// a node links to the smallest node on the other side that contains the whole
-// face. They are pushed down from parents to children and then moved down the
-// neighbour's subtree while a child still contains the face.
+// Ropes follow Bittner and Havran 2001, section "Visibility Propagation" and
+// Figure 6, after Havran, Bittner and Zara 1998, "Ray tracing with rope
+// trees": each face of a node links to the smallest node on the other side
+// that contains the whole face. They are pushed down from parents to children
+// and then moved down the neighbour's subtree while a child still contains
+// the face.
 #include "common/spatial/kdtree.h"
 
 #include <algorithm>
@@ -35,9 +38,9 @@ namespace vistream {
 namespace {
 
 // Subtrees with at least this many item references are built as separate
-// TBB tasks and their splits evaluate the three axes in parallel. Measured on
-// a 2-core machine with a 1M-triangle soup: lower values add splicing copies
-// without more speed.
+// TBB tasks and their splits evaluate the three axes in parallel. A 1M-
+// triangle build then makes a few hundred tasks, enough to keep a handful of
+// cores busy; not tuned further.
 constexpr size_t kParallelItems = 16384;
 // Below this many keys std::sort beats the radix sort's fixed passes.
 constexpr size_t kRadixSortMin = 128;

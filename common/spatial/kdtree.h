@@ -6,18 +6,24 @@
 // surface area heuristic. Every node keeps its box; leaves list the items that
 // overlap their box. After the build every node gets six ropes (Bittner and
 // Havran 2001, "Exploiting coherence in hierarchical visibility algorithms",
-// section "Spatial Coherence"): per face of its box, the smallest node on the
-// other side of the face whose box contains that whole face.
+// section "Visibility Propagation"): per face of its box, the smallest node on
+// the other side of the face whose box contains that whole face.
 //
 // Coordinates: whatever frame the item boxes are in (for scenes, the local
 // frame relative to Scene::origin, metres). Boxes are closed.
 //
-// Which items a leaf holds: every item whose (clipped) box overlaps the open
-// interior of the leaf box, and for every point of an item at least one leaf
-// whose closed box contains the point holds the item. An item lying exactly
-// in a splitting plane, or touching it from one side only, may be held by the
-// leaves on one side of the plane only; queries that must not miss such items
-// (a ray through the plane) visit both sides, see traverseRay.
+// Which items a leaf holds: every item that reaches into the open interior
+// of the leaf box (judged by the item's box, or with split clipping by the
+// box of its part inside the node), and for every point of an item at least
+// one leaf whose closed box contains the point holds the item. An item lying
+// exactly in a splitting plane, or touching it from one side only, may be
+// held by the leaves on one side of the plane only; queries that must not
+// miss such items (a ray through the plane) visit both sides, see
+// traverseRay. Leaves may also hold items that merely touch their box.
+//
+// Memory: about 84 bytes a node (KdNode plus an 8-byte traversal copy) and 4
+// bytes an item reference. A random triangle soup gives 2.5 to 5 nodes per
+// triangle, so a 2M-triangle tree takes 0.5 to 1 GB.
 //
 // Bad input: items with an empty box (lo > hi on some axis) or a non-finite
 // coordinate are in no leaf; they are counted in KdStats::skippedItems. Item
@@ -47,20 +53,23 @@ namespace vistream {
 enum KdFace : int { kNegX = 0, kPosX = 1, kNegY = 2, kPosY = 3, kNegZ = 4, kPosZ = 5 };
 inline constexpr int kdFace(int axis, bool highSide) { return 2 * axis + (highSide ? 1 : 0); }
 
-// Build parameters. The cost model is Havran's (PhD thesis, 2000, section
-// 4.3): splitting a node costs traversalCost + intersectionCost * (P_left *
-// N_left + P_right * N_right) with P the surface area ratio child / node, a
-// leaf costs intersectionCost * N, and a node is split only when that is
-// strictly cheaper. The defaults were tuned for ray casting against triangles
-// with the double-precision watertight test (random soups and city blocks);
-// for culling over objects, set intersectionCost to the relative cost of
-// testing or drawing one object.
+// Build parameters. The cost model is Havran's (PhD thesis, 2000): splitting
+// a node costs traversalCost + intersectionCost * (P_below * N_below +
+// P_above * N_above) with P the surface area ratio child / node, a leaf costs
+// intersectionCost * N, and a node is split only when that is strictly
+// cheaper. The defaults were tuned for ray casting against triangles
+// with the double-precision watertight test, on random triangle soups of 200k
+// triangles: against intersectionCost 1.5 and emptyBonus 0.2 they halve the
+// node count (2.5 instead of 4.6 nodes per triangle) at the same rays per
+// second. For culling over objects, set intersectionCost to the cost of
+// testing or drawing one object relative to one node test, and consider an
+// empty bonus: cutting empty space off gives tighter boxes to cull.
 struct KdBuildOptions {
   int maxDepth = 0;               // 0: automatic, 8 + 1.3 log2(items) (pbrt-v3), at most kMaxDepth
   uint32_t leafItems = 2;         // a node with at most this many items is a leaf, never split
   float traversalCost = 1.0f;     // cost of visiting one interior node
-  float intersectionCost = 1.5f;  // cost of testing one item
-  float emptyBonus = 0.2f;        // in [0, 1): split cost is scaled by (1 - bonus) when a child is empty
+  float intersectionCost = 1.0f;  // cost of testing one item
+  float emptyBonus = 0.0f;        // in [0, 1): split cost is scaled by (1 - bonus) when a child is empty
   bool parallel = true;           // build large subtrees in parallel with TBB
 };
 
@@ -109,9 +118,8 @@ class KdTree {
 
   // Builds over items given by their bounds. With `clipItem`, items that
   // straddle a splitting plane are clipped to each child's box ("split
-  // clipping", Havran's thesis section 4.4), so leaves hold only items that
-  // really reach into them; without, straddling items keep their box cut by
-  // the plane.
+  // clipping"), so leaves hold only items that really reach into them;
+  // without, straddling items keep their box cut by the plane.
   static KdTree build(std::span<const Box3f> itemBounds, const KdBuildOptions& options = {},
                       const KdItemClipper& clipItem = {});
   // Items are scene.objects (by index), with their bounding boxes.

@@ -37,12 +37,12 @@
 namespace vistream {
 namespace {
 
-constexpr float kEyeHeight = 1.7f;        // metres above the ground
+constexpr float kEyeHeight = 1.7f;  // metres above the ground
 constexpr size_t kRayPool = size_t(1) << 16;
-constexpr size_t kRaysPerEye = 8;         // directions cast from each street point
-constexpr size_t kBatch = 1024;           // rays per iteration for the fast back ends
-constexpr size_t kBruteForceBatch = 8;    // the oracle tests every triangle per ray
-constexpr size_t kBaselineRays = 64;      // rays timed once for the x_bruteforce ratio
+constexpr size_t kRaysPerEye = 8;       // directions cast from each street point
+constexpr size_t kBatch = 1024;         // rays per iteration for the fast back ends
+constexpr size_t kBruteForceBatch = 8;  // the oracle tests every triangle per ray
+constexpr size_t kBaselineRays = 64;    // rays timed once for the x_bruteforce ratio
 
 // CPU time of the calling thread: the ray queries are single-threaded, and
 // unlike wall-clock time this ignores other processes sharing the machine.
@@ -56,11 +56,16 @@ enum class QueryKind { FirstHit, FirstHitStream, Occluded, OccludedStream, AllHi
 
 const char* kindName(QueryKind kind) {
   switch (kind) {
-    case QueryKind::FirstHit: return "FirstHit";
-    case QueryKind::FirstHitStream: return "FirstHitStream";
-    case QueryKind::Occluded: return "Occluded";
-    case QueryKind::OccludedStream: return "OccludedStream";
-    case QueryKind::AllHits: return "AllHits";
+    case QueryKind::FirstHit:
+      return "FirstHit";
+    case QueryKind::FirstHitStream:
+      return "FirstHitStream";
+    case QueryKind::Occluded:
+      return "Occluded";
+    case QueryKind::OccludedStream:
+      return "OccludedStream";
+    case QueryKind::AllHits:
+      return "AllHits";
   }
   return "?";
 }
@@ -87,8 +92,7 @@ std::vector<Ray> streetRays(const FlatTriangles& triangles, const RayQuery& quer
   size_t attempts = 0;
   while (rays.size() < count) {
     VS_CHECK_LT(attempts++, 100 * count);  // a city has streets
-    const glm::vec3 eye(glm::mix(bounds.lo.x, bounds.hi.x, unit(rng)),
-                        bounds.lo.y + kEyeHeight,
+    const glm::vec3 eye(glm::mix(bounds.lo.x, bounds.hi.x, unit(rng)), bounds.lo.y + kEyeHeight,
                         glm::mix(bounds.lo.z, bounds.hi.z, unit(rng)));
     const Ray down{eye, glm::vec3(0, -1, 0), 0.0f, 2.0f};
     const Ray up{eye, glm::vec3(0, 1, 0)};
@@ -179,9 +183,8 @@ double bruteForceSecondsPerRay(City& c, QueryKind kind) {
   std::vector<Hit> hits(kBaselineRays), all;
   std::vector<uint8_t> occluded(kBaselineRays);
   const double start = threadCpuSeconds();
-  benchmark::DoNotOptimize(castBatch(oracle, baseKind,
-                                     std::span<const Ray>(c.rays.data(), kBaselineRays), hits,
-                                     occluded, all));
+  benchmark::DoNotOptimize(castBatch(
+      oracle, baseKind, std::span<const Ray>(c.rays.data(), kBaselineRays), hits, occluded, all));
   const double seconds = (threadCpuSeconds() - start) / double(kBaselineRays);
   c.bruteForceSecondsPerRay[baseKind] = seconds;
   return seconds;
@@ -263,8 +266,9 @@ void registerBenchmarks() {
         if (name == "bruteforce" &&
             (kind == QueryKind::FirstHitStream || kind == QueryKind::OccludedStream))
           continue;  // the oracle has no stream path
-        benchmark::RegisterBenchmark((std::string(kindName(kind)) + "/" + name + "/" + scene).c_str(),
-                                     castRays, scene, name, kind)
+        benchmark::RegisterBenchmark(
+            (std::string(kindName(kind)) + "/" + name + "/" + scene).c_str(), castRays, scene, name,
+            kind)
             ->Unit(benchmark::kMicrosecond);
       }
     }

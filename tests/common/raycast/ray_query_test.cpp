@@ -5,10 +5,12 @@
 // triangles, ties, an empty scene, a scene far from the origin, batches and
 // threads.
 //
-// Exactness: the grid meshes have integer vertices and the rays through their
-// edges have dyadic origins and directions (multiples of 1/4, dominant
-// component a power of two), so every back end's arithmetic on them, float or
-// double, is exact and "on the edge" means exactly on it.
+// Exactness: the grid meshes and the box have integer vertices and the rays
+// through their edges have dyadic origins and directions (small multiples of
+// 1/8, dominant component a power of two), so every back end's arithmetic on
+// them, float or double, is exact and "on the edge" means exactly on it.
+#include "common/raycast/ray_query.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -21,8 +23,6 @@
 #include <vector>
 
 #include "common/raycast/embree_ray_query.h"
-#include "common/raycast/ray_query.h"
-#include "common/raycast/triangle_intersect.h"
 
 namespace vistream {
 namespace {
@@ -92,7 +92,9 @@ FlatTriangles gridMesh(int n, glm::vec3 corner) {
 
 // Tolerance on t between a float back end and the double oracle, for unit
 // directions in scenes of a few tens of metres (float ulps of the distances).
-float tTolerance(float t) { return 2e-5f * std::max(1.0f, std::abs(t)); }
+float tTolerance(float t) {
+  return 2e-5f * std::max(1.0f, std::abs(t));
+}
 
 std::vector<uint32_t> trianglesOf(const std::vector<Hit>& hits) {
   std::vector<uint32_t> ids;
@@ -110,7 +112,8 @@ std::unique_ptr<RayQuery> makeBackEnd(const std::string& name, const FlatTriangl
 // ---- the oracle on known answers ---------------------------------------------
 
 TEST(BruteForceRayQuery, FindsTheKnownHitOfOneTriangle) {
-  const FlatTriangles tris = makeTriangles({{glm::vec3(0, 0, 0), glm::vec3(2, 0, 0), glm::vec3(0, 2, 0)}});
+  const FlatTriangles tris =
+      makeTriangles({{glm::vec3(0, 0, 0), glm::vec3(2, 0, 0), glm::vec3(0, 2, 0)}});
   const auto query = makeBruteForceRayQuery(tris);
   EXPECT_STREQ(query->name(), "bruteforce");
   const Hit hit = query->firstHit(Ray{glm::vec3(0.5f, 0.5f, 4.0f), glm::vec3(0, 0, -2)});
@@ -125,8 +128,9 @@ TEST(BruteForceRayQuery, FindsTheKnownHitOfOneTriangle) {
 
 TEST(BruteForceRayQuery, ReportsBothTrianglesOfAnEdgeAndResolvesTheTieToTheSmallerIndex) {
   // Two triangles sharing the edge x = y, listed so the second one is found first.
-  const FlatTriangles tris = makeTriangles({{glm::vec3(0, 0, 0), glm::vec3(1, 1, 0), glm::vec3(0, 1, 0)},
-                                            {glm::vec3(0, 0, 0), glm::vec3(1, 0, 0), glm::vec3(1, 1, 0)}});
+  const FlatTriangles tris =
+      makeTriangles({{glm::vec3(0, 0, 0), glm::vec3(1, 1, 0), glm::vec3(0, 1, 0)},
+                     {glm::vec3(0, 0, 0), glm::vec3(1, 0, 0), glm::vec3(1, 1, 0)}});
   const auto query = makeBruteForceRayQuery(tris);
   const Ray ray{glm::vec3(0.5f, 0.5f, 1.0f), glm::vec3(0, 0, -1)};
   EXPECT_EQ(query->firstHit(ray).triangle, 0u);
@@ -174,8 +178,8 @@ class AcceleratedRayQuery : public ::testing::TestWithParam<std::string> {
 
 // Compares first hits and occlusion of `rays` with the oracle. Where the two
 // nearest triangles differ, they must tie within float tolerance.
-void expectSameFirstHits(const RayQuery& query, const RayQuery& oracle, const std::vector<Ray>& rays,
-                         float tolerance = 0.0f) {
+void expectSameFirstHits(const RayQuery& query, const RayQuery& oracle,
+                         const std::vector<Ray>& rays, float tolerance = 0.0f) {
   size_t hitCount = 0;
   for (size_t i = 0; i < rays.size(); ++i) {
     const Hit got = query.firstHit(rays[i]), want = oracle.firstHit(rays[i]);
@@ -261,10 +265,10 @@ std::vector<SeamRay> seamRays(int n, glm::vec3 corner) {
     for (int j = 1; j < n; ++j) {
       const glm::vec3 v = corner + glm::vec3(i, 0, j);
       const std::array<SeamRay, 4> targets = {
-          SeamRay{Ray{v}, 6},                                  // vertex
-          SeamRay{Ray{v + glm::vec3(0.25f, 0, 0)}, 2},         // edge along x
-          SeamRay{Ray{v + glm::vec3(0, 0, 0.5f)}, 2},          // edge along z
-          SeamRay{Ray{v + glm::vec3(0.75f, 0, 0.75f)}, 2}};    // diagonal
+          SeamRay{Ray{v}, 6},                                // vertex
+          SeamRay{Ray{v + glm::vec3(0.25f, 0, 0)}, 2},       // edge along x
+          SeamRay{Ray{v + glm::vec3(0, 0, 0.5f)}, 2},        // edge along z
+          SeamRay{Ray{v + glm::vec3(0.75f, 0, 0.75f)}, 2}};  // diagonal
       for (const SeamRay& target : targets) {
         for (const glm::vec3& d : directions) {
           SeamRay s = target;
@@ -315,6 +319,54 @@ TEST_P(AcceleratedRayQuery, ReportsEveryTriangleAroundSeamsOfAGridMeshFarFromThe
   expectSeamsClosed(*make(tris), *makeBruteForceRayQuery(tris), tris, seamRays(4, corner));
 }
 
+TEST_P(AcceleratedRayQuery, AgreesWithBruteForceAtTheEdgesAndCornersOfABox) {
+  // The closed box [0, 2]^3, each face two triangles; rays aimed at surface
+  // points on a half-metre lattice: corners, edges (folded seams), face
+  // diagonals (flat seams) and face interiors, from dyadic directions.
+  std::vector<Triangle> faces;
+  for (int axis = 0; axis < 3; ++axis) {
+    for (float side : {0.0f, 2.0f}) {
+      std::array<glm::vec3, 4> q;
+      const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+      for (int k = 0; k < 4; ++k) {
+        q[size_t(k)][axis] = side;
+        q[size_t(k)][u] = (k == 1 || k == 2) ? 2.0f : 0.0f;
+        q[size_t(k)][v] = (k >= 2) ? 2.0f : 0.0f;
+      }
+      faces.push_back({q[0], q[1], q[2]});
+      faces.push_back({q[0], q[2], q[3]});
+    }
+  }
+  const FlatTriangles tris = makeTriangles(faces);
+  const auto query = make(tris);
+  const auto oracle = makeBruteForceRayQuery(tris);
+  const std::array<glm::vec3, 4> directions = {glm::vec3(-1, -0.5f, 0.25f),
+                                               glm::vec3(0.5f, 1, -0.75f),
+                                               glm::vec3(0.125f, -0.25f, 1), glm::vec3(-1, 0, 0)};
+  std::vector<Hit> got, want;
+  size_t rays = 0;
+  for (int i = 0; i <= 4; ++i) {
+    for (int j = 0; j <= 4; ++j) {
+      for (int k = 0; k <= 4; ++k) {
+        if (i % 4 != 0 && j % 4 != 0 && k % 4 != 0) continue;  // inside, not on the surface
+        const glm::vec3 target = 0.5f * glm::vec3(i, j, k);
+        for (const glm::vec3& dir : directions) {
+          const Ray ray{target - 4.0f * dir, dir};
+          ++rays;
+          const Hit first = query->firstHit(ray), expected = oracle->firstHit(ray);
+          ASSERT_TRUE(expected.valid());
+          EXPECT_EQ(first.triangle, expected.triangle) << "towards " << i << j << k;
+          EXPECT_FLOAT_EQ(first.t, expected.t) << "towards " << i << j << k;
+          query->allHits(ray, got);
+          oracle->allHits(ray, want);
+          EXPECT_EQ(trianglesOf(got), trianglesOf(want)) << "towards " << i << j << k;
+        }
+      }
+    }
+  }
+  EXPECT_EQ(rays, 98u * directions.size());
+}
+
 TEST_P(AcceleratedRayQuery, NeverLetsARayThroughTheSeamsOfATiltedMesh) {
   // A grid tilted out of every axis plane, so the vertices are not exact and
   // the rays only nearly pass through the seams: nothing may slip through.
@@ -333,7 +385,8 @@ TEST_P(AcceleratedRayQuery, NeverLetsARayThroughTheSeamsOfATiltedMesh) {
     const int e = int(unit(rng) * 2.999f);
     const glm::vec3 a = tris.vertex(t, e), b = tris.vertex(t, (e + 1) % 3);
     const glm::vec3 onEdge = glm::mix(a, b, unit(rng));
-    const glm::vec3 gridPoint = (glm::transpose(tilt) * (onEdge - glm::vec3(0.1f, 0.2f, 0.3f))) / 1.37f;
+    const glm::vec3 gridPoint =
+        (glm::transpose(tilt) * (onEdge - glm::vec3(0.1f, 0.2f, 0.3f))) / 1.37f;
     if (gridPoint.x < 0.01f || gridPoint.x > 7.99f || gridPoint.z < 0.01f || gridPoint.z > 7.99f)
       continue;  // the outer boundary is not a seam
     Ray ray;
@@ -353,9 +406,9 @@ TEST_P(AcceleratedRayQuery, HonoursTnearAndTfarAsAClosedInterval) {
     ray.dir = dir;
     ray.org = glm::vec3(1.375f, 0, 2.625f) - 5.0f * dir;  // the grid at t = 5 exactly
     std::vector<Hit> hits;
-    for (auto [tnear, tfar, hit] : {std::tuple{0.0f, 5.0f, true}, std::tuple{5.0f, 5.0f, true},
-                                    std::tuple{5.0f, 9.0f, true}, std::tuple{0.0f, 4.999f, false},
-                                    std::tuple{5.001f, 9.0f, false}}) {
+    for (auto [tnear, tfar, hit] :
+         {std::tuple{0.0f, 5.0f, true}, std::tuple{5.0f, 5.0f, true}, std::tuple{5.0f, 9.0f, true},
+          std::tuple{0.0f, 4.999f, false}, std::tuple{5.001f, 9.0f, false}}) {
       ray.tnear = tnear;
       ray.tfar = tfar;
       const Hit first = query->firstHit(ray);
@@ -408,7 +461,8 @@ TEST_P(AcceleratedRayQuery, ResolvesTiesToTheSmallerTriangleIndex) {
   const FlatTriangles tris = makeTriangles({{a, b, c}, {a, c, d}, {c, a, b}, {d, a, c}, {b, c, a}});
   const auto query = make(tris);
   const auto oracle = makeBruteForceRayQuery(tris);
-  for (const glm::vec3& p : {glm::vec3(1.5f, 0.5f, 0), glm::vec3(0.5f, 1.5f, 0), glm::vec3(1, 1, 0)}) {
+  for (const glm::vec3& p :
+       {glm::vec3(1.5f, 0.5f, 0), glm::vec3(0.5f, 1.5f, 0), glm::vec3(1, 1, 0)}) {
     for (float dz : {-1.0f, 1.0f}) {
       const glm::vec3 dir(0.25f, 0.5f, dz);
       const Ray ray{p - 3.0f * dir, dir};

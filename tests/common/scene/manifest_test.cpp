@@ -5,6 +5,7 @@
 // expected positions and face IDs follow from those texts by hand. The real
 // data (delfshaven.obj, Fox.glb, the HDR) is used through absolute paths or a
 // copy, with the counts from shared/data/README.md.
+#include <algorithm>
 #include <atomic>
 #include <fstream>
 #include <map>

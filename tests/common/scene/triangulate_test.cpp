@@ -9,6 +9,7 @@
 //   inside the polygon (even-odd ray crossing test) must lie in exactly one
 //   output triangle, each point outside in none. This catches overlapping or
 //   missing triangles that an area sum alone could hide.
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <numbers>
