@@ -41,22 +41,21 @@ class KdTreeRayQuery final : public RayQuery {
     const glm::dvec3 org(ray.org), dir(ray.dir);
     uint32_t best = kNoHit;
     TriangleHit bestHit{std::numeric_limits<double>::infinity(), 0.0, 0.0};
-    tree_.traverseRay(ray.org, ray.dir, ray.tnear, ray.tfar,
-                      [&](int32_t leaf, float, float) -> float {
-                        for (const uint32_t tri : tree_.items(leaf)) {
-                          const std::optional<TriangleHit> h = intersect(org, dir, ray, tri);
-                          if (h && (h->t < bestHit.t || (h->t == bestHit.t && tri < best))) {
-                            bestHit = *h;
-                            best = tri;
-                          }
-                        }
-                        if (best == kNoHit) return ray.tfar;
-                        const double limit = bestHit.t + kPruneMargin * std::abs(bestHit.t);
-                        return float(limit) < limit
-                                   ? std::nextafter(float(limit),
-                                                    std::numeric_limits<float>::infinity())
-                                   : float(limit);
-                      });
+    tree_.traverseRay(
+        ray.org, ray.dir, ray.tnear, ray.tfar, [&](int32_t leaf, float, float) -> float {
+          for (const uint32_t tri : tree_.items(leaf)) {
+            const std::optional<TriangleHit> h = intersect(org, dir, ray, tri);
+            if (h && (h->t < bestHit.t || (h->t == bestHit.t && tri < best))) {
+              bestHit = *h;
+              best = tri;
+            }
+          }
+          if (best == kNoHit) return ray.tfar;
+          const double limit = bestHit.t + kPruneMargin * std::abs(bestHit.t);
+          return float(limit) < limit
+                     ? std::nextafter(float(limit), std::numeric_limits<float>::infinity())
+                     : float(limit);
+        });
     return best == kNoHit ? Hit{} : makeHit(best, bestHit);
   }
 
@@ -108,14 +107,14 @@ class KdTreeRayQuery final : public RayQuery {
       if (t < triangles.degenerate.size() && triangles.degenerate[t]) continue;
       for (int k = 0; k < 3; ++k) bounds[t].extend(triangles.vertex(t, k));
     }
-    return KdTree::build(bounds, KdBuildOptions{}, [&triangles](uint32_t t, const Box3f& box) {
+    return KdTree::build(bounds, kRayCastingKdOptions, [&triangles](uint32_t t, const Box3f& box) {
       return clippedTriangleBounds(triangles.vertex(t, 0), triangles.vertex(t, 1),
                                    triangles.vertex(t, 2), box);
     });
   }
 
-  std::optional<TriangleHit> intersect(const glm::dvec3& org, const glm::dvec3& dir,
-                                       const Ray& ray, uint32_t tri) const {
+  std::optional<TriangleHit> intersect(const glm::dvec3& org, const glm::dvec3& dir, const Ray& ray,
+                                       uint32_t tri) const {
     return intersectWatertight(org, dir, ray.tnear, ray.tfar, glm::dvec3(triangles_.vertex(tri, 0)),
                                glm::dvec3(triangles_.vertex(tri, 1)),
                                glm::dvec3(triangles_.vertex(tri, 2)));

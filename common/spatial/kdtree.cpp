@@ -21,14 +21,14 @@
 // the face.
 #include "common/spatial/kdtree.h"
 
+#include <tbb/parallel_invoke.h>
+
 #include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstring>
 #include <memory>
 #include <utility>
-
-#include <tbb/parallel_invoke.h>
 
 #include "common/core/check.h"
 #include "common/core/timer.h"
@@ -137,10 +137,9 @@ class KdBuilder {
   const KdItemClipper& clip_;
   int maxDepth_;
 
-  SplitChoice findSplit(const std::vector<ItemRef>& refs, const Box3f& box,
-                        Scratch& scratch) const;
-  void sweepAxis(const std::vector<ItemRef>& refs, const Box3f& box, int axis,
-                 AxisScratch& scratch, SplitChoice& best) const;
+  SplitChoice findSplit(const std::vector<ItemRef>& refs, const Box3f& box, Scratch& scratch) const;
+  void sweepAxis(const std::vector<ItemRef>& refs, const Box3f& box, int axis, AxisScratch& scratch,
+                 SplitChoice& best) const;
   void partition(std::vector<ItemRef>& refs, const SplitChoice& split, const Box3f& below,
                  const Box3f& above, std::vector<ItemRef>& refsBelow,
                  std::vector<ItemRef>& refsAbove) const;
@@ -170,8 +169,7 @@ void KdBuilder::sweepAxis(const std::vector<ItemRef>& refs, const Box3f& box, in
   const float ct = options_.traversalCost, ci = options_.intersectionCost;
   const float bonus = 1.0f - options_.emptyBonus;
   auto cost = [&](float areaBelow, float areaAbove, size_t nBelow, size_t nAbove) {
-    const float c0 =
-        ct + ci * (areaBelow * float(nBelow) + areaAbove * float(nAbove)) * invArea;
+    const float c0 = ct + ci * (areaBelow * float(nBelow) + areaAbove * float(nAbove)) * invArea;
     return (nBelow == 0 || nAbove == 0) ? c0 * bonus : c0;
   };
 
@@ -179,8 +177,8 @@ void KdBuilder::sweepAxis(const std::vector<ItemRef>& refs, const Box3f& box, in
   constexpr uint32_t kEnd = 0xffffffffu;  // above every key of a finite float
   size_t i = 0, j = 0, k = 0;
   while (i < nLo || j < nHi || k < nPlanar) {
-    const uint32_t key = std::min({i < nLo ? s.lo[i] : kEnd, j < nHi ? s.hi[j] : kEnd,
-                                   k < nPlanar ? s.planar[k] : kEnd});
+    const uint32_t key = std::min(
+        {i < nLo ? s.lo[i] : kEnd, j < nHi ? s.hi[j] : kEnd, k < nPlanar ? s.planar[k] : kEnd});
     const size_t startsBefore = i, planarBefore = k;
     while (i < nLo && s.lo[i] == key) ++i;
     while (j < nHi && s.hi[j] == key) ++j;
@@ -190,7 +188,7 @@ void KdBuilder::sweepAxis(const std::vector<ItemRef>& refs, const Box3f& box, in
     // smaller, which bounds the recursion even without the depth limit.
     if (!(p > box.lo[axis] && p < box.hi[axis])) continue;
     const size_t below = startsBefore + planarBefore;  // items reaching below p
-    const size_t above = (nHi - j) + (nPlanar - k);     // items reaching above p
+    const size_t above = (nHi - j) + (nPlanar - k);    // items reaching above p
     const size_t inPlane = k - planarBefore;
     const float areaBelow = 2.0f * (crossArea + (p - box.lo[axis]) * crossPerimeter);
     const float areaAbove = 2.0f * (crossArea + (box.hi[axis] - p) * crossPerimeter);
@@ -207,7 +205,8 @@ SplitChoice KdBuilder::findSplit(const std::vector<ItemRef>& refs, const Box3f& 
   if (refs.size() > kParallelItems && options_.parallel) {
     std::array<SplitChoice, 3> perAxis;
     auto axisTask = [&](int a) {
-      if (box.lo[a] < box.hi[a]) sweepAxis(refs, box, a, scratch.axes[size_t(a)], perAxis[size_t(a)]);
+      if (box.lo[a] < box.hi[a])
+        sweepAxis(refs, box, a, scratch.axes[size_t(a)], perAxis[size_t(a)]);
     };
     tbb::parallel_invoke([&] { axisTask(0); }, [&] { axisTask(1); }, [&] { axisTask(2); });
     SplitChoice best;
@@ -221,9 +220,8 @@ SplitChoice KdBuilder::findSplit(const std::vector<ItemRef>& refs, const Box3f& 
   return best;
 }
 
-void KdBuilder::partition(std::vector<ItemRef>& refs, const SplitChoice& split,
-                          const Box3f& below, const Box3f& above,
-                          std::vector<ItemRef>& refsBelow,
+void KdBuilder::partition(std::vector<ItemRef>& refs, const SplitChoice& split, const Box3f& below,
+                          const Box3f& above, std::vector<ItemRef>& refsBelow,
                           std::vector<ItemRef>& refsAbove) const {
   const int a = split.axis;
   const float p = split.position;

@@ -37,12 +37,11 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <glm/glm.hpp>
 #include <limits>
 #include <span>
 #include <type_traits>
 #include <vector>
-
-#include <glm/glm.hpp>
 
 #include "common/core/box.h"
 #include "common/scene/scene.h"
@@ -51,27 +50,38 @@ namespace vistream {
 
 // Faces of a node's box, in rope order: 2 * axis + (1 for the high side).
 enum KdFace : int { kNegX = 0, kPosX = 1, kNegY = 2, kPosY = 3, kNegZ = 4, kPosZ = 5 };
-inline constexpr int kdFace(int axis, bool highSide) { return 2 * axis + (highSide ? 1 : 0); }
+inline constexpr int kdFace(int axis, bool highSide) {
+  return 2 * axis + (highSide ? 1 : 0);
+}
 
 // Build parameters. The cost model is Havran's (PhD thesis, 2000): splitting
 // a node costs traversalCost + intersectionCost * (P_below * N_below +
-// P_above * N_above) with P the surface area ratio child / node, a leaf costs
-// intersectionCost * N, and a node is split only when that is strictly
-// cheaper. The defaults were tuned for ray casting against triangles
-// with the double-precision watertight test, on random triangle soups of 200k
-// triangles: against intersectionCost 1.5 and emptyBonus 0.2 they halve the
-// node count (2.5 instead of 4.6 nodes per triangle) at the same rays per
-// second. For culling over objects, set intersectionCost to the cost of
-// testing or drawing one object relative to one node test, and consider an
-// empty bonus: cutting empty space off gives tighter boxes to cull.
+// P_above * N_above) with P the surface area ratio child / node (times
+// 1 - emptyBonus when a child is empty), a leaf costs intersectionCost * N,
+// and a node is split only when that is strictly cheaper.
+//
+// The defaults are for culling over objects: the empty bonus cuts empty
+// space off, which gives tighter boxes to cull, and the interior generator
+// (common/generate/interior.cpp) is calibrated against the node counts they
+// give. For ray casting against triangles, kRayCastingKdOptions halves the
+// node count (2.5 instead of 4.6 nodes per triangle on random soups of 200k
+// triangles) at the same rays per second.
 struct KdBuildOptions {
   int maxDepth = 0;               // 0: automatic, 8 + 1.3 log2(items) (pbrt-v3), at most kMaxDepth
   uint32_t leafItems = 2;         // a node with at most this many items is a leaf, never split
   float traversalCost = 1.0f;     // cost of visiting one interior node
-  float intersectionCost = 1.0f;  // cost of testing one item
-  float emptyBonus = 0.0f;        // in [0, 1): split cost is scaled by (1 - bonus) when a child is empty
+  float intersectionCost = 1.5f;  // cost of testing one item
+  float emptyBonus = 0.2f;        // in [0, 1)
   bool parallel = true;           // build large subtrees in parallel with TBB
 };
+
+// What makeKdTreeRayQuery builds with (tuned as said above).
+inline constexpr KdBuildOptions kRayCastingKdOptions{.maxDepth = 0,
+                                                     .leafItems = 2,
+                                                     .traversalCost = 1.0f,
+                                                     .intersectionCost = 1.0f,
+                                                     .emptyBonus = 0.0f,
+                                                     .parallel = true};
 
 // Bounds of the part of item `item` that lies inside the closed box `box`, or
 // an empty box when no part does. Must be conservative (every point of the
@@ -86,7 +96,7 @@ Box3f clippedTriangleBounds(const glm::vec3& a, const glm::vec3& b, const glm::v
 
 struct KdNode {
   Box3f box;
-  int32_t parent = -1;                    // -1 for the root
+  int32_t parent = -1;                      // -1 for the root
   std::array<int32_t, 2> children{-1, -1};  // below and above the split plane; -1 for leaves
   std::array<int32_t, 6> ropes{-1, -1, -1, -1, -1, -1};  // per KdFace; -1 on the scene boundary
   float split = 0.0f;                     // plane position on `axis` (interior nodes)
@@ -98,15 +108,15 @@ struct KdNode {
 };
 
 struct KdStats {
-  size_t items = 0;           // items given to build()
-  size_t skippedItems = 0;    // of those, with an empty or non-finite box
+  size_t items = 0;         // items given to build()
+  size_t skippedItems = 0;  // of those, with an empty or non-finite box
   size_t nodes = 0;
   size_t leaves = 0;
   size_t emptyLeaves = 0;
   int maxDepth = 0;
-  size_t itemReferences = 0;     // sum over leaves of their item counts
-  double meanItemsPerLeaf = 0;   // itemReferences / leaves, empty leaves included
-  double buildMs = 0;            // wall clock of build(), ropes included
+  size_t itemReferences = 0;    // sum over leaves of their item counts
+  double meanItemsPerLeaf = 0;  // itemReferences / leaves, empty leaves included
+  double buildMs = 0;           // wall clock of build(), ropes included
 };
 
 class KdTree {

@@ -1,17 +1,26 @@
 #include "server/cmd/pvs_commands.h"
 
 #include <cstdio>
+#include <charconv>
+#include <cmath>
 #include <iostream>
+#include <mutex>
 
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <nlohmann/json.hpp>
 
 #include "common/core/error.h"
 #include "common/core/log.h"
 #include "common/core/parse.h"
 #include "common/generate/scene_spec.h"
+#include "common/core/progress.h"
+#include "common/raycast/ray_query.h"
+#include "common/spatial/free_space.h"
 #include "server/visibility/epsilon_pvs.h"
+#include "server/visibility/pvs_bake.h"
+#include "server/visibility/pvs_database.h"
 
 namespace vistream {
 namespace {
@@ -72,6 +81,111 @@ int cmdCell(const std::string& spec, const std::string& cellText, const std::str
   return 0;
 }
 
+int cmdBake(const std::string& spec, const std::string& cellSizeText, const std::string& regionText,
+            unsigned threads, const std::string& shardText, bool coarseToFine, const PvsOptions& pvsOptions,
+            const std::string& out, bool asJson) {
+  BakeOptions options;
+  options.pvs = pvsOptions;
+  options.threads = threads;
+  options.coarseToFine = coarseToFine;
+  {
+    const size_t commas = size_t(std::count(cellSizeText.begin(), cellSizeText.end(), ','));
+    const auto v = parseNumberList(cellSizeText, commas == 0 ? 1 : 3, "--cell-size");
+    options.cellSize = commas == 0 ? glm::vec3(float(v[0])) : glm::vec3(float(v[0]), float(v[1]), float(v[2]));
+    if (!(options.cellSize.x > 0 && options.cellSize.y > 0 && options.cellSize.z > 0))
+      throwInputError("--cell-size: every component must be positive, got '{}'", cellSizeText);
+  }
+  if (!shardText.empty()) {
+    const size_t slash = shardText.find('/');
+    unsigned i = 0, n = 0;
+    const auto r1 = std::from_chars(shardText.data(), shardText.data() + (slash == std::string::npos ? shardText.size() : slash), i);
+    const auto r2 = slash == std::string::npos ? std::from_chars_result{nullptr, std::errc::invalid_argument}
+                                               : std::from_chars(shardText.data() + slash + 1, shardText.data() + shardText.size(), n);
+    if (r1.ec != std::errc() || r2.ec != std::errc() || r2.ptr != shardText.data() + shardText.size() || n == 0 || i >= n)
+      throwInputError("--shard: expected i/n with 0 <= i < n, got '{}'", shardText);
+    options.shardIndex = i;
+    options.shardCount = n;
+  }
+  const Scene scene = openScene(spec);
+  if (!regionText.empty()) options.region = parseCell(scene, regionText);
+  const FlatTriangles tris = flattenScene(scene, true);
+  const auto rays = makeEmbreeRayQuery(tris);
+  const FreeSpace fs = FreeSpace::build(*rays, scene.bounds());
+  const EpsilonPvs pvs(scene);
+  std::unique_ptr<ProgressBar> bar;
+  std::mutex barMutex;  // guards creation of the bar from the first progress call
+  options.progress = [&](size_t done, size_t total) {
+    std::lock_guard lock(barMutex);
+    if (!bar) {
+      bar = std::make_unique<ProgressBar>("baking cells", total);
+      bar->advance(done);
+    } else {
+      bar->advance(1);
+    }
+  };
+  const BakeReport r = bakePvs(scene, pvs, fs, options, out);
+  if (bar) bar->finish();
+  if (asJson) {
+    std::cout << json{{"out", out}, {"grid_cells", r.gridCells}, {"free_space_cells", r.freeCells},
+                      {"shard_cells", r.shardCells}, {"resumed_cells", r.resumedCells},
+                      {"computed_cells", r.computedCells}, {"time_ms", r.timeMs},
+                      {"mean_cell_ms", r.meanCellMs}, {"mean_pvs_faces", r.shardCells ? double(r.totalFaces) / double(r.shardCells) : 0.0}}
+                     .dump(2)
+              << "\n";
+  } else {
+    fmt::print("baked {} -> {}\n", scene.name, out);
+    fmt::print("  {:<28} {:>12}\n", "grid cells", r.gridCells);
+    fmt::print("  {:<28} {:>12}\n", "cells over free space", r.freeCells);
+    fmt::print("  {:<28} {:>12}\n", "cells in this shard", r.shardCells);
+    fmt::print("  {:<28} {:>12}\n", "resumed from journal", r.resumedCells);
+    fmt::print("  {:<28} {:>12}\n", "computed", r.computedCells);
+    fmt::print("  {:<28} {:>12.1f}\n", "time (s)", r.timeMs / 1000.0);
+    fmt::print("  {:<28} {:>12.2f}\n", "mean time per cell (ms)", r.meanCellMs);
+    fmt::print("  {:<28} {:>12.1f}\n", "mean PVS size (faces)", r.shardCells ? double(r.totalFaces) / double(r.shardCells) : 0.0);
+  }
+  return 0;
+}
+
+int cmdQuery(const std::string& dbPath, const std::string& pointText, const std::string& cellText, bool asJson) {
+  if (pointText.empty() == cellText.empty()) throwInputError("give exactly one of --point x,y,z or --cell i,j,k");
+  const PvsDatabase db = PvsDatabase::open(dbPath);
+  const ViewCellGrid grid = db.header().grid();
+  glm::ivec3 ijk;
+  if (!pointText.empty()) {
+    const auto p = parseNumberList(pointText, 3, "--point");
+    const glm::vec3 local(glm::dvec3(p[0], p[1], p[2]) - db.header().origin);
+    const auto c = grid.cellOf(local);
+    if (!c) throwInputError("--point {} lies outside the database's grid", pointText);
+    ijk = *c;
+  } else {
+    const auto v = parseNumberList(cellText, 3, "--cell");
+    for (int a = 0; a < 3; ++a) {
+      if (v[size_t(a)] != std::floor(v[size_t(a)])) throwInputError("--cell: '{}' must be three integers", cellText);
+      ijk[a] = int(v[size_t(a)]);
+    }
+    if (!grid.contains(ijk))
+      throwInputError("--cell {} is outside the grid ({} x {} x {} cells)", cellText, grid.dims().x, grid.dims().y, grid.dims().z);
+  }
+  const uint32_t index = uint32_t(grid.linearIndex(ijk));
+  const auto faces = db.cell(index);
+  if (!faces)
+    throwInputError("cell {},{},{} is not in {} (outside the free space, or baked by another shard)", ijk.x, ijk.y,
+                    ijk.z, dbPath);
+  const Box3f box = grid.cellBox(ijk);
+  const glm::dvec3 lo = db.header().origin + glm::dvec3(box.lo), hi = db.header().origin + glm::dvec3(box.hi);
+  if (asJson) {
+    std::cout << json{{"cell", {ijk.x, ijk.y, ijk.z}}, {"box", {lo.x, lo.y, lo.z, hi.x, hi.y, hi.z}},
+                      {"faces", *faces}, {"scene", db.header().sceneName}, {"method", db.header().method}}
+                     .dump()
+              << "\n";
+  } else {
+    fmt::print("cell {},{},{} [{:.3f},{:.3f},{:.3f} .. {:.3f},{:.3f},{:.3f}]: {} faces\n", ijk.x, ijk.y, ijk.z, lo.x,
+               lo.y, lo.z, hi.x, hi.y, hi.z, faces->size());
+    fmt::print("{}\n", fmt::join(*faces, " "));
+  }
+  return 0;
+}
+
 }  // namespace
 
 int runPvsTool(int argc, char** argv) {
@@ -98,6 +212,35 @@ int runPvsTool(int argc, char** argv) {
   cell->add_option("--large-occluders", largeOccluders, "use only the K largest occluders by solid angle (0: all)");
   cell->add_flag("--json", asJson, "one JSON object on stdout: faces, objects, stats");
 
+  auto* bake = app.add_subcommand("bake", "bake the PVS of every cell over the free space into a database");
+  std::string cellSize, region, shard, out;
+  unsigned threads = 0;
+  bool noCoarse = false;
+  bake->add_option("--scene", scene, "SCENE")->required();
+  bake->add_option("--cell-size", cellSize, "X or X,Y,Z in metres")->required();
+  bake->add_option("--region", region, "x0,y0,z0,x1,y1,z1: bake only this box (file coordinates)");
+  bake->add_option("--threads", threads, "worker threads (default: all cores)");
+  bake->add_option("--shard", shard, "i/n: bake only shard i of n (merge shards with 'merge')");
+  bake->add_option("--out,-o", out, "output database")->required();
+  bake->add_flag("--no-coarse-to-fine", noCoarse, "bake every cell from scratch");
+  bake->add_flag("--no-bbox", noBbox, "skip the bounding-box stage");
+  bake->add_flag("--no-incremental", noIncremental, "every line traverses the space on its own");
+  bake->add_flag("--no-redundant-occluders", noRedundantOccluders, "keep occluded objects as occluders");
+  bake->add_flag("--no-redundant-rays", noRedundantRays, "cast every corner-vertex line");
+  bake->add_flag("--json", asJson, "statistics as JSON");
+
+  auto* query = app.add_subcommand("query", "the PVS of the cell holding a point, from a baked database");
+  std::string db, point, cellIndex;
+  query->add_option("--db", db, "baked database")->required();
+  query->add_option("--point", point, "x,y,z in file coordinates");
+  query->add_option("--cell", cellIndex, "i,j,k grid cell");
+  query->add_flag("--json", asJson, "one JSON object on stdout");
+
+  auto* merge = app.add_subcommand("merge", "merge shard databases of one scene and grid");
+  std::vector<std::string> inputs;
+  merge->add_option("inputs", inputs, "shard databases")->required();
+  merge->add_option("--out,-o", out, "merged database")->required();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -113,6 +256,21 @@ int runPvsTool(int argc, char** argv) {
       options.removeRedundantLines = !noRedundantRays;
       options.largeOccluders = largeOccluders;
       return cmdCell(scene, cellText, method, options, asJson);
+    }
+    if (*bake) {
+      PvsOptions options;
+      options.boxStage = !noBbox;
+      options.incremental = !noIncremental;
+      options.dropOccludedOccluders = !noRedundantOccluders;
+      options.removeRedundantLines = !noRedundantRays;
+      return cmdBake(scene, cellSize, region, threads, shard, !noCoarse, options, out, asJson);
+    }
+    if (*query) return cmdQuery(db, point, cellIndex, asJson);
+    if (*merge) {
+      std::vector<std::filesystem::path> paths(inputs.begin(), inputs.end());
+      mergePvsDatabases(paths, out);
+      fmt::print("merged {} databases into {}\n", paths.size(), out);
+      return 0;
     }
   } catch (const std::exception& e) {
     std::fprintf(stderr, "vistream-pvs: error: %s\n", e.what());

@@ -381,6 +381,15 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
     }
     bool anyVisible = false;
     for (const OccludeeGroup& g : e.groups) {
+      if (options.candidateFaces) {
+        // Coarse to fine: a group with no face in the coarse PVS is hidden already.
+        bool any = false;
+        for (uint32_t fi = g.firstFace; fi < g.firstFace + g.faceCount && !any; ++fi) any = isCandidate(e.faces[fi].id);
+        if (!any) {
+          stats.facesOccluded += g.faceCount;
+          continue;
+        }
+      }
       if (options.boxStage) {
         Stopwatch sw;
         ++stats.boxes;

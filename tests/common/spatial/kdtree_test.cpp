@@ -3,15 +3,18 @@
 // all items, all nodes or all triangles.
 #include "common/spatial/kdtree.h"
 
+#include <gtest/gtest.h>
+
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <optional>
 #include <random>
 #include <set>
+#include <string>
+#include <utility>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "common/raycast/ray_query.h"
 #include "common/raycast/triangle_intersect.h"
@@ -36,11 +39,20 @@ std::vector<Box3f> randomBoxes(size_t count, uint32_t seed, float maxSize = 12.0
     glm::vec3 hi = lo + glm::vec3(size(rng), size(rng), size(rng));
     Box3f b(lo, hi);
     switch (kind(rng)) {
-      case 0: b.hi.y = b.lo.y; break;                   // flat
-      case 1: b.hi = b.lo; break;                       // point
-      case 2: if (!boxes.empty()) b = boxes.back(); break;  // duplicate
-      case 3: b = Box3f(glm::round(b.lo), glm::round(b.hi)); break;  // on the integer grid
-      default: break;
+      case 0:
+        b.hi.y = b.lo.y;
+        break;  // flat
+      case 1:
+        b.hi = b.lo;
+        break;  // point
+      case 2:
+        if (!boxes.empty()) b = boxes.back();
+        break;  // duplicate
+      case 3:
+        b = Box3f(glm::round(b.lo), glm::round(b.hi));
+        break;  // on the integer grid
+      default:
+        break;
     }
     boxes.push_back(b);
   }
@@ -238,7 +250,8 @@ TEST(KdTree, EveryPointOfAnItemIsInALeafThatHoldsIt) {
       points.emplace_back(corner & 1 ? b.hi.x : b.lo.x, corner & 2 ? b.hi.y : b.lo.y,
                           corner & 4 ? b.hi.z : b.lo.z);
     for (int k = 0; k < 4; ++k)
-      points.push_back(glm::min(b.lo + (b.hi - b.lo) * glm::vec3(unit(rng), unit(rng), unit(rng)), b.hi));
+      points.push_back(
+          glm::min(b.lo + (b.hi - b.lo) * glm::vec3(unit(rng), unit(rng), unit(rng)), b.hi));
     for (const glm::vec3& p : points) {
       bool found = false;
       for (const int32_t leaf : leaves)
@@ -306,17 +319,19 @@ TEST(KdTree, EmptyInputGivesOneEmptyLeafWithoutRopes) {
   for (int face = 0; face < 6; ++face) EXPECT_EQ(tree.rope(0, KdFace(face)), -1);
   EXPECT_EQ(tree.stats().emptyLeaves, 1u);
   int leaves = 0;
-  tree.traverseRay(glm::vec3(0.0f), glm::vec3(1.0f, 0.0f, 0.0f), 0.0f, kInf, [&](int32_t, float, float) {
-    ++leaves;
-    return true;
-  });
+  tree.traverseRay(glm::vec3(0.0f), glm::vec3(1.0f, 0.0f, 0.0f), 0.0f, kInf,
+                   [&](int32_t, float, float) {
+                     ++leaves;
+                     return true;
+                   });
   EXPECT_EQ(leaves, 0);
   EXPECT_EQ(tree.leafContaining(glm::vec3(0.0f)), -1);
   EXPECT_EQ(KdTree().nodes().size(), 1u);
 }
 
 TEST(KdTree, IdenticalItemsEndInOneLeaf) {
-  const std::vector<Box3f> boxes(1000, Box3f(glm::vec3(1.0f, 2.0f, 3.0f), glm::vec3(4.0f, 5.0f, 6.0f)));
+  const std::vector<Box3f> boxes(1000,
+                                 Box3f(glm::vec3(1.0f, 2.0f, 3.0f), glm::vec3(4.0f, 5.0f, 6.0f)));
   const KdTree tree = KdTree::build(boxes);
   ASSERT_EQ(tree.nodes().size(), 1u);
   EXPECT_EQ(tree.items(0).size(), boxes.size());
@@ -336,7 +351,8 @@ TEST(KdTree, FlatItemsInOnePlaneAreSplitWithinThePlane) {
   std::vector<Box3f> boxes;
   for (int i = 0; i < 20; ++i)
     for (int j = 0; j < 20; ++j)
-      boxes.emplace_back(glm::vec3(float(i), 7.0f, float(j)), glm::vec3(float(i) + 0.5f, 7.0f, float(j) + 0.5f));
+      boxes.emplace_back(glm::vec3(float(i), 7.0f, float(j)),
+                         glm::vec3(float(i) + 0.5f, 7.0f, float(j) + 0.5f));
   const KdTree tree = KdTree::build(boxes);
   EXPECT_EQ(tree.bounds().lo.y, 7.0f);
   EXPECT_EQ(tree.bounds().hi.y, 7.0f);
@@ -435,7 +451,8 @@ TEST(KdTree, BuildsOverSceneObjects) {
     Object o;
     o.name = "block" + std::to_string(i);
     o.bounds = Box3f(glm::vec3(float(i % 6) * 10.0f, 0.0f, float(i / 6) * 10.0f),
-                     glm::vec3(float(i % 6) * 10.0f + 8.0f, float(i % 4 + 1) * 5.0f, float(i / 6) * 10.0f + 8.0f));
+                     glm::vec3(float(i % 6) * 10.0f + 8.0f, float(i % 4 + 1) * 5.0f,
+                               float(i / 6) * 10.0f + 8.0f));
     scene.objects.push_back(o);
   }
   const KdTree tree = KdTree::buildOverObjects(scene);
@@ -471,13 +488,17 @@ TEST(ClippedTriangleBounds, IsTheBoxOfThePartInsideTheClipBox) {
   EXPECT_EQ(inside.lo, glm::vec3(0.0f));
   EXPECT_EQ(inside.hi, glm::vec3(10.0f, 10.0f, 0.0f));
   // Beyond the hypotenuse x + y = 10: nothing.
-  EXPECT_TRUE(clippedTriangleBounds(a, b, c, Box3f(glm::vec3(6.0f, 6.0f, -1.0f), glm::vec3(9.0f, 9.0f, 1.0f))).empty());
+  EXPECT_TRUE(clippedTriangleBounds(
+                  a, b, c, Box3f(glm::vec3(6.0f, 6.0f, -1.0f), glm::vec3(9.0f, 9.0f, 1.0f)))
+                  .empty());
   // A slab x in [4, 6] cuts the triangle to y in [0, 6].
-  const Box3f slabPart = clippedTriangleBounds(a, b, c, Box3f(glm::vec3(4.0f, -1.0f, -1.0f), glm::vec3(6.0f, 20.0f, 1.0f)));
+  const Box3f slabPart = clippedTriangleBounds(
+      a, b, c, Box3f(glm::vec3(4.0f, -1.0f, -1.0f), glm::vec3(6.0f, 20.0f, 1.0f)));
   EXPECT_EQ(slabPart.lo, glm::vec3(4.0f, 0.0f, 0.0f));
   EXPECT_EQ(slabPart.hi, glm::vec3(6.0f, 6.0f, 0.0f));
   // Touching the box only at the corner (5, 5) leaves a single point.
-  const Box3f corner = clippedTriangleBounds(a, b, c, Box3f(glm::vec3(5.0f, 5.0f, 0.0f), glm::vec3(8.0f, 8.0f, 1.0f)));
+  const Box3f corner = clippedTriangleBounds(
+      a, b, c, Box3f(glm::vec3(5.0f, 5.0f, 0.0f), glm::vec3(8.0f, 8.0f, 1.0f)));
   EXPECT_EQ(corner.lo, glm::vec3(5.0f, 5.0f, 0.0f));
   EXPECT_EQ(corner.hi, glm::vec3(5.0f, 5.0f, 0.0f));
 }
@@ -488,7 +509,8 @@ TEST(ClippedTriangleBounds, ContainsEveryPointOfTheTriangleInsideTheBox) {
   for (int k = 0; k < 2000; ++k) {
     const glm::vec3 a(pos(rng), pos(rng), pos(rng)), b(pos(rng), pos(rng), pos(rng)),
         c(pos(rng), pos(rng), pos(rng));
-    const Box3f box(glm::vec3(pos(rng), pos(rng), pos(rng)), glm::vec3(pos(rng), pos(rng), pos(rng)));
+    const Box3f box(glm::vec3(pos(rng), pos(rng), pos(rng)),
+                    glm::vec3(pos(rng), pos(rng), pos(rng)));
     const Box3f part = clippedTriangleBounds(a, b, c, box);
     for (int s = 0; s < 50; ++s) {
       float u = unit(rng), v = unit(rng);
@@ -530,8 +552,10 @@ TEST(KdTree, SplitClippingKeepsTrianglesOutOfLeavesTheyOnlyBoxOverlap) {
   for (size_t t = 0; t < soup.size(); ++t) bounds.push_back(soup.triangleBounds(t));
   const KdTree clipped = KdTree::buildOverTriangles(soup);
   const KdTree boxed = KdTree::build(bounds);
-  EXPECT_LT(double(clipped.stats().itemReferences) / double(clipped.stats().leaves - clipped.stats().emptyLeaves),
-            double(boxed.stats().itemReferences) / double(boxed.stats().leaves - boxed.stats().emptyLeaves));
+  EXPECT_LT(double(clipped.stats().itemReferences) /
+                double(clipped.stats().leaves - clipped.stats().emptyLeaves),
+            double(boxed.stats().itemReferences) /
+                double(boxed.stats().leaves - boxed.stats().emptyLeaves));
 }
 
 // ---- traversal -----------------------------------------------------------------------
@@ -577,6 +601,25 @@ TEST(KdTree, RayVisitsTheLeavesItCrossesInNondecreasingEntryDistance) {
       }
     }
   }
+}
+
+TEST(KdTree, RayInASplitPlaneVisitsTheLeavesOnBothSides) {
+  // Two slabs of items meeting at x = 5, so the root splits there.
+  std::vector<Box3f> boxes;
+  for (int k = 0; k < 8; ++k) {
+    boxes.emplace_back(glm::vec3(0.0f, float(k), 0.0f), glm::vec3(5.0f, float(k) + 0.5f, 1.0f));
+    boxes.emplace_back(glm::vec3(5.0f, float(k), 0.0f), glm::vec3(10.0f, float(k) + 0.5f, 1.0f));
+  }
+  const KdTree tree = KdTree::build(boxes);
+  ASSERT_TRUE(std::any_of(tree.nodes().begin(), tree.nodes().end(),
+                          [](const KdNode& n) { return n.axis == 0 && n.split == 5.0f; }));
+  std::set<uint32_t> met;
+  tree.traverseRay(glm::vec3(5.0f, -1.0f, 0.5f), glm::vec3(0.0f, 1.0f, 0.0f), 0.0f, kInf,
+                   [&](int32_t leaf, float, float) {
+                     met.insert(tree.items(leaf).begin(), tree.items(leaf).end());
+                     return true;
+                   });
+  EXPECT_EQ(met.size(), boxes.size());
 }
 
 TEST(KdTree, RayTraversalStopsWhenTheCallbackSaysSo) {
@@ -692,9 +735,9 @@ void checkGridSeams(const FlatTriangles& grid, int cells) {
       const glm::vec3 v = grid.vertex(size_t(2 * ((i - 1) * cells + (j - 1))), 2);  // (i, j) corner
       ASSERT_EQ(v.x, float(i));
       ASSERT_EQ(v.y, float(j));
-      const glm::vec3 vx = grid.vertex(size_t(2 * (i * cells + (j - 1))), 2);   // (i+1, j)
-      const glm::vec3 vy = grid.vertex(size_t(2 * ((i - 1) * cells + j)), 2);   // (i, j+1)
-      const glm::vec3 vd = grid.vertex(size_t(2 * (i * cells + j)), 2);         // (i+1, j+1)
+      const glm::vec3 vx = grid.vertex(size_t(2 * (i * cells + (j - 1))), 2);  // (i+1, j)
+      const glm::vec3 vy = grid.vertex(size_t(2 * ((i - 1) * cells + j)), 2);  // (i, j+1)
+      const glm::vec3 vd = grid.vertex(size_t(2 * (i * cells + j)), 2);        // (i+1, j+1)
       for (const glm::vec3& target : {v, (v + vx) * 0.5f, (v + vy) * 0.5f, (v + vd) * 0.5f}) {
         for (const glm::vec3& d : directions) {
           Ray ray;
@@ -735,7 +778,8 @@ TEST(KdTreeRayQuery, EmptySceneIsNeverHit) {
 }
 
 TEST(KdTreeRayQuery, SingleTriangleIsHitInsideAndMissedOutside) {
-  const FlatTriangles one = makeTriangles({{glm::vec3(0, 0, -5), glm::vec3(4, 0, -5), glm::vec3(0, 4, -5)}});
+  const FlatTriangles one =
+      makeTriangles({{glm::vec3(0, 0, -5), glm::vec3(4, 0, -5), glm::vec3(0, 4, -5)}});
   const auto query = makeKdTreeRayQuery(one);
   Ray ray;
   ray.org = glm::vec3(1.0f, 1.0f, 0.0f);
@@ -756,8 +800,8 @@ TEST(KdTreeRayQuery, SingleTriangleIsHitInsideAndMissedOutside) {
 
 TEST(KdTreeRayQuery, DegenerateTrianglesAreNeverHit) {
   FlatTriangles tris = makeTriangles({
-      {glm::vec3(0, 0, -2), glm::vec3(4, 0, -2), glm::vec3(2, 0, -2)},  // collinear
-      {glm::vec3(1, 1, -3), glm::vec3(1, 1, -3), glm::vec3(0, 4, -3)},  // repeated vertex
+      {glm::vec3(0, 0, -2), glm::vec3(4, 0, -2), glm::vec3(2, 0, -2)},     // collinear
+      {glm::vec3(1, 1, -3), glm::vec3(1, 1, -3), glm::vec3(0, 4, -3)},     // repeated vertex
       {glm::vec3(-4, -4, -4), glm::vec3(4, -4, -4), glm::vec3(0, 4, -4)},  // flagged below
       {glm::vec3(-8, -8, -9), glm::vec3(8, -8, -9), glm::vec3(0, 8, -9)},
   });
@@ -783,7 +827,8 @@ TEST(KdTreeRayQuery, FirstHitTiesResolveToTheSmallerTriangleIndex) {
   std::vector<std::array<glm::vec3, 3>> tris;
   const FlatTriangles clutter = randomTriangleSoup(400, 30);
   for (size_t t = 0; t < clutter.size(); ++t)
-    tris.push_back({clutter.vertex(t, 0) + glm::vec3(0, 0, 60), clutter.vertex(t, 1) + glm::vec3(0, 0, 60),
+    tris.push_back({clutter.vertex(t, 0) + glm::vec3(0, 0, 60),
+                    clutter.vertex(t, 1) + glm::vec3(0, 0, 60),
                     clutter.vertex(t, 2) + glm::vec3(0, 0, 60)});
   for (int copy = 0; copy < 5; ++copy) {
     tris.push_back({glm::vec3(0, 0, 0), glm::vec3(50, 0, 0), glm::vec3(50, 50, 0)});
