@@ -1,15 +1,28 @@
 // The conservative PVS against the sampled ground truth on every generated
-// scene type: for many view cells over the free space at eye height, every
-// face that some ray from some viewpoint in the cell hits first
-// (sampleVisibleFaces, the oracle behind `vistream-scene visible`) must be
-// in the cell's PVS. Zero missing faces is the requirement; the mean ratio
-// |PVS| / |sampled visible set| (overestimation) is reported, not asserted.
+// scene type. For many view cells over the free space at eye height, every
+// face that some ray from some viewpoint of the cell hits first
+// (sampleVisibleFaces, the oracle behind `vistream-scene visible`: 24
+// viewpoints, 128 x 128 rays per cube-map face) must be in the cell's PVS.
+// Zero missing faces is the requirement; the mean ratio |PVS| / |sampled
+// visible set| (overestimation) is printed and recorded, not asserted.
 //
-// bigcity is left to the benchmark: toScene + occluder extraction + the
-// free space of its 2 million triangles alone take longer than this whole
-// executable's budget (about 90 s in Release on two busy cores).
+// Cells are centred on walkable columns, so they often reach into a wall or
+// a building (a quarter of a building is wider than the street margin).
+// The contract only covers viewpoints outside solid geometry, and the
+// sampler's inside test is a majority vote of six axis rays, which a point
+// inside a thin wall crossed by other walls and standing on a coplanar floor
+// can win (4 front-face hits against 2 back-face hits). So a face the cell
+// sample sees but the PVS lacks is re-examined viewpoint by viewpoint, and
+// it counts as missing only if a viewpoint that sees it is strictly outside:
+// none of its six axis rays hits a back face. Faces seen only from inside a
+// solid are printed as excused, so the filter stays visible.
 //
-// Slow (about a minute in Release): carries the ctest label "slow".
+// bigcity is left to the benchmark: generating and triangulating its 2
+// million triangles, extracting occluders and building its free space take
+// most of this executable's 90 s budget on their own before one cell is
+// sampled.
+//
+// Slow (about a minute in Release on two cores): carries the ctest label "slow".
 #include <algorithm>
 #include <cstdio>
 #include <iostream>
@@ -30,21 +43,23 @@ namespace {
 
 struct SceneCase {
   std::string type;
-  glm::vec3 cellSize;       // the fine cells: about a quarter of a typical building or room
+  glm::vec3 cellSize;       // fine cells: about a quarter of a typical building (or room)
   glm::vec3 largeCellSize;  // a few larger cells, whose corners see much more
-  size_t cells;             // fine cells
+  size_t cells;
   size_t largeCells;
 };
 
-// Eye range of a standing viewer above the floor: 0.8 m to 2.0 m.
+// A standing viewer's eyes: 0.8 m to 2.0 m above the floor (cells are 1.2 m tall).
 constexpr float kEyeLow = 0.8f;
+constexpr size_t kViewpoints = 24;
+constexpr int kResolution = 128;
 
 struct Cell {
   Box3f box;
   bool large = false;
 };
 
-// Cells spread evenly over the walkable columns (every n-th column in grid
+// Cells spread evenly over the walkable columns (every n-th one in grid
 // order), centred on the column, from kEyeLow above its floor up.
 std::vector<Cell> pickCells(const FreeSpace& fs, const SceneCase& c) {
   const std::vector<glm::ivec2> columns = fs.walkableColumns();
@@ -52,11 +67,9 @@ std::vector<Cell> pickCells(const FreeSpace& fs, const SceneCase& c) {
   if (columns.empty()) return out;
   auto add = [&](size_t count, glm::vec3 size, bool large, size_t phase) {
     for (size_t k = 0; k < count; ++k) {
-      const size_t idx = (k * columns.size() + phase) / count % columns.size();
-      const glm::ivec2 col = columns[idx];
+      const glm::ivec2 col = columns[(k * columns.size() + phase) / count % columns.size()];
       const glm::vec2 xz = fs.columnCentre(col.x, col.y);
-      const float floor = fs.floorHeight(col.x, col.y);
-      const glm::vec3 lo(xz.x - 0.5f * size.x, floor + kEyeLow, xz.y - 0.5f * size.z);
+      const glm::vec3 lo(xz.x - 0.5f * size.x, fs.floorHeight(col.x, col.y) + kEyeLow, xz.y - 0.5f * size.z);
       out.push_back({Box3f(lo, lo + size), large});
     }
   };
@@ -65,21 +78,67 @@ std::vector<Cell> pickCells(const FreeSpace& fs, const SceneCase& c) {
   return out;
 }
 
-std::string describe(const Box3f& b) {
-  char text[160];
-  std::snprintf(text, sizeof text, "[%.3f,%.3f,%.3f]-[%.3f,%.3f,%.3f]", double(b.lo.x), double(b.lo.y),
-                double(b.lo.z), double(b.hi.x), double(b.hi.y), double(b.hi.z));
+std::string describe(const glm::vec3& p) {
+  char text[96];
+  std::snprintf(text, sizeof text, "(%.4f, %.4f, %.4f)", double(p.x), double(p.y), double(p.z));
   return text;
+}
+
+std::string describe(const Box3f& b) { return describe(b.lo) + "-" + describe(b.hi); }
+
+// Strictly outside solid geometry: no axis ray from p first hits the back of
+// a face. Stricter than the sampler's majority vote (see the file comment).
+bool strictlyOutside(const RayQuery& rays, const glm::vec3& p) {
+  static const glm::vec3 dirs[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  for (const glm::vec3& d : dirs) {
+    const Hit h = rays.firstHit(Ray{p, d, 0.0f, std::numeric_limits<float>::infinity()});
+    if (h.valid() && h.t > 0.0f && glm::dot(h.normal, d) > 0.0f) return false;
+  }
+  return true;
+}
+
+struct Verdict {
+  std::vector<uint32_t> missing;  // seen from a strictly outside viewpoint, not in the PVS
+  std::vector<uint32_t> excused;  // seen only from viewpoints inside solid geometry
+  std::string witnesses;          // viewpoints that see the missing faces
+};
+
+// Re-examines faces the cell sample saw but the PVS lacks, one viewpoint at a
+// time (the same viewpoints as sampleVisibleFaces uses for the cell).
+Verdict reexamine(const RayQuery& rays, const FlatTriangles& triangles, const Box3f& cell,
+                  const std::vector<uint32_t>& suspects) {
+  Verdict v;
+  SampledVisibilityOptions one;
+  one.points = 1;
+  one.resolution = kResolution;
+  std::vector<uint8_t> confirmed(suspects.size(), 0);
+  for (const glm::vec3& p : cellViewpoints(cell, kViewpoints, 1)) {
+    const SampledVisibility seen = sampleVisibleFaces(rays, triangles, Box3f(p, p), one);
+    if (seen.viewpoints == 0 || !strictlyOutside(rays, p)) continue;
+    bool witness = false;
+    for (size_t i = 0; i < suspects.size(); ++i)
+      if (std::binary_search(seen.faces.begin(), seen.faces.end(), suspects[i])) {
+        confirmed[i] = 1;
+        witness = true;
+      }
+    if (witness) v.witnesses += " " + describe(p);
+  }
+  for (size_t i = 0; i < suspects.size(); ++i) (confirmed[i] ? v.missing : v.excused).push_back(suspects[i]);
+  return v;
+}
+
+std::string list(const std::vector<uint32_t>& ids) {
+  std::string s;
+  for (size_t i = 0; i < ids.size() && i < 40; ++i) s += " " + std::to_string(ids[i]);
+  return ids.size() > 40 ? s + " ..." : s;
 }
 
 class PvsGroundTruth : public ::testing::TestWithParam<SceneCase> {};
 
-TEST_P(PvsGroundTruth, EveryFaceSeenFromAnyCellIsInItsPvs) {
+TEST_P(PvsGroundTruth, EveryFaceSampledVisibleFromACellIsInItsPvs) {
   const SceneCase& c = GetParam();
   Stopwatch clock;
   const Scene scene = toScene(generate(c.type, 1));
-  // Dynamic objects are in every PVS by contract; the ground truth of the
-  // static world is what the test is about, but keeping them costs nothing.
   const FlatTriangles triangles = flattenScene(scene);
   const auto rays = makeEmbreeRayQuery(triangles);
   const FreeSpace fs = FreeSpace::build(*rays, scene.bounds());
@@ -88,27 +147,34 @@ TEST_P(PvsGroundTruth, EveryFaceSeenFromAnyCellIsInItsPvs) {
   ASSERT_GT(fs.walkableCount(), 0u) << c.type;
 
   const std::vector<Cell> cells = pickCells(fs, c);
-  ASSERT_GE(cells.size(), c.cells + c.largeCells);
+  ASSERT_EQ(cells.size(), c.cells + c.largeCells);
 
   SampledVisibilityOptions sampling;
-  sampling.points = 24;
-  sampling.resolution = 128;
+  sampling.points = kViewpoints;
+  sampling.resolution = kResolution;
 
   double ratioSum = 0.0, pvsMs = 0.0, sampleMs = 0.0;
-  size_t ratioCells = 0, pvsFaces = 0, seenFaces = 0, missingTotal = 0;
+  size_t ratioCells = 0, pvsFaces = 0, seenFaces = 0, missingTotal = 0, excusedTotal = 0, insideTotal = 0;
   for (const Cell& cell : cells) {
     const PvsResult r = pvs.compute(cell.box);
     const SampledVisibility seen = sampleVisibleFaces(*rays, triangles, cell.box, sampling);
     pvsMs += r.stats.timeMs;
     sampleMs += seen.timeMs;
-    std::vector<uint32_t> missing;
+    insideTotal += seen.insideSolid;
+    std::vector<uint32_t> suspects;
     std::set_difference(seen.faces.begin(), seen.faces.end(), r.faces.begin(), r.faces.end(),
-                        std::back_inserter(missing));
-    missingTotal += missing.size();
-    std::string ids;
-    for (size_t i = 0; i < missing.size() && i < 40; ++i) ids += " " + std::to_string(missing[i]);
-    EXPECT_TRUE(missing.empty()) << c.type << " cell " << describe(cell.box) << (cell.large ? " (large)" : "")
-                                 << ": " << missing.size() << " sampled-visible faces missing from the PVS:" << ids;
+                        std::back_inserter(suspects));
+    if (!suspects.empty()) {
+      const Verdict v = reexamine(*rays, triangles, cell.box, suspects);
+      missingTotal += v.missing.size();
+      excusedTotal += v.excused.size();
+      EXPECT_TRUE(v.missing.empty()) << c.type << " cell " << describe(cell.box) << (cell.large ? " (large)" : "")
+                                     << ": " << v.missing.size() << " sampled-visible faces missing from the PVS:"
+                                     << list(v.missing) << "; seen from" << v.witnesses;
+      if (!v.excused.empty())
+        std::cout << "[ excused  ] " << c.type << " cell " << describe(cell.box) << ": faces" << list(v.excused)
+                  << " seen only from viewpoints inside solid geometry\n";
+    }
     if (!seen.faces.empty()) {
       ratioSum += double(r.faces.size()) / double(seen.faces.size());
       ++ratioCells;
@@ -116,22 +182,28 @@ TEST_P(PvsGroundTruth, EveryFaceSeenFromAnyCellIsInItsPvs) {
     pvsFaces += r.faces.size();
     seenFaces += seen.faces.size();
   }
+  // The oracle must have seen something from most cells, or the test is empty.
+  EXPECT_GE(ratioCells, cells.size() - cells.size() / 4) << c.type;
   const double ratio = ratioCells ? ratioSum / double(ratioCells) : 0.0;
   std::cout << "[ pvs/gt   ] " << c.type << ": " << cells.size() << " cells, " << scene.faceCount
             << " faces, mean PVS " << pvsFaces / cells.size() << ", mean sampled visible "
             << seenFaces / cells.size() << ", overestimation " << ratio << ", missing " << missingTotal
-            << "; setup " << setupMs << " ms, PVS " << pvsMs << " ms, sampling " << sampleMs << " ms\n";
+            << ", excused " << excusedTotal << ", viewpoints inside solid " << insideTotal << "; setup "
+            << setupMs << " ms, PVS " << pvsMs << " ms, sampling " << sampleMs << " ms\n";
   RecordProperty("overestimation", std::to_string(ratio));
   RecordProperty("cells", std::to_string(cells.size()));
+  RecordProperty("missing", std::to_string(missingTotal));
 }
+
+std::string sceneName(const ::testing::TestParamInfo<SceneCase>& param) { return param.param.type; }
 
 INSTANTIATE_TEST_SUITE_P(
     GeneratedScenes, PvsGroundTruth,
     ::testing::Values(SceneCase{"city1", {4.0f, 1.2f, 4.0f}, {16.0f, 1.2f, 16.0f}, 16, 3},
                       SceneCase{"city2", {4.0f, 1.2f, 4.0f}, {16.0f, 1.2f, 16.0f}, 16, 3},
                       SceneCase{"interior", {1.0f, 1.2f, 1.0f}, {4.0f, 1.2f, 4.0f}, 16, 3},
-                      SceneCase{"terrain", {8.0f, 1.2f, 8.0f}, {32.0f, 1.2f, 32.0f}, 16, 3}),
-    [](const ::testing::TestParamInfo<SceneCase>& info) { return info.param.type; });
+                      SceneCase{"terrain", {8.0f, 1.2f, 8.0f}, {32.0f, 1.2f, 32.0f}, 12, 2}),
+    sceneName);
 
 }  // namespace
 }  // namespace vistream
