@@ -18,6 +18,7 @@
 #include "common/core/progress.h"
 #include "common/raycast/ray_query.h"
 #include "common/spatial/free_space.h"
+#include "server/cmd/pvs_bench.h"
 #include "server/visibility/epsilon_pvs.h"
 #include "server/visibility/pvs_bake.h"
 #include "server/visibility/pvs_database.h"
@@ -241,6 +242,18 @@ int runPvsTool(int argc, char** argv) {
   merge->add_option("inputs", inputs, "shard databases")->required();
   merge->add_option("--out,-o", out, "merged database")->required();
 
+  auto* bench = app.add_subcommand("bench", "Tables 1 and 2 of the paper, and PVS accuracy against time");
+  PvsBenchOptions benchOptions;
+  std::string benchScenes;
+  bench->add_option("--scenes", benchScenes, "comma-separated SCENEs (default city1,city2,interior,bigcity)");
+  bench->add_option("--cells", benchOptions.cells, "street cells per city for Tables 1 and 2");
+  bench->add_option("--accuracy-cells", benchOptions.accuracyCells, "cells per scene and cell size for the accuracy table");
+  bench->add_option("--gt-res", benchOptions.groundTruthRes, "ground-truth rays per cube face side");
+  bench->add_option("--gt-points", benchOptions.groundTruthPoints, "ground-truth viewpoints per cell");
+  bench->add_option("--seed", benchOptions.seed, "seed for cell placement");
+  bench->add_option("--plot", benchOptions.plotDir, "directory for accuracy.dat/.png (gnuplot)");
+  bench->add_flag("--json", benchOptions.json, "one JSON object on stdout");
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -266,6 +279,18 @@ int runPvsTool(int argc, char** argv) {
       return cmdBake(scene, cellSize, region, threads, shard, !noCoarse, options, out, asJson);
     }
     if (*query) return cmdQuery(db, point, cellIndex, asJson);
+    if (*bench) {
+      if (!benchScenes.empty()) {
+        benchOptions.scenes.clear();
+        for (size_t pos = 0; pos <= benchScenes.size();) {
+          const size_t comma = benchScenes.find(',', pos);
+          benchOptions.scenes.push_back(benchScenes.substr(pos, comma == std::string::npos ? std::string::npos : comma - pos));
+          if (comma == std::string::npos) break;
+          pos = comma + 1;
+        }
+      }
+      return runPvsBench(benchOptions);
+    }
     if (*merge) {
       std::vector<std::filesystem::path> paths(inputs.begin(), inputs.end());
       mergePvsDatabases(paths, out);

@@ -103,7 +103,7 @@ std::vector<std::pair<uint8_t, uint8_t>> keptLinesFor(const std::vector<glm::dve
 
 // At most this many faces per box-stage group: tuned on city1, where the
 // ground's 2,128 tiles dominate the face stage when tested one by one.
-constexpr size_t kMaxFacesPerGroup = 16;
+constexpr size_t kMaxFacesPerGroup = 32;
 
 // Splits faces [first, first+count) at the median centroid of the longest
 // axis until groups are small, reordering `faces` in place.
@@ -393,6 +393,7 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
       if (options.boxStage) {
         Stopwatch sw;
         ++stats.boxes;
+        stats.objectBoxes += e.groups.size() == 1;
         bool byFirst = false;
         const bool boxHidden = q.hidden(
             g.boxCorners, options.removeRedundantLines ? std::span(boxPairs) : std::span(allPairs).first(64),
@@ -401,6 +402,10 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
         if (boxHidden) {
           ++stats.boxesOccluded;
           stats.boxesOccludedByFirst += byFirst;
+          if (e.groups.size() == 1) {
+            ++stats.objectBoxesOccluded;
+            stats.objectBoxesOccludedByFirst += byFirst;
+          }
           stats.facesCulledByBoxStage += g.faceCount;
           stats.facesOccluded += g.faceCount;
           continue;

@@ -66,9 +66,14 @@ struct PvsStats {
   uint64_t linesCast = 0;          // lines of sight cast (traversed or tested)
   uint64_t lineBoxTests = 0;       // line/occluder tests in the bounding-box stage
   uint64_t linePolygonTests = 0;   // line/occluder tests in the face stage
-  size_t boxes = 0;                // objects tested in the box stage
+  size_t boxes = 0;                // occludee groups tested in the box stage
   size_t boxesOccluded = 0;
   size_t boxesOccludedByFirst = 0; // hidden by the first candidate tried
+  // The same for objects whose bounding box is one occludee (not split into
+  // groups): the "bounding boxes" of the paper's Table 1.
+  size_t objectBoxes = 0;
+  size_t objectBoxesOccluded = 0;
+  size_t objectBoxesOccludedByFirst = 0;
   size_t faces = 0;                // faces considered
   size_t facesOccluded = 0;        // culled in total (box stage included)
   size_t facesCulledByBoxStage = 0;

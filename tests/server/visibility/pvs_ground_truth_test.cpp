@@ -121,7 +121,7 @@ Verdict reexamine(const RayQuery& rays, const FlatTriangles& triangles, const Bo
         confirmed[i] = 1;
         witness = true;
       }
-    if (witness) v.witnesses += " " + describe(p);
+    if (witness) v.witnesses.append(" ").append(describe(p));
   }
   for (size_t i = 0; i < suspects.size(); ++i) (confirmed[i] ? v.missing : v.excused).push_back(suspects[i]);
   return v;
@@ -129,7 +129,7 @@ Verdict reexamine(const RayQuery& rays, const FlatTriangles& triangles, const Bo
 
 std::string list(const std::vector<uint32_t>& ids) {
   std::string s;
-  for (size_t i = 0; i < ids.size() && i < 40; ++i) s += " " + std::to_string(ids[i]);
+  for (size_t i = 0; i < ids.size() && i < 40; ++i) s.append(" ").append(std::to_string(ids[i]));
   return ids.size() > 40 ? s + " ..." : s;
 }
 

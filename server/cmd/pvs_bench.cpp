@@ -1,0 +1,264 @@
+// Reproduces Tables 1 and 2 of Cohen-Or and Zadicario 1998 on the generated
+// cities and measures the accuracy/time trade-off of the PVS against the
+// sampled ground truth. All configurations run side by side in one process
+// on the same cells; times are medians over cells.
+#include "server/cmd/pvs_bench.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <random>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include "common/core/progress.h"
+#include "common/core/timer.h"
+#include "common/generate/scene_spec.h"
+#include "common/raycast/ray_query.h"
+#include "common/raycast/sampled_visibility.h"
+#include "common/spatial/free_space.h"
+#include "server/visibility/epsilon_pvs.h"
+
+namespace vistream {
+namespace {
+
+using nlohmann::json;
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+}
+
+double mean(const std::vector<double>& v) {
+  double s = 0.0;
+  for (double x : v) s += x;
+  return v.empty() ? 0.0 : s / double(v.size());
+}
+
+struct World {
+  Scene scene;
+  FlatTriangles triangles;
+  std::unique_ptr<RayQuery> rays;
+  FreeSpace freeSpace;
+  std::unique_ptr<EpsilonPvs> pvs;
+  double typicalBuilding = 16.0;  // metres: median horizontal size of objects
+};
+
+World makeWorld(const std::string& spec) {
+  World w;
+  w.scene = openScene(spec);
+  w.triangles = flattenScene(w.scene, true);
+  w.rays = makeEmbreeRayQuery(w.triangles);
+  w.freeSpace = FreeSpace::build(*w.rays, w.scene.bounds());
+  Stopwatch sw;
+  w.pvs = std::make_unique<EpsilonPvs>(w.scene);
+  spdlog::info("{}: {} occluders ({} solids, {} polygons), prepared in {:.0f} ms", spec,
+               w.pvs->occluders().occluders.size(), w.pvs->occluders().stats.solids,
+               w.pvs->occluders().stats.polygons, sw.ms());
+  std::vector<double> sizes;
+  for (const Object& o : w.scene.objects) {
+    const glm::vec3 e = o.bounds.extent();
+    if (o.mesh.triangleCount() <= 200 && e.x < 200 && e.z < 200) sizes.push_back(0.5 * (e.x + e.z));
+  }
+  if (!sizes.empty()) w.typicalBuilding = median(sizes);
+  return w;
+}
+
+// Cells of the given horizontal size centred on random free-space columns,
+// from 0.2 m above the floor up to eye height or the cell size.
+std::vector<Box3f> streetCells(const World& w, float size, size_t count, uint64_t seed) {
+  const auto columns = w.freeSpace.walkableColumns();
+  std::vector<Box3f> cells;
+  if (columns.empty()) return cells;
+  std::mt19937_64 rng(seed);
+  const float height = std::min(size, 1.8f);
+  for (size_t i = 0; i < count; ++i) {
+    const auto c = columns[rng() % columns.size()];
+    const glm::vec2 xz = w.freeSpace.columnCentre(c.x, c.y);
+    const float y = w.freeSpace.floorHeight(c.x, c.y) + 0.2f;
+    cells.emplace_back(glm::vec3(xz.x - size / 2, y, xz.y - size / 2), glm::vec3(xz.x + size / 2, y + height, xz.y + size / 2));
+  }
+  return cells;
+}
+
+struct Config {
+  const char* name;
+  PvsOptions options;
+};
+
+std::vector<Config> table2Configs() {
+  PvsOptions naive;
+  naive.boxStage = naive.incremental = naive.dropOccludedOccluders = naive.removeRedundantLines = false;
+  PvsOptions box = naive;
+  box.boxStage = true;
+  PvsOptions occl = box;
+  occl.dropOccludedOccluders = true;
+  PvsOptions rays = box;
+  rays.removeRedundantLines = true;
+  PvsOptions full;
+  return {{"no optimization", naive}, {"bounding box", box}, {"redundant occluders", occl},
+          {"redundant rays", rays}, {"fully optimized", full}};
+}
+
+}  // namespace
+
+int runPvsBench(const PvsBenchOptions& options) {
+  json out;
+  const bool human = !options.json;
+  std::vector<std::string> cities;
+  for (const auto& s : options.scenes)
+    if (s.rfind("city1", 0) == 0 || s.rfind("city2", 0) == 0) cities.push_back(s);
+
+  // ---- Tables 1 and 2 ---------------------------------------------------------
+  for (const std::string& spec : cities) {
+    World w = makeWorld(spec);
+    const float cellSize = float(w.typicalBuilding / 4.0);
+    const auto cells = streetCells(w, cellSize, options.cells, options.seed);
+    const auto configs = table2Configs();
+    std::vector<std::vector<PvsStats>> stats(configs.size());
+    std::vector<size_t> mismatches(configs.size(), 0);
+    ProgressBar bar(spec + " tables", cells.size() * configs.size());
+    for (const Box3f& cell : cells) {
+      std::vector<uint32_t> reference;
+      for (size_t c = configs.size(); c-- > 0;) {  // fully optimized first: it is the reference
+        const PvsResult r = w.pvs->compute(cell, configs[c].options);
+        if (c == configs.size() - 1) reference = r.faces;
+        else if (r.faces != reference) ++mismatches[c];
+        stats[c].push_back(r.stats);
+        bar.advance();
+      }
+    }
+    bar.finish();
+    const auto& full = stats.back();
+    std::vector<double> occludedFaces, occludedBoxes, firstOcc;
+    size_t buildings = 0;
+    for (const Object& o : w.scene.objects) buildings += o.name.rfind("building", 0) == 0;
+    for (const auto& s : full) {
+      occludedFaces.push_back(double(s.facesOccluded));
+      occludedBoxes.push_back(double(s.objectBoxesOccluded));
+      firstOcc.push_back(double(s.objectBoxesOccludedByFirst));
+    }
+    json t1 = {{"scene", spec}, {"cell_size_m", cellSize}, {"cells", cells.size()},
+               {"total_polygons", w.scene.faceCount}, {"occluded_polygons", mean(occludedFaces)},
+               {"total_boxes", full.empty() ? 0 : full[0].objectBoxes}, {"buildings", buildings},
+               {"occluded_boxes", mean(occludedBoxes)}, {"first_occluders", mean(firstOcc)}};
+    json t2 = json::array();
+    for (size_t c = 0; c < configs.size(); ++c) {
+      auto pick = [&](auto f) {
+        std::vector<double> v;
+        for (const auto& s : stats[c]) v.push_back(double(f(s)));
+        return v;
+      };
+      t2.push_back({{"config", configs[c].name},
+                    {"total_ms", median(pick([](const PvsStats& s) { return s.timeMs; }))},
+                    {"box_stage_ms", median(pick([](const PvsStats& s) { return s.boxStageMs; }))},
+                    {"face_stage_ms", median(pick([](const PvsStats& s) { return s.faceStageMs; }))},
+                    {"line_box_tests", mean(pick([](const PvsStats& s) { return s.lineBoxTests; }))},
+                    {"line_polygon_tests", mean(pick([](const PvsStats& s) { return s.linePolygonTests; }))},
+                    {"lines_cast", mean(pick([](const PvsStats& s) { return s.linesCast; }))},
+                    {"pvs_differs_from_fully_optimized", mismatches[c]}});
+    }
+    out["table1"].push_back(t1);
+    out["table2"].push_back({{"scene", spec}, {"configs", t2}});
+    if (human) {
+      fmt::print("\nTable 1 ({}, {} street cells of {:.1f} m, paper: city1 21280/20062/2128/1954/1427, "
+                 "city2 21280/18713/2128/1755/1225)\n", spec, cells.size(), cellSize);
+      fmt::print("  {:<28} {:>10}\n", "total polygons", w.scene.faceCount);
+      fmt::print("  {:<28} {:>10.0f}\n", "occluded polygons", mean(occludedFaces));
+      fmt::print("  {:<28} {:>10}\n", "total bounding boxes", full.empty() ? 0 : full[0].objectBoxes);
+      fmt::print("  {:<28} {:>10.0f}\n", "occluded boxes", mean(occludedBoxes));
+      fmt::print("  {:<28} {:>10.0f}\n", "first occluders", mean(firstOcc));
+      fmt::print("\nTable 2 ({}, medians over {} cells; paper, R4400: 30170 / 8900 / 8850 / 7040 / 7030 ms)\n", spec,
+                 cells.size());
+      fmt::print("  {:<22}", "");
+      for (const auto& c : configs) fmt::print(" {:>14}", c.name);
+      fmt::print("\n");
+      const char* rows[] = {"total_ms", "box_stage_ms", "face_stage_ms", "line_box_tests", "line_polygon_tests",
+                            "lines_cast", "pvs_differs_from_fully_optimized"};
+      const char* labels[] = {"total time (ms)", "box stage (ms)", "polygon stage (ms)", "line/box tests",
+                              "line/polygon tests", "lines cast", "PVS differs (cells)"};
+      for (size_t r = 0; r < std::size(rows); ++r) {
+        fmt::print("  {:<22}", labels[r]);
+        for (const auto& c : t2) fmt::print(" {:>14.3f}", c[rows[r]].get<double>());
+        fmt::print("\n");
+      }
+      fmt::print("  speed-up fully optimized over no optimization: {:.1f}x (paper: 4.3x)\n",
+                 t2[0]["total_ms"].get<double>() / std::max(1e-9, t2.back()["total_ms"].get<double>()));
+    }
+  }
+
+  // ---- accuracy against time: PVS over ground truth by cell size ------------
+  std::vector<std::string> lines;
+  for (const std::string& spec : options.scenes) {
+    World w = makeWorld(spec);
+    const bool indoor = spec.rfind("interior", 0) == 0;
+    const std::vector<float> sizes = indoor ? std::vector<float>{0.5f, 1.0f, 2.0f, 4.0f}
+                                            : std::vector<float>{2.0f, 4.0f, 8.0f, 16.0f};
+    if (human)
+      fmt::print("\nAccuracy against time ({}, {} cells per size, ground truth {} points x {}^2 rays per cube face)\n"
+                 "  {:>8} {:>12} {:>12} {:>14} {:>10} {:>10}\n",
+                 spec, options.accuracyCells, options.groundTruthPoints, options.groundTruthRes, "cell (m)",
+                 "PVS faces", "seen faces", "overestimation", "ms/cell", "missing");
+    for (float size : sizes) {
+      const auto cells = streetCells(w, size, options.accuracyCells, options.seed + uint64_t(size * 10));
+      std::vector<double> pvsSize, seen, ms;
+      size_t missing = 0;
+      for (const Box3f& cell : cells) {
+        const PvsResult r = w.pvs->compute(cell);
+        SampledVisibilityOptions gt;
+        gt.points = options.groundTruthPoints;
+        gt.resolution = options.groundTruthRes;
+        const SampledVisibility truth = sampleVisibleFaces(*w.rays, w.triangles, cell, gt);
+        for (uint32_t f : truth.faces) missing += !std::binary_search(r.faces.begin(), r.faces.end(), f);
+        pvsSize.push_back(double(r.faces.size()));
+        seen.push_back(double(truth.faces.size()));
+        ms.push_back(r.stats.timeMs);
+      }
+      const json row = {{"scene", spec}, {"method", "paper"}, {"cell_size_m", size}, {"pvs_faces", mean(pvsSize)},
+                        {"seen_faces", mean(seen)}, {"overestimation", mean(pvsSize) / std::max(1.0, mean(seen))}, {"ms_per_cell", median(ms)},
+                        {"missing_faces", missing}};
+      out["accuracy"].push_back(row);
+      lines.push_back(fmt::format("{} paper {} {} {}", spec, size, mean(pvsSize) / std::max(1.0, mean(seen)), median(ms)));
+      if (human)
+        fmt::print("  {:>8.1f} {:>12.0f} {:>12.0f} {:>14.2f} {:>10.2f} {:>10}\n", size, mean(pvsSize), mean(seen),
+                   mean(pvsSize) / std::max(1.0, mean(seen)), median(ms), missing);
+    }
+  }
+  if (!options.plotDir.empty()) {
+    std::filesystem::create_directories(options.plotDir);
+    const auto dat = std::filesystem::path(options.plotDir) / "accuracy.dat";
+    std::ofstream f(dat);
+    f << "# scene method cell_size_m overestimation ms_per_cell\n";
+    for (const auto& l : lines) f << l << "\n";
+    f.close();
+    const auto gp = std::filesystem::path(options.plotDir) / "accuracy.gp";
+    std::ofstream g(gp);
+    g << "set terminal pngcairo size 900,420\nset output '" << (std::filesystem::path(options.plotDir) / "accuracy.png").string()
+      << "'\nset multiplot layout 1,2\nset logscale x 2\nset xlabel 'cell size (m)'\nset ylabel 'PVS / seen faces'\n"
+      << "set key top left\nplot ";
+    bool first = true;
+    for (const auto& s : options.scenes) {
+      g << (first ? "" : ", ") << "'" << dat.string() << "' using ($1 eq '" << s << "' ? $3 : 1/0):4 with linespoints title '" << s << "'";
+      first = false;
+    }
+    g << "\nset ylabel 'ms per cell'\nset logscale y\nplot ";
+    first = true;
+    for (const auto& s : options.scenes) {
+      g << (first ? "" : ", ") << "'" << dat.string() << "' using ($1 eq '" << s << "' ? $3 : 1/0):5 with linespoints title '" << s << "'";
+      first = false;
+    }
+    g << "\nunset multiplot\n";
+    g.close();
+    const std::string cmd = "gnuplot '" + gp.string() + "' 2>/dev/null";
+    if (std::system(cmd.c_str()) != 0) spdlog::warn("gnuplot not available: wrote {} only", dat.string());
+  }
+  if (!human) std::cout << out.dump(2) << "\n";
+  return 0;
+}
+
+}  // namespace vistream

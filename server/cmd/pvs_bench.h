@@ -1,0 +1,25 @@
+// `vistream-pvs bench`: the measurements of Cohen-Or and Zadicario 1998
+// (Tables 1 and 2) on the generated cities, and what accuracy costs in time
+// (PVS size over the sampled ground truth against cell size), each measured
+// side by side in one run. See README.md ("Benchmarks") for how to run it.
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace vistream {
+
+struct PvsBenchOptions {
+  std::vector<std::string> scenes{"city1", "city2", "interior", "bigcity"};
+  size_t cells = 24;             // street cells per scene for Tables 1 and 2
+  size_t accuracyCells = 6;      // cells per (scene, cell size) for the accuracy table
+  int groundTruthRes = 128;      // rays per cube face side for the ground truth
+  size_t groundTruthPoints = 24;
+  uint64_t seed = 1;
+  bool json = false;
+  std::string plotDir;           // if set, writes accuracy.dat and accuracy.png there
+};
+
+int runPvsBench(const PvsBenchOptions& options);
+
+}  // namespace vistream
