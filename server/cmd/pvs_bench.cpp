@@ -22,6 +22,7 @@
 #include "common/raycast/sampled_visibility.h"
 #include "common/spatial/free_space.h"
 #include "server/visibility/epsilon_pvs.h"
+#include "server/visibility/fused_pvs.h"
 
 namespace vistream {
 namespace {
@@ -200,33 +201,55 @@ int runPvsBench(const PvsBenchOptions& options) {
     const std::vector<float> sizes = indoor ? std::vector<float>{0.5f, 1.0f, 2.0f, 4.0f}
                                             : std::vector<float>{2.0f, 4.0f, 8.0f, 16.0f};
     if (human)
-      fmt::print("\nAccuracy against time ({}, {} cells per size, ground truth {} points x {}^2 rays per cube face)\n"
-                 "  {:>8} {:>12} {:>12} {:>14} {:>10} {:>10}\n",
-                 spec, options.accuracyCells, options.groundTruthPoints, options.groundTruthRes, "cell (m)",
-                 "PVS faces", "seen faces", "overestimation", "ms/cell", "missing");
+      fmt::print("\nAccuracy against time ({}, {} cells per size ({} for fused), ground truth {} points x {}^2 rays per cube face)\n"
+                 "  {:>8} {:<16} {:>10} {:>10} {:>14} {:>10} {:>8}\n",
+                 spec, options.accuracyCells, std::min(options.fusedCells, options.accuracyCells), options.groundTruthPoints,
+                 options.groundTruthRes, "cell (m)", "method", "PVS faces", "seen", "overestimation", "ms/cell", "missing");
     for (float size : sizes) {
       const auto cells = streetCells(w, size, options.accuracyCells, options.seed + uint64_t(size * 10));
-      std::vector<double> pvsSize, seen, ms;
-      size_t missing = 0;
-      for (const Box3f& cell : cells) {
-        const PvsResult r = w.pvs->compute(cell);
+      struct Method {
+        std::string name;
+        std::unique_ptr<FusedPvs> fused;  // null: the paper's method
+        std::vector<double> pvsSize, ms;
+        size_t missing = 0;
+      };
+      std::vector<Method> methods;
+      methods.push_back({"paper", nullptr, {}, {}, 0});
+      if (!indoor)
+        for (double eps : options.fusedEpsilons) {
+          FusedPvsOptions fo;
+          fo.epsilon = eps;
+          fo.resolution = options.fusedResolution;
+          methods.push_back({fmt::format("fused eps={}", eps), std::make_unique<FusedPvs>(*w.pvs, fo), {}, {}, 0});
+        }
+      std::vector<double> seen;
+      for (size_t ci = 0; ci < cells.size(); ++ci) {
+        const Box3f& cell = cells[ci];
         SampledVisibilityOptions gt;
         gt.points = options.groundTruthPoints;
         gt.resolution = options.groundTruthRes;
         const SampledVisibility truth = sampleVisibleFaces(*w.rays, w.triangles, cell, gt);
-        for (uint32_t f : truth.faces) missing += !std::binary_search(r.faces.begin(), r.faces.end(), f);
-        pvsSize.push_back(double(r.faces.size()));
         seen.push_back(double(truth.faces.size()));
-        ms.push_back(r.stats.timeMs);
+        for (Method& m : methods) {
+          if (m.fused && ci >= options.fusedCells) continue;
+          const PvsResult r = m.fused ? m.fused->compute(cell) : w.pvs->compute(cell);
+          for (uint32_t f : truth.faces) m.missing += !std::binary_search(r.faces.begin(), r.faces.end(), f);
+          m.pvsSize.push_back(double(r.faces.size()));
+          m.ms.push_back(r.stats.timeMs);
+        }
       }
-      const json row = {{"scene", spec}, {"method", "paper"}, {"cell_size_m", size}, {"pvs_faces", mean(pvsSize)},
-                        {"seen_faces", mean(seen)}, {"overestimation", mean(pvsSize) / std::max(1.0, mean(seen))}, {"ms_per_cell", median(ms)},
-                        {"missing_faces", missing}};
-      out["accuracy"].push_back(row);
-      lines.push_back(fmt::format("{} paper {} {} {}", spec, size, mean(pvsSize) / std::max(1.0, mean(seen)), median(ms)));
-      if (human)
-        fmt::print("  {:>8.1f} {:>12.0f} {:>12.0f} {:>14.2f} {:>10.2f} {:>10}\n", size, mean(pvsSize), mean(seen),
-                   mean(pvsSize) / std::max(1.0, mean(seen)), median(ms), missing);
+      for (const Method& m : methods) {
+        const double seenMean = mean(std::vector<double>(seen.begin(), seen.begin() + std::ptrdiff_t(m.pvsSize.size())));
+        const double over = mean(m.pvsSize) / std::max(1.0, seenMean);
+        const json row = {{"scene", spec}, {"method", m.name}, {"cell_size_m", size}, {"cells", m.pvsSize.size()},
+                          {"pvs_faces", mean(m.pvsSize)}, {"seen_faces", seenMean}, {"overestimation", over},
+                          {"ms_per_cell", median(m.ms)}, {"missing_faces", m.missing}};
+        out["accuracy"].push_back(row);
+        if (!m.fused) lines.push_back(fmt::format("{} paper {} {} {}", spec, size, over, median(m.ms)));
+        if (human)
+          fmt::print("  {:>8.1f} {:<16} {:>10.0f} {:>10.0f} {:>14.2f} {:>10.2f} {:>8}\n", size, m.name, mean(m.pvsSize),
+                     seenMean, over, median(m.ms), m.missing);
+      }
     }
   }
   if (!options.plotDir.empty()) {

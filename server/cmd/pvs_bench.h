@@ -17,6 +17,9 @@ struct PvsBenchOptions {
   size_t groundTruthPoints = 24;
   uint64_t seed = 1;
   bool json = false;
+  std::vector<double> fusedEpsilons{1.0, 0.5};  // fused method settings compared (cities, terrain)
+  int fusedResolution = 96;
+  size_t fusedCells = 2;         // the fused method is slow: this many cells per size
   std::string plotDir;           // if set, writes accuracy.dat and accuracy.png there
 };
 

@@ -20,6 +20,7 @@
 #include "common/spatial/free_space.h"
 #include "server/cmd/pvs_bench.h"
 #include "server/visibility/epsilon_pvs.h"
+#include "server/visibility/fused_pvs.h"
 #include "server/visibility/pvs_bake.h"
 #include "server/visibility/pvs_database.h"
 
@@ -53,18 +54,27 @@ json statsJson(const PvsStats& s) {
 }
 
 int cmdCell(const std::string& spec, const std::string& cellText, const std::string& method,
-            const PvsOptions& options, bool asJson) {
+            const PvsOptions& options, const FusedPvsOptions& fusedOptions, bool asJson) {
+  if (!(fusedOptions.epsilon > 0.0) || fusedOptions.resolution < 4 || fusedOptions.resolution > 2048)
+    throwInputError("--epsilon must be positive and --fused-res in 4..2048");
   if (method != "paper" && method != "fused")
     throwInputError("--method: expected 'paper' or 'fused', got '{}'", method);
-  if (method == "fused") throwInputError("--method fused is not available yet");
   const Scene scene = openScene(spec);
   const Box3f cell = parseCell(scene, cellText);
   const EpsilonPvs pvs(scene);
-  const PvsResult r = pvs.compute(cell, options);
+  FusedPvsStats fusedStats;
+  const PvsResult r = method == "fused" ? FusedPvs(pvs, fusedOptions).compute(cell, options, &fusedStats)
+                                        : pvs.compute(cell, options);
   if (asJson) {
     json objects = json::array();
     for (uint32_t o : r.objects) objects.push_back(scene.objects[o].name);
-    std::cout << json{{"faces", r.faces}, {"objects", objects}, {"stats", statsJson(r.stats)}}.dump() << "\n";
+    json stats = statsJson(r.stats);
+    stats["method"] = method;
+    if (method == "fused")
+      stats["fused"] = {{"epsilon", fusedOptions.epsilon}, {"resolution", fusedOptions.resolution},
+                        {"samples", fusedStats.samples}, {"eroded_occluders", fusedStats.erodedOccluders},
+                        {"candidate_faces", fusedStats.candidateFaces}, {"fused_culled", fusedStats.fusedCulled}};
+    std::cout << json{{"faces", r.faces}, {"objects", objects}, {"stats", stats}}.dump() << "\n";
     return 0;
   }
   const PvsStats& s = r.stats;
@@ -79,6 +89,9 @@ int cmdCell(const std::string& spec, const std::string& cellText, const std::str
   fmt::print("  {:<34} {:>12}\n", "line/polygon tests", s.linePolygonTests);
   fmt::print("  {:<34} {:>12}\n", "boxes (occluded / total)", fmt::format("{} / {}", s.boxesOccluded, s.boxes));
   fmt::print("  {:<34} {:>12}\n", "faces culled by box stage", s.facesCulledByBoxStage);
+  if (method == "fused")
+    fmt::print("  {:<34} {:>12}\n", "culled by fused occluders",
+               fmt::format("{} ({} samples, eps {} m)", fusedStats.fusedCulled, fusedStats.samples, fusedOptions.epsilon));
   return 0;
 }
 
@@ -212,6 +225,9 @@ int runPvsTool(int argc, char** argv) {
   cell->add_flag("--no-redundant-rays", noRedundantRays, "cast every corner-vertex line");
   cell->add_option("--large-occluders", largeOccluders, "use only the K largest occluders by solid angle (0: all)");
   cell->add_flag("--json", asJson, "one JSON object on stdout: faces, objects, stats");
+  FusedPvsOptions fusedOptions;
+  cell->add_option("--epsilon", fusedOptions.epsilon, "fused: occluder erosion and sample spacing bound (m)");
+  cell->add_option("--fused-res", fusedOptions.resolution, "fused: occlusion cube-map pixels per side");
 
   auto* bake = app.add_subcommand("bake", "bake the PVS of every cell over the free space into a database");
   std::string cellSize, region, shard, out;
@@ -251,6 +267,8 @@ int runPvsTool(int argc, char** argv) {
   bench->add_option("--gt-res", benchOptions.groundTruthRes, "ground-truth rays per cube face side");
   bench->add_option("--gt-points", benchOptions.groundTruthPoints, "ground-truth viewpoints per cell");
   bench->add_option("--seed", benchOptions.seed, "seed for cell placement");
+  bench->add_option("--fused-cells", benchOptions.fusedCells, "cells per size for the (slow) fused method");
+  bench->add_option("--fused-eps", benchOptions.fusedEpsilons, "fused epsilons to compare (metres)")->delimiter(',');
   bench->add_option("--plot", benchOptions.plotDir, "directory for accuracy.dat/.png (gnuplot)");
   bench->add_flag("--json", benchOptions.json, "one JSON object on stdout");
 
@@ -268,7 +286,7 @@ int runPvsTool(int argc, char** argv) {
       options.dropOccludedOccluders = !noRedundantOccluders;
       options.removeRedundantLines = !noRedundantRays;
       options.largeOccluders = largeOccluders;
-      return cmdCell(scene, cellText, method, options, asJson);
+      return cmdCell(scene, cellText, method, options, fusedOptions, asJson);
     }
     if (*bake) {
       PvsOptions options;

@@ -146,7 +146,16 @@ EpsilonPvs::EpsilonPvs(const Scene& scene, const OccluderOptions& occluderOption
     splitGroups(e.faces, 0, uint32_t(e.faces.size()), e.groups);
     objects_.push_back(std::move(e));
   }
+  faceIndex_.assign(scene.faceCount, {~0u, ~0u});
+  for (uint32_t e = 0; e < objects_.size(); ++e)
+    for (uint32_t f = 0; f < objects_[e].faces.size(); ++f)
+      if (objects_[e].faces[f].id < faceIndex_.size()) faceIndex_[objects_[e].faces[f].id] = {e, f};
   prepareMs_ = clock.ms();
+}
+
+const std::vector<glm::dvec3>* EpsilonPvs::faceVertices(uint32_t faceId) const {
+  if (faceId >= faceIndex_.size() || faceIndex_[faceId].first == ~0u) return nullptr;
+  return &objects_[faceIndex_[faceId].first].faces[faceIndex_[faceId].second].vertices;
 }
 
 EpsilonPvs::~EpsilonPvs() = default;
@@ -281,7 +290,7 @@ struct PvsQuery {
       // The first line collects candidates front to back through the
       // kD-tree; each is checked against the remaining lines at once, so
       // the traversal stops at the first occluder that blocks them all.
-      const auto [a0, b0] = lineEnds(lines[0]);
+      const glm::dvec3 a0 = lineEnds(lines[0]).first, b0 = lineEnds(lines[0]).second;
       ++stats.linesCast;
       stats.linesCast += lines.size() - 1;
       ++lineId;

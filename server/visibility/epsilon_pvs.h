@@ -98,6 +98,8 @@ class EpsilonPvs {
   PvsResult compute(const Box3f& cell, const PvsOptions& options = {}) const;
 
   const OccluderSet& occluders() const { return occluders_; }
+  // The distinct vertices of a face (local frame), or null for an unknown ID.
+  const std::vector<glm::dvec3>* faceVertices(uint32_t faceId) const;
   const Scene& scene() const { return scene_; }
   double prepareMs() const { return prepareMs_; }
 
@@ -110,6 +112,7 @@ class EpsilonPvs {
   OccluderSet occluders_;
   KdTree occluderTree_;
   std::vector<ObjectEntry> objects_;
+  std::vector<std::pair<uint32_t, uint32_t>> faceIndex_;  // face ID -> (object entry, face), or ~0u
   double prepareMs_ = 0.0;
 
   friend struct PvsQuery;
