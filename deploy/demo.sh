@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The main job on the built-in default scene: installs what is missing,
 # builds Release, generates the default city (city1), prints its statistics
-# and the effects it calls for, then the sampled visible set of one street
-# view cell, with timings.
+# and the effects it calls for, the sampled visible set of one street view
+# cell and its conservative PVS (checked against each other), then bakes the
+# PVS database of a district and answers a query from it, with timings.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -32,5 +33,25 @@ echo "cell: $cell"
 
 echo
 echo "== 4. sampled visible set from that cell (ground truth) =="
+"$bin/vistream-scene" visible --scene "$work/city1.obj" --cell "$cell" --points 32 --res 128 --json > "$work/seen.json"
 "$bin/vistream-scene" visible --scene "$work/city1.obj" --cell "$cell" --points 32 --res 128 \
   | awk 'NR == 1 { print; next } { n = split($0, ids, " "); printf "face IDs (first 40 of %d): ", n; for (i = 1; i <= n && i <= 40; ++i) printf "%s ", ids[i]; print "" }'
+
+echo
+echo "== 5. conservative PVS of the cell (Cohen-Or and Zadicario 1998) =="
+"$bin/vistream-pvs" cell --scene "$work/city1.obj" --cell "$cell"
+"$bin/vistream-pvs" cell --scene "$work/city1.obj" --cell "$cell" --json > "$work/pvs.json"
+python3 - "$work/seen.json" "$work/pvs.json" <<'PY'
+import json, sys
+seen = set(json.load(open(sys.argv[1]))["faces"])
+pvs = set(json.load(open(sys.argv[2]))["faces"])
+print(f"  seen faces {len(seen)}, PVS faces {len(pvs)}, seen but not in PVS: {len(seen - pvs)} (must be 0)")
+PY
+
+echo
+echo "== 6. bake the PVS database of the district around the cell, then query it =="
+region=$(awk -v x="$x" -v y="$y" -v z="$z" 'BEGIN { printf "%.3f,%.3f,%.3f,%.3f,%.3f,%.3f", x-60, y-1.5, z-60, x+60, y+0.5, z+60 }')
+rm -f "$work/district.db"
+"$bin/vistream-pvs" bake --scene "$work/city1.obj" --cell-size 4,2,4 --region "$region" --out "$work/district.db"
+"$bin/vistream-pvs" query --db "$work/district.db" --point "$x,$y,$z" | head -c 400
+echo

@@ -19,7 +19,6 @@ struct PvsBenchOptions {
   bool json = false;
   std::vector<double> fusedEpsilons{1.0, 0.5};  // fused method settings compared (cities, terrain)
   int fusedResolution = 96;
-  size_t fusedCells = 2;         // the fused method is slow: this many cells per size
   std::string plotDir;           // if set, writes accuracy.dat and accuracy.png there
 };
 

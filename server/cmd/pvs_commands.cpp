@@ -267,8 +267,9 @@ int runPvsTool(int argc, char** argv) {
   bench->add_option("--gt-res", benchOptions.groundTruthRes, "ground-truth rays per cube face side");
   bench->add_option("--gt-points", benchOptions.groundTruthPoints, "ground-truth viewpoints per cell");
   bench->add_option("--seed", benchOptions.seed, "seed for cell placement");
-  bench->add_option("--fused-cells", benchOptions.fusedCells, "cells per size for the (slow) fused method");
   bench->add_option("--fused-eps", benchOptions.fusedEpsilons, "fused epsilons to compare (metres)")->delimiter(',');
+  bool noFused = false;
+  bench->add_flag("--no-fused", noFused, "measure the paper's method only");
   bench->add_option("--plot", benchOptions.plotDir, "directory for accuracy.dat/.png (gnuplot)");
   bench->add_flag("--json", benchOptions.json, "one JSON object on stdout");
 
@@ -307,6 +308,7 @@ int runPvsTool(int argc, char** argv) {
           pos = comma + 1;
         }
       }
+      if (noFused) benchOptions.fusedEpsilons.clear();
       return runPvsBench(benchOptions);
     }
     if (*merge) {

@@ -307,6 +307,8 @@ OccluderSet extractOccluders(const Scene& scene, const OccluderOptions& options)
     for (const auto& comp : components(m, all)) {
       ConvexOccluder solid;
       if (options.solids && makeSolid(m, comp, oi, options.coplanarTolerance, solid)) {
+        const glm::vec3 e = solid.bounds.extent();
+        if (std::max({e.x, e.y, e.z}) < options.minOccluderSize) continue;  // a solid part: never an occludee-only polygon either
         set.occluders.push_back(std::move(solid));
         ++set.stats.solids;
       } else {
@@ -335,7 +337,7 @@ OccluderSet extractOccluders(const Scene& scene, const OccluderOptions& options)
       for (const auto& group : components(m, members)) {
         ConvexOccluder poly;
         if (makePolygon(m, group, oi, glm::dvec3(p), poly)) {
-          if (poly.area >= options.minPolygonArea) {
+          if (poly.area >= options.minPolygonArea && std::sqrt(poly.area) >= options.minOccluderSize) {
             set.stats.mergedPolygons += group.size() > 1;
             ++set.stats.polygons;
             set.occluders.push_back(std::move(poly));
@@ -349,7 +351,7 @@ OccluderSet extractOccluders(const Scene& scene, const OccluderOptions& options)
         for (const auto& [face, faceTris] : byFace) {
           for (const auto& piece : components(m, faceTris)) {
             if (makePolygon(m, piece, oi, glm::dvec3(p), poly)) {
-              if (poly.area >= options.minPolygonArea) {
+              if (poly.area >= options.minPolygonArea && std::sqrt(poly.area) >= options.minOccluderSize) {
                 ++set.stats.polygons;
                 set.occluders.push_back(std::move(poly));
               }
@@ -357,7 +359,7 @@ OccluderSet extractOccluders(const Scene& scene, const OccluderOptions& options)
             }
             for (uint32_t ti : piece)
               if (makePolygon(m, {ti}, oi, unitNormal(m, m.triangles[ti]), poly) &&
-                  poly.area >= options.minPolygonArea) {
+                  poly.area >= options.minPolygonArea && std::sqrt(poly.area) >= options.minOccluderSize) {
                 ++set.stats.polygons;
                 set.occluders.push_back(std::move(poly));
               }

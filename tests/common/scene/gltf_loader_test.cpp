@@ -647,7 +647,7 @@ TEST(GltfLoader, RejectsFilesThatAreNotGltf) {
   for (const auto& [name, bytes] : std::vector<std::pair<std::string, std::string>>{
            {"text.gltf", "this is not json"},
            {"object.gltf", "{\"hello\": 1}"},
-           {"random.glb", std::string("glTF\x02\0\0\0\xff\xff\xff\x7f garbage", 24)},
+           {"random.glb", std::string("glTF\x02\0\0\0\xff\xff\xff\x7f garbage", 20)},
            {"obj.glb", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"},
            {"empty.gltf", ""}}) {
     SCOPED_TRACE(name);
