@@ -14,8 +14,8 @@ packages=(
   libtinyobjloader-dev libtinygltf-dev libstb-dev
   # headless OpenGL for tests (Mesa llvmpipe under Xvfb)
   xvfb xauth libgl1-mesa-dri libgl1-mesa-dev
-  # plots in benchmarks
-  gnuplot-nox
+  # plots in benchmarks; the demo's result check
+  gnuplot-nox python3
 )
 
 missing=()
