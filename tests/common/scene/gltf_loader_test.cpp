@@ -19,6 +19,8 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+
+#include "tests/common/support/temp_dir.h"
 #include <nlohmann/json.hpp>
 
 #include "common/core/error.h"
@@ -28,48 +30,15 @@ namespace vistream {
 namespace {
 
 using ::testing::HasSubstr;
+using testing::inputErrorOf;
 using nlohmann::json;
 namespace fs = std::filesystem;
 
 const fs::path kFox = fs::path(VISTREAM_SHARED_DIR) / "data" / "Fox.glb";
 
-template <typename F>
-std::string inputErrorOf(F&& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "<no InputError thrown>";
-}
-
-class TempDir {
+class TempDir : public testing::TempDir {
  public:
-  TempDir() {
-    static std::atomic<int> counter{0};
-    const auto* info = testing::UnitTest::GetInstance()->current_test_info();
-    path_ = fs::temp_directory_path() /
-            ("vistream_gltf_" + std::string(info ? info->name() : "x") + "_" +
-             std::to_string(::getpid()) + "_" + std::to_string(counter++));
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-
-  fs::path write(const std::string& name, const std::string& bytes) const {
-    const fs::path p = path_ / name;
-    std::ofstream(p, std::ios::binary) << bytes;
-    return p;
-  }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
+  TempDir() : testing::TempDir("vistream_gltf") {}
 };
 
 void expectNear(const glm::dvec3& actual, const glm::dvec3& expected, double tolerance) {
@@ -567,7 +536,7 @@ TEST(GltfLoaderDeathTest, SurvivesAnAccessorCountWhoseByteSizeOverflows) {
         }
         std::_Exit(1);
       },
-      testing::ExitedWithCode(0), "");
+      ::testing::ExitedWithCode(0), "");
 }
 
 TEST(GltfLoader, RejectsAnIndexOutOfRangeNamingTheMeshAndPrimitive) {
@@ -700,7 +669,7 @@ json readGlbJson(const fs::path& path) {
   return json::parse(bytes.substr(20, chunkLength));
 }
 
-class Fox : public testing::Test {
+class Fox : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     scene_ = new Scene(loadGltf(kFox));

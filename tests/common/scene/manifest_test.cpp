@@ -16,6 +16,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "tests/common/support/temp_dir.h"
+
 #include "common/core/error.h"
 #include "common/scene/manifest.h"
 #include "common/scene/scene_loader.h"
@@ -24,49 +26,15 @@ namespace vistream {
 namespace {
 
 using ::testing::HasSubstr;
+using testing::inputErrorOf;
 using ::testing::StartsWith;
 namespace fs = std::filesystem;
 
 const fs::path kSharedData = fs::path(VISTREAM_SHARED_DIR) / "data";
 
-template <typename F>
-std::string inputErrorOf(F&& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "<no InputError thrown>";
-}
-
-class TempDir {
+class TempDir : public testing::TempDir {
  public:
-  TempDir() {
-    static std::atomic<int> counter{0};
-    const auto* info = testing::UnitTest::GetInstance()->current_test_info();
-    path_ = fs::temp_directory_path() /
-            ("vistream_manifest_" + std::string(info ? info->name() : "x") + "_" +
-             std::to_string(::getpid()) + "_" + std::to_string(counter++));
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-
-  fs::path write(const std::string& name, const std::string& text) const {
-    const fs::path p = path_ / name;
-    fs::create_directories(p.parent_path());
-    std::ofstream(p, std::ios::binary) << text;
-    return p;
-  }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
+  TempDir() : testing::TempDir("vistream_manifest") {}
 };
 
 // Two faces (a quad and a triangle, three triangles) in object "A" near the origin.

@@ -14,6 +14,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "tests/common/support/temp_dir.h"
+
 #include "common/core/error.h"
 #include "common/scene/scene_loader.h"
 
@@ -21,50 +23,15 @@ namespace vistream {
 namespace {
 
 using ::testing::HasSubstr;
+using testing::inputErrorOf;
+
+class TempDir : public testing::TempDir {
+ public:
+  TempDir() : testing::TempDir("vistream_obj") {}
+};
 namespace fs = std::filesystem;
 
 const fs::path kSharedData = fs::path(VISTREAM_SHARED_DIR) / "data";
-
-// The message of the InputError `f` throws, or a marker no assertion expects.
-template <typename F>
-std::string inputErrorOf(F&& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "<no InputError thrown>";
-}
-
-// A fresh directory under the system temp dir, removed with its contents.
-class TempDir {
- public:
-  TempDir() {
-    static std::atomic<int> counter{0};
-    const auto* info = testing::UnitTest::GetInstance()->current_test_info();
-    path_ = fs::temp_directory_path() /
-            ("vistream_obj_" + std::string(info ? info->name() : "x") + "_" +
-             std::to_string(::getpid()) + "_" + std::to_string(counter++));
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-
-  fs::path write(const std::string& name, const std::string& text) const {
-    const fs::path p = path_ / name;
-    std::ofstream(p, std::ios::binary) << text;
-    return p;
-  }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
-};
 
 // One triangle of a loaded scene, in file coordinates.
 struct FileTriangle {
@@ -530,7 +497,7 @@ TEST(ObjLoader, LoadsWithDefaultMaterialsWhenTheMtllibIsMissing) {
 
 // ---- real data: delfshaven.obj ---------------------------------------------------
 
-class Delfshaven : public testing::Test {
+class Delfshaven : public ::testing::Test {
  protected:
   static void SetUpTestSuite() { scene_ = new Scene(loadObj(kSharedData / "delfshaven.obj")); }
   static void TearDownTestSuite() {

@@ -17,6 +17,8 @@
 // Every cell corner lies strictly inside the wall's x-y extent, so the
 // segment from a corner to any point behind the wall whose x-y is also inside
 // that extent crosses the wall's interior for its whole thickness.
+// The PVS runs with the default occluder options; every occluder these
+// answers rely on is far larger than OccluderOptions::minOccluderSize.
 #include "server/visibility/epsilon_pvs.h"
 
 #include <algorithm>

@@ -63,7 +63,15 @@ Loop floorQuad(float x0, float z0, float x1, float z1, float y = 0.0f) {
   return {{x0, y, z0}, {x0, y, z1}, {x1, y, z1}, {x1, y, z0}};
 }
 
-OccluderSet extract(Scene& scene, const OccluderOptions& options = {}) {
+// The extraction rules without the size cut (OccluderOptions::minOccluderSize),
+// so that a unit quad or a degenerate triangle is judged by shape alone.
+OccluderOptions everySize() {
+  OccluderOptions o;
+  o.minOccluderSize = 0.0;
+  return o;
+}
+
+OccluderSet extract(Scene& scene, const OccluderOptions& options = everySize()) {
   finalizeScene(scene);
   return extractOccluders(scene, options);
 }
@@ -232,15 +240,32 @@ TEST(Occluders, DynamicObjectsNeverOcclude) {
 TEST(Occluders, OptionsSwitchOffSolidsAndPolygons) {
   Scene scene;
   addBox(scene, "box", {-1, -1, -1}, {1, 1, 1});
-  OccluderOptions noSolids;
+  OccluderOptions noSolids = everySize();
   noSolids.solids = false;
   const OccluderSet asPolygons = extract(scene, noSolids);
   EXPECT_EQ(countKind(asPolygons, kSolid), 0u);
   EXPECT_EQ(countKind(asPolygons, kPolygon), 6u);  // one per side
-  OccluderOptions nothing;
+  OccluderOptions nothing = everySize();
   nothing.solids = false;
   nothing.polygons = false;
   EXPECT_TRUE(extract(scene, nothing).occluders.empty());
+}
+
+TEST(Occluders, OccludersSmallerThanTheMinimumSizeAreLeftOut) {
+  // Solids by their longest side, polygons by the square root of their area.
+  Scene scene;
+  addBox(scene, "small box", {0, 0, 0}, {0.5f, 0.5f, 0.5f});
+  addBox(scene, "thin slab", {2, 0, 0}, {3.5f, 0.1f, 0.1f});   // longest side 1.5 m
+  addFaces(scene, "small quad", {{{0, 0, 5}, {0.5f, 0, 5}, {0.5f, 0.5f, 5}, {0, 0.5f, 5}}});
+  addFaces(scene, "large quad", {{{0, 0, 8}, {2, 0, 8}, {2, 2, 8}, {0, 2, 8}}});
+  OccluderOptions oneMetre = everySize();
+  oneMetre.minOccluderSize = 1.0;
+  const OccluderSet set = extract(scene, oneMetre);
+  std::vector<uint32_t> objects;
+  for (const ConvexOccluder& o : set.occluders) objects.push_back(o.object);
+  EXPECT_EQ(objects, (std::vector<uint32_t>{1, 3}));
+  // Without the cut all four are occluders.
+  EXPECT_EQ(extract(scene).occluders.size(), 4u);
 }
 
 // --- The strict segment test --------------------------------------------------

@@ -14,6 +14,7 @@
 #include "common/raycast/sampled_visibility.h"
 #include "server/visibility/pvs_bake.h"
 #include "tests/common/support/box_scenes.h"
+#include "tests/common/support/temp_dir.h"
 
 namespace vistream {
 namespace {
@@ -21,28 +22,9 @@ namespace {
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 
-class TempDir {
- public:
-  TempDir() : path_(fs::temp_directory_path() / ("vistream_pvsdb_" + std::to_string(::getpid()) + "_" +
-                                                 std::to_string(counter_++))) {
-    fs::create_directories(path_);
-  }
-  ~TempDir() { fs::remove_all(path_); }
-  fs::path operator/(const std::string& name) const { return path_ / name; }
+using testing::TempDir;
 
- private:
-  static inline int counter_ = 0;
-  fs::path path_;
-};
-
-std::string errorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "";
-}
+std::string errorOf(const std::function<void()>& f) { return testing::inputErrorOf(f); }
 
 TEST(FaceList, RoundTripsSortedIdsOfEveryMagnitude) {
   std::mt19937 rng(3);
