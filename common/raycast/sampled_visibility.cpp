@@ -30,17 +30,24 @@ std::vector<glm::vec3> cellViewpoints(const Box3f& cell, size_t points, uint64_t
 }
 
 bool insideSolid(const RayQuery& rays, const glm::vec3& p) {
-  // Majority vote over the six axis rays: a box resting on the ground has its
-  // bottom face coincide with the ground, so one ray may see a front face at
-  // a tie even from inside.
+  // Two votes over the six axis rays. A point is inside when both rays of one
+  // axis leave through back faces (a thin wall: its floor and ceiling ties
+  // and crossing walls can outvote the two side rays), or when back faces win
+  // the majority (a box resting on the ground, whose bottom face ties with
+  // the ground under the downward ray).
   static const glm::vec3 dirs[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
   int back = 0, front = 0;
-  for (const glm::vec3& d : dirs) {
+  bool backFace[6] = {};
+  for (int i = 0; i < 6; ++i) {
+    const glm::vec3& d = dirs[i];
     const Hit h = rays.firstHit(Ray{p, d, 0.0f, std::numeric_limits<float>::infinity()});
     if (!h.valid()) continue;
     if (h.t == 0.0f) return false;  // on a surface: outside by convention
-    (glm::dot(h.normal, d) > 0.0f ? back : front) += 1;
+    backFace[i] = glm::dot(h.normal, d) > 0.0f;
+    (backFace[i] ? back : front) += 1;
   }
+  for (int axis = 0; axis < 3; ++axis)
+    if (backFace[2 * axis] && backFace[2 * axis + 1]) return true;
   return back > front;
 }
 

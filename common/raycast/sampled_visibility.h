@@ -6,8 +6,8 @@
 // the first face hit. The union of those face IDs is a lower bound of the
 // exact visible set: every conservative PVS must contain it.
 //
-// Viewpoints inside solid geometry (most axis rays hit back faces) are
-// skipped and counted: no one stands there.
+// Viewpoints inside solid geometry (see insideSolid) are skipped and
+// counted: no one stands there.
 //
 // Thread safety: sampleVisibleFaces may run concurrently; it uses TBB internally.
 #pragma once
@@ -38,8 +38,9 @@ struct SampledVisibility {
 // The viewpoints sampleVisibleFaces uses for a cell (before the inside-solid test).
 std::vector<glm::vec3> cellViewpoints(const Box3f& cell, size_t points, uint64_t seed);
 
-// True if the point lies inside solid geometry: more of the six axis rays
-// hit back faces than front faces. A point on a surface counts as outside.
+// True if the point lies inside solid geometry: both rays of one axis, or
+// most of the six axis rays, hit back faces. A point on a surface counts as
+// outside.
 bool insideSolid(const RayQuery& rays, const glm::vec3& point);
 
 SampledVisibility sampleVisibleFaces(const RayQuery& rays, const FlatTriangles& triangles,

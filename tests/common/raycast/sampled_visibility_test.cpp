@@ -92,3 +92,27 @@ TEST(SampledVisibility, EmbreeAndBruteForceSeeTheSameFaces) {
 
 }  // namespace
 }  // namespace vistream
+
+namespace vistream {
+namespace {
+
+TEST(InsideSolid, APointInsideAThinWallBetweenFloorAndCeilingIsInside) {
+  // A 0.2 m wall standing on a floor and touching a ceiling, crossed by a
+  // second wall: the floor, ceiling and crossing wall give four front-face
+  // hits against two back-face hits, but both rays across the wall's
+  // thickness leave through its own faces.
+  Scene s;
+  testing::addGround(s, -10, -10, 10, 10);
+  testing::addBox(s, "ceiling", {-10, 3, -10}, {10, 3.2f, 10});
+  testing::addBox(s, "wall", {-5, 0, -0.1f}, {5, 3, 0.1f});
+  testing::addBox(s, "cross", {2, 0, -5}, {2.2f, 3, 5});
+  finalizeScene(s);
+  const FlatTriangles tris = flattenScene(s);
+  const auto rays = makeEmbreeRayQuery(tris);
+  EXPECT_TRUE(insideSolid(*rays, {0.5f, 1.5f, 0.05f}));
+  EXPECT_FALSE(insideSolid(*rays, {0.5f, 1.5f, 0.5f}));   // in the room beside it
+  EXPECT_FALSE(insideSolid(*rays, {0.5f, 1.5f, -0.5f}));  // in the room behind it
+}
+
+}  // namespace
+}  // namespace vistream
