@@ -116,7 +116,7 @@ int runPvsBench(const PvsBenchOptions& options) {
     if (s.rfind("city1", 0) == 0 || s.rfind("city2", 0) == 0) cities.push_back(s);
 
   // ---- Tables 1 and 2 ---------------------------------------------------------
-  for (const std::string& spec : cities) {
+  for (const std::string& spec : options.cells > 0 ? cities : std::vector<std::string>{}) {
     World w = makeWorld(spec);
     const float cellSize = float(w.typicalBuilding / 4.0);
     const auto cells = streetCells(w, cellSize, options.cells, options.seed);
@@ -216,9 +216,10 @@ int runPvsBench(const PvsBenchOptions& options) {
       std::vector<Method> methods;
       methods.push_back({"paper", nullptr, {}, {}, 0});
       // Interior walls are 0.2 m thick: an erosion of half that removes them,
-      // so indoors the fused method runs with a fifth of the smallest epsilon.
+      // so indoors the fused method runs with 0.04 m, and (its sample count
+      // growing with the cell's area over epsilon squared) on cells up to 1 m.
       std::vector<double> epsilons = options.fusedEpsilons;
-      if (indoor && !epsilons.empty()) epsilons = {0.2 * *std::min_element(epsilons.begin(), epsilons.end())};
+      if (indoor && !epsilons.empty()) epsilons = size <= 1.0f ? std::vector<double>{0.04} : std::vector<double>{};
       for (double eps : epsilons) {
         FusedPvsOptions fo;
         fo.epsilon = eps;
