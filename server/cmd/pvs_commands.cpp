@@ -21,6 +21,8 @@
 #include "server/cmd/pvs_bench.h"
 #include "server/visibility/epsilon_pvs.h"
 #include "server/visibility/fused_pvs.h"
+#include "server/visibility/hierarchical_culling.h"
+#include "common/generate/path.h"
 #include "server/visibility/pvs_bake.h"
 #include "server/visibility/pvs_database.h"
 
@@ -200,6 +202,57 @@ int cmdQuery(const std::string& dbPath, const std::string& pointText, const std:
   return 0;
 }
 
+int cmdWalk(const std::string& spec, const std::string& pathFile, const std::string& method, const CullingOptions& base,
+            double pVp, bool asJson, bool withFaces) {
+  CullingOptions options = base;
+  options.method = parseCullingMethod(method);
+  options.collectFaces = withFaces;
+  if (!(options.pSkip >= 0.0 && options.pSkip <= 1.0)) throwInputError("--p-skip must be in [0, 1]");
+  if (!(pVp >= 0.0 && pVp <= 1.0)) throwInputError("--p-vp must be in [0, 1]");
+  if (!(options.fovDeg > 0.0 && options.fovDeg < 180.0)) throwInputError("--fov must be in (0, 180) degrees");
+  if (options.occluders == 0) throwInputError("--occluders must be at least 1");
+  const auto path = readPath(pathFile);
+  const Scene scene = openScene(spec);
+  const CullingScene culling(scene);
+  CullingViewer viewer(culling, options);
+  json frames = json::array();
+  double tests = 0, cullMs = 0, frameMs = 0, faces = 0;
+  for (size_t i = 0; i < path.size(); ++i) {
+    const PathSample& s = path[i];
+    const FrameResult r = viewer.frame(glm::dvec3(scene.toLocal(s.position)), s.yawDeg, s.pitchDeg);
+    const double fms = r.cullingMs + double(r.visibleFaces) * culling.drawMsPerFace();
+    tests += double(r.nodeTests);
+    cullMs += r.cullingMs;
+    frameMs += fms;
+    faces += double(r.visibleFaces);
+    json f = {{"frame", i}, {"node_tests", r.nodeTests}, {"propagated", r.propagated}, {"skipped", r.skipped},
+              {"culling_ms", r.cullingMs}, {"frame_ms", fms}, {"visible_leaves", r.visibleLeaves},
+              {"visible_faces", r.visibleFaces}};
+    if (withFaces) f["faces"] = r.faces;
+    frames.push_back(std::move(f));
+    if (!asJson)
+      fmt::print("frame {:>5}  node tests {:>6}  culling {:>8.3f} ms  frame {:>8.3f} ms  leaves {:>5}  faces {:>7}\n", i,
+                 r.nodeTests, r.cullingMs, fms, r.visibleLeaves, r.visibleFaces);
+  }
+  const double n = double(std::max<size_t>(1, path.size()));
+  const json summary = {{"method", method}, {"frames", path.size()}, {"kd_nodes", culling.tree().nodes().size()},
+                        {"occluders", options.occluders}, {"node_tests_mean", tests / n},
+                        {"culling_ms_mean", cullMs / n}, {"frame_ms_mean", frameMs / n},
+                        {"visible_faces_mean", faces / n}, {"draw_ms_per_face", culling.drawMsPerFace()},
+                        {"cost_model", "frame_ms = culling_ms + visible_faces * draw_ms_per_face"}};
+  if (asJson) {
+    std::cout << json{{"summary", summary}, {"frames", frames}}.dump() << "\n";
+  } else {
+    fmt::print("method {}: {} frames, {} kD-tree nodes, {} occluders per view\n", method, path.size(),
+               culling.tree().nodes().size(), options.occluders);
+    fmt::print("  mean node tests {:.1f}, culling {:.3f} ms, frame {:.3f} ms, visible faces {:.0f}\n", tests / n,
+               cullMs / n, frameMs / n, faces / n);
+    fmt::print("  cost model: frame = culling + visible faces x {:.2e} ms (software transform and bound per face)\n",
+               culling.drawMsPerFace());
+  }
+  return 0;
+}
+
 }  // namespace
 
 int runPvsTool(int argc, char** argv) {
@@ -273,6 +326,22 @@ int runPvsTool(int argc, char** argv) {
   bench->add_option("--plot", benchOptions.plotDir, "directory for accuracy.dat/.png (gnuplot)");
   bench->add_flag("--json", benchOptions.json, "one JSON object on stdout");
 
+  auto* walk = app.add_subcommand("walk", "replay a path with hierarchical visibility culling (Bittner and Havran 2001)");
+  std::string pathFile, walkMethod = "A";
+  CullingOptions cullOptions;
+  double pVp = 0.5;
+  bool withFaces = false;
+  walk->add_option("--scene", scene, "SCENE")->required();
+  walk->add_option("--path", pathFile, "path CSV (t,x,y,z,yaw_deg,pitch_deg)")->required();
+  walk->add_option("--method", walkMethod, "A (classical), B (hierarchy updating), D (B + conservative updating)");
+  walk->add_option("--occluders", cullOptions.occluders, "occluders per viewpoint (default 16)");
+  walk->add_option("--p-skip", cullOptions.pSkip, "method D: probability of skipping a visible node's test");
+  walk->add_option("--p-vp", pVp, "method C: probability of visibility propagation (not implemented yet)");
+  walk->add_option("--seed", cullOptions.seed, "random seed for D");
+  walk->add_option("--fov", cullOptions.fovDeg, "horizontal field of view in degrees (4:3 frustum)");
+  walk->add_flag("--json", asJson, "one JSON object: summary and frames");
+  walk->add_flag("--with-faces", withFaces, "list the faces of visible leaves per frame");
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -298,6 +367,7 @@ int runPvsTool(int argc, char** argv) {
       return cmdBake(scene, cellSize, region, threads, shard, !noCoarse, options, out, asJson);
     }
     if (*query) return cmdQuery(db, point, cellIndex, asJson);
+    if (*walk) return cmdWalk(scene, pathFile, walkMethod, cullOptions, pVp, asJson, withFaces);
     if (*bench) {
       if (!benchScenes.empty()) {
         benchOptions.scenes.clear();
