@@ -253,6 +253,85 @@ int cmdWalk(const std::string& spec, const std::string& pathFile, const std::str
   return 0;
 }
 
+// Figures 8-10 of Bittner and Havran 2001 (node tests, culling time and
+// frame time against walking speed for each method) and Figure 11 (frame time
+// against p_skip), measured side by side on the same paths.
+int cmdWalkBench(const std::vector<std::string>& specs, size_t frames, size_t occluders, bool asJson) {
+  json out = json::array();
+  const std::vector<double> speeds = {0.25, 0.5, 1.0, 2.0, 4.0};
+  const std::vector<CullingMethod> methods = {CullingMethod::Classical, CullingMethod::HierarchyUpdating,
+                                              CullingMethod::Conservative};
+  for (const std::string& spec : specs) {
+    const Scene scene = openScene(spec);
+    const CullingScene culling(scene);
+    const FlatTriangles tris = flattenScene(scene, true);
+    const auto rays = makeEmbreeRayQuery(tris);
+    const FreeSpace fs = FreeSpace::build(*rays, scene.bounds());
+    auto walkPath = [&](double speed) {
+      PathOptions po;
+      po.speed = speed;
+      po.frames = frames;
+      po.seed = 7;
+      auto path = generatePath(scene, fs, po);
+      for (auto& p : path) p.position = glm::dvec3(scene.toLocal(p.position));
+      return path;
+    };
+    struct Mean {
+      double tests = 0, cullMs = 0, frameMs = 0, faces = 0;
+    };
+    auto run = [&](const std::vector<PathSample>& path, CullingMethod m, double pSkip) {
+      CullingOptions o;
+      o.method = m;
+      o.occluders = occluders;
+      o.pSkip = pSkip;
+      CullingViewer viewer(culling, o);
+      Mean mean;
+      for (const auto& s : path) {
+        const FrameResult r = viewer.frame(s.position, s.yawDeg, s.pitchDeg);
+        mean.tests += double(r.nodeTests);
+        mean.cullMs += r.cullingMs;
+        mean.frameMs += r.cullingMs + double(r.visibleFaces) * culling.drawMsPerFace();
+        mean.faces += double(r.visibleFaces);
+      }
+      const double n = double(std::max<size_t>(1, path.size()));
+      return Mean{mean.tests / n, mean.cullMs / n, mean.frameMs / n, mean.faces / n};
+    };
+    json sceneOut = {{"scene", spec}, {"kd_nodes", culling.tree().nodes().size()}, {"occluders", occluders}};
+    if (!asJson)
+      fmt::print("\n{}: {} kD-tree nodes, {} occluders, {} frames per path, draw cost {:.2e} ms/face\n"
+                 "  {:>6} {:>7} {:>12} {:>12} {:>12} {:>12}\n",
+                 spec, culling.tree().nodes().size(), occluders, frames, culling.drawMsPerFace(), "speed", "method",
+                 "node tests", "culling ms", "frame ms", "faces");
+    for (double speed : speeds) {
+      const auto path = walkPath(speed);
+      Mean a{};
+      for (CullingMethod m : methods) {
+        const Mean r = run(path, m, 0.5);
+        if (m == CullingMethod::Classical) a = r;
+        sceneOut["speeds"].push_back({{"speed", speed}, {"method", cullingMethodName(m)}, {"node_tests", r.tests},
+                                      {"culling_ms", r.cullMs}, {"frame_ms", r.frameMs}, {"visible_faces", r.faces},
+                                      {"node_tests_saved_vs_A", 1.0 - r.tests / std::max(1e-9, a.tests)},
+                                      {"faces_over_A", r.faces / std::max(1e-9, a.faces)}});
+        if (!asJson)
+          fmt::print("  {:>6.2f} {:>7} {:>12.1f} {:>12.3f} {:>12.3f} {:>12.0f}   tests saved {:>5.1f}%  faces x{:.3f}\n",
+                     speed, cullingMethodName(m), r.tests, r.cullMs, r.frameMs, r.faces,
+                     100.0 * (1.0 - r.tests / std::max(1e-9, a.tests)), r.faces / std::max(1e-9, a.faces));
+      }
+    }
+    const auto path = walkPath(1.0);
+    if (!asJson) fmt::print("  method D at speed 1.0 against p_skip:\n  {:>6} {:>12} {:>12} {:>12}\n", "p_skip", "node tests", "frame ms", "faces");
+    for (int i = 0; i <= 9; ++i) {
+      const double p = 0.1 * i;
+      const Mean r = run(path, CullingMethod::Conservative, p);
+      sceneOut["p_skip"].push_back({{"p_skip", p}, {"node_tests", r.tests}, {"frame_ms", r.frameMs}, {"visible_faces", r.faces}});
+      if (!asJson) fmt::print("  {:>6.1f} {:>12.1f} {:>12.3f} {:>12.0f}\n", p, r.tests, r.frameMs, r.faces);
+    }
+    out.push_back(std::move(sceneOut));
+  }
+  if (asJson) std::cout << out.dump(2) << "\n";
+  return 0;
+}
+
 }  // namespace
 
 int runPvsTool(int argc, char** argv) {
@@ -342,6 +421,14 @@ int runPvsTool(int argc, char** argv) {
   walk->add_flag("--json", asJson, "one JSON object: summary and frames");
   walk->add_flag("--with-faces", withFaces, "list the faces of visible leaves per frame");
 
+  auto* walkBench = app.add_subcommand("walk-bench", "Figures 8-11 of Bittner and Havran 2001: methods against speed and p_skip");
+  std::string walkScenes = "interior";
+  size_t walkFrames = 300, walkOccluders = 16;
+  walkBench->add_option("--scenes", walkScenes, "comma-separated SCENEs (default interior)");
+  walkBench->add_option("--frames", walkFrames, "frames per path");
+  walkBench->add_option("--occluders", walkOccluders, "occluders per viewpoint");
+  walkBench->add_flag("--json", asJson, "one JSON array on stdout");
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -368,6 +455,17 @@ int runPvsTool(int argc, char** argv) {
     }
     if (*query) return cmdQuery(db, point, cellIndex, asJson);
     if (*walk) return cmdWalk(scene, pathFile, walkMethod, cullOptions, pVp, asJson, withFaces);
+    if (*walkBench) {
+      std::vector<std::string> specs;
+      for (size_t pos = 0; pos <= walkScenes.size();) {
+        const size_t comma = walkScenes.find(',', pos);
+        specs.push_back(walkScenes.substr(pos, comma == std::string::npos ? std::string::npos : comma - pos));
+        if (comma == std::string::npos) break;
+        pos = comma + 1;
+      }
+      if (walkFrames == 0 || walkOccluders == 0) throwInputError("--frames and --occluders must be at least 1");
+      return cmdWalkBench(specs, walkFrames, walkOccluders, asJson);
+    }
     if (*bench) {
       if (!benchScenes.empty()) {
         benchOptions.scenes.clear();

@@ -54,7 +54,9 @@ constexpr double kMinRelativeArea = 1e-10;
 // than the tolerance for boxes up to ~1000 times farther than the occluder.
 constexpr double kRoundingRelativeTolerance = 1e-12;
 
-double tolerance(double magnitude) { return kRelativeTolerance * (1.0 + magnitude); }
+double tolerance(double magnitude) {
+  return kRelativeTolerance * (1.0 + magnitude);
+}
 
 double maxAbs(const glm::dvec3& v) {
   return std::max({std::abs(v.x), std::abs(v.y), std::abs(v.z)});
@@ -93,7 +95,8 @@ std::optional<ShadowFrustum> shadowFrustumOf(const OccluderPolygon& polygon,
   double size2 = 0.0;
   for (size_t i = 1; i + 1 < n; ++i)
     newell += glm::cross(f.vertices[i] - v0, f.vertices[i + 1] - v0);
-  for (size_t i = 1; i < n; ++i) size2 = std::max(size2, glm::dot(f.vertices[i] - v0, f.vertices[i] - v0));
+  for (size_t i = 1; i < n; ++i)
+    size2 = std::max(size2, glm::dot(f.vertices[i] - v0, f.vertices[i] - v0));
   f.area = 0.5 * glm::length(newell);
   if (!(f.area > kMinRelativeArea * size2)) return std::nullopt;  // also rejects NaN
 
@@ -226,8 +229,9 @@ OcclusionTree::OcclusionTree(const glm::dvec3& viewpoint,
     while (!pending.empty()) {
       Pending item = std::move(pending.back());
       pending.pop_back();
-      const int32_t link =
-          item.owner < 0 ? root_ : (item.front ? nodes_[item.owner].front : nodes_[item.owner].back);
+      const int32_t link = item.owner < 0
+                               ? root_
+                               : (item.front ? nodes_[item.owner].front : nodes_[item.owner].back);
       if (link == kInLeaf) continue;  // already hidden, and so is its shadow
 
       if (link == kOutLeaf) {
