@@ -55,7 +55,7 @@ struct FrameResult {
   uint64_t nodeTests = 0;        // occlusion-tree node visibility tests
   uint64_t propagated = 0;       // nodes classified by propagation (always 0 until method C exists)
   uint64_t skipped = 0;          // method D: tests skipped by p_skip
-  double cullingMs = 0.0;        // occluder selection, occlusion tree and traversal
+  double cullingMs = 0.0;        // occluder selection, occlusion tree and traversal (not face gathering)
   size_t visibleLeaves = 0;      // visible or partially visible leaves
   size_t visibleFaces = 0;
   std::vector<uint32_t> faces;   // sorted, when CullingOptions::collectFaces
