@@ -9,8 +9,8 @@
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
+#include "common/cmd/cli.h"
 #include "common/core/error.h"
-#include "common/core/log.h"
 #include "common/core/parse.h"
 #include "common/core/timer.h"
 #include "common/generate/generate.h"
@@ -185,10 +185,8 @@ int runSceneTool(int argc, char** argv) {
   CLI::App app{"vistream-scene: generate, inspect and sample scenes.\n"
                "A SCENE is a file (.obj, .gltf, .glb, .json manifest) or a built-in name "
                "(city1, city2, bigcity, interior, terrain; 'city1@SEED' picks a seed)."};
-  app.require_subcommand(1);
-  app.fallthrough();  // --log-level may follow the subcommand
   std::string logLevel;
-  app.add_option("--log-level", logLevel, "trace, debug, info, warn, error, critical, off");
+  setUpToolApp(app, logLevel);
 
   auto* gen = app.add_subcommand("generate", "write a procedural scene as OBJ");
   std::string genType, preset, out;
@@ -226,25 +224,13 @@ int runSceneTool(int argc, char** argv) {
   visible->add_option("--seed", seed, "seed for the random viewpoints");
   visible->add_flag("--json", asJson, "one JSON object on stdout: faces, stats");
 
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 2;
-  }
-  try {
-    initLogging(logLevel);
+  return runToolApp("vistream-scene", app, argc, argv, logLevel, [&]() -> int {
     if (*gen) return cmdGenerate(genType, preset, seed, out, asJson);
     if (*info) return cmdInfo(scene, asJson);
     if (*path) return cmdPath(scene, speed, frames, seed, fps, out);
     if (*visible) return cmdVisible(scene, cell, points, res, seed, asJson);
-  } catch (const InputError& e) {
-    std::fprintf(stderr, "vistream-scene: error: %s\n", e.what());
-    return 1;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "vistream-scene: error: %s\n", e.what());
-    return 1;
-  }
-  return 2;
+    return 2;
+  });
 }
 
 }  // namespace vistream

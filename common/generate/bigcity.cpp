@@ -70,13 +70,7 @@ enum BigCityMaterial : uint32_t {
 constexpr int kFacadeMaterials = 5;
 
 std::vector<Material> bigCityMaterials() {
-  auto material = [](const char* name, glm::vec3 diffuse) {
-    Material m;
-    m.name = name;
-    m.diffuse = diffuse;
-    m.baseColor = glm::vec4(diffuse, 1.0f);
-    return m;
-  };
+  const auto material = &Material::diffuseColour;
   return {material("asphalt", {0.20f, 0.20f, 0.21f}),
           material("pavement", {0.45f, 0.44f, 0.41f}),
           material("glass", {0.16f, 0.22f, 0.30f}),

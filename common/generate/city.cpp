@@ -65,13 +65,7 @@ enum CityMaterial : uint32_t { kGround, kFirstFacade };
 constexpr int kFacadeMaterials = 5;
 
 std::vector<Material> cityMaterials() {
-  auto material = [](const char* name, glm::vec3 diffuse) {
-    Material m;
-    m.name = name;
-    m.diffuse = diffuse;
-    m.baseColor = glm::vec4(diffuse, 1.0f);
-    return m;
-  };
+  const auto material = &Material::diffuseColour;
   return {material("ground", {0.32f, 0.34f, 0.30f}),
           material("facade_sand", {0.76f, 0.70f, 0.58f}),
           material("facade_brick", {0.62f, 0.36f, 0.28f}),

@@ -70,13 +70,7 @@ constexpr int kTilesPerSide = 20;
 enum InteriorMaterial : uint32_t { kFloor, kCeiling, kWall, kWood, kFabric, kShelf };
 
 std::vector<Material> interiorMaterials() {
-  auto material = [](const char* name, glm::vec3 diffuse) {
-    Material m;
-    m.name = name;
-    m.diffuse = diffuse;
-    m.baseColor = glm::vec4(diffuse, 1.0f);
-    return m;
-  };
+  const auto material = &Material::diffuseColour;
   return {material("floor", {0.50f, 0.46f, 0.40f}),  material("ceiling", {0.90f, 0.90f, 0.88f}),
           material("wall", {0.82f, 0.80f, 0.74f}),   material("wood", {0.55f, 0.38f, 0.22f}),
           material("fabric", {0.22f, 0.30f, 0.45f}), material("shelf", {0.42f, 0.30f, 0.20f})};

@@ -51,13 +51,7 @@ constexpr int kRocks = 80;
 enum TerrainMaterial : uint32_t { kGrass, kRock, kSnow, kFoliage, kStone };
 
 std::vector<Material> terrainMaterials() {
-  auto material = [](const char* name, glm::vec3 diffuse) {
-    Material m;
-    m.name = name;
-    m.diffuse = diffuse;
-    m.baseColor = glm::vec4(diffuse, 1.0f);
-    return m;
-  };
+  const auto material = &Material::diffuseColour;
   return {material("grass", {0.30f, 0.45f, 0.20f}), material("rock", {0.45f, 0.42f, 0.38f}),
           material("snow", {0.92f, 0.93f, 0.95f}), material("foliage", {0.16f, 0.32f, 0.12f}),
           material("stone", {0.52f, 0.50f, 0.47f})};

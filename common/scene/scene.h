@@ -40,6 +40,13 @@ struct Material {
     m.name = std::move(name);
     return m;
   }
+  // A plain diffuse material (base colour the same, opaque).
+  static Material diffuseColour(std::string name, glm::vec3 diffuse) {
+    Material m = named(std::move(name));
+    m.diffuse = diffuse;
+    m.baseColor = glm::vec4(diffuse, 1.0f);
+    return m;
+  }
 };
 
 struct TriangleMesh {

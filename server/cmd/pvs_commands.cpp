@@ -11,8 +11,8 @@
 #include <fmt/ranges.h>
 #include <nlohmann/json.hpp>
 
+#include "common/cmd/cli.h"
 #include "common/core/error.h"
-#include "common/core/log.h"
 #include "common/core/parse.h"
 #include "common/generate/scene_spec.h"
 #include "common/core/progress.h"
@@ -338,10 +338,8 @@ int runPvsTool(int argc, char** argv) {
   CLI::App app{"vistream-pvs: conservative potentially visible sets of view cells "
                "(Cohen-Or and Zadicario 1998).\nA SCENE is a file (.obj, .gltf, .glb, .json manifest) "
                "or a built-in name (city1, city2, bigcity, interior, terrain)."};
-  app.require_subcommand(1);
-  app.fallthrough();  // --log-level may follow the subcommand
   std::string logLevel;
-  app.add_option("--log-level", logLevel, "trace, debug, info, warn, error, critical, off");
+  setUpToolApp(app, logLevel);
 
   auto* cell = app.add_subcommand("cell", "the PVS of one view cell");
   std::string scene, cellText, method = "paper";
@@ -429,53 +427,34 @@ int runPvsTool(int argc, char** argv) {
   walkBench->add_option("--occluders", walkOccluders, "occluders per viewpoint");
   walkBench->add_flag("--json", asJson, "one JSON array on stdout");
 
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 2;
-  }
-  try {
-    initLogging(logLevel);
+  // The acceleration switches shared by cell and bake.
+  auto pvsOptionsFromFlags = [&] {
+    PvsOptions options;
+    options.boxStage = !noBbox;
+    options.incremental = !noIncremental;
+    options.dropOccludedOccluders = !noRedundantOccluders;
+    options.removeRedundantLines = !noRedundantRays;
+    return options;
+  };
+  return runToolApp("vistream-pvs", app, argc, argv, logLevel, [&]() -> int {
     if (*cell) {
-      PvsOptions options;
-      options.boxStage = !noBbox;
-      options.incremental = !noIncremental;
-      options.dropOccludedOccluders = !noRedundantOccluders;
-      options.removeRedundantLines = !noRedundantRays;
+      PvsOptions options = pvsOptionsFromFlags();
       options.largeOccluders = largeOccluders;
       return cmdCell(scene, cellText, method, options, fusedOptions, asJson);
     }
     if (*bake) {
-      PvsOptions options;
-      options.boxStage = !noBbox;
-      options.incremental = !noIncremental;
-      options.dropOccludedOccluders = !noRedundantOccluders;
-      options.removeRedundantLines = !noRedundantRays;
+      const PvsOptions options = pvsOptionsFromFlags();
       return cmdBake(scene, cellSize, region, threads, shard, !noCoarse, options, out, asJson);
     }
     if (*query) return cmdQuery(db, point, cellIndex, asJson);
     if (*walk) return cmdWalk(scene, pathFile, walkMethod, cullOptions, pVp, asJson, withFaces);
     if (*walkBench) {
-      std::vector<std::string> specs;
-      for (size_t pos = 0; pos <= walkScenes.size();) {
-        const size_t comma = walkScenes.find(',', pos);
-        specs.push_back(walkScenes.substr(pos, comma == std::string::npos ? std::string::npos : comma - pos));
-        if (comma == std::string::npos) break;
-        pos = comma + 1;
-      }
+      const std::vector<std::string> specs = splitCommaList(walkScenes);
       if (walkFrames == 0 || walkOccluders == 0) throwInputError("--frames and --occluders must be at least 1");
       return cmdWalkBench(specs, walkFrames, walkOccluders, asJson);
     }
     if (*bench) {
-      if (!benchScenes.empty()) {
-        benchOptions.scenes.clear();
-        for (size_t pos = 0; pos <= benchScenes.size();) {
-          const size_t comma = benchScenes.find(',', pos);
-          benchOptions.scenes.push_back(benchScenes.substr(pos, comma == std::string::npos ? std::string::npos : comma - pos));
-          if (comma == std::string::npos) break;
-          pos = comma + 1;
-        }
-      }
+      if (!benchScenes.empty()) benchOptions.scenes = splitCommaList(benchScenes);
       if (noFused) benchOptions.fusedEpsilons.clear();
       return runPvsBench(benchOptions);
     }
@@ -485,11 +464,8 @@ int runPvsTool(int argc, char** argv) {
       fmt::print("merged {} databases into {}\n", paths.size(), out);
       return 0;
     }
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "vistream-pvs: error: %s\n", e.what());
-    return 1;
-  }
-  return 2;
+    return 2;
+  });
 }
 
 }  // namespace vistream

@@ -245,22 +245,22 @@ BakeReport bakePvs(const Scene& scene, const EpsilonPvs& pvs, const FreeSpace& f
   if (options.threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, options.threads);
   std::atomic<size_t> computed{0};
   tbb::parallel_for_each(mine.begin(), mine.end(), [&](const std::vector<uint32_t>& block) {
-    std::vector<uint32_t> todo;
+    std::vector<uint32_t> pending;
     {
       std::lock_guard lock(doneMutex);
       for (uint32_t c : block)
-        if (!done.count(c)) todo.push_back(c);
+        if (!done.count(c)) pending.push_back(c);
     }
-    if (todo.empty()) return;
+    if (pending.empty()) return;
     PvsOptions cellOptions = options.pvs;
     std::vector<uint32_t> coarse;
-    if (options.coarseToFine && todo.size() > 1) {
+    if (options.coarseToFine && pending.size() > 1) {
       Box3f box;
-      for (uint32_t c : todo) box.extend(grid.cellBox(grid.cellAt(c)));
+      for (uint32_t c : pending) box.extend(grid.cellBox(grid.cellAt(c)));
       coarse = pvs.compute(box, options.pvs).faces;
       cellOptions.candidateFaces = &coarse;
     }
-    for (uint32_t c : todo) {
+    for (uint32_t c : pending) {
       PvsResult r = pvs.compute(grid.cellBox(grid.cellAt(c)), cellOptions);
       journal.append(c, r.faces);
       {

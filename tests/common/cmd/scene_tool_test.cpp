@@ -11,34 +11,17 @@
 #include <string>
 
 #include <gtest/gtest.h>
+
+#include "tests/common/support/run_tool.h"
 #include <nlohmann/json.hpp>
 
 namespace {
 
 namespace fs = std::filesystem;
 
-struct ToolRun {
-  int status = -1;
-  std::string out;
-  std::string err;
-};
+using vistream::testing::ToolRun;
 
-ToolRun runTool(const std::string& args) {
-  const fs::path errFile = fs::temp_directory_path() / ("vistream_tool_err_" + std::to_string(::getpid()));
-  const std::string cmd = std::string(VISTREAM_BIN_DIR) + "/vistream-scene " + args + " 2>" + errFile.string();
-  ToolRun r;
-  FILE* pipe = ::popen(cmd.c_str(), "r");
-  if (!pipe) return r;
-  std::array<char, 4096> buf{};
-  size_t n;
-  while ((n = std::fread(buf.data(), 1, buf.size(), pipe)) > 0) r.out.append(buf.data(), n);
-  const int st = ::pclose(pipe);
-  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-  std::ifstream e(errFile);
-  r.err.assign(std::istreambuf_iterator<char>(e), {});
-  fs::remove(errFile);
-  return r;
-}
+ToolRun runTool(const std::string& args) { return vistream::testing::runTool("vistream-scene", args); }
 
 // A wall in front of a hidden box, 50 km from the origin, as OBJ quads.
 // Face IDs: 0 ground; wall faces 1..6 (-x,+x,-y,+y,-z,+z); hidden box 7..12.

@@ -10,6 +10,8 @@
 #include <string>
 
 #include <gtest/gtest.h>
+
+#include "tests/common/support/run_tool.h"
 #include <nlohmann/json.hpp>
 
 #include "tests/common/support/temp_dir.h"
@@ -18,27 +20,9 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct ToolRun {
-  int status = -1;
-  std::string out, err;
-};
+using vistream::testing::ToolRun;
 
-ToolRun runPvs(const std::string& args) {
-  const fs::path errFile = fs::temp_directory_path() / ("vistream_pvs_err_" + std::to_string(::getpid()));
-  const std::string cmd = std::string(VISTREAM_BIN_DIR) + "/vistream-pvs " + args + " 2>" + errFile.string();
-  ToolRun r;
-  FILE* pipe = ::popen(cmd.c_str(), "r");
-  if (!pipe) return r;
-  std::array<char, 4096> buf{};
-  size_t n;
-  while ((n = std::fread(buf.data(), 1, buf.size(), pipe)) > 0) r.out.append(buf.data(), n);
-  const int st = ::pclose(pipe);
-  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-  std::ifstream e(errFile);
-  r.err.assign(std::istreambuf_iterator<char>(e), {});
-  fs::remove(errFile);
-  return r;
-}
+ToolRun runPvs(const std::string& args) { return vistream::testing::runTool("vistream-pvs", args); }
 
 // Ground, a wall and a box hidden behind it. Face IDs: 0 ground; wall 1..6
 // (-x,+x,-y,+y,-z,+z); hidden box 7..12.

@@ -1,0 +1,56 @@
+// The shape every vistream command-line tool shares: one CLI11 app with
+// subcommands, a --log-level that may come before or after the subcommand,
+// and one boundary where errors become exit codes (0 success, 1 bad input
+// with "tool: error: ..." on stderr, 2 bad usage).
+#pragma once
+
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "common/core/error.h"
+#include "common/core/log.h"
+
+namespace vistream {
+
+// Requires one subcommand and adds --log-level (stored in `logLevel`).
+inline void setUpToolApp(CLI::App& app, std::string& logLevel) {
+  app.require_subcommand(1);
+  app.fallthrough();  // --log-level may follow the subcommand
+  app.add_option("--log-level", logLevel, "trace, debug, info, warn, error, critical, off");
+}
+
+// Parses, sets up logging and runs `dispatch` (which returns the exit code),
+// turning errors into exit codes as described above.
+template <typename Dispatch>
+int runToolApp(const char* tool, CLI::App& app, int argc, char** argv, const std::string& logLevel,
+               Dispatch&& dispatch) {
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : 2;
+  }
+  try {
+    initLogging(logLevel);
+    return dispatch();
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: error: %s\n", tool, e.what());
+    return 1;
+  }
+}
+
+// Splits "a,b,c" into {"a", "b", "c"}; an empty string gives one empty item.
+inline std::vector<std::string> splitCommaList(const std::string& text) {
+  std::vector<std::string> out;
+  for (size_t pos = 0; pos <= text.size();) {
+    const size_t comma = text.find(',', pos);
+    out.push_back(text.substr(pos, comma == std::string::npos ? std::string::npos : comma - pos));
+    if (comma == std::string::npos) break;
+    pos = comma + 1;
+  }
+  return out;
+}
+
+}  // namespace vistream
