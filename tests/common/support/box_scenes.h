@@ -3,6 +3,7 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 #include "common/scene/scene.h"
 
@@ -45,6 +46,28 @@ inline uint32_t addGround(Scene& scene, float x0, float z0, float x1, float z1, 
   o.mesh.faceIds = {scene.faceCount, scene.faceCount};
   scene.objects.push_back(std::move(o));
   return scene.faceCount++;
+}
+
+// Adds one object made of planar faces, each a vertex loop fan-triangulated
+// from its first vertex (which must see every other vertex); a loop's winding
+// gives its normal by the right-hand rule. Returns the first face ID.
+using Loop = std::vector<glm::vec3>;
+inline uint32_t addFaces(Scene& scene, const std::string& name, const std::vector<Loop>& faces, bool dynamic = false) {
+  Object o;
+  o.name = name;
+  o.dynamic = dynamic;
+  const uint32_t first = scene.faceCount;
+  for (const Loop& loop : faces) {
+    const uint32_t base = uint32_t(o.mesh.positions.size());
+    o.mesh.positions.insert(o.mesh.positions.end(), loop.begin(), loop.end());
+    for (uint32_t i = 1; i + 1 < loop.size(); ++i) {
+      o.mesh.triangles.emplace_back(base, base + i, base + i + 1);
+      o.mesh.faceIds.push_back(scene.faceCount);
+    }
+    ++scene.faceCount;
+  }
+  scene.objects.push_back(std::move(o));
+  return first;
 }
 
 // Face IDs of a box added by addBox, by side.

@@ -49,27 +49,9 @@ using testing::kPlusX;
 using testing::kPlusY;
 using testing::kPlusZ;
 
-using Loop = std::vector<glm::vec3>;
+using testing::addFaces;
+using testing::Loop;
 
-// One object of planar faces, each a vertex loop fan-triangulated from its
-// first vertex; the winding gives the normal. Returns the first face ID.
-uint32_t addFaces(Scene& scene, const std::string& name, const std::vector<Loop>& faces, bool dynamic = false) {
-  Object o;
-  o.name = name;
-  o.dynamic = dynamic;
-  const uint32_t first = scene.faceCount;
-  for (const Loop& loop : faces) {
-    const uint32_t base = uint32_t(o.mesh.positions.size());
-    o.mesh.positions.insert(o.mesh.positions.end(), loop.begin(), loop.end());
-    for (uint32_t i = 1; i + 1 < loop.size(); ++i) {
-      o.mesh.triangles.emplace_back(base, base + i, base + i + 1);
-      o.mesh.faceIds.push_back(scene.faceCount);
-    }
-    ++scene.faceCount;
-  }
-  scene.objects.push_back(std::move(o));
-  return first;
-}
 
 // A quad in the plane z = const facing +z, over [x0,x1] x [y0,y1].
 Loop quadFacingPlusZ(float x0, float y0, float x1, float y1, float z) {

@@ -16,28 +16,9 @@ namespace {
 
 using testing::addBox;
 
-using Loop = std::vector<glm::vec3>;
+using testing::addFaces;
+using testing::Loop;
 
-// Adds one object made of planar faces, each a vertex loop fan-triangulated
-// from its first vertex (which must see every other vertex). A loop's
-// winding gives its face normal by the right-hand rule. Returns the first face ID.
-uint32_t addFaces(Scene& scene, const std::string& name, const std::vector<Loop>& faces, bool dynamic = false) {
-  Object o;
-  o.name = name;
-  o.dynamic = dynamic;
-  const uint32_t first = scene.faceCount;
-  for (const Loop& loop : faces) {
-    const uint32_t base = uint32_t(o.mesh.positions.size());
-    o.mesh.positions.insert(o.mesh.positions.end(), loop.begin(), loop.end());
-    for (uint32_t i = 1; i + 1 < loop.size(); ++i) {
-      o.mesh.triangles.emplace_back(base, base + i, base + i + 1);
-      o.mesh.faceIds.push_back(scene.faceCount);
-    }
-    ++scene.faceCount;
-  }
-  scene.objects.push_back(std::move(o));
-  return first;
-}
 
 // A closed prism over a loop in the XZ plane from y0 to y1, outward-facing.
 // The loop must have a positive signed area sum(x_i z_{i+1} - x_{i+1} z_i)
