@@ -53,7 +53,9 @@ PolygonScene generate(const std::string& type, uint64_t seed = 1);
 // Individual generators.
 PolygonScene generateCity(bool dense, uint64_t seed);
 PolygonScene generateBigCity(uint64_t seed);
-PolygonScene generateInterior(uint64_t seed);
+// wallPatch > 0 cuts every wall into boxes at most that long, each its own
+// object ("interior2" uses this).
+PolygonScene generateInterior(uint64_t seed, double wallPatch = 0.0);
 PolygonScene generateTerrain(uint64_t seed);
 
 // Triangulated scene with face IDs in object-then-face order (the OBJ order).

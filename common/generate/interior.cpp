@@ -90,7 +90,8 @@ struct Office {
 
 class FloorBuilder {
  public:
-  FloorBuilder(PolygonScene& scene, SceneRandom& random) : scene_(scene), random_(random) {}
+  FloorBuilder(PolygonScene& scene, SceneRandom& random, double wallPatch)
+      : scene_(scene), random_(random), wallPatch_(wallPatch) {}
 
   // A wall running along x at line z, its box from x0 to x1, with doors
   // (gaps with lintels) centred at doorCentres.
@@ -132,11 +133,21 @@ class FloorBuilder {
   }
 
  private:
+  // A wall box, or with wallPatch_ set, a row of boxes at most that long
+  // (the patches of a radiosity solution), each its own object.
   void wallBox(const glm::dvec3& lo, const glm::dvec3& hi) {
     if (hi.x - lo.x < 1e-6 || hi.z - lo.z < 1e-6) return;  // a door flush with a wall end
-    PolygonObject wall = makeObject(fmt::format("wall_{:03d}", ++walls_), kWall);
-    addBox(wall, lo, hi);
-    scene_.objects.push_back(std::move(wall));
+    const int axis = hi.x - lo.x >= hi.z - lo.z ? 0 : 2;
+    const int pieces = wallPatch_ > 0.0 ? std::max(1, int(std::ceil((hi[axis] - lo[axis]) / wallPatch_ - 1e-9))) : 1;
+    for (int k = 0; k < pieces; ++k) {
+      glm::dvec3 a = lo, b = hi;
+      // Shared ends come from the same expression: no cracks between patches.
+      a[axis] = k == 0 ? lo[axis] : lo[axis] + (hi[axis] - lo[axis]) * k / pieces;
+      b[axis] = k + 1 == pieces ? hi[axis] : lo[axis] + (hi[axis] - lo[axis]) * (k + 1) / pieces;
+      PolygonObject wall = makeObject(fmt::format("wall_{:03d}", ++walls_), kWall);
+      addBox(wall, a, b);
+      scene_.objects.push_back(std::move(wall));
+    }
   }
 
   // A 1.6 m x 0.8 m table with one or two chairs on each long side; the table
@@ -299,6 +310,7 @@ class FloorBuilder {
 
   PolygonScene& scene_;
   SceneRandom& random_;
+  double wallPatch_ = 0.0;
   int walls_ = 0, lintels_ = 0, tables_ = 0, desks_ = 0, chairs_ = 0, shelves_ = 0;
 };
 
@@ -317,7 +329,7 @@ std::vector<double> roomLines(SceneRandom& random, double lo, double hi) {
 
 }  // namespace
 
-PolygonScene generateInterior(uint64_t seed) {
+PolygonScene generateInterior(uint64_t seed, double wallPatch) {
   SceneRandom random(seed);
   PolygonScene scene;
   scene.name = "interior";
@@ -377,7 +389,7 @@ PolygonScene generateInterior(uint64_t seed) {
     }
   }
 
-  FloorBuilder builder(scene, random);
+  FloorBuilder builder(scene, random, wallPatch);
   // Outer walls: those along x run the full width, those along z stop at them.
   builder.wallAlongX(-kHalfSize, -outer, outer, {});
   builder.wallAlongX(kHalfSize, -outer, outer, {});

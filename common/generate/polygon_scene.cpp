@@ -14,6 +14,11 @@
 #include "common/scene/triangulate.h"
 
 namespace vistream {
+namespace {
+// Wall patch length of "interior2", tuned so that its kD-tree over objects
+// has about the 1,605 nodes of scene II in Bittner and Havran 2001.
+constexpr double kInterior2WallPatch = 2.0;
+}  // namespace
 
 size_t PolygonScene::faceCount() const {
   size_t n = 0;
@@ -22,7 +27,7 @@ size_t PolygonScene::faceCount() const {
 }
 
 const std::vector<std::string>& sceneTypes() {
-  static const std::vector<std::string> types{"city1", "city2", "bigcity", "interior", "terrain"};
+  static const std::vector<std::string> types{"city1", "city2", "bigcity", "interior", "interior2", "terrain"};
   return types;
 }
 
@@ -36,6 +41,8 @@ PolygonScene generate(const std::string& type, uint64_t seed) {
     scene = generateBigCity(seed);
   } else if (type == "interior") {
     scene = generateInterior(seed);
+  } else if (type == "interior2") {
+    scene = generateInterior(seed, kInterior2WallPatch);
   } else if (type == "terrain") {
     scene = generateTerrain(seed);
   } else {

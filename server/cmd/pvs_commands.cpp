@@ -19,6 +19,7 @@
 #include "common/raycast/ray_query.h"
 #include "common/spatial/free_space.h"
 #include "server/cmd/pvs_bench.h"
+#include "server/cmd/walk_bench.h"
 #include "server/visibility/epsilon_pvs.h"
 #include "server/visibility/fused_pvs.h"
 #include "server/visibility/hierarchical_culling.h"
@@ -203,12 +204,12 @@ int cmdQuery(const std::string& dbPath, const std::string& pointText, const std:
 }
 
 int cmdWalk(const std::string& spec, const std::string& pathFile, const std::string& method, const CullingOptions& base,
-            double pVp, bool asJson, bool withFaces) {
+            bool asJson, bool withFaces) {
   CullingOptions options = base;
   options.method = parseCullingMethod(method);
   options.collectFaces = withFaces;
   if (!(options.pSkip >= 0.0 && options.pSkip <= 1.0)) throwInputError("--p-skip must be in [0, 1]");
-  if (!(pVp >= 0.0 && pVp <= 1.0)) throwInputError("--p-vp must be in [0, 1]");
+  if (!(options.pVp >= 0.0 && options.pVp <= 1.0)) throwInputError("--p-vp must be in [0, 1]");
   if (!(options.fovDeg > 0.0 && options.fovDeg < 180.0)) throwInputError("--fov must be in (0, 180) degrees");
   if (options.occluders == 0) throwInputError("--occluders must be at least 1");
   const auto path = readPath(pathFile);
@@ -216,27 +217,32 @@ int cmdWalk(const std::string& spec, const std::string& pathFile, const std::str
   const CullingScene culling(scene);
   CullingViewer viewer(culling, options);
   json frames = json::array();
-  double tests = 0, cullMs = 0, frameMs = 0, faces = 0;
+  double tests = 0, cullMs = 0, frameMs = 0, faces = 0, propagated = 0, skipped = 0;
   for (size_t i = 0; i < path.size(); ++i) {
     const PathSample& s = path[i];
     const FrameResult r = viewer.frame(glm::dvec3(scene.toLocal(s.position)), s.yawDeg, s.pitchDeg);
     const double fms = r.cullingMs + double(r.visibleFaces) * culling.drawMsPerFace();
     tests += double(r.nodeTests);
+    propagated += double(r.propagated);
+    skipped += double(r.skipped);
     cullMs += r.cullingMs;
     frameMs += fms;
     faces += double(r.visibleFaces);
-    json f = {{"frame", i}, {"node_tests", r.nodeTests}, {"propagated", r.propagated}, {"skipped", r.skipped},
+    json f = {{"frame", i}, {"node_tests", r.nodeTests}, {"propagated", r.propagated},
+              {"propagation_tries", r.propagationTries}, {"skipped", r.skipped},
               {"culling_ms", r.cullingMs}, {"frame_ms", fms}, {"visible_leaves", r.visibleLeaves},
               {"visible_faces", r.visibleFaces}};
     if (withFaces) f["faces"] = r.faces;
     frames.push_back(std::move(f));
     if (!asJson)
-      fmt::print("frame {:>5}  node tests {:>6}  culling {:>8.3f} ms  frame {:>8.3f} ms  leaves {:>5}  faces {:>7}\n", i,
-                 r.nodeTests, r.cullingMs, fms, r.visibleLeaves, r.visibleFaces);
+      fmt::print("frame {:>5}  node tests {:>6}  propagated {:>4}  skipped {:>4}  culling {:>8.3f} ms  frame {:>8.3f} ms  "
+                 "leaves {:>5}  faces {:>7}\n",
+                 i, r.nodeTests, r.propagated, r.skipped, r.cullingMs, fms, r.visibleLeaves, r.visibleFaces);
   }
   const double n = double(std::max<size_t>(1, path.size()));
   const json summary = {{"method", method}, {"frames", path.size()}, {"kd_nodes", culling.tree().nodes().size()},
                         {"occluders", options.occluders}, {"node_tests_mean", tests / n},
+                        {"propagated_mean", propagated / n}, {"skipped_mean", skipped / n},
                         {"culling_ms_mean", cullMs / n}, {"frame_ms_mean", frameMs / n},
                         {"visible_faces_mean", faces / n}, {"draw_ms_per_face", culling.drawMsPerFace()},
                         {"cost_model", "frame_ms = culling_ms + visible_faces * draw_ms_per_face"}};
@@ -245,90 +251,12 @@ int cmdWalk(const std::string& spec, const std::string& pathFile, const std::str
   } else {
     fmt::print("method {}: {} frames, {} kD-tree nodes, {} occluders per view\n", method, path.size(),
                culling.tree().nodes().size(), options.occluders);
-    fmt::print("  mean node tests {:.1f}, culling {:.3f} ms, frame {:.3f} ms, visible faces {:.0f}\n", tests / n,
-               cullMs / n, frameMs / n, faces / n);
-    fmt::print("  cost model: frame = culling + visible faces x {:.2e} ms (software transform and bound per face)\n",
+    fmt::print("  mean node tests {:.1f}, propagated {:.1f}, skipped {:.1f}, culling {:.3f} ms, frame {:.3f} ms, "
+               "visible faces {:.0f}\n",
+               tests / n, propagated / n, skipped / n, cullMs / n, frameMs / n, faces / n);
+    fmt::print("  cost model: frame = culling + visible faces x {:.2e} ms (mean cost of a face in a software z-buffer rasterizer at 640x480)\n",
                culling.drawMsPerFace());
   }
-  return 0;
-}
-
-// Figures 8-10 of Bittner and Havran 2001 (node tests, culling time and
-// frame time against walking speed for each method) and Figure 11 (frame time
-// against p_skip), measured side by side on the same paths.
-int cmdWalkBench(const std::vector<std::string>& specs, size_t frames, size_t occluders, bool asJson) {
-  json out = json::array();
-  const std::vector<double> speeds = {0.25, 0.5, 1.0, 2.0, 4.0};
-  const std::vector<CullingMethod> methods = {CullingMethod::Classical, CullingMethod::HierarchyUpdating,
-                                              CullingMethod::Conservative};
-  for (const std::string& spec : specs) {
-    const Scene scene = openScene(spec);
-    const CullingScene culling(scene);
-    const FlatTriangles tris = flattenScene(scene, true);
-    const auto rays = makeEmbreeRayQuery(tris);
-    const FreeSpace fs = FreeSpace::build(*rays, scene.bounds());
-    auto walkPath = [&](double speed) {
-      PathOptions po;
-      po.speed = speed;
-      po.frames = frames;
-      po.seed = 7;
-      auto path = generatePath(scene, fs, po);
-      for (auto& p : path) p.position = glm::dvec3(scene.toLocal(p.position));
-      return path;
-    };
-    struct Mean {
-      double tests = 0, cullMs = 0, frameMs = 0, faces = 0;
-    };
-    auto run = [&](const std::vector<PathSample>& path, CullingMethod m, double pSkip) {
-      CullingOptions o;
-      o.method = m;
-      o.occluders = occluders;
-      o.pSkip = pSkip;
-      CullingViewer viewer(culling, o);
-      Mean mean;
-      for (const auto& s : path) {
-        const FrameResult r = viewer.frame(s.position, s.yawDeg, s.pitchDeg);
-        mean.tests += double(r.nodeTests);
-        mean.cullMs += r.cullingMs;
-        mean.frameMs += r.cullingMs + double(r.visibleFaces) * culling.drawMsPerFace();
-        mean.faces += double(r.visibleFaces);
-      }
-      const double n = double(std::max<size_t>(1, path.size()));
-      return Mean{mean.tests / n, mean.cullMs / n, mean.frameMs / n, mean.faces / n};
-    };
-    json sceneOut = {{"scene", spec}, {"kd_nodes", culling.tree().nodes().size()}, {"occluders", occluders}};
-    if (!asJson)
-      fmt::print("\n{}: {} kD-tree nodes, {} occluders, {} frames per path, draw cost {:.2e} ms/face\n"
-                 "  {:>6} {:>7} {:>12} {:>12} {:>12} {:>12}\n",
-                 spec, culling.tree().nodes().size(), occluders, frames, culling.drawMsPerFace(), "speed", "method",
-                 "node tests", "culling ms", "frame ms", "faces");
-    for (double speed : speeds) {
-      const auto path = walkPath(speed);
-      Mean a{};
-      for (CullingMethod m : methods) {
-        const Mean r = run(path, m, 0.5);
-        if (m == CullingMethod::Classical) a = r;
-        sceneOut["speeds"].push_back({{"speed", speed}, {"method", cullingMethodName(m)}, {"node_tests", r.tests},
-                                      {"culling_ms", r.cullMs}, {"frame_ms", r.frameMs}, {"visible_faces", r.faces},
-                                      {"node_tests_saved_vs_A", 1.0 - r.tests / std::max(1e-9, a.tests)},
-                                      {"faces_over_A", r.faces / std::max(1e-9, a.faces)}});
-        if (!asJson)
-          fmt::print("  {:>6.2f} {:>7} {:>12.1f} {:>12.3f} {:>12.3f} {:>12.0f}   tests saved {:>5.1f}%  faces x{:.3f}\n",
-                     speed, cullingMethodName(m), r.tests, r.cullMs, r.frameMs, r.faces,
-                     100.0 * (1.0 - r.tests / std::max(1e-9, a.tests)), r.faces / std::max(1e-9, a.faces));
-      }
-    }
-    const auto path = walkPath(1.0);
-    if (!asJson) fmt::print("  method D at speed 1.0 against p_skip:\n  {:>6} {:>12} {:>12} {:>12}\n", "p_skip", "node tests", "frame ms", "faces");
-    for (int i = 0; i <= 9; ++i) {
-      const double p = 0.1 * i;
-      const Mean r = run(path, CullingMethod::Conservative, p);
-      sceneOut["p_skip"].push_back({{"p_skip", p}, {"node_tests", r.tests}, {"frame_ms", r.frameMs}, {"visible_faces", r.faces}});
-      if (!asJson) fmt::print("  {:>6.1f} {:>12.1f} {:>12.3f} {:>12.0f}\n", p, r.tests, r.frameMs, r.faces);
-    }
-    out.push_back(std::move(sceneOut));
-  }
-  if (asJson) std::cout << out.dump(2) << "\n";
   return 0;
 }
 
@@ -406,26 +334,28 @@ int runPvsTool(int argc, char** argv) {
   auto* walk = app.add_subcommand("walk", "replay a path with hierarchical visibility culling (Bittner and Havran 2001)");
   std::string pathFile, walkMethod = "A";
   CullingOptions cullOptions;
-  double pVp = 0.5;
   bool withFaces = false;
   walk->add_option("--scene", scene, "SCENE")->required();
   walk->add_option("--path", pathFile, "path CSV (t,x,y,z,yaw_deg,pitch_deg)")->required();
-  walk->add_option("--method", walkMethod, "A (classical), B (hierarchy updating), D (B + conservative updating)");
+  walk->add_option("--method", walkMethod, "A (classical), B (hierarchy updating), C (B + visibility propagation), "
+                                          "D (C + conservative updating), adaptive (D with learnt probabilities)");
   walk->add_option("--occluders", cullOptions.occluders, "occluders per viewpoint (default 16)");
   walk->add_option("--p-skip", cullOptions.pSkip, "method D: probability of skipping a visible node's test");
-  walk->add_option("--p-vp", pVp, "method C: probability of visibility propagation (not implemented yet)");
+  walk->add_option("--p-vp", cullOptions.pVp, "methods C and D: probability of trying visibility propagation");
   walk->add_option("--seed", cullOptions.seed, "random seed for D");
   walk->add_option("--fov", cullOptions.fovDeg, "horizontal field of view in degrees (4:3 frustum)");
   walk->add_flag("--json", asJson, "one JSON object: summary and frames");
   walk->add_flag("--with-faces", withFaces, "list the faces of visible leaves per frame");
 
   auto* walkBench = app.add_subcommand("walk-bench", "Figures 8-11 of Bittner and Havran 2001: methods against speed and p_skip");
-  std::string walkScenes = "interior";
-  size_t walkFrames = 300, walkOccluders = 16;
-  walkBench->add_option("--scenes", walkScenes, "comma-separated SCENEs (default interior)");
-  walkBench->add_option("--frames", walkFrames, "frames per path");
-  walkBench->add_option("--occluders", walkOccluders, "occluders per viewpoint");
-  walkBench->add_flag("--json", asJson, "one JSON array on stdout");
+  WalkBenchOptions walkBenchOptions;
+  std::string walkScenes;
+  walkBench->add_option("--scenes", walkScenes, "comma-separated SCENEs (default interior,interior2)");
+  walkBench->add_option("--frames", walkBenchOptions.frames, "frames per path");
+  walkBench->add_option("--occluders", walkBenchOptions.occluders, "occluders per viewpoint (default: 32 for interior2, else 16)");
+  walkBench->add_option("--repeats", walkBenchOptions.repeats, "runs per configuration; times are medians");
+  walkBench->add_option("--plot-dir", walkBenchOptions.plotDir, "write .dat files and a PNG of Figures 8-11 per scene here");
+  walkBench->add_flag("--json", walkBenchOptions.json, "one JSON array on stdout");
 
   // The acceleration switches shared by cell and bake.
   auto pvsOptionsFromFlags = [&] {
@@ -447,11 +377,12 @@ int runPvsTool(int argc, char** argv) {
       return cmdBake(scene, cellSize, region, threads, shard, !noCoarse, options, out, asJson);
     }
     if (*query) return cmdQuery(db, point, cellIndex, asJson);
-    if (*walk) return cmdWalk(scene, pathFile, walkMethod, cullOptions, pVp, asJson, withFaces);
+    if (*walk) return cmdWalk(scene, pathFile, walkMethod, cullOptions, asJson, withFaces);
     if (*walkBench) {
-      const std::vector<std::string> specs = splitCommaList(walkScenes);
-      if (walkFrames == 0 || walkOccluders == 0) throwInputError("--frames and --occluders must be at least 1");
-      return cmdWalkBench(specs, walkFrames, walkOccluders, asJson);
+      if (!walkScenes.empty()) walkBenchOptions.scenes = splitCommaList(walkScenes);
+      if (walkBenchOptions.frames == 0 || walkBenchOptions.repeats == 0)
+        throwInputError("--frames and --repeats must be at least 1");
+      return runWalkBench(walkBenchOptions);
     }
     if (*bench) {
       if (!benchScenes.empty()) benchOptions.scenes = splitCommaList(benchScenes);

@@ -329,50 +329,88 @@ OcclusionTree::OcclusionTree(const glm::dvec3& viewpoint,
   }
 }
 
+namespace {
+
+// A half-space dot(normal, x) - offset >= -tol (the side a DFS entered).
+struct HalfSpace {
+  glm::dvec3 normal;
+  double offset;
+};
+
+// Whether the box [lo, hi] meets every half-space, each widened by tol. The
+// set they cut out of the box is a convex polytope; it is non-empty exactly
+// when one of its facets is, and every facet lies on a box face or on one of
+// the half-spaces' planes: so clip each of those polygons by all the others.
+bool boxMeetsHalfSpaces(const glm::dvec3& lo, const glm::dvec3& hi, const std::vector<HalfSpace>& cuts, double tol) {
+  std::vector<HalfSpace> all = cuts;
+  for (int axis = 0; axis < 3; ++axis) {
+    glm::dvec3 n(0.0);
+    n[axis] = 1.0;
+    all.push_back({n, lo[axis]});    // x >= lo
+    all.push_back({-n, -hi[axis]});  // x <= hi
+  }
+  const glm::dvec3 centre = 0.5 * (lo + hi);
+  const double size = 2.0 * glm::length(hi - lo) + 1.0;
+  std::vector<double> g;
+  for (size_t j = 0; j < all.size(); ++j) {
+    // A square on plane j around the box centre's projection, larger than the box.
+    const glm::dvec3 n = all[j].normal;
+    const glm::dvec3 c = centre - (glm::dot(n, centre) - all[j].offset) * n;
+    const glm::dvec3 a = glm::normalize(std::abs(n.x) < 0.9 ? glm::cross(n, glm::dvec3(1, 0, 0)) : glm::cross(n, glm::dvec3(0, 1, 0)));
+    const glm::dvec3 b = glm::cross(n, a);
+    Polygon3 poly = {c - size * a - size * b, c + size * a - size * b, c + size * a + size * b, c - size * a + size * b};
+    for (size_t i = 0; i < all.size() && !poly.empty(); ++i) {
+      if (i == j) continue;
+      g.resize(poly.size());
+      for (size_t v = 0; v < poly.size(); ++v) g[v] = glm::dot(all[i].normal, poly[v]) - all[i].offset + tol;
+      poly = clip(poly, g);
+    }
+    if (!poly.empty()) return true;
+  }
+  return false;
+}
+
+}  // namespace
+
 NodeVisibility OcclusionTree::classifyRelative(const glm::dvec3& lo, const glm::dvec3& hi,
                                                double tol, uint64_t* nodesVisited) const {
   const glm::dvec3 centre = 0.5 * (lo + hi);
   const glm::dvec3 halfExtent = 0.5 * (hi - lo);
 
-  // Constrained DFS: a box reaches the side(s) of a plane it comes within
-  // the tolerance of; stop once both leaf kinds have been reached.
-  int32_t inlineStack[64];
-  std::vector<int32_t> overflow;
-  size_t top = 0;
-  auto push = [&](int32_t id) {
-    if (top < std::size(inlineStack)) {
-      inlineStack[top] = id;
-    } else {
-      overflow.push_back(id);
-    }
-    ++top;
-  };
-  auto pop = [&]() {
-    --top;
-    if (top < std::size(inlineStack)) return inlineStack[top];
-    const int32_t id = overflow.back();
-    overflow.pop_back();
-    return id;
-  };
-
+  // Constrained DFS: a box reaches the side(s) of a plane it comes within the
+  // tolerance of; stop once both leaf kinds have been reached. Testing one
+  // plane at a time over-reaches: a box that straddles two planes on the way
+  // down can reach a leaf whose cell it misses. So the planes a box straddles
+  // are kept, and a leaf reached past two or more of them counts only if the
+  // box really meets its cell (within the tolerance).
   bool reachedIn = false, reachedOut = false;
   uint64_t visited = 0;
-  push(root_);
-  while (top > 0 && !(reachedIn && reachedOut)) {
-    const int32_t id = pop();
+  std::vector<HalfSpace> straddled;
+  auto visit = [&](auto&& self, int32_t id) -> void {
+    if (reachedIn && reachedOut) return;
     ++visited;
-    if (id == kInLeaf) {
-      reachedIn = true;
-    } else if (id == kOutLeaf) {
-      reachedOut = true;
-    } else {
-      const Node& node = nodes_[size_t(id)];
-      const double s = glm::dot(node.normal, centre) - node.offset;
-      const double r = glm::dot(glm::abs(node.normal), halfExtent);
-      if (s + r >= -tol) push(node.front);
-      if (s - r <= tol) push(node.back);
+    if (id == kInLeaf || id == kOutLeaf) {
+      bool& reached = id == kInLeaf ? reachedIn : reachedOut;
+      if (!reached && (straddled.size() < 2 || boxMeetsHalfSpaces(lo, hi, straddled, tol))) reached = true;
+      return;
     }
-  }
+    const Node& node = nodes_[size_t(id)];
+    const double s = glm::dot(node.normal, centre) - node.offset;
+    const double r = glm::dot(glm::abs(node.normal), halfExtent);
+    const bool front = s + r >= -tol, back = s - r <= tol;
+    if (front && back) {
+      straddled.push_back({node.normal, node.offset});
+      self(self, node.front);
+      straddled.back() = {-node.normal, -node.offset};
+      self(self, node.back);
+      straddled.pop_back();
+    } else if (front) {
+      self(self, node.front);
+    } else if (back) {
+      self(self, node.back);
+    }
+  };
+  visit(visit, root_);
   if (nodesVisited) *nodesVisited += visited;
 
   if (!reachedIn) return NodeVisibility::Visible;

@@ -74,11 +74,11 @@ class OcclusionTree {
   //  - Visible: no point of the box is in shadow;
   //  - PartiallyVisible: otherwise, or when the test cannot tell.
   // Invisible and Visible are never wrong; PartiallyVisible is the
-  // conservative answer for a box within the tolerance of a shadow boundary,
-  // and also, now and then, for a box the search over-reaches with: it tests
-  // the box against one plane at a time, so it can reach a leaf whose cell
-  // the box misses (about 2% of random boxes get a different, equally
-  // conservative answer from trees of the same shadow built differently).
+  // conservative answer for a box within the tolerance of a shadow boundary.
+  // Otherwise the answer is exact: the search tests the box against one
+  // plane at a time, and a leaf reached past two or more planes the box
+  // straddles counts only if the box really meets the leaf's cell, so trees
+  // of the same shadow built differently give the same answers.
   // A box containing or touching the viewpoint is never Invisible. An empty
   // box is Visible. The constrained depth-first search enters only the
   // half-spaces the box reaches and stops as soon as it has reached both an

@@ -562,9 +562,9 @@ TEST(TerrainGenerator, SameSeedGivesTheSameLandAndAnotherSeedAnotherOne) {
 
 // ---- dispatch ------------------------------------------------------------------
 
-TEST(SceneTypes, ListsTheFiveGeneratorsAndEachGeneratesANamedScene) {
+TEST(SceneTypes, ListsTheSixGeneratorsAndEachGeneratesANamedScene) {
   EXPECT_EQ(sceneTypes(),
-            (std::vector<std::string>{"city1", "city2", "bigcity", "interior", "terrain"}));
+            (std::vector<std::string>{"city1", "city2", "bigcity", "interior", "interior2", "terrain"}));
   for (const char* type : {"city1", "interior", "terrain"}) {
     const PolygonScene scene = generate(type, 1);
     EXPECT_EQ(scene.name, type);

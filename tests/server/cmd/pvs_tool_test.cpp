@@ -115,7 +115,7 @@ TEST(PvsTool, WalkPrintsTheSummaryAndOneRecordPerFrame) {
   vistream::testing::TempDir dir;
   const fs::path scene = dir.write("wall.obj", wallScene());
   const fs::path path = dir.write("p.csv", "t,x,y,z,yaw_deg,pitch_deg\n0,0,1.7,2,0,0\n0.033,0,1.7,1.95,10,0\n0.066,0,1.7,1.9,180,0\n");
-  for (const char* method : {"A", "B", "D"}) {
+  for (const char* method : {"A", "B", "C", "D", "adaptive"}) {
     const ToolRun r = runPvs("walk --scene " + scene.string() + " --path " + path.string() + " --method " + method +
                              " --json --with-faces");
     ASSERT_EQ(r.status, 0) << r.err;
@@ -131,6 +131,9 @@ TEST(PvsTool, WalkPrintsTheSummaryAndOneRecordPerFrame) {
   const ToolRun bad = runPvs("walk --scene " + scene.string() + " --path " + path.string() + " --method Q");
   EXPECT_EQ(bad.status, 1);
   EXPECT_NE(bad.err.find("--method"), std::string::npos) << bad.err;
+  const ToolRun badP = runPvs("walk --scene " + scene.string() + " --path " + path.string() + " --method C --p-vp 1.5");
+  EXPECT_EQ(badP.status, 1);
+  EXPECT_NE(badP.err.find("--p-vp"), std::string::npos) << badP.err;
 }
 
 }  // namespace
