@@ -192,7 +192,7 @@ int runSceneTool(int argc, char** argv) {
   std::string genType, preset, out;
   uint64_t seed = 1;
   bool asJson = false;
-  gen->add_option("type", genType, "city, city1, city2, bigcity, interior, terrain")->required();
+  gen->add_option("type", genType, "city, city1, city2, bigcity, interior, interior2, terrain")->required();
   gen->add_option("--preset", preset, "for 'city': city1 (dense) or city2 (sparse)");
   gen->add_option("--seed", seed, "random seed (same seed, same scene)");
   gen->add_option("--out,-o", out, "output OBJ file")->required();

@@ -10,6 +10,9 @@
 //    with detailed facades (as in Wimmer's thesis), streets free of geometry.
 //  - "interior": one building floor of rooms, corridors and doors with
 //    furniture, sized like scene I of Bittner and Havran 2001.
+//  - "interior2": the same floor with every wall cut into boxes at most 2 m
+//    long (the patches of a radiosity solution), sized like scene II of
+//    Bittner and Havran 2001 (1,605 kD-tree nodes; 32 occluders needed).
 //  - "terrain": open land with hills and distant mountains under open sky.
 //
 // Generators build polygon objects (faces as vertex loops, the way an OBJ

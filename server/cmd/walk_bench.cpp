@@ -63,11 +63,16 @@ void writePlots(const std::string& dir, const std::string& spec, const json& sce
   const auto base = std::filesystem::path(dir) / ("walk_" + spec);
   const std::string speedDat = base.string() + "_speed.dat", skipDat = base.string() + "_pskip.dat";
   {
+    // One block per method (gnuplot's "index"), in the order plotted.
     std::ofstream f(speedDat);
-    f << "# method speed node_tests culling_ms frame_ms\n";
-    for (const auto& r : sceneOut["speeds"])
-      f << r["method"].get<std::string>() << " " << r["speed"].get<double>() << " " << r["node_tests"].get<double>()
-        << " " << r["culling_ms"].get<double>() << " " << r["frame_ms"].get<double>() << "\n";
+    f << "# speed node_tests culling_ms frame_ms, one block per method: A B C D adaptive\n";
+    for (const char* m : {"A", "B", "C", "D", "adaptive"}) {
+      for (const auto& r : sceneOut["speeds"])
+        if (r["method"] == m)
+          f << r["speed"].get<double>() << " " << r["node_tests"].get<double>() << " "
+            << r["culling_ms"].get<double>() << " " << r["frame_ms"].get<double>() << "\n";
+      f << "\n\n";
+    }
     std::ofstream g(skipDat);
     g << "# p_skip frame_ms node_tests\n";
     for (const auto& r : sceneOut["p_skip"])
@@ -79,12 +84,12 @@ void writePlots(const std::string& dir, const std::string& spec, const json& sce
     << "set multiplot layout 2,2 title '" << spec << ": Bittner and Havran 2001, Figures 8-11'\n"
     << "set logscale x 2\nset xlabel 'relative walking speed'\nset key top left\n";
   const char* methods[] = {"A", "B", "C", "D", "adaptive"};
-  const char* columns[][2] = {{"3", "node visibility tests"}, {"4", "culling time (ms)"}, {"5", "frame time (ms)"}};
+  const char* columns[][2] = {{"2", "node visibility tests"}, {"3", "culling time (ms)"}, {"4", "frame time (ms)"}};
   for (const auto& c : columns) {
     g << "set ylabel '" << c[1] << "'\nplot ";
     for (size_t m = 0; m < std::size(methods); ++m)
-      g << (m ? ", " : "") << "'" << speedDat << "' using (strcol(1) eq '" << methods[m] << "' ? $2 : 1/0):" << c[0]
-        << " with linespoints title '" << methods[m] << "'";
+      g << (m ? ", " : "") << "'" << speedDat << "' index " << m << " using 1:" << c[0] << " with linespoints title '"
+        << methods[m] << "'";
     g << "\n";
   }
   g << "unset logscale x\nset xlabel 'p_{skip} (method D, speed 1.0)'\nset ylabel 'frame time (ms)'\n"
