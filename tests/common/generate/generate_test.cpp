@@ -359,6 +359,23 @@ TEST(BigCityGenerator, StreetsAreFreeOfGeometryAndBuildingsDoNotOverlap) {
 
 // ---- interior: Bittner and Havran 2001, scene I --------------------------------
 
+TEST(InteriorGenerator, Interior2IsTheSameFloorWithWallsCutIntoPatchesOfAtMostTwoMetres) {
+  const PolygonScene whole = generate("interior", 1), patched = generate("interior2", 1);
+  double wholeLength = 0.0, patchedLength = 0.0;
+  for (const auto* w : objectsNamed(whole, "wall_")) {
+    const glm::dvec3 e = boundsOf(*w).extent();
+    wholeLength += std::max(e.x, e.z);
+  }
+  for (const auto* w : objectsNamed(patched, "wall_")) {
+    const glm::dvec3 e = boundsOf(*w).extent();
+    EXPECT_LE(std::max(e.x, e.z), 2.0 + 1e-9) << w->name;
+    patchedLength += std::max(e.x, e.z);
+  }
+  EXPECT_NEAR(patchedLength, wholeLength, 1e-6);  // cut, not moved
+  EXPECT_GT(objectsNamed(patched, "wall_").size(), 3 * objectsNamed(whole, "wall_").size());
+  EXPECT_EQ(objectsNamed(patched, "chair_").size(), objectsNamed(whole, "chair_").size());
+}
+
 TEST(InteriorGenerator, HasFloorCeilingWallsAndDoorsOnOneStorey) {
   const PolygonScene floor = generate("interior", 1);
   const auto floors = objectsNamed(floor, "floor"), ceilings = objectsNamed(floor, "ceiling");
