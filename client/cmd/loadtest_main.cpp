@@ -1,0 +1,92 @@
+// vistream-loadtest: N simulated clients walking through a scene over TCP
+// (see client/loadtest/load_test.h).
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <fstream>
+#include <iostream>
+
+#include "client/loadtest/load_test.h"
+#include "common/cmd/cli.h"
+#include "common/generate/scene_spec.h"
+#include "common/raycast/ray_query.h"
+#include "common/spatial/free_space.h"
+
+using namespace vistream;
+
+int main(int argc, char** argv) {
+  CLI::App app{"vistream-loadtest: simulated clients walking through a scene served by vistream-server, over real "
+               "TCP, without rendering. Prints bytes per client, CellReady latency and visibility misses."};
+  std::string logLevel, pathFile, pathsMode, sceneSpec, tokenFile;
+  bool asJson = false;
+  LoadTestOptions o;
+  app.add_option("--log-level", logLevel, "trace, debug, info, warn, error, critical, off");
+  app.add_option("--host", o.host, "server address (default 127.0.0.1)");
+  app.add_option("--port", o.port, "server port (default 7070)");
+  app.add_option("--clients", o.clients, "simulated clients (default 10)");
+  app.add_option("--path", pathFile, "path CSV (t,x,y,z,yaw_deg,pitch_deg); clients start at different points of it");
+  app.add_option("--paths", pathsMode, "auto: a different generated path per client (needs --scene)");
+  app.add_option("--speed", o.speed, "relative walking speed (default 1.0)");
+  app.add_option("--duration", o.durationS, "seconds each client walks (default 10)");
+  app.add_option("--fps", o.fps, "poses per second per client (default 10)");
+  app.add_option("--scene", sceneSpec, "the scene, locally: enables visibility-miss checks and --paths auto");
+  app.add_option("--check-every", o.checkEvery, "frames between visibility checks (default 10; 0: none)");
+  app.add_option("--radius", o.radius, "near-field radius to ask for in metres (0: the server's)");
+  app.add_option("--memory-budget", o.memoryBudget, "client memory budget in bytes (0: unlimited)");
+  app.add_option("--token-file", tokenFile, "auth token file (first line)");
+  app.add_option("--threads", o.threads, "client I/O threads (default 1)");
+  app.add_flag("--json", asJson, "one JSON object on stdout");
+  return runToolApp("vistream-loadtest", app, argc, argv, logLevel, [&]() -> int {
+    if (pathFile.empty() == pathsMode.empty()) throwInputError("give exactly one of --path P.csv and --paths auto");
+    if (!pathsMode.empty() && pathsMode != "auto") throwInputError("--paths: expected 'auto', got '{}'", pathsMode);
+    if (!tokenFile.empty()) {
+      std::ifstream f(tokenFile);
+      if (!f || !std::getline(f, o.token) || o.token.empty()) throwInputError("--token-file {}: cannot read a token", tokenFile);
+    }
+    Scene scene;
+    if (!sceneSpec.empty()) {
+      scene = openScene(sceneSpec);
+      o.scene = &scene;
+    }
+    if (!pathFile.empty()) {
+      o.paths.push_back(readPath(pathFile));
+    } else {
+      if (!o.scene) throwInputError("--paths auto needs --scene");
+      const FlatTriangles tris = flattenScene(scene, true);
+      const auto rays = makeEmbreeRayQuery(tris);
+      const FreeSpace fs = FreeSpace::build(*rays, scene.bounds());
+      for (size_t i = 0; i < o.clients; ++i) {
+        PathOptions po;
+        po.seed = 1000 + i;
+        po.frames = size_t(std::max(2.0, 30.0 * (o.durationS * std::max(1.0, o.speed) + 2.0)));
+        o.paths.push_back(generatePath(scene, fs, po));
+      }
+    }
+    spdlog::info("{} clients walking for {:.0f} s at speed {:.2f} against {}:{}", o.clients, o.durationS, o.speed, o.host, o.port);
+    const LoadTestReport r = runLoadTest(o);
+    const auto& j = r.json;
+    if (asJson) {
+      std::cout << j.dump() << "\n";
+    } else {
+      auto pct = [](const nlohmann::json& p) {
+        return p["count"].get<size_t>() == 0 ? std::string("-")
+                                             : fmt::format("{:.1f} / {:.1f} / {:.1f}", p["p50"].get<double>(),
+                                                           p["p95"].get<double>(), p["p99"].get<double>());
+      };
+      fmt::print("{:<34} {}\n", "clients", j["clients"].get<size_t>());
+      fmt::print("{:<34} {:.1f}\n", "duration (s)", j["duration_s"].get<double>());
+      fmt::print("{:<34} {:.0f}\n", "bytes per client per second", j["bytes_per_client_per_s"].get<double>());
+      fmt::print("{:<34} {}\n", "initial load ms (p50 / p95 / p99)", pct(j["initial_load_ms"]));
+      fmt::print("{:<34} {}\n", "CellReady latency ms (p50/p95/p99)", pct(j["cell_ready_latency_ms"]));
+      fmt::print("{:<34} {}\n", "cell entries", j["cell_entries"].get<uint64_t>());
+      fmt::print("{:<34} {} in {} checks\n", "visibility misses", j["visibility_misses"].get<uint64_t>(),
+                 j["frames_checked"].get<uint64_t>());
+      fmt::print("{:<34} {}{}\n", "errors", j["errors"].get<uint64_t>(),
+                 j["first_error"].get<std::string>().empty() ? "" : " (first: " + j["first_error"].get<std::string>() + ")");
+      if (!j["server_cpu_ms_per_s_per_client"].is_null())
+        fmt::print("{:<34} {:.2f}\n", "server CPU ms/s per client", j["server_cpu_ms_per_s_per_client"].get<double>());
+    }
+    return j["errors"].get<uint64_t>() == 0 ? 0 : 3;
+  });
+}

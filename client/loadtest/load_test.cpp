@@ -1,0 +1,392 @@
+#include "client/loadtest/load_test.h"
+
+#include <boost/asio.hpp>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <deque>
+#include <map>
+#include <thread>
+#include <memory>
+#include <set>
+
+#include "common/core/error.h"
+#include "common/raycast/ray_query.h"
+#include "protocol/geometry/geometry_codec.h"
+#include "protocol/wire/messages.h"
+
+namespace vistream {
+
+namespace asio = boost::asio;
+using asio::ip::tcp;
+using Clock = std::chrono::steady_clock;
+using namespace wire;
+
+namespace {
+
+double msSince(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); }
+
+nlohmann::json percentiles(std::vector<double> v) {
+  if (v.empty()) return {{"p50", nullptr}, {"p95", nullptr}, {"p99", nullptr}, {"max", nullptr}, {"count", 0}};
+  std::sort(v.begin(), v.end());
+  auto at = [&](double q) { return v[std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5))]; };
+  return {{"p50", at(0.5)}, {"p95", at(0.95)}, {"p99", at(0.99)}, {"max", v.back()}, {"count", v.size()}};
+}
+
+struct Shared {
+  const LoadTestOptions& options;
+  std::unique_ptr<RayQuery> rays;
+  FlatTriangles triangles;
+  tcp::endpoint endpoint;
+};
+
+// Where a path puts the walker at path time t (looping), and its velocity.
+struct PathPoint {
+  glm::dvec3 position;
+  glm::dvec3 velocity;
+  double yaw, pitch;
+};
+PathPoint pointAt(const std::vector<PathSample>& path, double t) {
+  if (path.size() == 1) return {path[0].position, glm::dvec3(0.0), path[0].yawDeg, path[0].pitchDeg};
+  const double t0 = path.front().t, span = path.back().t - t0;
+  const double local = span > 0.0 ? t0 + std::fmod(std::max(0.0, t), span) : t0;
+  size_t k = size_t(std::upper_bound(path.begin(), path.end(), local, [](double v, const PathSample& s) { return v < s.t; }) -
+                    path.begin());
+  k = std::clamp<size_t>(k, 1, path.size() - 1);
+  const PathSample &a = path[k - 1], &b = path[k];
+  const double dt = b.t - a.t;
+  const double u = dt > 0.0 ? std::clamp((local - a.t) / dt, 0.0, 1.0) : 0.0;
+  double dyaw = std::remainder(b.yawDeg - a.yawDeg, 360.0);
+  return {glm::mix(a.position, b.position, u), dt > 0.0 ? (b.position - a.position) / dt : glm::dvec3(0.0),
+          a.yawDeg + u * dyaw, glm::mix(a.pitchDeg, b.pitchDeg, u)};
+}
+
+class SimClient : public std::enable_shared_from_this<SimClient> {
+ public:
+  SimClient(asio::io_context& io, Shared& shared, size_t index)
+      : shared_(shared), opt_(shared.options), index_(index), strand_(asio::make_strand(io)), socket_(strand_),
+        timer_(strand_), decoder_(64u << 20) {
+    path_ = &opt_.paths[opt_.paths.size() == 1 ? 0 : index % opt_.paths.size()];
+    const double span = path_->back().t - path_->front().t;
+    offset_ = opt_.paths.size() == 1 && opt_.clients > 0 ? span * double(index) / double(opt_.clients) : 0.0;
+  }
+
+  void start() {
+    asio::dispatch(strand_, [self = shared_from_this()] {
+      self->connectStarted_ = Clock::now();
+      self->timer_.expires_after(std::chrono::duration_cast<Clock::duration>(
+          std::chrono::duration<double>(self->opt_.connectTimeoutS)));
+      self->timer_.async_wait([self](const boost::system::error_code& ec) {
+        if (!ec && !self->connected_) self->finish("connect timed out", true);
+      });
+      self->socket_.async_connect(self->shared_.endpoint, [self](const boost::system::error_code& ec) {
+        if (self->done_) return;
+        if (ec) return self->finish("connect: " + ec.message(), true);
+        self->connected_ = true;
+        self->timer_.cancel();
+        boost::system::error_code ignored;
+        self->socket_.set_option(tcp::no_delay(true), ignored);
+        HelloT hello;
+        hello.protocol_version = kProtocolVersion;
+        hello.auth_token = self->opt_.token;
+        hello.client_name = "vistream-loadtest";
+        hello.capabilities = std::make_unique<CapabilitiesT>();
+        hello.capabilities->near_field_radius_m = self->opt_.radius;
+        hello.capabilities->memory_budget_bytes = self->opt_.memoryBudget;
+        self->helloSent_ = Clock::now();
+        self->send(encodeMessage(std::move(hello)));
+        self->read();
+      });
+    });
+  }
+
+  // Results, read after the io_context has stopped.
+  uint64_t bytes = 0, misses = 0, checks = 0, errors = 0, geometryFrames = 0, facesReceived = 0, cellEntries = 0;
+  std::vector<double> latencies;
+  double initialLoadMs = -1.0;
+  std::vector<double> cpuPerClient;
+  double walkedS = 0.0;
+  std::string firstError;
+
+ private:
+  void send(std::vector<uint8_t> frame) {
+    auto buf = std::make_shared<std::vector<uint8_t>>(std::move(frame));
+    outbox_.push_back(buf);
+    if (outbox_.size() == 1) writeNext();
+  }
+  void writeNext() {
+    if (outbox_.empty() || done_) return;
+    asio::async_write(socket_, asio::buffer(*outbox_.front()), [self = shared_from_this()](const boost::system::error_code& ec, size_t) {
+      if (self->done_) return;
+      if (ec) return self->finish("write: " + ec.message(), true);
+      self->outbox_.pop_front();
+      self->writeNext();
+    });
+  }
+  void read() {
+    socket_.async_read_some(asio::buffer(buffer_), [self = shared_from_this()](const boost::system::error_code& ec, size_t n) {
+      if (self->done_) return;
+      if (ec) return self->finish("connection closed by the server: " + ec.message(), !self->walkEnded_);
+      self->bytes += n;
+      if (!self->decoder_.feed(std::span<const uint8_t>(self->buffer_.data(), n)))
+        return self->finish("bad frame from the server: " + self->decoder_.error(), true);
+      while (auto frame = self->decoder_.next()) {
+        self->onFrame(*envelopeOf(*frame));
+        if (self->done_) return;
+      }
+      if (self->decoder_.failed()) return self->finish("bad frame from the server: " + self->decoder_.error(), true);
+      self->read();
+    });
+  }
+
+  void onFrame(const Envelope& e) {
+    const auto now = Clock::now();
+    switch (e.payload_type()) {
+      case Payload::Welcome: {
+        const Welcome& w = *e.payload_as_Welcome();
+        if (!w.grid() || !w.grid()->cell_size() || !w.grid()->origin() || !w.grid()->dims() || !w.local_origin() ||
+            w.face_count() > (64u << 20))
+          return finish("Welcome without a usable grid", true);
+        origin_ = fromWire(*w.local_origin());
+        gridOrigin_ = fromWire(*w.grid()->origin());
+        cellSize_ = fromWire(*w.grid()->cell_size());
+        dims_ = fromWire(*w.grid()->dims());
+        radius_ = w.near_field_radius_m();
+        held_.assign((size_t(w.face_count()) + 63) / 64, 0);
+        walkStarted_ = now;
+        tick();
+        return;
+      }
+      case Payload::Geometry: {
+        DecodedGeometry g;
+        std::string error;
+        if (!decodeGeometry(*e.payload_as_Geometry(), g, error)) return finish(error, true);
+        ++geometryFrames;
+        for (uint32_t f : g.faces)
+          if ((f >> 6) < held_.size()) {
+            held_[f >> 6] |= uint64_t(1) << (f & 63);
+            ++facesReceived;
+          }
+        return;
+      }
+      case Payload::Evict: {
+        if (const auto* ids = e.payload_as_Evict()->face_ids())
+          for (uint32_t f : *ids)
+            if ((f >> 6) < held_.size()) held_[f >> 6] &= ~(uint64_t(1) << (f & 63));
+        // Cells away from here may have lost faces; the server announces them again.
+        for (auto it = ready_.begin(); it != ready_.end();)
+          it = glm::all(glm::lessThanEqual(glm::abs(*it - cell_), glm::ivec3(1))) ? std::next(it) : ready_.erase(it);
+        return;
+      }
+      case Payload::CellReady: {
+        const CellReady& r = *e.payload_as_CellReady();
+        if (!r.cell()) return;
+        const glm::ivec3 c = fromWire(*r.cell());
+        ready_.insert(c);
+        if (initialLoadMs < 0.0 && hasCell_ && c == cell_) initialLoadMs = msSince(helloSent_, now);
+        if (auto it = pending_.find(c); it != pending_.end()) {
+          latencies.push_back(msSince(it->second, now));
+          pending_.erase(it);
+        }
+        return;
+      }
+      case Payload::Stats: {
+        const Stats& s = *e.payload_as_Stats();
+        if (s.sessions() > 0) cpuPerClient.push_back(s.server_cpu_ms_per_s() / double(s.sessions()));
+        return;
+      }
+      case Payload::Error: {
+        const Error& err = *e.payload_as_Error();
+        return finish(fmt::format("server error {}: {}", EnumNameErrorCode(err.code()), err.text() ? err.text()->str() : ""), true);
+      }
+      case Payload::Bye: return finish("server said bye", !walkEnded_);
+      default: return;  // Avatar, PvsReply: not measured
+    }
+  }
+
+  void tick() {
+    if (done_) return;
+    const auto now = Clock::now();
+    const double elapsed = std::chrono::duration<double>(now - walkStarted_).count();
+    if (elapsed >= opt_.durationS) {
+      walkEnded_ = true;
+      walkedS = elapsed;
+      for (const auto& [c, t] : pending_) latencies.push_back(msSince(t, now));  // still waiting: counted as such
+      pending_.clear();
+      send(encodeBye("load test finished"));
+      // Let the Bye go out, then close.
+      timer_.expires_after(std::chrono::milliseconds(200));
+      timer_.async_wait([self = shared_from_this()](const boost::system::error_code&) { self->finish("", false); });
+      return;
+    }
+    const PathPoint p = pointAt(*path_, offset_ + elapsed * opt_.speed);
+    const glm::dvec3 local = p.position - origin_;
+    PoseT pose;
+    pose.position = std::make_unique<Vec3d>(toWire(local));
+    pose.yaw_deg = float(p.yaw);
+    pose.pitch_deg = float(p.pitch);
+    pose.velocity = std::make_unique<Vec3f>(toWire(glm::vec3(p.velocity * opt_.speed)));
+    pose.client_time_s = elapsed;
+    send(encodeMessage(std::move(pose)));
+
+    const glm::ivec3 cell = glm::clamp(glm::ivec3(glm::floor((glm::vec3(local) - gridOrigin_) / cellSize_)), glm::ivec3(0),
+                                       glm::max(dims_ - 1, glm::ivec3(0)));
+    if (!hasCell_ || cell != cell_) {
+      cell_ = cell;
+      const bool first = !hasCell_;
+      hasCell_ = true;
+      if (first && ready_.count(cell) && initialLoadMs < 0.0) initialLoadMs = msSince(helloSent_, now);
+      if (!first && initialLoadMs >= 0.0) {
+        ++cellEntries;
+        if (ready_.count(cell)) latencies.push_back(0.0);
+        else pending_.emplace(cell, now);
+      }
+    }
+    ++frame_;
+    if (shared_.rays && opt_.checkEvery > 0 && initialLoadMs >= 0.0 && frame_ % opt_.checkEvery == 0) check(local, p.yaw, p.pitch);
+    timer_.expires_after(std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / opt_.fps)));
+    timer_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
+      if (!ec) self->tick();
+    });
+  }
+
+  void check(const glm::dvec3& eye, double yaw, double pitch) {
+    ++checks;
+    const glm::dvec3 f = viewDirection(yaw, pitch);
+    glm::dvec3 r = glm::cross(f, glm::dvec3(0, 1, 0));
+    r = glm::length(r) > 1e-9 ? glm::normalize(r) : glm::dvec3(1, 0, 0);
+    const glm::dvec3 u = glm::cross(r, f);
+    const double th = std::tan(30.0 * 3.14159265358979323846 / 180.0), tv = th * 0.75;
+    std::set<uint32_t> missing;
+    for (int y = 0; y < opt_.checkRaysY; ++y)
+      for (int x = 0; x < opt_.checkRaysX; ++x) {
+        const glm::dvec3 d = f + r * (th * ((x + 0.5) / (0.5 * opt_.checkRaysX) - 1.0)) +
+                             u * (tv * ((y + 0.5) / (0.5 * opt_.checkRaysY) - 1.0));
+        const Hit h = shared_.rays->firstHit(Ray{glm::vec3(eye), glm::vec3(glm::normalize(d)), 0.0f, radius_});
+        if (!h.valid()) continue;
+        const uint32_t face = shared_.triangles.faceIds[h.triangle];
+        if ((face >> 6) >= held_.size() || !((held_[face >> 6] >> (face & 63)) & 1u)) missing.insert(face);
+      }
+    misses += missing.size();
+  }
+
+  void finish(const std::string& why, bool isError) {
+    if (done_) return;
+    done_ = true;
+    if (isError) {
+      ++errors;
+      if (firstError.empty()) firstError = why;
+      spdlog::debug("client {}: {}", index_, why);
+    }
+    if (walkedS == 0.0 && walkStarted_ != Clock::time_point{}) walkedS = std::chrono::duration<double>(Clock::now() - walkStarted_).count();
+    boost::system::error_code ignored;
+    socket_.close(ignored);
+    timer_.cancel();
+  }
+
+  Shared& shared_;
+  const LoadTestOptions& opt_;
+  size_t index_;
+  asio::strand<asio::io_context::executor_type> strand_;
+  tcp::socket socket_;
+  asio::steady_timer timer_;
+  FrameDecoder decoder_;
+  std::array<uint8_t, 65536> buffer_{};
+  std::deque<std::shared_ptr<std::vector<uint8_t>>> outbox_;
+  const std::vector<PathSample>* path_ = nullptr;
+  double offset_ = 0.0;
+  bool connected_ = false, done_ = false, walkEnded_ = false, hasCell_ = false;
+  Clock::time_point connectStarted_, helloSent_, walkStarted_;
+  glm::dvec3 origin_{0.0};
+  glm::vec3 gridOrigin_{0.0f}, cellSize_{1.0f};
+  glm::ivec3 dims_{1}, cell_{0};
+  float radius_ = 0.0f;
+  std::vector<uint64_t> held_;
+  struct IvecLess {
+    bool operator()(const glm::ivec3& a, const glm::ivec3& b) const {
+      return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z);
+    }
+  };
+  std::set<glm::ivec3, IvecLess> ready_;
+  std::map<glm::ivec3, Clock::time_point, IvecLess> pending_;
+  uint64_t frame_ = 0;
+};
+
+}  // namespace
+
+LoadTestReport runLoadTest(const LoadTestOptions& options) {
+  if (options.clients == 0) throwInputError("--clients must be at least 1");
+  if (options.paths.empty() || std::any_of(options.paths.begin(), options.paths.end(), [](const auto& p) { return p.empty(); }))
+    throwInputError("no path to walk");
+  if (!(options.durationS > 0.0) || !(options.fps > 0.0) || !(options.speed >= 0.0))
+    throwInputError("--duration and --fps must be positive and --speed non-negative");
+  Shared shared{options, nullptr, {}, {}};
+  if (options.scene) {
+    shared.triangles = flattenScene(*options.scene, true);
+    shared.rays = makeEmbreeRayQuery(shared.triangles);
+  }
+  asio::io_context io;
+  {
+    tcp::resolver resolver(io);
+    boost::system::error_code ec;
+    auto results = resolver.resolve(options.host, std::to_string(options.port), ec);
+    if (ec || results.empty()) throwInputError("--host {}: cannot resolve it: {}", options.host, ec.message());
+    shared.endpoint = *results.begin();
+  }
+  std::vector<std::shared_ptr<SimClient>> clients;
+  for (size_t i = 0; i < options.clients; ++i) {
+    clients.push_back(std::make_shared<SimClient>(io, shared, i));
+    clients.back()->start();
+  }
+  const auto started = Clock::now();
+  std::vector<std::thread> threads;
+  for (unsigned t = 1; t < std::max(1u, options.threads); ++t) threads.emplace_back([&io] { io.run(); });
+  io.run();
+  for (auto& t : threads) t.join();
+  const double wall = std::chrono::duration<double>(Clock::now() - started).count();
+
+  std::vector<double> latencies, initial, cpu, bytesPerS;
+  uint64_t misses = 0, checks = 0, errors = 0, entries = 0, frames = 0;
+  size_t loaded = 0;
+  std::string firstError;
+  for (const auto& c : clients) {
+    latencies.insert(latencies.end(), c->latencies.begin(), c->latencies.end());
+    if (c->initialLoadMs >= 0.0) {
+      initial.push_back(c->initialLoadMs);
+      ++loaded;
+    }
+    cpu.insert(cpu.end(), c->cpuPerClient.begin(), c->cpuPerClient.end());
+    bytesPerS.push_back(c->walkedS > 0.0 ? double(c->bytes) / c->walkedS : 0.0);
+    misses += c->misses;
+    checks += c->checks;
+    errors += c->errors;
+    entries += c->cellEntries;
+    frames += c->geometryFrames;
+    if (firstError.empty()) firstError = c->firstError;
+  }
+  double meanBytes = 0.0;
+  for (double b : bytesPerS) meanBytes += b / double(bytesPerS.size());
+  double cpuMean = 0.0;
+  for (double v : cpu) cpuMean += v / double(cpu.size());
+  LoadTestReport report;
+  report.json = {{"clients", options.clients},
+                 {"duration_s", options.durationS},
+                 {"wall_s", wall},
+                 {"speed", options.speed},
+                 {"bytes_per_client_per_s", meanBytes},
+                 {"cell_ready_latency_ms", percentiles(latencies)},
+                 {"cell_entries", entries},
+                 {"visibility_misses", misses},
+                 {"frames_checked", checks},
+                 {"initial_load_ms", percentiles(initial)},
+                 {"clients_loaded", loaded},
+                 {"geometry_frames", frames},
+                 {"errors", errors},
+                 {"first_error", firstError},
+                 {"server_cpu_ms_per_s_per_client", cpu.empty() ? nlohmann::json(nullptr) : nlohmann::json(cpuMean)}};
+  return report;
+}
+
+}  // namespace vistream

@@ -1,0 +1,72 @@
+// vistream-server: streams a scene to many clients over TCP (see
+// server/stream/stream_server.h and protocol/README.md).
+#include <CLI/CLI.hpp>
+#include <spdlog/spdlog.h>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "common/cmd/cli.h"
+#include "common/generate/scene_spec.h"
+#include "server/stream/stream_server.h"
+
+using namespace vistream;
+
+int main(int argc, char** argv) {
+  CLI::App app{"vistream-server: streams to each client the part of a scene it can see (a conservative PVS of its "
+               "view cell), over TCP.\nA SCENE is a file (.obj, .gltf, .glb, .json manifest) or a built-in name "
+               "(city1, city2, bigcity, interior, interior2, terrain)."};
+  app.set_config("--config", "", "read options from a TOML/INI file (keys are the long option names)");
+  std::string logLevel, scene, pvsDb, tokenFile, policy = "visibility", portFile;
+  StreamServerConfig cfg;
+  StreamWorldOptions worldOptions;
+  app.add_option("--log-level", logLevel, "trace, debug, info, warn, error, critical, off");
+  app.add_option("--scene", scene, "SCENE")->required();
+  app.add_option("--pvs-db", pvsDb, "baked PVS database (vistream-pvs bake); default: compute on demand");
+  app.add_option("--cell-size", worldOptions.cellSize, "view cell size in metres without a database (default 8)");
+  app.add_option("--pvs-cache", worldOptions.pvsCacheCells, "cells whose PVS stays cached (LRU)");
+  app.add_option("--bind", cfg.bindAddress, "address to listen on (default 127.0.0.1)");
+  app.add_option("--port", cfg.port, "TCP port (default 7070; 0 picks a free one)");
+  app.add_option("--port-file", portFile, "write the port listened on to this file");
+  app.add_option("--threads", cfg.ioThreads, "I/O threads (default 2)");
+  app.add_option("--workers", cfg.workerThreads, "visibility worker threads (default: all cores)");
+  app.add_option("--max-clients", cfg.maxClients, "sessions at once (default 1000)");
+  app.add_option("--token-file", tokenFile, "require the shared token in this file (first line)");
+  app.add_flag("--pvs-only", cfg.pvsOnly, "answer PvsRequest with face IDs; send no geometry");
+  app.add_option("--policy", policy, "visibility (PVS within the radius) or radius (baseline: everything within it)");
+  app.add_option("--radius", cfg.defaultRadius, "near-field radius in metres when the client names none (default 200)");
+  app.add_option("--max-client-kbps", cfg.maxClientKbps, "per-client bandwidth limit in kbit/s (0: none)");
+  app.add_option("--prefetch-s", cfg.prefetchSeconds, "prefetch the cells the client reaches within this time");
+  app.add_option("--avatar-hz", cfg.avatarHz, "avatar updates per second (0: off)");
+  app.add_option("--stats-interval", cfg.statsIntervalS, "seconds between stats lines");
+  app.add_option("--max-frame-bytes", cfg.maxInboundFrameBytes, "largest inbound frame accepted");
+  app.add_option("--send-queue-bytes", cfg.sendQueueLimitBytes, "a client with more queued is not reading: closed");
+  app.add_option("--hello-timeout", cfg.helloTimeoutS, "seconds a client has to say Hello");
+  app.add_option("--idle-timeout", cfg.idleTimeoutS, "seconds of silence before a client is closed");
+  app.add_option("--max-frames-per-s", cfg.maxFramesPerSecond, "inbound frames per second per client");
+  return runToolApp("vistream-server", app, argc, argv, logLevel, [&]() -> int {
+    cfg.policy = parseStreamPolicy(policy);
+    if (!tokenFile.empty()) {
+      std::ifstream f(tokenFile);
+      if (!f) throwInputError("--token-file {}: cannot read it", tokenFile);
+      std::getline(f, cfg.token);
+      while (!cfg.token.empty() && (cfg.token.back() == '\r' || cfg.token.back() == ' ')) cfg.token.pop_back();
+      if (cfg.token.empty()) throwInputError("--token-file {}: the first line is empty", tokenFile);
+    }
+    if (!(cfg.defaultRadius > 0.0f)) throwInputError("--radius must be positive");
+    if (cfg.maxClientKbps < 0.0) throwInputError("--max-client-kbps must be >= 0");
+    if (cfg.ioThreads == 0) throwInputError("--threads must be at least 1");
+    worldOptions.pvsDatabase = pvsDb;
+    StreamWorld world(openScene(scene), worldOptions);
+    StreamServer server(world, cfg);
+    server.start();
+    if (!portFile.empty()) {
+      const std::filesystem::path tmp = portFile + ".tmp";
+      std::ofstream(tmp) << server.port() << "\n";
+      std::filesystem::rename(tmp, portFile);
+    }
+    server.run(true);
+    return 0;
+  });
+}

@@ -1,0 +1,538 @@
+#include "server/stream/session.h"
+
+#include <boost/asio/bind_executor.hpp>
+#include <boost/asio/post.hpp>
+#include <boost/asio/write.hpp>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "protocol/geometry/geometry_codec.h"
+#include "server/stream/stream_server.h"
+
+namespace vistream {
+
+namespace asio = boost::asio;
+using namespace wire;
+
+namespace {
+double seconds(std::chrono::steady_clock::duration d) { return std::chrono::duration<double>(d).count(); }
+
+bool sameToken(const std::string& a, const std::string& b) {
+  // Constant time in the token's length.
+  unsigned diff = unsigned(a.size() != b.size());
+  for (size_t i = 0; i < a.size(); ++i) diff |= unsigned(uint8_t(a[i]) ^ uint8_t(i < b.size() ? b[i] : 0));
+  return diff == 0;
+}
+}  // namespace
+
+Session::Session(StreamServer& server, asio::ip::tcp::socket socket, uint32_t id)
+    : server_(server),
+      world_(server.world()),
+      strand_(asio::make_strand(server.io())),
+      socket_(std::move(socket)),
+      housekeepingTimer_(strand_),
+      id_(id),
+      decoder_(server.config().maxInboundFrameBytes) {
+  held_.assign((size_t(world_.faceCount()) + 63) / 64, 0);
+}
+
+Session::~Session() = default;
+
+void Session::start() {
+  asio::dispatch(strand_, [self = shared_from_this()] {
+    self->started_ = self->lastInbound_ = self->windowStart_ = self->lastRefill_ = Clock::now();
+    self->read();
+    self->housekeeping();
+  });
+}
+
+void Session::reject(ErrorCode code, const std::string& text) {
+  asio::dispatch(strand_, [self = shared_from_this(), code, text] {
+    self->started_ = Clock::now();
+    self->fail(code, text);
+    self->housekeeping();
+  });
+}
+
+void Session::shutdown(const std::string& reason) {
+  asio::dispatch(strand_, [self = shared_from_this(), reason] {
+    if (self->state_ == State::Closed || self->state_ == State::Closing) return;
+    self->send(std::make_shared<const std::vector<uint8_t>>(encodeBye(reason)));
+    self->state_ = State::Closing;
+    self->closingSince_ = Clock::now();
+    if (self->queue_.empty()) self->close("shutdown");
+  });
+}
+
+void Session::deliverAvatars(std::shared_ptr<const std::vector<uint8_t>> frame) {
+  asio::dispatch(strand_, [self = shared_from_this(), frame = std::move(frame)] {
+    if (self->state_ == State::Active) self->send(frame);
+  });
+}
+
+Session::Snapshot Session::snapshot() const {
+  std::lock_guard lock(snapshotMutex_);
+  return snapshot_;
+}
+
+void Session::read() {
+  socket_.async_read_some(
+      asio::buffer(readBuffer_),
+      asio::bind_executor(strand_, [self = shared_from_this()](const boost::system::error_code& ec, size_t n) {
+        if (self->state_ == State::Closed) return;
+        if (ec) {
+          if (self->decoder_.buffered() > 0)
+            spdlog::warn("session {}: connection lost in the middle of a frame ({} bytes buffered): {}", self->id_,
+                         self->decoder_.buffered(), ec.message());
+          self->close(ec == asio::error::eof ? "client closed the connection" : "read error");
+          return;
+        }
+        self->lastInbound_ = Clock::now();
+        if (!self->decoder_.feed(std::span<const uint8_t>(self->readBuffer_.data(), n))) {
+          const bool tooLarge = self->decoder_.error().find("exceeds") != std::string::npos;
+          self->fail(tooLarge ? ErrorCode::FrameTooLarge : ErrorCode::MalformedFrame, self->decoder_.error());
+          return;
+        }
+        while (self->state_ == State::AwaitHello || self->state_ == State::Active) {
+          auto frame = self->decoder_.next();
+          if (!frame) {
+            if (self->decoder_.failed()) self->fail(ErrorCode::MalformedFrame, self->decoder_.error());
+            break;
+          }
+          // Inbound rate limit over one-second windows.
+          const auto now = Clock::now();
+          if (now - self->windowStart_ >= std::chrono::seconds(1)) {
+            self->windowStart_ = now;
+            self->framesInWindow_ = 0;
+          }
+          if (++self->framesInWindow_ > self->server_.config().maxFramesPerSecond) {
+            self->fail(ErrorCode::RateLimited,
+                       fmt::format("more than {} frames per second", self->server_.config().maxFramesPerSecond));
+            break;
+          }
+          self->onFrame(*envelopeOf(*frame));
+        }
+        if (self->state_ == State::AwaitHello || self->state_ == State::Active) self->read();
+      }));
+}
+
+void Session::onFrame(const Envelope& envelope) {
+  switch (envelope.payload_type()) {
+    case Payload::Hello: return onHello(*envelope.payload_as_Hello());
+    case Payload::Pose:
+      if (state_ != State::Active) return fail(ErrorCode::OutOfOrder, "Pose before Hello");
+      return onPose(*envelope.payload_as_Pose());
+    case Payload::PvsRequest:
+      if (state_ != State::Active) return fail(ErrorCode::OutOfOrder, "PvsRequest before Hello");
+      return onPvsRequest(*envelope.payload_as_PvsRequest());
+    case Payload::Bye:
+      spdlog::info("session {}: client said bye", id_);
+      return close("bye");
+    case Payload::Error: {
+      const auto* e = envelope.payload_as_Error();
+      spdlog::warn("session {}: client reported error {}: {}", id_, int(e->code()),
+                   e->text() ? e->text()->str() : std::string());
+      return close("client error");
+    }
+    default:
+      return fail(ErrorCode::OutOfOrder,
+                  fmt::format("{} is a server-to-client message", payloadName(envelope.payload_type())));
+  }
+}
+
+void Session::onHello(const Hello& hello) {
+  const StreamServerConfig& cfg = server_.config();
+  if (state_ != State::AwaitHello) return fail(ErrorCode::OutOfOrder, "second Hello");
+  if (hello.protocol_version() != kProtocolVersion)
+    return fail(ErrorCode::UnsupportedVersion,
+                fmt::format("protocol version {} is not supported (server speaks {})", hello.protocol_version(),
+                            kProtocolVersion));
+  if (!cfg.token.empty() && !sameToken(hello.auth_token() ? hello.auth_token()->str() : std::string(), cfg.token))
+    return fail(ErrorCode::BadToken, "bad auth token");
+  radius_ = cfg.defaultRadius;
+  if (const Capabilities* caps = hello.capabilities()) {
+    const float r = caps->near_field_radius_m();
+    if (!std::isfinite(r) || r < 0.0f) return fail(ErrorCode::BadRequest, "near_field_radius_m must be finite and >= 0");
+    if (r > 0.0f) radius_ = std::min(r, cfg.maxRadius);
+    budget_ = caps->memory_budget_bytes();
+    wantsGeometry_ = caps->wants_geometry();
+    wantsAvatars_ = caps->wants_avatars();
+  }
+  state_ = State::Active;
+  {
+    std::lock_guard lock(snapshotMutex_);
+    snapshot_.id = id_;
+    snapshot_.active = true;
+    snapshot_.wantsAvatars = wantsAvatars_;
+    snapshot_.radius = radius_;
+  }
+  const Scene& scene = world_.scene();
+  WelcomeT w;
+  w.protocol_version = kProtocolVersion;
+  w.scene_id = scene.name;
+  w.session_id = id_;
+  const Box3f b = scene.bounds();
+  w.bounds_min = std::make_unique<Vec3d>(toWire(glm::dvec3(b.lo)));
+  w.bounds_max = std::make_unique<Vec3d>(toWire(glm::dvec3(b.hi)));
+  w.local_origin = std::make_unique<Vec3d>(toWire(scene.origin));
+  w.grid = std::make_unique<CellGridT>();
+  w.grid->origin = std::make_unique<Vec3f>(toWire(world_.grid().origin()));
+  w.grid->cell_size = std::make_unique<Vec3f>(toWire(world_.grid().cellSize()));
+  w.grid->dims = std::make_unique<CellIndex>(toWire(world_.grid().dims()));
+  for (const Material& m : scene.materials) {
+    auto mi = std::make_unique<MaterialInfoT>();
+    mi->name = m.name;
+    mi->diffuse = std::make_unique<Vec3f>(toWire(m.diffuse));
+    w.materials.push_back(std::move(mi));
+  }
+  w.environment_colour = std::make_unique<Vec3f>(toWire(scene.environment.skyColor));
+  w.environment_map = scene.environment.hdrImage.string();
+  w.face_count = world_.faceCount();
+  w.near_field_radius_m = radius_;
+  w.pvs_only = cfg.pvsOnly;
+  w.policy = streamPolicyName(cfg.policy);
+  send(std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(w))));
+  spdlog::debug("session {}: welcome (radius {:.0f} m, budget {} bytes)", id_, radius_, budget_);
+}
+
+void Session::onPose(const Pose& pose) {
+  if (!isFinite(pose.position()) || !std::isfinite(pose.yaw_deg()) || !std::isfinite(pose.pitch_deg()) ||
+      (pose.velocity() && !isFinite(pose.velocity())))
+    return fail(ErrorCode::BadRequest, "Pose with a missing or non-finite position, orientation or velocity");
+  position_ = fromWire(*pose.position());
+  velocity_ = pose.velocity() ? fromWire(*pose.velocity()) : glm::vec3(0.0f);
+  yaw_ = pose.yaw_deg();
+  pitch_ = pose.pitch_deg();
+  const auto cell = world_.cellOf(glm::vec3(position_));
+  hasPose_ = cell.has_value();
+  if (cell) cell_ = *cell;
+  {
+    std::lock_guard lock(snapshotMutex_);
+    snapshot_.hasPose = hasPose_;
+    snapshot_.position = position_;
+    snapshot_.yawDeg = yaw_;
+    snapshot_.pitchDeg = pitch_;
+    snapshot_.cell = cell_;
+  }
+  pump();
+}
+
+void Session::onPvsRequest(const PvsRequest& request) {
+  std::optional<glm::ivec3> cell;
+  if (request.by_cell()) {
+    const glm::ivec3 c = request.cell() ? fromWire(*request.cell()) : glm::ivec3(-1);
+    if (world_.grid().contains(c)) cell = c;
+  } else if (isFinite(request.point())) {
+    const glm::vec3 p(fromWire(*request.point()));
+    const glm::vec3 rel = (p - world_.grid().origin()) / world_.grid().cellSize();
+    const glm::ivec3 c(glm::floor(rel));
+    if (world_.grid().contains(c)) cell = c;
+  }
+  const uint32_t requestId = request.request_id();
+  if (!cell) {
+    PvsReplyT reply;
+    reply.request_id = requestId;
+    reply.found = false;
+    return send(std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(reply))));
+  }
+  world_.pvs(*cell, server_.workers(), [self = shared_from_this(), requestId, c = *cell](FaceListPtr faces) {
+    PvsReplyT reply;
+    reply.request_id = requestId;
+    reply.cell = std::make_unique<CellIndex>(toWire(c));
+    reply.face_ids = *faces;
+    reply.found = true;
+    auto frame = std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(reply)));
+    asio::post(self->strand_, [self, frame] {
+      if (self->state_ == State::Active) self->send(frame);
+    });
+  });
+}
+
+void Session::fail(ErrorCode code, const std::string& text) {
+  if (state_ == State::Closed || state_ == State::Closing) return;
+  spdlog::warn("session {}: {} ({}); closing it", id_, text, EnumNameErrorCode(code));
+  send(std::make_shared<const std::vector<uint8_t>>(encodeError(code, text)));
+  state_ = State::Closing;
+  closingSince_ = Clock::now();
+}
+
+void Session::close(const char* why) {
+  if (state_ == State::Closed) return;
+  state_ = State::Closed;
+  spdlog::debug("session {}: closed ({}), {} bytes sent", id_, why, bytesSent_);
+  boost::system::error_code ignored;
+  socket_.shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
+  socket_.close(ignored);
+  housekeepingTimer_.cancel();
+  queue_.clear();
+  queued_ = 0;
+  queuedAtomic_ = 0;
+  {
+    std::lock_guard lock(snapshotMutex_);
+    snapshot_.active = false;
+  }
+  server_.sessionEnded(id_);
+}
+
+void Session::send(std::shared_ptr<const std::vector<uint8_t>> frame) {
+  if (state_ == State::Closed) return;
+  queued_ += frame->size();
+  queuedAtomic_ = queued_;
+  queue_.push_back(std::move(frame));
+  if (queued_ > server_.config().sendQueueLimitBytes) {
+    spdlog::warn("session {}: client is not reading ({} bytes queued); closing it", id_, queued_);
+    close("not reading");
+    return;
+  }
+  writeNext();
+}
+
+void Session::writeNext() {
+  if (writing_ || queue_.empty() || state_ == State::Closed) return;
+  writing_ = true;
+  writeStarted_ = Clock::now();
+  asio::async_write(socket_, asio::buffer(*queue_.front()),
+                    asio::bind_executor(strand_, [self = shared_from_this()](const boost::system::error_code& ec, size_t n) {
+                      self->writing_ = false;
+                      if (self->state_ == State::Closed) return;
+                      if (ec) return self->close("write error");
+                      self->bytesSent_ += n;
+                      self->server_.countSent(n);
+                      self->queued_ -= self->queue_.front()->size();
+                      self->queuedAtomic_ = self->queued_;
+                      self->queue_.pop_front();
+                      if (self->state_ == State::Closing && self->queue_.empty()) return self->close("closing");
+                      self->writeNext();
+                      self->pump();
+                    }));
+}
+
+void Session::housekeeping() {
+  if (state_ == State::Closed) return;
+  const StreamServerConfig& cfg = server_.config();
+  const auto now = Clock::now();
+  if (state_ == State::Closing && seconds(now - closingSince_) > 2.0) return close("closing timed out");
+  if (state_ == State::AwaitHello && seconds(now - started_) > cfg.helloTimeoutS)
+    return fail(ErrorCode::Timeout, fmt::format("no Hello within {:.1f} s", cfg.helloTimeoutS));
+  if (state_ == State::Active && seconds(now - lastInbound_) > cfg.idleTimeoutS)
+    return fail(ErrorCode::Timeout, fmt::format("nothing received for {:.1f} s", cfg.idleTimeoutS));
+  if (writing_ && seconds(now - writeStarted_) > cfg.writeStallTimeoutS) {
+    spdlog::warn("session {}: a write has not finished in {:.1f} s; closing it", id_, cfg.writeStallTimeoutS);
+    return close("write stalled");
+  }
+  if (state_ == State::Active && seconds(now - lastClientStats_) >= cfg.clientStatsIntervalS) {
+    lastClientStats_ = now;
+    StatsT s;
+    s.server_time_s = seconds(now.time_since_epoch());
+    s.sessions = uint32_t(server_.sessionCount());
+    s.bytes_sent = bytesSent_;
+    s.faces_held = heldCount_;
+    s.cells_ready = uint32_t(announced_.size());
+    s.queue_bytes = uint32_t(std::min<size_t>(queued_, UINT32_MAX));
+    s.server_cpu_ms_per_s = server_.cpuMsPerSecond();
+    send(std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(s))));
+  }
+  pump();  // the bandwidth bucket refills
+  housekeepingTimer_.expires_after(std::chrono::milliseconds(100));
+  housekeepingTimer_.async_wait(asio::bind_executor(strand_, [self = shared_from_this()](const boost::system::error_code& ec) {
+    if (!ec) self->housekeeping();
+  }));
+}
+
+// ---- streaming ------------------------------------------------------------------
+
+void Session::setHeld(uint32_t face, bool on) {
+  uint64_t& word = held_[face >> 6];
+  const uint64_t bit = uint64_t(1) << (face & 63);
+  if (bool(word & bit) == on) return;
+  word ^= bit;
+  if (on) {
+    heldBytes_ += world_.faceBytes(face);
+    ++heldCount_;
+  } else {
+    heldBytes_ -= world_.faceBytes(face);
+    --heldCount_;
+  }
+}
+
+void Session::updateNeededCells() {
+  const ViewCellGrid& grid = world_.grid();
+  std::vector<uint32_t> needed{uint32_t(grid.linearIndex(cell_))};
+  auto add = [&](const glm::ivec3& c) {
+    if (!grid.contains(c)) return;
+    const uint32_t l = uint32_t(grid.linearIndex(c));
+    if (std::find(needed.begin(), needed.end(), l) == needed.end()) needed.push_back(l);
+  };
+  // Ahead along the velocity, then the ring around the current cell.
+  const float speed = glm::length(velocity_);
+  if (speed > 1e-3f) {
+    const float step = 0.5f * std::min(grid.cellSize().x, grid.cellSize().z);
+    const double horizon = server_.config().prefetchSeconds * speed;
+    for (double d = step; d <= horizon; d += step)
+      if (auto c = world_.cellOf(glm::vec3(position_) + velocity_ / speed * float(d))) add(*c);
+  }
+  for (int dz = -1; dz <= 1; ++dz)
+    for (int dx = -1; dx <= 1; ++dx) add(cell_ + glm::ivec3(dx, 0, dz));
+  needed_ = std::move(needed);
+  // Forget the face sets of cells no longer needed (their faces stay held).
+  for (auto it = cellSets_.begin(); it != cellSets_.end();) {
+    if (std::find(needed_.begin(), needed_.end(), it->first) == needed_.end()) {
+      cursor_.erase(it->first);
+      it = cellSets_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  for (uint32_t l : needed_) {
+    if (cellSets_.count(l) || requested_.count(l)) continue;
+    requested_.insert(l);
+    world_.cellFaceSet(grid.cellAt(l), server_.config().policy, radius_, server_.workers(),
+                       [self = shared_from_this(), l](FaceListPtr faces) {
+                         asio::post(self->strand_, [self, l, faces] {
+                           self->requested_.erase(l);
+                           if (std::find(self->needed_.begin(), self->needed_.end(), l) == self->needed_.end()) return;
+                           self->cellSets_[l] = faces;
+                           self->cursor_[l] = 0;
+                           self->pump();
+                         });
+                       });
+  }
+}
+
+void Session::maybeCull() {
+  if (server_.config().policy != StreamPolicy::Visibility || cullingInFlight_ || needed_.empty()) return;
+  const auto it = cellSets_.find(needed_.front());
+  if (it == cellSets_.end() || cursor_[it->first] >= it->second->size()) return;  // not loaded, or complete
+  const auto now = Clock::now();
+  if (seconds(now - lastCull_) < 0.25) return;
+  lastCull_ = now;
+  cullingInFlight_ = true;
+  if (!viewer_) {
+    CullingOptions o;
+    o.method = CullingMethod::HierarchyUpdating;
+    o.collectFaces = true;
+    viewer_ = std::make_unique<CullingViewer>(world_.culling(), o);
+  }
+  asio::post(server_.workers(), [self = shared_from_this(), eye = position_, yaw = yaw_, pitch = pitch_,
+                                 set = it->second] {
+    const FrameResult r = self->viewer_->frame(eye, yaw, pitch);
+    FaceList visible;
+    std::set_intersection(r.faces.begin(), r.faces.end(), set->begin(), set->end(), std::back_inserter(visible));
+    asio::post(self->strand_, [self, visible = std::move(visible)]() mutable {
+      self->cullingInFlight_ = false;
+      self->visibleNow_ = std::move(visible);
+      self->pump();
+    });
+  });
+}
+
+std::vector<uint32_t> Session::selectBatch() {
+  std::vector<uint32_t> batch;
+  size_t bytes = 0;
+  const size_t limit = server_.config().batchBytes;
+  auto take = [&](uint32_t f) {
+    if (held(f) || (budget_ > 0 && heldBytes_ + world_.faceBytes(f) > budget_)) return;
+    setHeld(f, true);
+    batch.push_back(f);
+    bytes += world_.faceBytes(f);
+  };
+  for (uint32_t f : visibleNow_) {
+    if (bytes >= limit) break;
+    take(f);
+  }
+  for (uint32_t l : needed_) {
+    auto it = cellSets_.find(l);
+    if (it == cellSets_.end()) continue;
+    const FaceList& set = *it->second;
+    size_t& c = cursor_[l];
+    while (c < set.size() && bytes < limit) {
+      take(set[c]);
+      if (!held(set[c])) break;  // over budget: this cell cannot complete for now
+      ++c;
+    }
+    if (bytes >= limit) break;
+  }
+  return batch;
+}
+
+void Session::announceReadyCells() {
+  for (uint32_t l : needed_) {
+    auto it = cellSets_.find(l);
+    if (it == cellSets_.end() || announced_.count(l)) continue;
+    size_t& c = cursor_[l];
+    while (c < it->second->size() && held((*it->second)[c])) ++c;
+    if (c < it->second->size()) continue;
+    announced_.insert(l);
+    CellReadyT ready;
+    ready.cell = std::make_unique<CellIndex>(toWire(world_.grid().cellAt(l)));
+    ready.faces = uint32_t(it->second->size());
+    send(std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(ready))));
+  }
+}
+
+void Session::maybeEvict() {
+  if (budget_ == 0 || heldBytes_ <= budget_ * 9 / 10) return;
+  // Keep what the needed cells stream; evict the rest, farthest first.
+  std::vector<uint8_t> keep(world_.faceCount(), 0);
+  for (const auto& [l, set] : cellSets_)
+    for (uint32_t f : *set) keep[f] = 1;
+  std::vector<std::pair<float, uint32_t>> candidates;
+  for (size_t w = 0; w < held_.size(); ++w)
+    for (uint64_t bits = held_[w]; bits; bits &= bits - 1) {
+      const uint32_t f = uint32_t(w * 64 + size_t(__builtin_ctzll(bits)));
+      if (!keep[f]) candidates.emplace_back(glm::length(world_.faceCentre(f) - glm::vec3(position_)), f);
+    }
+  if (candidates.empty()) return;
+  std::sort(candidates.begin(), candidates.end(), std::greater<>());
+  EvictT evict;
+  for (const auto& [d, f] : candidates) {
+    if (heldBytes_ <= budget_ * 7 / 10) break;
+    setHeld(f, false);
+    evict.face_ids.push_back(f);
+  }
+  std::sort(evict.face_ids.begin(), evict.face_ids.end());
+  // Cells announced ready may have lost faces: they are announced again when whole.
+  for (auto it = announced_.begin(); it != announced_.end();)
+    it = cellSets_.count(*it) ? std::next(it) : announced_.erase(it);
+  send(std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(evict))));
+}
+
+void Session::pump() {
+  const StreamServerConfig& cfg = server_.config();
+  if (state_ != State::Active || cfg.pvsOnly || !wantsGeometry_ || !hasPose_) return;
+  updateNeededCells();
+  maybeCull();
+  if (produceInFlight_ || queued_ > cfg.geometryWatermarkBytes) return;
+  if (cfg.maxClientKbps > 0.0) {
+    const auto now = Clock::now();
+    const double rate = cfg.maxClientKbps * 1000.0 / 8.0;  // bytes per second
+    tokens_ = std::min(std::max(rate * 0.25, double(cfg.batchBytes)), tokens_ + rate * seconds(now - lastRefill_));
+    lastRefill_ = now;
+    if (tokens_ <= 0.0) return;  // housekeeping pumps again as the bucket refills
+  }
+  maybeEvict();
+  std::vector<uint32_t> batch = selectBatch();
+  if (batch.empty()) {
+    announceReadyCells();
+    return;
+  }
+  produceInFlight_ = true;
+  asio::post(server_.workers(), [self = shared_from_this(), batch = std::move(batch)] {
+    std::vector<FaceTriangles> faces;
+    faces.reserve(batch.size());
+    for (uint32_t f : batch) faces.push_back(self->world_.face(f));
+    auto frame = std::make_shared<const std::vector<uint8_t>>(encodeMessage(encodeGeometry(faces)));
+    asio::post(self->strand_, [self, frame] {
+      self->produceInFlight_ = false;
+      if (self->state_ != State::Active) return;
+      self->tokens_ -= double(frame->size());
+      self->send(frame);
+      self->announceReadyCells();
+      self->pump();
+    });
+  });
+}
+
+}  // namespace vistream

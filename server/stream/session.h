@@ -1,0 +1,134 @@
+// One client connection of the streaming server (see stream_server.h).
+//
+// The conversation: the client sends Hello; the server answers Welcome (or
+// Error and closes). Then the client sends Pose whenever it moves; the server
+// streams Geometry for the faces of the client's current cell first (those
+// visible from the pose before the rest), then the cells ahead of it, sends
+// CellReady when the client holds a cell's whole face set, Evict when the
+// client's memory budget would be exceeded, Avatar updates and Stats. A
+// PvsRequest is answered with a PvsReply at any time after Welcome. Bye
+// from either side ends the session.
+//
+// Every handler runs on the session's strand; work for the worker pool
+// captures a shared_ptr to the session and posts its result back.
+#pragma once
+
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <boost/asio/strand.hpp>
+
+#include <array>
+#include <chrono>
+#include <deque>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "protocol/wire/messages.h"
+#include "server/stream/stream_world.h"
+
+namespace vistream {
+
+class StreamServer;
+
+class Session : public std::enable_shared_from_this<Session> {
+ public:
+  Session(StreamServer& server, boost::asio::ip::tcp::socket socket, uint32_t id);
+  ~Session();
+
+  void start();
+  // Sends an Error and closes without reading (too many clients).
+  void reject(wire::ErrorCode code, const std::string& text);
+  // Says Bye and closes. Thread-safe.
+  void shutdown(const std::string& reason);
+  // Queues an Avatar frame if the session is active. Thread-safe.
+  void deliverAvatars(std::shared_ptr<const std::vector<uint8_t>> frame);
+
+  struct Snapshot {
+    uint32_t id = 0;
+    bool active = false, hasPose = false, wantsAvatars = false;
+    glm::dvec3 position{0.0};
+    float yawDeg = 0.0f, pitchDeg = 0.0f, radius = 0.0f;
+    glm::ivec3 cell{0};
+  };
+  Snapshot snapshot() const;  // thread-safe
+  uint32_t id() const { return id_; }
+  size_t queuedBytes() const { return queuedAtomic_; }
+
+ private:
+  using Clock = std::chrono::steady_clock;
+  enum class State { AwaitHello, Active, Closing, Closed };
+
+  void read();
+  void onFrame(const wire::Envelope& envelope);
+  void onHello(const wire::Hello& hello);
+  void onPose(const wire::Pose& pose);
+  void onPvsRequest(const wire::PvsRequest& request);
+  void fail(wire::ErrorCode code, const std::string& text);
+  void close(const char* why);
+  void send(std::shared_ptr<const std::vector<uint8_t>> frame);
+  void writeNext();
+  void housekeeping();
+
+  // Streaming.
+  void pump();
+  void updateNeededCells();
+  void maybeCull();
+  void maybeEvict();
+  void announceReadyCells();
+  std::vector<uint32_t> selectBatch();
+  bool held(uint32_t face) const { return (held_[face >> 6] >> (face & 63)) & 1u; }
+  void setHeld(uint32_t face, bool on);
+
+  StreamServer& server_;
+  StreamWorld& world_;
+  boost::asio::strand<boost::asio::io_context::executor_type> strand_;
+  boost::asio::ip::tcp::socket socket_;
+  boost::asio::steady_timer housekeepingTimer_;
+  const uint32_t id_;
+  State state_ = State::AwaitHello;
+  wire::FrameDecoder decoder_;
+  std::array<uint8_t, 16384> readBuffer_{};
+
+  std::deque<std::shared_ptr<const std::vector<uint8_t>>> queue_;
+  size_t queued_ = 0;
+  std::atomic<size_t> queuedAtomic_{0};
+  bool writing_ = false;
+  Clock::time_point writeStarted_, lastInbound_, started_, closingSince_, lastClientStats_, windowStart_;
+  unsigned framesInWindow_ = 0;
+  uint64_t bytesSent_ = 0;
+
+  // Client capabilities.
+  float radius_ = 0.0f;
+  uint64_t budget_ = 0;
+  bool wantsGeometry_ = true, wantsAvatars_ = true;
+
+  // Pose.
+  bool hasPose_ = false;
+  glm::dvec3 position_{0.0};
+  glm::vec3 velocity_{0.0f};
+  float yaw_ = 0.0f, pitch_ = 0.0f;
+  glm::ivec3 cell_{0};
+  mutable std::mutex snapshotMutex_;
+  Snapshot snapshot_;
+
+  // Faces held by the client (a bitset over face IDs) and the cells wanted.
+  std::vector<uint64_t> held_;
+  uint64_t heldBytes_ = 0;
+  uint32_t heldCount_ = 0;
+  std::vector<uint32_t> needed_;                   // linear cell indices, current first
+  std::map<uint32_t, FaceListPtr> cellSets_;       // loaded face sets of needed cells
+  std::map<uint32_t, size_t> cursor_;              // per loaded cell: faces before this index are held
+  std::set<uint32_t> requested_, announced_;
+  FaceList visibleNow_;
+  bool cullingInFlight_ = false, produceInFlight_ = false;
+  Clock::time_point lastCull_;
+  std::unique_ptr<CullingViewer> viewer_;
+  double tokens_ = 0.0;
+  Clock::time_point lastRefill_;
+};
+
+}  // namespace vistream

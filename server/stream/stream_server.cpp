@@ -1,0 +1,233 @@
+#include "server/stream/stream_server.h"
+
+#include <boost/asio/post.hpp>
+#include <boost/asio/signal_set.hpp>
+#include <spdlog/spdlog.h>
+#include <sys/resource.h>
+
+#include <unordered_map>
+
+#include "common/core/error.h"
+#include "protocol/wire/messages.h"
+#include "server/stream/session.h"
+
+namespace vistream {
+
+namespace asio = boost::asio;
+using asio::ip::tcp;
+
+namespace {
+double processCpuMs() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return (double(u.ru_utime.tv_sec) + double(u.ru_stime.tv_sec)) * 1e3 +
+         (double(u.ru_utime.tv_usec) + double(u.ru_stime.tv_usec)) * 1e-3;
+}
+}  // namespace
+
+StreamServer::StreamServer(StreamWorld& world, StreamServerConfig config)
+    : world_(world),
+      config_(std::move(config)),
+      workers_(config_.workerThreads ? config_.workerThreads : std::max(1u, std::thread::hardware_concurrency())),
+      acceptor_(io_),
+      avatarTimer_(io_),
+      statsTimer_(io_) {}
+
+StreamServer::~StreamServer() {
+  stop();
+  workers_.join();
+}
+
+void StreamServer::start() {
+  boost::system::error_code ec;
+  const auto address = asio::ip::make_address(config_.bindAddress, ec);
+  if (ec) throwInputError("--bind {}: not an IP address", config_.bindAddress);
+  const tcp::endpoint endpoint(address, config_.port);
+  acceptor_.open(endpoint.protocol(), ec);
+  if (!ec) acceptor_.set_option(tcp::acceptor::reuse_address(true), ec);
+  if (!ec) acceptor_.bind(endpoint, ec);
+  if (!ec) acceptor_.listen(asio::socket_base::max_listen_connections, ec);
+  if (ec) throwInputError("cannot listen on {}:{}: {}", config_.bindAddress, config_.port, ec.message());
+  port_ = acceptor_.local_endpoint().port();
+  lastStats_ = std::chrono::steady_clock::now();
+  lastCpuMs_ = processCpuMs();
+  spdlog::info("vistream-server listening on {}:{} ({} policy{}, {} I/O threads)", config_.bindAddress, port_,
+               streamPolicyName(config_.policy), config_.pvsOnly ? ", PVS only" : "", config_.ioThreads);
+  accept();
+  avatarTick();
+  statsTick();
+}
+
+void StreamServer::accept() {
+  acceptor_.async_accept(asio::make_strand(io_), [this](const boost::system::error_code& ec, tcp::socket socket) {
+    if (ec) {
+      if (ec != asio::error::operation_aborted) spdlog::warn("accept: {}", ec.message());
+      if (!stopping_ && acceptor_.is_open()) accept();
+      return;
+    }
+    boost::system::error_code ignored;
+    socket.set_option(tcp::no_delay(true), ignored);
+    uint32_t id;
+    bool full;
+    {
+      std::lock_guard lock(sessionsMutex_);
+      id = nextId_++;
+      full = sessions_.size() >= config_.maxClients;
+    }
+    auto session = std::make_shared<Session>(*this, std::move(socket), id);
+    if (full || stopping_) {
+      ++rejected_;
+      session->reject(wire::ErrorCode::TooManyClients,
+                      stopping_ ? std::string("server is shutting down")
+                                : fmt::format("the server takes at most {} clients", config_.maxClients));
+    } else {
+      ++accepted_;
+      {
+        std::lock_guard lock(sessionsMutex_);
+        sessions_[id] = session;
+      }
+      session->start();
+    }
+    if (!stopping_) accept();
+  });
+}
+
+void StreamServer::sessionEnded(uint32_t id) {
+  std::lock_guard lock(sessionsMutex_);
+  if (sessions_.erase(id)) ++ended_;
+}
+
+size_t StreamServer::sessionCount() const {
+  std::lock_guard lock(sessionsMutex_);
+  return sessions_.size();
+}
+
+StreamServer::Counters StreamServer::counters() const { return {accepted_, rejected_, ended_, bytesSent_}; }
+
+void StreamServer::avatarTick() {
+  if (stopping_ || config_.avatarHz <= 0.0) return;
+  std::vector<std::shared_ptr<Session>> live;
+  {
+    std::lock_guard lock(sessionsMutex_);
+    for (auto& [id, weak] : sessions_)
+      if (auto s = weak.lock()) live.push_back(std::move(s));
+  }
+  // Filtering is visibility work: on the worker pool.
+  asio::post(workers_, [this, live = std::move(live)] {
+    std::vector<Session::Snapshot> snaps;
+    snaps.reserve(live.size());
+    for (const auto& s : live) snaps.push_back(s->snapshot());
+    // Cell-to-cell answers are shared within the tick.
+    std::unordered_map<uint64_t, bool> seen;
+    for (size_t i = 0; i < live.size(); ++i) {
+      const Session::Snapshot& x = snaps[i];
+      if (!x.active || !x.hasPose || !x.wantsAvatars) continue;
+      const FaceListPtr pvs = world_.cachedPvs(x.cell);
+      wire::AvatarT message;
+      for (size_t j = 0; j < live.size(); ++j) {
+        const Session::Snapshot& y = snaps[j];
+        if (i == j || !y.active || !y.hasPose) continue;
+        if (glm::length(y.position - x.position) > double(x.radius)) continue;
+        bool visible = glm::all(glm::lessThanEqual(glm::abs(y.cell - x.cell), glm::ivec3(1)));
+        if (!visible && pvs) {
+          const auto yCell = world_.cellOf(glm::vec3(y.position));
+          const uint64_t key = (uint64_t(world_.grid().linearIndex(x.cell)) << 32) |
+                               uint64_t(yCell ? world_.grid().linearIndex(*yCell) : 0);
+          auto [it, fresh] = seen.try_emplace(key, false);
+          // Per pair of cells, judged at the first avatar met there.
+          if (fresh) it->second = world_.avatarVisible(*pvs, glm::vec3(y.position));
+          visible = it->second;
+        }
+        if (!visible) continue;
+        auto a = std::make_unique<wire::AvatarStateT>();
+        a->session_id = y.id;
+        a->position = std::make_unique<wire::Vec3d>(wire::toWire(y.position));
+        a->yaw_deg = y.yawDeg;
+        a->pitch_deg = y.pitchDeg;
+        message.avatars.push_back(std::move(a));
+      }
+      live[i]->deliverAvatars(std::make_shared<const std::vector<uint8_t>>(wire::encodeMessage(std::move(message))));
+    }
+  });
+  avatarTimer_.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+      std::chrono::duration<double>(1.0 / config_.avatarHz)));
+  avatarTimer_.async_wait([this](const boost::system::error_code& ec) {
+    if (!ec) avatarTick();
+  });
+}
+
+void StreamServer::statsTick() {
+  if (stopping_) return;
+  const auto now = std::chrono::steady_clock::now();
+  const double dt = std::chrono::duration<double>(now - lastStats_).count();
+  const double cpu = processCpuMs();
+  if (dt > 0.0) cpuMsPerS_ = (cpu - lastCpuMs_) / dt;
+  sinceLog_ += dt;
+  if (sinceLog_ >= config_.statsIntervalS) {
+    sinceLog_ = 0.0;
+    size_t sessions = 0, queueSum = 0, queueMax = 0;
+    {
+      std::lock_guard lock(sessionsMutex_);
+      for (auto& [id, weak] : sessions_)
+        if (auto s = weak.lock()) {
+          ++sessions;
+          queueSum += s->queuedBytes();
+          queueMax = std::max(queueMax, s->queuedBytes());
+        }
+    }
+    const uint64_t bytes = bytesSent_;
+    const auto cs = world_.cacheStats();
+    const double hitRate = cs.hits + cs.misses ? double(cs.hits) / double(cs.hits + cs.misses) : 0.0;
+    spdlog::info("stats: {} sessions, {:.1f} kB/s out, cache hit rate {:.1f}% ({} PVS computed, {} from the database), "
+                 "queues {:.1f} kB total / {:.1f} kB max, CPU {:.0f}%",
+                 sessions, double(bytes - lastBytes_) / 1e3 / config_.statsIntervalS, 100.0 * hitRate, cs.pvsComputed,
+                 cs.pvsFromDatabase, double(queueSum) / 1e3, double(queueMax) / 1e3, cpuMsPerS_ / 10.0);
+    lastBytes_ = bytes;
+  }
+  lastStats_ = now;
+  lastCpuMs_ = cpu;
+  statsTimer_.expires_after(std::chrono::seconds(1));
+  statsTimer_.async_wait([this](const boost::system::error_code& ec) {
+    if (!ec) statsTick();
+  });
+}
+
+void StreamServer::stop() {
+  if (stopping_.exchange(true)) return;
+  asio::post(io_, [this] {
+    boost::system::error_code ignored;
+    acceptor_.close(ignored);
+    avatarTimer_.cancel();
+    statsTimer_.cancel();
+    std::vector<std::shared_ptr<Session>> live;
+    {
+      std::lock_guard lock(sessionsMutex_);
+      for (auto& [id, weak] : sessions_)
+        if (auto s = weak.lock()) live.push_back(std::move(s));
+    }
+    for (auto& s : live) s->shutdown("server shutting down");
+    // Give the Bye frames a moment, then end run().
+    auto timer = std::make_shared<asio::steady_timer>(io_, std::chrono::milliseconds(300));
+    timer->async_wait([this, timer](const boost::system::error_code&) { io_.stop(); });
+  });
+}
+
+void StreamServer::run(bool handleSignals) {
+  std::unique_ptr<asio::signal_set> signals;
+  if (handleSignals) {
+    signals = std::make_unique<asio::signal_set>(io_, SIGINT, SIGTERM);
+    signals->async_wait([this](const boost::system::error_code& ec, int sig) {
+      if (ec) return;
+      spdlog::info("signal {}: shutting down", sig);
+      stop();
+    });
+  }
+  std::vector<std::thread> threads;
+  for (unsigned i = 1; i < std::max(1u, config_.ioThreads); ++i) threads.emplace_back([this] { io_.run(); });
+  io_.run();
+  for (auto& t : threads) t.join();
+  spdlog::info("vistream-server stopped: {} sessions served, {} rejected, {:.1f} MB sent", accepted_.load(),
+               rejected_.load(), double(bytesSent_) / 1e6);
+}
+
+}  // namespace vistream

@@ -1,0 +1,114 @@
+// The streaming server: accepts TCP clients and streams to each what it can
+// see (see protocol/README.md for the conversation).
+//
+// Threads: the io_context runs on `ioThreads` threads; every session does its
+// socket work and state changes on its own strand, with one write in flight
+// and a bounded send queue. Visibility work (PVS, face sets, culling,
+// encoding geometry, avatar filtering) runs on a separate worker pool and
+// posts its results back to the session's strand: I/O threads never compute.
+//
+// Bad input ends only the session that sent it: an Error frame where the
+// socket still takes one, a log line, and the socket closed; every other
+// session keeps being served. Memory per session is bounded by the inbound
+// frame limit, the send queue limit and the client's memory budget.
+#pragma once
+
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <boost/asio/thread_pool.hpp>
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "server/stream/stream_world.h"
+
+namespace vistream {
+
+struct StreamServerConfig {
+  std::string bindAddress = "127.0.0.1";
+  uint16_t port = 7070;              // 0: any free port (see StreamServer::port())
+  unsigned ioThreads = 2;
+  unsigned workerThreads = 0;        // 0: hardware concurrency
+  size_t maxClients = 1000;
+  std::string token;                 // empty: no authentication
+  bool pvsOnly = false;              // answer PvsRequest only, send no geometry
+  StreamPolicy policy = StreamPolicy::Visibility;
+  float defaultRadius = 200.0f;      // near-field radius when the client names none (metres)
+  float maxRadius = 2000.0f;
+  double maxClientKbps = 0.0;        // 0: unlimited
+  double prefetchSeconds = 3.0;      // look-ahead along the client's velocity
+  double avatarHz = 5.0;
+  double statsIntervalS = 5.0;       // the server's log line
+  double clientStatsIntervalS = 2.0; // Stats frames to each client
+  uint32_t maxInboundFrameBytes = 64u << 10;
+  size_t sendQueueLimitBytes = 8u << 20;   // beyond this the client is not reading: closed
+  size_t geometryWatermarkBytes = 256u << 10;  // produce geometry only below this queue depth
+  size_t batchBytes = 48u << 10;     // raw face bytes per Geometry frame
+  double helloTimeoutS = 5.0;
+  double idleTimeoutS = 60.0;
+  double writeStallTimeoutS = 20.0;
+  unsigned maxFramesPerSecond = 400;
+};
+
+class Session;
+
+class StreamServer {
+ public:
+  StreamServer(StreamWorld& world, StreamServerConfig config);
+  ~StreamServer();
+
+  // Binds and starts accepting; throws InputError when the address is unusable.
+  void start();
+  // Runs until stop() (or SIGINT/SIGTERM when handleSignals is set).
+  void run(bool handleSignals);
+  // Stops accepting, says Bye to every session and ends run(). Thread-safe.
+  void stop();
+  uint16_t port() const { return port_; }
+
+  // For sessions.
+  StreamWorld& world() { return world_; }
+  const StreamServerConfig& config() const { return config_; }
+  boost::asio::thread_pool& workers() { return workers_; }
+  boost::asio::io_context& io() { return io_; }
+  void sessionEnded(uint32_t id);
+  void countSent(size_t bytes) { bytesSent_ += bytes; }
+  double cpuMsPerSecond() const { return cpuMsPerS_; }
+  size_t sessionCount() const;
+
+  struct Counters {
+    uint64_t accepted = 0, rejected = 0, ended = 0, bytesSent = 0;
+  };
+  Counters counters() const;
+
+ private:
+  void accept();
+  void avatarTick();
+  void statsTick();
+
+  StreamWorld& world_;
+  StreamServerConfig config_;
+  boost::asio::io_context io_;
+  boost::asio::thread_pool workers_;
+  boost::asio::ip::tcp::acceptor acceptor_;
+  boost::asio::steady_timer avatarTimer_, statsTimer_;
+  uint16_t port_ = 0;
+  mutable std::mutex sessionsMutex_;
+  std::map<uint32_t, std::weak_ptr<Session>> sessions_;
+  uint32_t nextId_ = 1;
+  std::atomic<bool> stopping_{false};
+  std::atomic<uint64_t> accepted_{0}, rejected_{0}, ended_{0}, bytesSent_{0};
+  uint64_t lastBytes_ = 0;
+  double lastCpuMs_ = 0.0, sinceLog_ = 0.0;
+  std::atomic<double> cpuMsPerS_{0.0};
+  std::chrono::steady_clock::time_point lastStats_;
+};
+
+}  // namespace vistream

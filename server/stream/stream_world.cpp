@@ -1,0 +1,187 @@
+#include "server/stream/stream_world.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "common/core/error.h"
+#include "common/core/timer.h"
+#include "common/raycast/ray_query.h"
+#include "common/spatial/free_space.h"
+#include "server/visibility/pvs_bake.h"
+
+namespace vistream {
+
+StreamPolicy parseStreamPolicy(const std::string& name) {
+  if (name == "visibility") return StreamPolicy::Visibility;
+  if (name == "radius") return StreamPolicy::Radius;
+  throwInputError("--policy: expected visibility or radius, got '{}'", name);
+}
+
+const char* streamPolicyName(StreamPolicy p) { return p == StreamPolicy::Visibility ? "visibility" : "radius"; }
+
+namespace {
+
+float boxDistance(const Box3f& a, const Box3f& b) {
+  const glm::vec3 gap = glm::max(glm::vec3(0.0f), glm::max(a.lo - b.hi, b.lo - a.hi));
+  return glm::length(gap);
+}
+
+}  // namespace
+
+StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options) : scene_(std::move(scene)) {
+  Stopwatch clock;
+  if (!options.pvsDatabase.empty()) {
+    database_.emplace(PvsDatabase::open(options.pvsDatabase));
+    const PvsDatabaseHeader& h = database_->header();
+    if (h.sceneFingerprint != sceneFingerprint(scene_) || h.sceneFaces != scene_.faceCount)
+      throwInputError("--pvs-db {}: baked for scene '{}' ({} faces), not for this scene '{}' ({} faces)",
+                      options.pvsDatabase.string(), h.sceneName, h.sceneFaces, scene_.name, scene_.faceCount);
+    grid_ = h.grid();
+  } else {
+    if (!(options.cellSize > 0.0f)) throwInputError("--cell-size must be positive");
+    const FlatTriangles tris = flattenScene(scene_, true);
+    const auto rays = makeEmbreeRayQuery(tris);
+    const FreeSpace fs = FreeSpace::build(*rays, scene_.bounds());
+    BakeOptions bo;
+    bo.cellSize = glm::vec3(options.cellSize);
+    grid_ = bakeGrid(scene_, fs, bo);
+  }
+  culling_ = std::make_unique<CullingScene>(scene_);
+
+  // Per-face triangles and bounds, in face-ID order.
+  faces_.resize(scene_.faceCount);
+  faceBoxes_.resize(scene_.faceCount);
+  for (uint32_t i = 0; i < scene_.faceCount; ++i) faces_[i].face = i;
+  for (const Object& o : scene_.objects) {
+    for (size_t t = 0; t < o.mesh.triangles.size(); ++t) {
+      const uint32_t id = o.mesh.faceIds[t];
+      if (id >= faces_.size()) continue;
+      wire::FaceTriangles& f = faces_[id];
+      f.material = uint16_t(t < o.mesh.materials.size() ? std::min<uint32_t>(o.mesh.materials[t], 65535) : 0);
+      for (int k = 0; k < 3; ++k) {
+        const glm::vec3 p = o.mesh.positions[o.mesh.triangles[t][k]];
+        f.corners.push_back(p);
+        faceBoxes_[id].extend(p);
+      }
+    }
+  }
+  // Buckets over x and z.
+  const Box3f b = scene_.bounds();
+  if (!b.empty()) {
+    bucketSize_ = std::max(8.0f, std::max(b.hi.x - b.lo.x, b.hi.z - b.lo.z) / 512.0f);
+    bucketLo_ = {b.lo.x, b.lo.z};
+    buckets_ = glm::ivec2(int((b.hi.x - b.lo.x) / bucketSize_) + 1, int((b.hi.z - b.lo.z) / bucketSize_) + 1);
+    bucketFaces_.resize(size_t(buckets_.x) * size_t(buckets_.y));
+    for (uint32_t id = 0; id < faceBoxes_.size(); ++id) {
+      const Box3f& fb = faceBoxes_[id];
+      if (fb.empty()) continue;
+      const int x0 = std::clamp(int((fb.lo.x - bucketLo_.x) / bucketSize_), 0, buckets_.x - 1);
+      const int x1 = std::clamp(int((fb.hi.x - bucketLo_.x) / bucketSize_), 0, buckets_.x - 1);
+      const int z0 = std::clamp(int((fb.lo.z - bucketLo_.y) / bucketSize_), 0, buckets_.y - 1);
+      const int z1 = std::clamp(int((fb.hi.z - bucketLo_.y) / bucketSize_), 0, buckets_.y - 1);
+      for (int z = z0; z <= z1; ++z)
+        for (int x = x0; x <= x1; ++x) bucketFaces_[size_t(z) * size_t(buckets_.x) + size_t(x)].push_back(id);
+    }
+  }
+  pvsCache_ = std::make_unique<AsyncCache<uint32_t, FaceList>>(options.pvsCacheCells,
+                                                               [this](const uint32_t& c) { return computePvs(c); });
+  faceSetCache_ = std::make_unique<AsyncCache<FaceSetKey, FaceList, FaceSetKeyHash>>(
+      options.faceSetCacheEntries, [this](const FaceSetKey& k) {
+        const Box3f box = grid_.cellBox(grid_.cellAt(k.cell));
+        FaceList near = facesWithin(box, float(k.radiusCm) / 100.0f);
+        if (k.policy == StreamPolicy::Radius) return near;
+        FaceListPtr pvs = pvsCache_->find(k.cell);
+        const FaceList computed = pvs ? FaceList{} : computePvs(k.cell);
+        const FaceList& p = pvs ? *pvs : computed;
+        FaceList out;
+        std::set_intersection(p.begin(), p.end(), near.begin(), near.end(), std::back_inserter(out));
+        return out;
+      });
+  spdlog::info("stream world: scene '{}' ({} faces), {} x {} x {} cells of {:.1f} m, PVS {}, ready in {:.0f} ms",
+               scene_.name, scene_.faceCount, grid_.dims().x, grid_.dims().y, grid_.dims().z, grid_.cellSize().x,
+               database_ ? "from " + database_->path().string() : std::string("on demand"), clock.ms());
+}
+
+StreamWorld::~StreamWorld() = default;
+
+const EpsilonPvs& StreamWorld::epsilonPvs() {
+  std::call_once(pvsOnce_, [this] {
+    Stopwatch clock;
+    pvs_ = std::make_unique<EpsilonPvs>(scene_);
+    spdlog::info("PVS occluders prepared in {:.0f} ms", clock.ms());
+  });
+  return *pvs_;
+}
+
+FaceList StreamWorld::computePvs(uint32_t linear) {
+  if (database_) {
+    if (auto faces = database_->cell(linear)) {
+      ++pvsFromDatabase_;
+      return std::move(*faces);
+    }
+  }
+  return epsilonPvs().compute(grid_.cellBox(grid_.cellAt(linear))).faces;
+}
+
+std::optional<glm::ivec3> StreamWorld::cellOf(const glm::vec3& p) const {
+  if (grid_.cellCount() == 0) return std::nullopt;
+  const glm::vec3 rel = (p - grid_.origin()) / grid_.cellSize();
+  return glm::clamp(glm::ivec3(glm::floor(rel)), glm::ivec3(0), grid_.dims() - 1);
+}
+
+void StreamWorld::pvs(const glm::ivec3& cell, boost::asio::thread_pool& pool, std::function<void(FaceListPtr)> done) {
+  pvsCache_->get(uint32_t(grid_.linearIndex(cell)), pool.get_executor(), std::move(done));
+}
+
+FaceListPtr StreamWorld::cachedPvs(const glm::ivec3& cell) { return pvsCache_->find(uint32_t(grid_.linearIndex(cell))); }
+
+void StreamWorld::cellFaceSet(const glm::ivec3& cell, StreamPolicy policy, float radius, boost::asio::thread_pool& pool,
+                              std::function<void(FaceListPtr)> done) {
+  const FaceSetKey key{uint32_t(grid_.linearIndex(cell)), uint32_t(std::lround(std::max(0.0f, radius) * 100.0f)), policy};
+  if (policy == StreamPolicy::Radius) {
+    faceSetCache_->get(key, pool.get_executor(), std::move(done));
+    return;
+  }
+  // The PVS first (shared with PvsRequest and avatars), then the face set.
+  pvs(cell, pool, [this, key, &pool, done = std::move(done)](FaceListPtr) mutable {
+    faceSetCache_->get(key, pool.get_executor(), std::move(done));
+  });
+}
+
+FaceList StreamWorld::facesWithin(const Box3f& box, float radius) const {
+  FaceList out;
+  if (bucketFaces_.empty()) return out;
+  const int x0 = std::clamp(int((box.lo.x - radius - bucketLo_.x) / bucketSize_), 0, buckets_.x - 1);
+  const int x1 = std::clamp(int((box.hi.x + radius - bucketLo_.x) / bucketSize_), 0, buckets_.x - 1);
+  const int z0 = std::clamp(int((box.lo.z - radius - bucketLo_.y) / bucketSize_), 0, buckets_.y - 1);
+  const int z1 = std::clamp(int((box.hi.z + radius - bucketLo_.y) / bucketSize_), 0, buckets_.y - 1);
+  for (int z = z0; z <= z1; ++z)
+    for (int x = x0; x <= x1; ++x)
+      for (uint32_t id : bucketFaces_[size_t(z) * size_t(buckets_.x) + size_t(x)])
+        if (boxDistance(faceBoxes_[id], box) <= radius) out.push_back(id);
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+bool StreamWorld::avatarVisible(const FaceList& pvs, const glm::vec3& position) const {
+  if (bucketFaces_.empty()) return false;
+  const int x = std::clamp(int((position.x - bucketLo_.x) / bucketSize_), 0, buckets_.x - 1);
+  const int z = std::clamp(int((position.z - bucketLo_.y) / bucketSize_), 0, buckets_.y - 1);
+  for (uint32_t id : bucketFaces_[size_t(z) * size_t(buckets_.x) + size_t(x)]) {
+    const Box3f& fb = faceBoxes_[id];
+    const float dx = std::max({0.0f, fb.lo.x - position.x, position.x - fb.hi.x});
+    const float dz = std::max({0.0f, fb.lo.z - position.z, position.z - fb.hi.z});
+    if (dx * dx + dz * dz <= 4.0f && std::binary_search(pvs.begin(), pvs.end(), id)) return true;
+  }
+  return false;
+}
+
+StreamWorld::CacheStats StreamWorld::cacheStats() const {
+  return {pvsCache_->hits() + faceSetCache_->hits(), pvsCache_->misses() + faceSetCache_->misses(),
+          pvsCache_->computed(), pvsFromDatabase_};
+}
+
+}  // namespace vistream

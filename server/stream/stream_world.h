@@ -1,0 +1,120 @@
+// What the streaming server shares between all sessions: the scene, its view
+// cell grid, per-face geometry ready to encode, the PVS of each cell
+// (from a baked database or computed on demand, each once, in a bounded LRU
+// cache) and the face set each cell streams under each policy.
+//
+// Policies: "visibility" streams, per cell, the faces of the cell's PVS
+// within the near-field radius of the cell; "radius" (the baseline) streams
+// every face within that radius, visible or not.
+//
+// Thread safety: immutable after construction except the caches, which are
+// thread-safe; every const member may be called from any thread. Work that
+// computes (PVS, face sets) runs on the executor passed in, never inline.
+#pragma once
+
+#include <boost/asio/thread_pool.hpp>
+
+#include <filesystem>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "common/scene/scene.h"
+#include "protocol/geometry/geometry_codec.h"
+#include "server/stream/async_cache.h"
+#include "server/visibility/epsilon_pvs.h"
+#include "server/visibility/hierarchical_culling.h"
+#include "server/visibility/pvs_database.h"
+#include "server/visibility/view_cell_grid.h"
+
+namespace vistream {
+
+enum class StreamPolicy : uint8_t { Visibility, Radius };
+StreamPolicy parseStreamPolicy(const std::string& name);  // throws InputError
+const char* streamPolicyName(StreamPolicy p);
+
+struct StreamWorldOptions {
+  std::filesystem::path pvsDatabase;  // empty: compute every PVS on demand
+  float cellSize = 8.0f;              // without a database (metres)
+  size_t pvsCacheCells = 4096;
+  size_t faceSetCacheEntries = 4096;
+};
+
+using FaceList = std::vector<uint32_t>;  // sorted face IDs
+using FaceListPtr = std::shared_ptr<const FaceList>;
+
+class StreamWorld {
+ public:
+  // Takes the scene; throws InputError if a given database does not belong
+  // to it.
+  StreamWorld(Scene scene, const StreamWorldOptions& options);
+  ~StreamWorld();
+
+  const Scene& scene() const { return scene_; }
+  const ViewCellGrid& grid() const { return grid_; }
+  const CullingScene& culling() const { return *culling_; }
+  uint32_t faceCount() const { return scene_.faceCount; }
+  const wire::FaceTriangles& face(uint32_t id) const { return faces_[id]; }
+  // What a client holding the face stores: its decoded triangles and ID.
+  uint32_t faceBytes(uint32_t id) const { return uint32_t(faces_[id].corners.size() * sizeof(glm::vec3) + 8); }
+  glm::vec3 faceCentre(uint32_t id) const { return faceBoxes_[id].center(); }
+
+  // The cell holding a local-frame point (clamped to the grid), or nothing
+  // when the grid is empty.
+  std::optional<glm::ivec3> cellOf(const glm::vec3& p) const;
+
+  // The PVS of a cell (all faces, no radius), asynchronously on `pool`.
+  void pvs(const glm::ivec3& cell, boost::asio::thread_pool& pool, std::function<void(FaceListPtr)> done);
+  FaceListPtr cachedPvs(const glm::ivec3& cell);
+  // The faces a cell streams under a policy and radius, asynchronously.
+  void cellFaceSet(const glm::ivec3& cell, StreamPolicy policy, float radius, boost::asio::thread_pool& pool,
+                   std::function<void(FaceListPtr)> done);
+  // Faces whose bounding box lies within `radius` of the box (sorted).
+  FaceList facesWithin(const Box3f& box, float radius) const;
+  // Whether an avatar at `position` is potentially visible from a cell with
+  // this PVS: some face of the PVS lies within 2 m of it horizontally (the
+  // ground it stands on, the wall beside it), as in Funkhouser's RING.
+  bool avatarVisible(const FaceList& pvs, const glm::vec3& position) const;
+
+  struct CacheStats {
+    uint64_t hits = 0, misses = 0, pvsComputed = 0, pvsFromDatabase = 0;
+  };
+  CacheStats cacheStats() const;
+  bool hasDatabase() const { return database_.has_value(); }
+
+ private:
+  FaceList computePvs(uint32_t linear);
+  struct FaceSetKey {
+    uint32_t cell;
+    uint32_t radiusCm;
+    StreamPolicy policy;
+    bool operator==(const FaceSetKey&) const = default;
+  };
+  struct FaceSetKeyHash {
+    size_t operator()(const FaceSetKey& k) const {
+      return (size_t(k.cell) * 1000003u) ^ (size_t(k.radiusCm) << 1) ^ size_t(k.policy);
+    }
+  };
+  const EpsilonPvs& epsilonPvs();
+
+  Scene scene_;
+  ViewCellGrid grid_;
+  std::optional<PvsDatabase> database_;
+  std::unique_ptr<CullingScene> culling_;
+  std::once_flag pvsOnce_;
+  std::unique_ptr<EpsilonPvs> pvs_;
+  std::vector<wire::FaceTriangles> faces_;
+  std::vector<Box3f> faceBoxes_;
+  // Faces by 2D bucket (x, z) of their bounding boxes.
+  float bucketSize_ = 16.0f;
+  glm::vec2 bucketLo_{0.0f};
+  glm::ivec2 buckets_{0};
+  std::vector<std::vector<uint32_t>> bucketFaces_;
+  std::unique_ptr<AsyncCache<uint32_t, FaceList>> pvsCache_;
+  std::unique_ptr<AsyncCache<FaceSetKey, FaceList, FaceSetKeyHash>> faceSetCache_;
+  std::atomic<uint64_t> pvsFromDatabase_{0};
+};
+
+}  // namespace vistream
