@@ -4,7 +4,8 @@
 //
 // Error bound: a decoded vertex lies within half a quantization step of the
 // original on every axis, step = (batch extent) / 65535 (3 mm for a 200 m
-// batch). Decoding checks every size and index against the message and
+// batch). Triangles keep their order and winding, but the index codec may
+// rotate a triangle's corners. Decoding checks every size and index against the message and
 // fails with a message naming the problem; it never reads out of bounds.
 // Thread safety: free functions, no shared state.
 #pragma once

@@ -122,22 +122,19 @@ void StreamServer::avatarTick() {
     for (size_t i = 0; i < live.size(); ++i) {
       const Session::Snapshot& x = snaps[i];
       if (!x.active || !x.hasPose || !x.wantsAvatars) continue;
-      const FaceListPtr pvs = world_.cachedPvs(x.cell);
       wire::AvatarT message;
       for (size_t j = 0; j < live.size(); ++j) {
         const Session::Snapshot& y = snaps[j];
         if (i == j || !y.active || !y.hasPose) continue;
         if (glm::length(y.position - x.position) > double(x.radius)) continue;
-        bool visible = glm::all(glm::lessThanEqual(glm::abs(y.cell - x.cell), glm::ivec3(1)));
-        if (!visible && pvs) {
-          const auto yCell = world_.cellOf(glm::vec3(y.position));
-          const uint64_t key = (uint64_t(world_.grid().linearIndex(x.cell)) << 32) |
-                               uint64_t(yCell ? world_.grid().linearIndex(*yCell) : 0);
-          auto [it, fresh] = seen.try_emplace(key, false);
-          // Per pair of cells, judged at the first avatar met there.
-          if (fresh) it->second = world_.avatarVisible(*pvs, glm::vec3(y.position));
-          visible = it->second;
-        }
+        // Per receiver cell and avatar position to 0.5 m, within the tick.
+        const glm::ivec3 q(glm::floor(glm::vec3(y.position) * 2.0f));
+        const uint64_t key = (uint64_t(world_.grid().linearIndex(x.cell)) << 32) ^
+                             (uint64_t(uint32_t(q.x)) * 73856093u) ^ (uint64_t(uint32_t(q.y)) * 19349663u) ^
+                             (uint64_t(uint32_t(q.z)) * 83492791u);
+        auto [it, fresh] = seen.try_emplace(key, false);
+        if (fresh) it->second = world_.avatarVisible(x.cell, glm::vec3(y.position));
+        const bool visible = it->second;
         if (!visible) continue;
         auto a = std::make_unique<wire::AvatarStateT>();
         a->session_id = y.id;

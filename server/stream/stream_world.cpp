@@ -166,17 +166,9 @@ FaceList StreamWorld::facesWithin(const Box3f& box, float radius) const {
   return out;
 }
 
-bool StreamWorld::avatarVisible(const FaceList& pvs, const glm::vec3& position) const {
-  if (bucketFaces_.empty()) return false;
-  const int x = std::clamp(int((position.x - bucketLo_.x) / bucketSize_), 0, buckets_.x - 1);
-  const int z = std::clamp(int((position.z - bucketLo_.y) / bucketSize_), 0, buckets_.y - 1);
-  for (uint32_t id : bucketFaces_[size_t(z) * size_t(buckets_.x) + size_t(x)]) {
-    const Box3f& fb = faceBoxes_[id];
-    const float dx = std::max({0.0f, fb.lo.x - position.x, position.x - fb.hi.x});
-    const float dz = std::max({0.0f, fb.lo.z - position.z, position.z - fb.hi.z});
-    if (dx * dx + dz * dz <= 4.0f && std::binary_search(pvs.begin(), pvs.end(), id)) return true;
-  }
-  return false;
+bool StreamWorld::avatarVisible(const glm::ivec3& cell, const glm::vec3& eye) {
+  const Box3f body(eye - glm::vec3(0.3f, 1.7f, 0.3f), eye + glm::vec3(0.3f, 0.2f, 0.3f));
+  return !epsilonPvs().boxHidden(grid_.cellBox(cell), body);
 }
 
 StreamWorld::CacheStats StreamWorld::cacheStats() const {

@@ -73,10 +73,12 @@ class StreamWorld {
                    std::function<void(FaceListPtr)> done);
   // Faces whose bounding box lies within `radius` of the box (sorted).
   FaceList facesWithin(const Box3f& box, float radius) const;
-  // Whether an avatar at `position` is potentially visible from a cell with
-  // this PVS: some face of the PVS lies within 2 m of it horizontally (the
-  // ground it stands on, the wall beside it), as in Funkhouser's RING.
-  bool avatarVisible(const FaceList& pvs, const glm::vec3& position) const;
+  // Whether an avatar whose eye is at `eye` is potentially visible from a
+  // view cell: its body box (0.6 m wide, from 1.7 m below the eye to 0.2 m
+  // above) is not hidden by one occluder from the whole cell, the test the
+  // PVS applies to objects (Funkhouser's RING filtered avatar updates by
+  // cell-to-cell visibility the same way). Runs on the calling thread.
+  bool avatarVisible(const glm::ivec3& cell, const glm::vec3& eye);
 
   struct CacheStats {
     uint64_t hits = 0, misses = 0, pvsComputed = 0, pvsFromDatabase = 0;

@@ -337,6 +337,18 @@ struct PvsQuery {
   }
 };
 
+bool EpsilonPvs::boxHidden(const Box3f& cell, const Box3f& box) const {
+  PvsStats stats;
+  const PvsOptions options;
+  PvsQuery q(*this, options, cell, stats);
+  std::array<glm::dvec3, 8> corners;
+  for (int s = 0; s < 8; ++s) corners[size_t(s)] = cellCorner(box, s);
+  std::array<std::pair<uint8_t, uint8_t>, 8> pairs;
+  for (int s = 0; s < 8; ++s) pairs[size_t(s)] = {uint8_t(s), uint8_t(s)};
+  uint64_t tests = 0;
+  return q.hidden(corners, pairs, tests, nullptr);
+}
+
 PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) const {
   Stopwatch total;
   PvsResult result;

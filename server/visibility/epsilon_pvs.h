@@ -97,6 +97,11 @@ class EpsilonPvs {
   // `cell` in the scene's local frame.
   PvsResult compute(const Box3f& cell, const PvsOptions& options = {}) const;
 
+  // True if one occluder hides the whole closed box from every point of the
+  // cell: the test compute() applies to object boxes (8 corner-to-corner
+  // lines). For dynamic things such as avatars. Thread-safe like compute().
+  bool boxHidden(const Box3f& cell, const Box3f& box) const;
+
   const OccluderSet& occluders() const { return occluders_; }
   // The distinct vertices of a face (local frame), or null for an unknown ID.
   const std::vector<glm::dvec3>* faceVertices(uint32_t faceId) const;

@@ -1,0 +1,520 @@
+// The streaming server over real loopback sockets: the conversation, what is
+// streamed (checked against rays cast into the scene), and every kind of bad
+// client, each ending only its own session.
+#include "server/stream/stream_server.h"
+
+#include <gtest/gtest.h>
+
+#include <set>
+
+#include "common/raycast/ray_query.h"
+#include "common/generate/path.h"
+#include "server/visibility/epsilon_pvs.h"
+#include "tests/server/stream/stream_test_support.h"
+
+namespace vistream {
+namespace {
+
+using testing::errorCodeOf;
+using testing::ServerFixture;
+using testing::TestClient;
+using wire::ErrorCode;
+using wire::Payload;
+
+// Faces decoded from every Geometry frame until CellReady for `cell` (or the timeout).
+struct Received {
+  std::vector<uint32_t> faces;  // in arrival order, duplicates kept
+  std::vector<wire::DecodedGeometry> batches;
+  bool ready = false;
+  size_t evictions = 0;
+  std::set<uint32_t> held() const { return {faces.begin(), faces.end()}; }
+};
+
+Received receiveUntilReady(TestClient& c, const glm::ivec3& cell, double timeoutS = 10.0) {
+  Received r;
+  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(int(timeoutS));
+  while (!r.ready && std::chrono::steady_clock::now() < end) {
+    auto f = c.next(0.5);
+    if (!f) continue;
+    const auto* e = wire::envelopeOf(*f);
+    if (e->payload_type() == Payload::Geometry) {
+      wire::DecodedGeometry g;
+      std::string error;
+      EXPECT_TRUE(wire::decodeGeometry(*e->payload_as_Geometry(), g, error)) << error;
+      r.faces.insert(r.faces.end(), g.faces.begin(), g.faces.end());
+      r.batches.push_back(std::move(g));
+    } else if (e->payload_type() == Payload::CellReady) {
+      r.ready = wire::fromWire(*e->payload_as_CellReady()->cell()) == cell;
+    } else if (e->payload_type() == Payload::Evict) {
+      ++r.evictions;
+    }
+  }
+  return r;
+}
+
+// What the server should stream for a cell, computed here: the PVS of the
+// cell's box, cut to the faces whose bounds lie within the radius.
+std::set<uint32_t> expectedFaceSet(const Scene& scene, const Box3f& cell, float radius, bool pvs) {
+  std::vector<Box3f> boxes(scene.faceCount);
+  for (const Object& o : scene.objects)
+    for (size_t t = 0; t < o.mesh.triangles.size(); ++t)
+      for (int k = 0; k < 3; ++k) boxes[o.mesh.faceIds[t]].extend(o.mesh.positions[o.mesh.triangles[t][k]]);
+  std::set<uint32_t> out;
+  std::vector<uint32_t> candidates;
+  if (pvs) {
+    candidates = EpsilonPvs(scene).compute(cell).faces;
+  } else {
+    for (uint32_t f = 0; f < scene.faceCount; ++f) candidates.push_back(f);
+  }
+  for (uint32_t f : candidates) {
+    const glm::vec3 gap = glm::max(glm::vec3(0.0f), glm::max(boxes[f].lo - cell.hi, cell.lo - boxes[f].hi));
+    if (glm::length(gap) <= radius) out.insert(f);
+  }
+  return out;
+}
+
+// Faces hit by a 64 x 64 fan of rays in every horizontal direction from eye.
+std::set<uint32_t> facesSeenFrom(const Scene& scene, const glm::vec3& eye, float radius) {
+  const FlatTriangles tris = flattenScene(scene, true);
+  const auto rays = makeEmbreeRayQuery(tris);
+  std::set<uint32_t> seen;
+  for (int a = 0; a < 256; ++a)
+    for (int b = 0; b < 32; ++b) {
+      const float az = 6.2831853f * float(a) / 256.0f, el = -0.6f + 1.2f * float(b) / 31.0f;
+      const glm::vec3 d(std::cos(el) * std::sin(az), std::sin(el), std::cos(el) * std::cos(az));
+      const Hit h = rays->firstHit(Ray{eye, d, 0.0f, radius});
+      if (h.valid()) seen.insert(tris.faceIds[h.triangle]);
+    }
+  return seen;
+}
+
+// A fresh client can still connect, say Hello and get geometry.
+void expectOthersStillServed(ServerFixture& fx) {
+  TestClient c(fx.port());
+  c.hello();
+  ASSERT_TRUE(c.nextOf(Payload::Welcome));
+  c.pose({0.0, 1.7, 8.0});
+  EXPECT_TRUE(c.nextOf(Payload::Geometry)) << "an innocent session was not served";
+}
+
+TEST(StreamServer, GreetsAHelloWithTheSceneItsGridAndMaterials) {
+  ServerFixture fx;
+  TestClient c(fx.port());
+  c.hello("", wire::kProtocolVersion, 50.0f);
+  const auto f = c.nextOf(Payload::Welcome);
+  ASSERT_TRUE(f);
+  const wire::Welcome& w = *wire::envelopeOf(*f)->payload_as_Welcome();
+  EXPECT_EQ(w.protocol_version(), wire::kProtocolVersion);
+  EXPECT_EQ(w.scene_id()->str(), "street");
+  EXPECT_EQ(w.face_count(), fx.world().faceCount());
+  EXPECT_EQ(w.near_field_radius_m(), 50.0f);
+  EXPECT_EQ(wire::fromWire(*w.grid()->dims()), fx.world().grid().dims());
+  EXPECT_EQ(w.materials()->size(), fx.world().scene().materials.size());
+  EXPECT_EQ(w.policy()->str(), "visibility");
+}
+
+TEST(StreamServer, StreamsTheCellsPvsWithinTheRadiusOnceThenSaysCellReady) {
+  ServerFixture fx;
+  TestClient c(fx.port());
+  c.hello("", wire::kProtocolVersion, 40.0f);
+  ASSERT_TRUE(c.nextOf(Payload::Welcome));
+  const glm::dvec3 eye(0.5, 1.7, 8.5);
+  c.pose(eye);
+  const glm::ivec3 cell = *fx.world().cellOf(glm::vec3(eye));
+  const Received r = receiveUntilReady(c, cell);
+  ASSERT_TRUE(r.ready);
+  const std::set<uint32_t> held = r.held();
+  EXPECT_EQ(held.size(), r.faces.size()) << "a face was sent twice";
+  const Scene& scene = fx.world().scene();
+  const Box3f box = fx.world().grid().cellBox(cell);
+  for (uint32_t f : expectedFaceSet(scene, box, 40.0f, true)) EXPECT_TRUE(held.count(f)) << "face " << f;
+  // The independent oracle: every face a ray from the eye hits within the radius is held.
+  for (uint32_t f : facesSeenFrom(scene, glm::vec3(eye), 40.0f)) EXPECT_TRUE(held.count(f)) << "seen face " << f;
+  // Known hidden: the boxes north of the 6 m wall are not sent.
+  size_t northHeld = 0;
+  for (const Object& o : scene.objects)
+    if (o.name.rfind("north_", 0) == 0)
+      for (uint32_t id : o.mesh.faceIds) northHeld += held.count(id);
+  EXPECT_EQ(northHeld, 0u);
+  // Decoded corners lie within the quantization step of the scene's.
+  std::vector<std::vector<glm::vec3>> corners(scene.faceCount);
+  for (const Object& o : scene.objects)
+    for (size_t t = 0; t < o.mesh.triangles.size(); ++t)
+      for (int k = 0; k < 3; ++k) corners[o.mesh.faceIds[t]].push_back(o.mesh.positions[o.mesh.triangles[t][k]]);
+  for (const auto& g : r.batches) {
+    size_t tri = 0;
+    for (size_t i = 0; i < g.faces.size(); ++i)
+      for (uint16_t t = 0; t < g.triangleCounts[i]; ++t, ++tri) {
+        // The index codec may rotate a triangle's corners (keeping its winding).
+        float best = 1e30f;
+        for (int rot = 0; rot < 3; ++rot) {
+          float worst = 0.0f;
+          for (int k = 0; k < 3; ++k) {
+            const glm::vec3 p = g.positions[g.indices[3 * tri + size_t(k)]];
+            const glm::vec3 q = corners[g.faces[i]][3 * t + size_t((k + rot) % 3)];
+            worst = std::max(worst, glm::length(p - q));
+          }
+          best = std::min(best, worst);
+        }
+        EXPECT_LT(best, 0.01f) << "face " << g.faces[i];
+      }
+  }
+}
+
+TEST(StreamServer, RadiusPolicyStreamsEverythingWithinTheRadiusVisibleOrNot) {
+  StreamServerConfig cfg;
+  cfg.policy = StreamPolicy::Radius;
+  ServerFixture fx(cfg);
+  TestClient c(fx.port());
+  c.hello("", wire::kProtocolVersion, 40.0f);
+  ASSERT_TRUE(c.nextOf(Payload::Welcome));
+  const glm::dvec3 eye(0.5, 1.7, 8.5);
+  c.pose(eye);
+  const glm::ivec3 cell = *fx.world().cellOf(glm::vec3(eye));
+  const Received r = receiveUntilReady(c, cell);
+  ASSERT_TRUE(r.ready);
+  const std::set<uint32_t> held = r.held();
+  const auto expected = expectedFaceSet(fx.world().scene(), fx.world().grid().cellBox(cell), 40.0f, false);
+  for (uint32_t f : expected) EXPECT_TRUE(held.count(f)) << "face " << f;
+  EXPECT_GT(expected.size(), expectedFaceSet(fx.world().scene(), fx.world().grid().cellBox(cell), 40.0f, true).size());
+}
+
+TEST(StreamServer, PrefetchesTheCellsAheadSoTheyAreReadyBeforeTheClientArrives) {
+  ServerFixture fx;
+  TestClient c(fx.port());
+  c.hello("", wire::kProtocolVersion, 40.0f);
+  ASSERT_TRUE(c.nextOf(Payload::Welcome));
+  const glm::dvec3 eye(0.5, 1.7, 8.5);
+  c.pose(eye, 90.0f, {-1.4f, 0.0f, 0.0f});  // walking west
+  const glm::ivec3 cell = *fx.world().cellOf(glm::vec3(eye));
+  const glm::ivec3 ahead = *fx.world().cellOf(glm::vec3(eye) + glm::vec3(-4.0f, 0.0f, 0.0f));
+  ASSERT_NE(ahead, cell);
+  std::set<glm::ivec3, bool (*)(const glm::ivec3&, const glm::ivec3&)> ready(
+      [](const glm::ivec3& a, const glm::ivec3& b) { return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z); });
+  for (int i = 0; i < 200 && !(ready.count(ahead) && ready.count(cell)); ++i) {
+    auto f = c.next(0.1);
+    if (f && wire::envelopeOf(*f)->payload_type() == Payload::CellReady)
+      ready.insert(wire::fromWire(*wire::envelopeOf(*f)->payload_as_CellReady()->cell()));
+  }
+  EXPECT_TRUE(ready.count(cell));
+  EXPECT_TRUE(ready.count(ahead)) << "the cell ahead was not prefetched";
+}
+
+TEST(StreamServer, AClientOverItsMemoryBudgetGetsEvictionsAndStaysWithinIt) {
+  ServerFixture fx;
+  TestClient c(fx.port());
+  const uint64_t budget = 2500;
+  c.hello("", wire::kProtocolVersion, 10.0f, budget);
+  ASSERT_TRUE(c.nextOf(Payload::Welcome));
+  std::set<uint32_t> held;
+  size_t evictions = 0;
+  for (double x : {-24.0, -8.0, 8.0, 24.0}) {
+    c.pose({x, 1.7, 8.5});
+    for (int i = 0; i < 20; ++i) {
+      auto f = c.next(0.1);
+      if (!f) continue;
+      const auto* e = wire::envelopeOf(*f);
+      if (e->payload_type() == Payload::Geometry) {
+        for (uint32_t id : *e->payload_as_Geometry()->face_ids()) held.insert(id);
+      } else if (e->payload_type() == Payload::Evict) {
+        ++evictions;
+        for (uint32_t id : *e->payload_as_Evict()->face_ids()) held.erase(id);
+      }
+    }
+    uint64_t bytes = 0;
+    for (uint32_t id : held) bytes += fx.world().faceBytes(id);
+    EXPECT_LE(bytes, budget) << "at x = " << x;
+  }
+  EXPECT_GT(evictions, 0u);
+}
+
+TEST(StreamServer, BandwidthLimitBoundsTheBytesEachClientReceives) {
+  StreamServerConfig cfg;
+  cfg.maxClientKbps = 40.0;  // 5,000 bytes a second
+  cfg.batchBytes = 2048;
+  ServerFixture fx(cfg);
+  TestClient c(fx.port());
+  c.hello("", wire::kProtocolVersion, 60.0f);
+  ASSERT_TRUE(c.nextOf(Payload::Welcome));
+  c.pose({0.5, 1.7, 8.5});
+  const auto start = std::chrono::steady_clock::now();
+  while (std::chrono::steady_clock::now() - start < std::chrono::seconds(2)) c.next(0.1);
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  // The bucket holds at most max(a quarter second, one batch) of credit, and
+  // a frame may overdraw it by its own size.
+  EXPECT_LE(double(c.bytes()), 5000.0 * s + 2048.0 + 4096.0 + 2000.0);
+  EXPECT_GT(c.bytes(), 2000u);
+}
+
+TEST(StreamServer, PvsOnlyModeAnswersRequestsAndSendsNoGeometry) {
+  StreamServerConfig cfg;
+  cfg.pvsOnly = true;
+  ServerFixture fx(cfg);
+  TestClient c(fx.port());
+  c.hello();
+  const auto w = c.nextOf(Payload::Welcome);
+  ASSERT_TRUE(w);
+  EXPECT_TRUE(wire::envelopeOf(*w)->payload_as_Welcome()->pvs_only());
+  const glm::dvec3 point(5.0, 1.7, 10.0);
+  wire::PvsRequestT req;
+  req.request_id = 42;
+  req.point = std::make_unique<wire::Vec3d>(wire::toWire(point));
+  c.sendRaw(wire::encodeMessage(std::move(req)));
+  const auto f = c.nextOf(Payload::PvsReply);
+  ASSERT_TRUE(f);
+  const wire::PvsReply& reply = *wire::envelopeOf(*f)->payload_as_PvsReply();
+  EXPECT_EQ(reply.request_id(), 42u);
+  ASSERT_TRUE(reply.found());
+  const glm::ivec3 cell = *fx.world().cellOf(glm::vec3(point));
+  EXPECT_EQ(wire::fromWire(*reply.cell()), cell);
+  const auto expected = EpsilonPvs(fx.world().scene()).compute(fx.world().grid().cellBox(cell)).faces;
+  EXPECT_EQ(std::vector<uint32_t>(reply.face_ids()->begin(), reply.face_ids()->end()), expected);
+  // Outside the grid: found is false.
+  wire::PvsRequestT far;
+  far.request_id = 43;
+  far.point = std::make_unique<wire::Vec3d>(wire::toWire(glm::dvec3(1e6, 0.0, 0.0)));
+  c.sendRaw(wire::encodeMessage(std::move(far)));
+  const auto g = c.nextOf(Payload::PvsReply);
+  ASSERT_TRUE(g);
+  EXPECT_FALSE(wire::envelopeOf(*g)->payload_as_PvsReply()->found());
+  c.pose(point);
+  EXPECT_FALSE(c.nextOf(Payload::Geometry, 1.0));
+}
+
+TEST(StreamServer, AvatarsGoOnlyToClientsThatCanSeeThemAndWantThem) {
+  StreamServerConfig cfg;
+  cfg.avatarHz = 20.0;
+  ServerFixture fx(cfg);
+  TestClient a(fx.port()), b(fx.port()), hidden(fx.port()), blind(fx.port());
+  a.hello();
+  b.hello();
+  hidden.hello();
+  blind.hello("", wire::kProtocolVersion, 0.0f, 0, false);
+  uint32_t ids[4];
+  TestClient* all[] = {&a, &b, &hidden, &blind};
+  for (int i = 0; i < 4; ++i) {
+    const auto w = all[i]->nextOf(Payload::Welcome);
+    ASSERT_TRUE(w);
+    ids[i] = wire::envelopeOf(*w)->payload_as_Welcome()->session_id();
+  }
+  a.pose({-10.0, 1.7, 8.0});
+  b.pose({10.0, 1.7, 8.0});        // same side of the wall
+  hidden.pose({0.0, 1.7, -25.0});  // behind the wall, by the north boxes
+  blind.pose({12.0, 1.7, 8.0});
+  bool aSeesB = false, aSeesHidden = false;
+  for (int i = 0; i < 30; ++i) {
+    for (TestClient* c : {&b, &hidden, &blind}) c->next(0.01);
+    auto f = a.nextOf(Payload::Avatar, 0.2);
+    if (!f) continue;
+    for (const auto* s : *wire::envelopeOf(*f)->payload_as_Avatar()->avatars()) {
+      aSeesB |= s->session_id() == ids[1];
+      aSeesHidden |= s->session_id() == ids[2];
+    }
+  }
+  EXPECT_TRUE(aSeesB);
+  EXPECT_FALSE(aSeesHidden) << "an avatar behind the wall was sent";
+  EXPECT_FALSE(blind.nextOf(Payload::Avatar, 0.5)) << "a client that wants no avatars got some";
+}
+
+// ---- bad input: each ends only its own session ---------------------------------
+
+TEST(StreamServer, WrongProtocolVersionGetsUnsupportedVersionAndIsClosed) {
+  ServerFixture fx;
+  TestClient bad(fx.port());
+  bad.hello("", 99);
+  const auto f = bad.nextOf(Payload::Error);
+  ASSERT_TRUE(f);
+  EXPECT_EQ(errorCodeOf(*f), ErrorCode::UnsupportedVersion);
+  EXPECT_TRUE(bad.closedWithin(3.0));
+  expectOthersStillServed(fx);
+}
+
+TEST(StreamServer, BadTokenGetsBadTokenAndTheRightOneGetsIn) {
+  StreamServerConfig cfg;
+  cfg.token = "s3cret";
+  ServerFixture fx(cfg);
+  TestClient bad(fx.port());
+  bad.hello("guess");
+  const auto f = bad.nextOf(Payload::Error);
+  ASSERT_TRUE(f);
+  EXPECT_EQ(errorCodeOf(*f), ErrorCode::BadToken);
+  EXPECT_TRUE(bad.closedWithin(3.0));
+  TestClient good(fx.port());
+  good.hello("s3cret");
+  EXPECT_TRUE(good.nextOf(Payload::Welcome));
+}
+
+TEST(StreamServer, MalformedFrameGetsMalformedFrameAndIsClosed) {
+  ServerFixture fx;
+  TestClient innocent(fx.port());
+  innocent.hello();
+  ASSERT_TRUE(innocent.nextOf(Payload::Welcome));
+  TestClient bad(fx.port());
+  bad.sendRaw({8, 0, 0, 0, 0xde, 0xad, 0xbe, 0xef, 0x01, 0x02, 0x03, 0x04});
+  const auto f = bad.nextOf(Payload::Error);
+  ASSERT_TRUE(f);
+  EXPECT_EQ(errorCodeOf(*f), ErrorCode::MalformedFrame);
+  EXPECT_TRUE(bad.closedWithin(3.0));
+  innocent.pose({0.0, 1.7, 8.0});
+  EXPECT_TRUE(innocent.nextOf(Payload::Geometry));
+}
+
+TEST(StreamServer, OversizedFrameGetsFrameTooLargeBeforeAnyBuffering) {
+  ServerFixture fx;
+  TestClient bad(fx.port());
+  bad.sendRaw({0xff, 0xff, 0xff, 0x7f});
+  const auto f = bad.nextOf(Payload::Error);
+  ASSERT_TRUE(f);
+  EXPECT_EQ(errorCodeOf(*f), ErrorCode::FrameTooLarge);
+  EXPECT_TRUE(bad.closedWithin(3.0));
+  expectOthersStillServed(fx);
+}
+
+TEST(StreamServer, OutOfOrderFramesGetOutOfOrder) {
+  ServerFixture fx;
+  {
+    TestClient bad(fx.port());
+    bad.pose({0.0, 1.7, 8.0});  // before Hello
+    const auto f = bad.nextOf(Payload::Error);
+    ASSERT_TRUE(f);
+    EXPECT_EQ(errorCodeOf(*f), ErrorCode::OutOfOrder);
+    EXPECT_TRUE(bad.closedWithin(3.0));
+  }
+  {
+    TestClient bad(fx.port());
+    bad.hello();
+    ASSERT_TRUE(bad.nextOf(Payload::Welcome));
+    bad.sendRaw(wire::encodeMessage(wire::WelcomeT{}));  // a server message
+    const auto f = bad.nextOf(Payload::Error);
+    ASSERT_TRUE(f);
+    EXPECT_EQ(errorCodeOf(*f), ErrorCode::OutOfOrder);
+  }
+  {
+    TestClient bad(fx.port());
+    bad.hello();
+    bad.hello();  // twice
+    const auto f = bad.nextOf(Payload::Error);
+    ASSERT_TRUE(f);
+    EXPECT_EQ(errorCodeOf(*f), ErrorCode::OutOfOrder);
+  }
+  expectOthersStillServed(fx);
+}
+
+TEST(StreamServer, NonFinitePoseGetsBadRequest) {
+  ServerFixture fx;
+  TestClient bad(fx.port());
+  bad.hello();
+  ASSERT_TRUE(bad.nextOf(Payload::Welcome));
+  bad.pose({std::nan(""), 1.7, 8.0});
+  const auto f = bad.nextOf(Payload::Error);
+  ASSERT_TRUE(f);
+  EXPECT_EQ(errorCodeOf(*f), ErrorCode::BadRequest);
+  expectOthersStillServed(fx);
+}
+
+TEST(StreamServer, AClientVanishingMidFrameEndsOnlyItsSession) {
+  ServerFixture fx;
+  TestClient innocent(fx.port());
+  innocent.hello();
+  ASSERT_TRUE(innocent.nextOf(Payload::Welcome));
+  {
+    TestClient bad(fx.port());
+    bad.hello();
+    ASSERT_TRUE(bad.nextOf(Payload::Welcome));
+    auto frame = wire::encodeBye("x");
+    frame.resize(frame.size() / 2);
+    bad.sendRaw(frame);
+  }  // closed with half a frame sent
+  for (int i = 0; i < 50 && fx.server().sessionCount() > 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  EXPECT_EQ(fx.server().sessionCount(), 1u);
+  innocent.pose({0.0, 1.7, 8.0});
+  EXPECT_TRUE(innocent.nextOf(Payload::Geometry));
+}
+
+TEST(StreamServer, SilentClientsTimeOut) {
+  StreamServerConfig cfg;
+  cfg.helloTimeoutS = 0.3;
+  ServerFixture fx(cfg);
+  TestClient silent(fx.port());
+  const auto f = silent.nextOf(Payload::Error, 3.0);
+  ASSERT_TRUE(f);
+  EXPECT_EQ(errorCodeOf(*f), ErrorCode::Timeout);
+  EXPECT_TRUE(silent.closedWithin(3.0));
+}
+
+TEST(StreamServer, AClientThatStopsReadingIsClosedWhileOthersAreServed) {
+  StreamServerConfig cfg;
+  cfg.sendQueueLimitBytes = 64u << 10;
+  cfg.writeStallTimeoutS = 1.0;
+  cfg.maxFramesPerSecond = 1u << 30;
+  ServerFixture fx(cfg);
+  TestClient reader(fx.port());
+  reader.hello();
+  ASSERT_TRUE(reader.nextOf(Payload::Welcome));
+  TestClient stuck(fx.port(), 4096);
+  stuck.hello();
+  // Many requests, each answered with a face list; never read.
+  std::vector<uint8_t> burst;
+  wire::PvsRequestT req;
+  req.by_cell = true;
+  req.cell = std::make_unique<wire::CellIndex>(0, 0, 0);
+  const auto one = wire::encodeMessage(req);
+  for (int i = 0; i < 4000; ++i) burst.insert(burst.end(), one.begin(), one.end());
+  boost::system::error_code ec;
+  for (int round = 0; round < 20 && !ec && fx.server().sessionCount() > 1; ++round) {
+    boost::asio::write(stuck.socket(), boost::asio::buffer(burst), ec);
+    reader.next(0.05);
+  }
+  for (int i = 0; i < 100 && fx.server().sessionCount() > 1; ++i) {
+    reader.next(0.05);
+  }
+  EXPECT_EQ(fx.server().sessionCount(), 1u) << "the session that stopped reading is still open";
+  reader.pose({0.0, 1.7, 8.0});
+  EXPECT_TRUE(reader.nextOf(Payload::Geometry));
+}
+
+TEST(StreamServer, ClientsBeyondTheMaximumGetTooManyClients) {
+  StreamServerConfig cfg;
+  cfg.maxClients = 1;
+  ServerFixture fx(cfg);
+  TestClient first(fx.port());
+  first.hello();
+  ASSERT_TRUE(first.nextOf(Payload::Welcome));
+  TestClient second(fx.port());
+  const auto f = second.nextOf(Payload::Error);
+  ASSERT_TRUE(f);
+  EXPECT_EQ(errorCodeOf(*f), ErrorCode::TooManyClients);
+  EXPECT_TRUE(second.closedWithin(3.0));
+  first.pose({0.0, 1.7, 8.0});
+  EXPECT_TRUE(first.nextOf(Payload::Geometry));
+}
+
+TEST(StreamServer, AFloodOfFramesGetsRateLimited) {
+  StreamServerConfig cfg;
+  cfg.maxFramesPerSecond = 50;
+  ServerFixture fx(cfg);
+  TestClient bad(fx.port());
+  bad.hello();
+  ASSERT_TRUE(bad.nextOf(Payload::Welcome));
+  for (int i = 0; i < 200; ++i) bad.pose({0.0, 1.7, 8.0});
+  const auto f = bad.nextOf(Payload::Error);
+  ASSERT_TRUE(f);
+  EXPECT_EQ(errorCodeOf(*f), ErrorCode::RateLimited);
+  expectOthersStillServed(fx);
+}
+
+TEST(StreamServer, StoppingSaysByeToEveryClient) {
+  auto fx = std::make_unique<ServerFixture>();
+  TestClient a(fx->port()), b(fx->port());
+  a.hello();
+  b.hello();
+  ASSERT_TRUE(a.nextOf(Payload::Welcome));
+  ASSERT_TRUE(b.nextOf(Payload::Welcome));
+  fx->server().stop();
+  EXPECT_TRUE(a.nextOf(Payload::Bye));
+  EXPECT_TRUE(b.nextOf(Payload::Bye));
+  fx.reset();
+}
+
+}  // namespace
+}  // namespace vistream

@@ -1,0 +1,164 @@
+// A loopback test harness for the streaming server: a server on a small
+// hand-built scene running on its own thread, and blocking test clients
+// with timeouts.
+#pragma once
+
+#include <boost/asio.hpp>
+
+#include <chrono>
+#include <memory>
+#include <optional>
+#include <thread>
+#include <vector>
+
+#include "protocol/geometry/geometry_codec.h"
+#include "protocol/wire/messages.h"
+#include "server/stream/stream_server.h"
+#include "tests/common/support/box_scenes.h"
+
+namespace vistream::testing {
+
+// A 60 m square of ground with a wall across it and boxes on both sides.
+inline Scene streetScene() {
+  Scene s;
+  addGround(s, -30, -30, 30, 30);
+  addBox(s, "wall", {-30, 0, -0.2f}, {30, 6, 0.2f});
+  for (int i = 0; i < 6; ++i) {
+    const float x = -25.0f + 10.0f * float(i);
+    addBox(s, "north_" + std::to_string(i), {x, 0, -20}, {x + 4, 3, -16});
+    addBox(s, "south_" + std::to_string(i), {x, 0, 16}, {x + 4, 3, 20});
+  }
+  finalizeScene(s);
+  s.name = "street";
+  return s;
+}
+
+class ServerFixture {
+ public:
+  explicit ServerFixture(StreamServerConfig config = {}, Scene scene = streetScene(), float cellSize = 4.0f) {
+    StreamWorldOptions wo;
+    wo.cellSize = cellSize;
+    world_ = std::make_unique<StreamWorld>(std::move(scene), wo);
+    config.port = 0;
+    config.workerThreads = 2;
+    server_ = std::make_unique<StreamServer>(*world_, config);
+    server_->start();
+    thread_ = std::thread([this] { server_->run(false); });
+  }
+  ~ServerFixture() {
+    server_->stop();
+    thread_.join();
+  }
+  uint16_t port() const { return server_->port(); }
+  StreamWorld& world() { return *world_; }
+  StreamServer& server() { return *server_; }
+
+ private:
+  std::unique_ptr<StreamWorld> world_;
+  std::unique_ptr<StreamServer> server_;
+  std::thread thread_;
+};
+
+class TestClient {
+ public:
+  explicit TestClient(uint16_t port, int receiveBuffer = 0) : socket_(io_), decoder_(64u << 20) {
+    socket_.open(boost::asio::ip::tcp::v4());
+    if (receiveBuffer > 0) socket_.set_option(boost::asio::socket_base::receive_buffer_size(receiveBuffer));
+    socket_.connect({boost::asio::ip::make_address("127.0.0.1"), port});
+  }
+  void sendRaw(const std::vector<uint8_t>& bytes) { boost::asio::write(socket_, boost::asio::buffer(bytes)); }
+  void hello(const std::string& token = "", uint32_t version = wire::kProtocolVersion, float radius = 0.0f,
+             uint64_t budget = 0, bool avatars = true) {
+    wire::HelloT h;
+    h.protocol_version = version;
+    h.auth_token = token;
+    h.capabilities = std::make_unique<wire::CapabilitiesT>();
+    h.capabilities->near_field_radius_m = radius;
+    h.capabilities->memory_budget_bytes = budget;
+    h.capabilities->wants_avatars = avatars;
+    sendRaw(wire::encodeMessage(std::move(h)));
+  }
+  void pose(const glm::dvec3& p, float yaw = 0.0f, glm::vec3 velocity = glm::vec3(0.0f)) {
+    wire::PoseT m;
+    m.position = std::make_unique<wire::Vec3d>(wire::toWire(p));
+    m.yaw_deg = yaw;
+    m.velocity = std::make_unique<wire::Vec3f>(wire::toWire(velocity));
+    sendRaw(wire::encodeMessage(std::move(m)));
+  }
+  // The next frame within the timeout, or nothing (timeout or closed).
+  std::optional<std::vector<uint8_t>> next(double timeoutS = 5.0) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                                                  std::chrono::duration<double>(timeoutS));
+    while (true) {
+      if (auto f = decoder_.next()) return f;
+      if (closed_ || decoder_.failed()) return std::nullopt;
+      const auto now = std::chrono::steady_clock::now();
+      if (now >= deadline) return std::nullopt;
+      bool done = false;
+      size_t got = 0;
+      boost::system::error_code err;
+      socket_.async_read_some(boost::asio::buffer(buffer_), [&](const boost::system::error_code& ec, size_t n) {
+        done = true;
+        err = ec;
+        got = n;
+      });
+      io_.restart();
+      io_.run_for(deadline - now);
+      if (!done) {
+        socket_.cancel();
+        io_.restart();
+        io_.run();
+        if (got == 0) return decoder_.next();
+      }
+      if (err && got == 0) {
+        closed_ = true;
+        continue;
+      }
+      bytes_ += got;
+      decoder_.feed(std::span<const uint8_t>(buffer_.data(), got));
+    }
+  }
+  // The next frame of the given payload type (skipping others), or nothing.
+  std::optional<std::vector<uint8_t>> nextOf(wire::Payload type, double timeoutS = 5.0) {
+    const auto end = std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                                            std::chrono::duration<double>(timeoutS));
+    while (std::chrono::steady_clock::now() < end) {
+      const double left = std::chrono::duration<double>(end - std::chrono::steady_clock::now()).count();
+      auto f = next(std::max(0.01, left));
+      if (!f) return std::nullopt;
+      if (wire::envelopeOf(*f)->payload_type() == type) return f;
+      onOther(*f);
+    }
+    return std::nullopt;
+  }
+  // Reads until the server closes the connection; true if it did in time.
+  bool closedWithin(double timeoutS) {
+    const auto end = std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                                            std::chrono::duration<double>(timeoutS));
+    while (!closed_ && std::chrono::steady_clock::now() < end) {
+      auto f = next(0.2);
+      if (f) onOther(*f);
+    }
+    return closed_;
+  }
+  // Frames skipped by nextOf/closedWithin are recorded here.
+  std::vector<std::vector<uint8_t>> skipped;
+  uint64_t bytes() const { return bytes_; }
+  boost::asio::ip::tcp::socket& socket() { return socket_; }
+
+ private:
+  void onOther(const std::vector<uint8_t>& f) { skipped.push_back(f); }
+  boost::asio::io_context io_;
+  boost::asio::ip::tcp::socket socket_;
+  wire::FrameDecoder decoder_;
+  std::array<uint8_t, 65536> buffer_{};
+  bool closed_ = false;
+  uint64_t bytes_ = 0;
+};
+
+inline wire::ErrorCode errorCodeOf(const std::vector<uint8_t>& frame) {
+  const auto* e = wire::envelopeOf(frame);
+  return e->payload_type() == wire::Payload::Error ? e->payload_as_Error()->code() : wire::ErrorCode::None;
+}
+
+}  // namespace vistream::testing
