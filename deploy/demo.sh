@@ -2,8 +2,10 @@
 # The main job on the built-in default scene: installs what is missing,
 # builds Release, generates the default city (city1), prints its statistics
 # and the effects it calls for, the sampled visible set of one street view
-# cell and its conservative PVS (checked against each other), then bakes the
-# PVS database of a district and answers a query from it, with timings.
+# cell and its conservative PVS (checked against each other), bakes the PVS
+# database of a district and answers a query from it, then runs the main job:
+# the streaming server on the city over loopback with simulated users walking
+# through it (vistream-loadtest), and prints what they measured.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -55,3 +57,21 @@ rm -f "$work/district.db"
 "$bin/vistream-pvs" bake --scene "$work/city1.obj" --cell-size 4,2,4 --region "$region" --out "$work/district.db"
 "$bin/vistream-pvs" query --db "$work/district.db" --point "$x,$y,$z" | head -c 400
 echo
+
+echo
+echo "== 7. the main job: stream the city to 20 walking users over loopback =="
+"$bin/vistream-scene" path --scene city1 --frames 900 --seed 3 --out "$work/walk.csv" --log-level warn
+rm -f "$work/port"
+"$bin/vistream-server" --scene city1 --port 0 --port-file "$work/port" --stats-interval 5 --log-level info \
+  > "$work/server.log" 2>&1 &
+server=$!
+trap 'kill $server 2>/dev/null || true' EXIT
+for _ in $(seq 1 240); do [ -s "$work/port" ] && break; kill -0 $server 2>/dev/null || break; sleep 0.25; done
+if [ ! -s "$work/port" ]; then echo "demo: the server did not start:"; cat "$work/server.log"; exit 1; fi
+"$bin/vistream-loadtest" --port "$(cat "$work/port")" --clients 20 --path "$work/walk.csv" --duration 15 \
+  --scene city1 --log-level warn
+kill -INT $server
+wait $server || true
+trap - EXIT
+echo "server log (last lines):"
+tail -n 4 "$work/server.log"

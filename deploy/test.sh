@@ -2,7 +2,8 @@
 # Installs what is missing, builds and runs the whole test suite with ctest:
 # first a Release build with warnings as errors (binaries in build/bin), then
 # the same tests under AddressSanitizer + UndefinedBehaviorSanitizer (clang),
-# which also builds the fuzzers and runs each on its seed corpus.
+# which also builds the fuzzers and runs each on its seed corpus, and last the
+# streaming server's tests under ThreadSanitizer.
 #
 #   deploy/test.sh               everything (what CI runs)
 #   deploy/test.sh --no-sanitize only the Release build and its tests
@@ -36,5 +37,10 @@ if [ "$sanitize" = 1 ]; then
   cmake --build --preset asan
   echo "== Sanitizer tests =="
   ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 ctest --preset asan
+  echo "== ThreadSanitizer build of the streaming server's tests (clang) =="
+  cmake --preset tsan >/dev/null
+  cmake --build --preset tsan --target test_stream
+  echo "== ThreadSanitizer tests =="
+  TSAN_OPTIONS="halt_on_error=1 suppressions=$PWD/tests/tsan.supp" ctest --preset tsan -L test_stream
 fi
 echo "== all tests passed in $(( $(date +%s) - start )) s =="

@@ -348,7 +348,7 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
   const double wall = std::chrono::duration<double>(Clock::now() - started).count();
 
   std::vector<double> latencies, initial, cpu, bytesPerS;
-  uint64_t misses = 0, checks = 0, errors = 0, entries = 0, frames = 0;
+  uint64_t misses = 0, checks = 0, errors = 0, entries = 0, frames = 0, faces = 0, totalBytes = 0;
   size_t loaded = 0;
   std::string firstError;
   for (const auto& c : clients) {
@@ -364,6 +364,8 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
     errors += c->errors;
     entries += c->cellEntries;
     frames += c->geometryFrames;
+    faces += c->facesReceived;
+    totalBytes += c->bytes;
     if (firstError.empty()) firstError = c->firstError;
   }
   double meanBytes = 0.0;
@@ -383,6 +385,8 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
                  {"initial_load_ms", percentiles(initial)},
                  {"clients_loaded", loaded},
                  {"geometry_frames", frames},
+                 {"faces_received", faces},
+                 {"bytes_per_face", faces ? double(totalBytes) / double(faces) : 0.0},
                  {"errors", errors},
                  {"first_error", firstError},
                  {"server_cpu_ms_per_s_per_client", cpu.empty() ? nlohmann::json(nullptr) : nlohmann::json(cpuMean)}};

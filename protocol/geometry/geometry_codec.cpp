@@ -57,11 +57,13 @@ GeometryT encodeGeometry(std::span<const FaceTriangles> faces) {
   }
   g.vertex_count = uint32_t(vertexCount);
   g.index_count = uint32_t(indices.size());
-  g.vertices.resize(meshopt_encodeVertexBufferBound(vertexCount, sizeof(QuantizedVertex)));
-  g.vertices.resize(meshopt_encodeVertexBuffer(g.vertices.data(), g.vertices.size(), vertices.data(), vertexCount,
-                                               sizeof(QuantizedVertex)));
-  g.indices.resize(meshopt_encodeIndexBufferBound(indices.size(), vertexCount));
-  g.indices.resize(meshopt_encodeIndexBuffer(g.indices.data(), g.indices.size(), indices.data(), indices.size()));
+  if (vertexCount > 0) {
+    g.vertices.resize(meshopt_encodeVertexBufferBound(vertexCount, sizeof(QuantizedVertex)));
+    g.vertices.resize(meshopt_encodeVertexBuffer(g.vertices.data(), g.vertices.size(), vertices.data(), vertexCount,
+                                                 sizeof(QuantizedVertex)));
+    g.indices.resize(meshopt_encodeIndexBufferBound(indices.size(), vertexCount));
+    g.indices.resize(meshopt_encodeIndexBuffer(g.indices.data(), g.indices.size(), indices.data(), indices.size()));
+  }
   g.codec = GeometryCodec::Meshopt;
   return g;
 }
@@ -113,9 +115,11 @@ bool decodeGeometry(const Geometry& g, DecodedGeometry& out, std::string& error)
   out.positions.reserve(vertices.size());
   for (const QuantizedVertex& v : vertices)
     out.positions.push_back(glm::vec3(origin + glm::dvec3(v[0], v[1], v[2]) * step));
-  out.faces.assign(g.face_ids()->begin(), g.face_ids()->end());
-  out.materials.assign(g.face_materials()->begin(), g.face_materials()->end());
-  out.triangleCounts.assign(g.face_triangle_counts()->begin(), g.face_triangle_counts()->end());
+  if (nf > 0) {  // absent vectors are empty
+    out.faces.assign(g.face_ids()->begin(), g.face_ids()->end());
+    out.materials.assign(g.face_materials()->begin(), g.face_materials()->end());
+    out.triangleCounts.assign(g.face_triangle_counts()->begin(), g.face_triangle_counts()->end());
+  }
   return true;
 }
 

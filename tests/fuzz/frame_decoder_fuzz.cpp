@@ -1,9 +1,11 @@
 // libFuzzer target: FrameDecoder must reject or accept any byte stream
-// without crashing, and every frame it returns must be readable.
+// without crashing, every frame it returns must be readable, and a Geometry
+// frame must decode or be rejected.
 #include <cstddef>
 #include <cstdint>
 #include <span>
 
+#include "protocol/geometry/geometry_codec.h"
 #include "protocol/wire/framing.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
@@ -18,6 +20,12 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         if (hello->auth_token()) (void)hello->auth_token()->size();
       if (const auto* err = env->payload_as_Error())
         if (err->text()) (void)err->text()->str();
+      if (const auto* g = env->payload_as_Geometry()) {
+        vistream::wire::DecodedGeometry out;
+        std::string error;
+        (void)vistream::wire::decodeGeometry(*g, out, error);
+      }
+      if (const auto* p = env->payload_as_Pose()) (void)vistream::wire::isFinite(p->position());
     }
   }
   return 0;

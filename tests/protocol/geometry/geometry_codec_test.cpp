@@ -65,6 +65,19 @@ TEST(GeometryCodec, AnEmptyBatchRoundTrips) {
   EXPECT_TRUE(g.faces.empty());
 }
 
+TEST(GeometryCodec, AMessageWithNoFieldsAtAllDecodesAsEmpty) {
+  flatbuffers::FlatBufferBuilder b;
+  GeometryBuilder gb(b);
+  const auto geometry = gb.Finish();
+  b.Finish(CreateEnvelope(b, Payload::Geometry, geometry.Union()));
+  const auto frame = encodeFrame(b);
+  DecodedGeometry g;
+  std::string error;
+  // No quantization: rejected, without reading any absent vector.
+  EXPECT_FALSE(decodeGeometry(geometryIn(frame), g, error));
+  EXPECT_FALSE(error.empty());
+}
+
 TEST(GeometryCodec, RejectsInconsistentMessagesWithAMessage) {
   auto base = encodeGeometry(randomFaces(10, 2, 5.0f));
   auto expectRejected = [](GeometryT g, const char* what) {
