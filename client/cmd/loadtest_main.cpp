@@ -35,9 +35,12 @@ int main(int argc, char** argv) {
   app.add_option("--radius", o.radius, "near-field radius to ask for in metres (0: the server's)");
   app.add_option("--memory-budget", o.memoryBudget, "client memory budget in bytes (0: unlimited)");
   app.add_option("--token-file", tokenFile, "auth token file (first line)");
+  bool noAvatars = false;
+  app.add_flag("--no-avatars", noAvatars, "do not ask for other users' avatars");
   app.add_option("--threads", o.threads, "client I/O threads (default 1)");
   app.add_flag("--json", asJson, "one JSON object on stdout");
   return runToolApp("vistream-loadtest", app, argc, argv, logLevel, [&]() -> int {
+    o.avatars = !noAvatars;
     if (pathFile.empty() == pathsMode.empty()) throwInputError("give exactly one of --path P.csv and --paths auto");
     if (!pathsMode.empty() && pathsMode != "auto") throwInputError("--paths: expected 'auto', got '{}'", pathsMode);
     if (!tokenFile.empty()) {

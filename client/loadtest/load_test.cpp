@@ -95,6 +95,7 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
         hello.capabilities = std::make_unique<CapabilitiesT>();
         hello.capabilities->near_field_radius_m = self->opt_.radius;
         hello.capabilities->memory_budget_bytes = self->opt_.memoryBudget;
+        hello.capabilities->wants_avatars = self->opt_.avatars;
         self->helloSent_ = Clock::now();
         self->send(encodeMessage(std::move(hello)));
         self->read();

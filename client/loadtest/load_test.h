@@ -35,6 +35,7 @@ struct LoadTestOptions {
   int checkRaysX = 32, checkRaysY = 24;
   float radius = 0.0f;            // near-field radius asked for (0: the server's)
   uint64_t memoryBudget = 0;
+  bool avatars = true;            // ask for avatar updates
   std::string token;
   unsigned threads = 1;
   double connectTimeoutS = 10.0;

@@ -38,7 +38,8 @@ int main(int argc, char** argv) {
   app.add_option("--radius", cfg.defaultRadius, "near-field radius in metres when the client names none (default 200)");
   app.add_option("--max-client-kbps", cfg.maxClientKbps, "per-client bandwidth limit in kbit/s (0: none)");
   app.add_option("--prefetch-s", cfg.prefetchSeconds, "prefetch the cells the client reaches within this time");
-  app.add_option("--avatar-hz", cfg.avatarHz, "avatar updates per second (0: off)");
+  app.add_option("--avatar-hz", cfg.avatarHz, "avatar updates per second (default 2; 0: off)");
+  app.add_option("--max-avatars", cfg.maxAvatars, "nearest visible avatars per update (default 16)");
   app.add_option("--stats-interval", cfg.statsIntervalS, "seconds between stats lines");
   app.add_option("--max-frame-bytes", cfg.maxInboundFrameBytes, "largest inbound frame accepted");
   app.add_option("--send-queue-bytes", cfg.sendQueueLimitBytes, "a client with more queued is not reading: closed");

@@ -94,7 +94,10 @@ void StreamServer::accept() {
 
 void StreamServer::sessionEnded(uint32_t id) {
   std::lock_guard lock(sessionsMutex_);
-  if (sessions_.erase(id)) ++ended_;
+  if (sessions_.erase(id)) {
+    ++ended_;
+    departed_.push_back(id);
+  }
 }
 
 size_t StreamServer::sessionCount() const {
@@ -107,35 +110,36 @@ StreamServer::Counters StreamServer::counters() const { return {accepted_, rejec
 void StreamServer::avatarTick() {
   if (stopping_ || config_.avatarHz <= 0.0) return;
   std::vector<std::shared_ptr<Session>> live;
+  std::vector<uint32_t> departed;
   {
     std::lock_guard lock(sessionsMutex_);
     for (auto& [id, weak] : sessions_)
       if (auto s = weak.lock()) live.push_back(std::move(s));
+    departed.swap(departed_);
   }
   // Filtering is visibility work: on the worker pool.
-  asio::post(workers_, [this, live = std::move(live)] {
+  asio::post(workers_, [this, live = std::move(live), departed = std::move(departed)] {
     std::vector<Session::Snapshot> snaps;
     snaps.reserve(live.size());
     for (const auto& s : live) snaps.push_back(s->snapshot());
-    // Cell-to-cell answers are shared within the tick.
-    std::unordered_map<uint64_t, bool> seen;
+    std::vector<std::pair<double, size_t>> near;
     for (size_t i = 0; i < live.size(); ++i) {
       const Session::Snapshot& x = snaps[i];
       if (!x.active || !x.hasPose || !x.wantsAvatars) continue;
-      wire::AvatarT message;
+      // The nearest others within the radius, then the visible ones among them.
+      near.clear();
       for (size_t j = 0; j < live.size(); ++j) {
         const Session::Snapshot& y = snaps[j];
-        if (i == j || !y.active || !y.hasPose) continue;
-        if (glm::length(y.position - x.position) > double(x.radius)) continue;
-        // Per receiver cell and avatar position to 0.5 m, within the tick.
-        const glm::ivec3 q(glm::floor(glm::vec3(y.position) * 2.0f));
-        const uint64_t key = (uint64_t(world_.grid().linearIndex(x.cell)) << 32) ^
-                             (uint64_t(uint32_t(q.x)) * 73856093u) ^ (uint64_t(uint32_t(q.y)) * 19349663u) ^
-                             (uint64_t(uint32_t(q.z)) * 83492791u);
-        auto [it, fresh] = seen.try_emplace(key, false);
-        if (fresh) it->second = world_.avatarVisible(x.cell, glm::vec3(y.position));
-        const bool visible = it->second;
-        if (!visible) continue;
+        const double d = glm::length(y.position - x.position);
+        if (i != j && y.active && y.hasPose && d <= double(x.radius)) near.emplace_back(d, j);
+      }
+      std::sort(near.begin(), near.end());
+      wire::AvatarT message;
+      message.departed = departed;
+      for (const auto& [d, j] : near) {
+        if (message.avatars.size() >= config_.maxAvatars) break;
+        const Session::Snapshot& y = snaps[j];
+        if (!world_.cellSeesCell(x.cell, y.cell)) continue;
         auto a = std::make_unique<wire::AvatarStateT>();
         a->session_id = y.id;
         a->position = std::make_unique<wire::Vec3d>(wire::toWire(y.position));

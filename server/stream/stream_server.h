@@ -45,7 +45,8 @@ struct StreamServerConfig {
   float maxRadius = 2000.0f;
   double maxClientKbps = 0.0;        // 0: unlimited
   double prefetchSeconds = 3.0;      // look-ahead along the client's velocity
-  double avatarHz = 5.0;
+  double avatarHz = 2.0;
+  size_t maxAvatars = 16;            // nearest visible avatars per update
   double statsIntervalS = 5.0;       // the server's log line
   double clientStatsIntervalS = 2.0; // Stats frames to each client
   uint32_t maxInboundFrameBytes = 64u << 10;
@@ -102,6 +103,7 @@ class StreamServer {
   uint16_t port_ = 0;
   mutable std::mutex sessionsMutex_;
   std::map<uint32_t, std::weak_ptr<Session>> sessions_;
+  std::vector<uint32_t> departed_;  // sessions ended since the last avatar update
   uint32_t nextId_ = 1;
   std::atomic<bool> stopping_{false};
   std::atomic<uint64_t> accepted_{0}, rejected_{0}, ended_{0}, bytesSent_{0};

@@ -166,9 +166,22 @@ FaceList StreamWorld::facesWithin(const Box3f& box, float radius) const {
   return out;
 }
 
-bool StreamWorld::avatarVisible(const glm::ivec3& cell, const glm::vec3& eye) {
-  const Box3f body(eye - glm::vec3(0.3f, 1.7f, 0.3f), eye + glm::vec3(0.3f, 0.2f, 0.3f));
-  return !epsilonPvs().boxHidden(grid_.cellBox(cell), body);
+bool StreamWorld::cellSeesCell(const glm::ivec3& viewerCell, const glm::ivec3& avatarCell) {
+  const uint64_t key = (uint64_t(grid_.linearIndex(viewerCell)) << 32) | uint64_t(grid_.linearIndex(avatarCell));
+  {
+    std::lock_guard lock(cellPairsMutex_);
+    if (auto it = cellPairs_.find(key); it != cellPairs_.end()) return it->second;
+  }
+  // The avatar stands on a floor within its cell: its body reaches 0.3 m
+  // around and 0.2 m above the cell, and no lower than the cell's floor.
+  Box3f body = grid_.cellBox(avatarCell);
+  body.lo -= glm::vec3(0.3f, 0.0f, 0.3f);
+  body.hi += glm::vec3(0.3f, 0.2f, 0.3f);
+  const bool visible = !epsilonPvs().boxHidden(grid_.cellBox(viewerCell), body);
+  std::lock_guard lock(cellPairsMutex_);
+  if (cellPairs_.size() > (1u << 20)) cellPairs_.clear();  // bounded memory
+  cellPairs_[key] = visible;
+  return visible;
 }
 
 StreamWorld::CacheStats StreamWorld::cacheStats() const {

@@ -19,6 +19,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "common/scene/scene.h"
@@ -73,12 +74,14 @@ class StreamWorld {
                    std::function<void(FaceListPtr)> done);
   // Faces whose bounding box lies within `radius` of the box (sorted).
   FaceList facesWithin(const Box3f& box, float radius) const;
-  // Whether an avatar whose eye is at `eye` is potentially visible from a
-  // view cell: its body box (0.6 m wide, from 1.7 m below the eye to 0.2 m
-  // above) is not hidden by one occluder from the whole cell, the test the
-  // PVS applies to objects (Funkhouser's RING filtered avatar updates by
-  // cell-to-cell visibility the same way). Runs on the calling thread.
-  bool avatarVisible(const glm::ivec3& cell, const glm::vec3& eye);
+  // Whether an avatar anywhere in view cell `avatarCell` may be visible from
+  // any point of view cell `viewerCell` (cell-to-cell visibility, as
+  // Funkhouser's RING filtered avatar updates): the avatar cell's box, grown
+  // by a body (0.3 m around, 0.2 m above; the avatar stands on a floor within
+  // the cell, so not below it), is not hidden
+  // by one occluder from the whole viewer cell, the test the PVS applies to
+  // objects. Answers are cached (bounded); thread-safe.
+  bool cellSeesCell(const glm::ivec3& viewerCell, const glm::ivec3& avatarCell);
 
   struct CacheStats {
     uint64_t hits = 0, misses = 0, pvsComputed = 0, pvsFromDatabase = 0;
@@ -117,6 +120,8 @@ class StreamWorld {
   std::unique_ptr<AsyncCache<uint32_t, FaceList>> pvsCache_;
   std::unique_ptr<AsyncCache<FaceSetKey, FaceList, FaceSetKeyHash>> faceSetCache_;
   std::atomic<uint64_t> pvsFromDatabase_{0};
+  std::mutex cellPairsMutex_;
+  std::unordered_map<uint64_t, bool> cellPairs_;
 };
 
 }  // namespace vistream

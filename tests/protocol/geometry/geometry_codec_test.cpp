@@ -7,11 +7,17 @@
 namespace vistream::wire {
 namespace {
 
-std::vector<uint8_t> frameOf(GeometryT g) { return encodeMessage(std::move(g)); }
-
-const Geometry& geometryIn(const std::vector<uint8_t>& frame) {
-  return *GetEnvelope(frame.data() + kFrameHeaderBytes)->payload_as_Geometry();
+// The FlatBuffer of a frame, without its length prefix, in its own (aligned)
+// allocation, as FrameDecoder hands it out.
+std::vector<uint8_t> frameOf(GeometryT g) {
+  const auto frame = encodeMessage(std::move(g));
+  return {frame.begin() + kFrameHeaderBytes, frame.end()};
 }
+std::vector<uint8_t> bufferOf(const flatbuffers::FlatBufferBuilder& b) {
+  return {b.GetBufferPointer(), b.GetBufferPointer() + b.GetSize()};
+}
+
+const Geometry& geometryIn(const std::vector<uint8_t>& buffer) { return *GetEnvelope(buffer.data())->payload_as_Geometry(); }
 
 std::vector<FaceTriangles> randomFaces(size_t n, uint32_t seed, float extent) {
   std::mt19937 rng(seed);
@@ -70,7 +76,7 @@ TEST(GeometryCodec, AMessageWithNoFieldsAtAllDecodesAsEmpty) {
   GeometryBuilder gb(b);
   const auto geometry = gb.Finish();
   b.Finish(CreateEnvelope(b, Payload::Geometry, geometry.Union()));
-  const auto frame = encodeFrame(b);
+  const auto frame = bufferOf(b);
   DecodedGeometry g;
   std::string error;
   // No quantization: rejected, without reading any absent vector.
