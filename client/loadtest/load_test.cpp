@@ -42,25 +42,34 @@ struct Shared {
   tcp::endpoint endpoint;
 };
 
-// Where a path puts the walker at path time t (looping), and its velocity.
 struct PathPoint {
   glm::dvec3 position;
   glm::dvec3 velocity;
   double yaw, pitch;
 };
+// Where a path puts the walker at path time t, and its velocity. Past the
+// end the walker turns round and walks back (and so on), so a long test never
+// teleports.
 PathPoint pointAt(const std::vector<PathSample>& path, double t) {
   if (path.size() == 1) return {path[0].position, glm::dvec3(0.0), path[0].yawDeg, path[0].pitchDeg};
   const double t0 = path.front().t, span = path.back().t - t0;
-  const double local = span > 0.0 ? t0 + std::fmod(std::max(0.0, t), span) : t0;
+  double local = t0;
+  bool back = false;
+  if (span > 0.0) {
+    const double m = std::fmod(std::max(0.0, t), 2.0 * span);
+    back = m > span;
+    local = t0 + (back ? 2.0 * span - m : m);
+  }
   size_t k = size_t(std::upper_bound(path.begin(), path.end(), local, [](double v, const PathSample& s) { return v < s.t; }) -
                     path.begin());
   k = std::clamp<size_t>(k, 1, path.size() - 1);
   const PathSample &a = path[k - 1], &b = path[k];
   const double dt = b.t - a.t;
   const double u = dt > 0.0 ? std::clamp((local - a.t) / dt, 0.0, 1.0) : 0.0;
-  double dyaw = std::remainder(b.yawDeg - a.yawDeg, 360.0);
-  return {glm::mix(a.position, b.position, u), dt > 0.0 ? (b.position - a.position) / dt : glm::dvec3(0.0),
-          a.yawDeg + u * dyaw, glm::mix(a.pitchDeg, b.pitchDeg, u)};
+  const double dyaw = std::remainder(b.yawDeg - a.yawDeg, 360.0);
+  const glm::dvec3 v = dt > 0.0 ? (b.position - a.position) / dt : glm::dvec3(0.0);
+  return {glm::mix(a.position, b.position, u), back ? -v : v, a.yawDeg + u * dyaw + (back ? 180.0 : 0.0),
+          glm::mix(a.pitchDeg, b.pitchDeg, u)};
 }
 
 class SimClient : public std::enable_shared_from_this<SimClient> {
@@ -104,6 +113,7 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
   }
 
   // Results, read after the io_context has stopped.
+  uint64_t missesWhilePending = 0;
   uint64_t bytes = 0, misses = 0, checks = 0, errors = 0, geometryFrames = 0, facesReceived = 0, cellEntries = 0;
   std::vector<double> latencies;
   double initialLoadMs = -1.0;
@@ -271,6 +281,10 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
         if ((face >> 6) >= held_.size() || !((held_[face >> 6] >> (face & 63)) & 1u)) missing.insert(face);
       }
     misses += missing.size();
+    if (!ready_.count(cell_)) missesWhilePending += missing.size();
+    for (uint32_t face : missing)
+      spdlog::debug("client {}: miss face {} at {:.2f},{:.2f},{:.2f} cell {},{},{} ({})", index_, face, eye.x, eye.y, eye.z,
+                    cell_.x, cell_.y, cell_.z, ready_.count(cell_) ? "cell ready" : "cell not ready yet");
   }
 
   void finish(const std::string& why, bool isError) {
@@ -349,7 +363,7 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
   const double wall = std::chrono::duration<double>(Clock::now() - started).count();
 
   std::vector<double> latencies, initial, cpu, bytesPerS;
-  uint64_t misses = 0, checks = 0, errors = 0, entries = 0, frames = 0, faces = 0, totalBytes = 0;
+  uint64_t misses = 0, checks = 0, errors = 0, entries = 0, frames = 0, faces = 0, totalBytes = 0, pendingMisses = 0;
   size_t loaded = 0;
   std::string firstError;
   for (const auto& c : clients) {
@@ -361,6 +375,7 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
     cpu.insert(cpu.end(), c->cpuPerClient.begin(), c->cpuPerClient.end());
     bytesPerS.push_back(c->walkedS > 0.0 ? double(c->bytes) / c->walkedS : 0.0);
     misses += c->misses;
+    pendingMisses += c->missesWhilePending;
     checks += c->checks;
     errors += c->errors;
     entries += c->cellEntries;
@@ -382,6 +397,7 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
                  {"cell_ready_latency_ms", percentiles(latencies)},
                  {"cell_entries", entries},
                  {"visibility_misses", misses},
+                 {"visibility_misses_cell_not_ready", pendingMisses},
                  {"frames_checked", checks},
                  {"initial_load_ms", percentiles(initial)},
                  {"clients_loaded", loaded},

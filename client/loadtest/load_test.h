@@ -7,8 +7,8 @@
 // hold yet.
 //
 // Time: each client sends a Pose every 1/fps seconds of wall time; its
-// position is the path's at (start offset + elapsed * speed), the path
-// looping. Path files are in file coordinates; the client converts with the
+// position is the path's at (start offset + elapsed * speed); past the path's
+// end it turns round and walks back, so it never teleports. Path files are in file coordinates; the client converts with the
 // Welcome's local origin.
 #pragma once
 
