@@ -24,7 +24,7 @@ int main(int argc, char** argv) {
   app.add_option("--log-level", logLevel, "trace, debug, info, warn, error, critical, off");
   app.add_option("--scene", scene, "SCENE")->required();
   app.add_option("--pvs-db", pvsDb, "baked PVS database (vistream-pvs bake); default: compute on demand");
-  app.add_option("--cell-size", worldOptions.cellSize, "view cell size in metres without a database (default 8)");
+  app.add_option("--cell-size", worldOptions.cellSize, "view cell size in metres without a database (default 4)");
   app.add_option("--pvs-cache", worldOptions.pvsCacheCells, "cells whose PVS stays cached (LRU)");
   app.add_option("--bind", cfg.bindAddress, "address to listen on (default 127.0.0.1)");
   app.add_option("--port", cfg.port, "TCP port (default 7070; 0 picks a free one)");

@@ -373,8 +373,17 @@ void Session::updateNeededCells() {
     for (double d = step; d <= horizon; d += step)
       if (auto c = world_.cellOf(glm::vec3(position_) + velocity_ / speed * float(d))) add(*c);
   }
+  // Neighbours the client could step into before their face sets would
+  // arrive: those whose shared side or corner lies within the margin.
+  const Box3f box = grid.cellBox(cell_);
+  const glm::vec3 p(position_);
+  const float margin = std::max(2.0f, float(server_.config().prefetchSeconds) * std::max(speed, 1.4f));
   for (int dz = -1; dz <= 1; ++dz)
-    for (int dx = -1; dx <= 1; ++dx) add(cell_ + glm::ivec3(dx, 0, dz));
+    for (int dx = -1; dx <= 1; ++dx) {
+      const bool nearX = dx == 0 || (dx < 0 ? p.x - box.lo.x : box.hi.x - p.x) <= margin;
+      const bool nearZ = dz == 0 || (dz < 0 ? p.z - box.lo.z : box.hi.z - p.z) <= margin;
+      if (nearX && nearZ) add(cell_ + glm::ivec3(dx, 0, dz));
+    }
   needed_ = std::move(needed);
   // Forget the face sets of cells no longer needed (their faces stay held).
   for (auto it = cellSets_.begin(); it != cellSets_.end();) {

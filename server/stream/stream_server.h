@@ -44,7 +44,8 @@ struct StreamServerConfig {
   float defaultRadius = 200.0f;      // near-field radius when the client names none (metres)
   float maxRadius = 2000.0f;
   double maxClientKbps = 0.0;        // 0: unlimited
-  double prefetchSeconds = 3.0;      // look-ahead along the client's velocity
+  double prefetchSeconds = 3.0;      // look-ahead along the client's velocity, and the
+                                     // neighbour margin (this long at walking speed, at least 2 m)
   double avatarHz = 2.0;
   size_t maxAvatars = 16;            // nearest visible avatars per update
   double statsIntervalS = 5.0;       // the server's log line

@@ -38,7 +38,7 @@ const char* streamPolicyName(StreamPolicy p);
 
 struct StreamWorldOptions {
   std::filesystem::path pvsDatabase;  // empty: compute every PVS on demand
-  float cellSize = 8.0f;              // without a database (metres)
+  float cellSize = 4.0f;              // without a database (metres), the paper's scale
   size_t pvsCacheCells = 4096;
   size_t faceSetCacheEntries = 4096;
 };

@@ -6,6 +6,7 @@
 # run. Usage:
 #   tests/benchmarks/stream_bench.sh [SCENE] [CLIENTS] [DURATION_S] [RADII]
 # e.g. tests/benchmarks/stream_bench.sh city1 500 40 "100 200 400 800"
+# Extra server options via SERVER_ARGS (e.g. SERVER_ARGS="--cell-size 4").
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 bin=build/bin
@@ -21,7 +22,7 @@ printf "%-8s %-10s %7s %8s %14s %12s %22s %10s %12s %7s %12s\n" scene policy rad
 for radius in $radii; do
   for policy in visibility radius; do
     rm -f "$work/port"
-    "$bin/vistream-server" --scene "$scene" --policy "$policy" --radius "$radius" --port 0 --port-file "$work/port" \
+    "$bin/vistream-server" --scene "$scene" --policy "$policy" --radius "$radius" --port 0 --port-file "$work/port" ${SERVER_ARGS:-} \
       --log-level warn > "$work/server_${policy}_${radius}.log" 2>&1 &
     server=$!
     for _ in $(seq 1 600); do [ -s "$work/port" ] && break; kill -0 $server 2>/dev/null || break; sleep 0.25; done
