@@ -283,8 +283,15 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
     misses += missing.size();
     if (!ready_.count(cell_)) missesWhilePending += missing.size();
     for (uint32_t face : missing)
-      spdlog::debug("client {}: miss face {} at {:.2f},{:.2f},{:.2f} cell {},{},{} ({})", index_, face, eye.x, eye.y, eye.z,
-                    cell_.x, cell_.y, cell_.z, ready_.count(cell_) ? "cell ready" : "cell not ready yet");
+      spdlog::debug("client {}: miss face {} from {:.3f},{:.3f},{:.3f} (file) in cell {},{},{} [{:.3f},{:.3f},{:.3f} .. "
+                    "{:.3f},{:.3f},{:.3f}] ({})",
+                    index_, face, eye.x + origin_.x, eye.y + origin_.y, eye.z + origin_.z, cell_.x, cell_.y, cell_.z,
+                    gridOrigin_.x + cellSize_.x * float(cell_.x) + origin_.x, gridOrigin_.y + cellSize_.y * float(cell_.y) + origin_.y,
+                    gridOrigin_.z + cellSize_.z * float(cell_.z) + origin_.z,
+                    gridOrigin_.x + cellSize_.x * float(cell_.x + 1) + origin_.x,
+                    gridOrigin_.y + cellSize_.y * float(cell_.y + 1) + origin_.y,
+                    gridOrigin_.z + cellSize_.z * float(cell_.z + 1) + origin_.z,
+                    ready_.count(cell_) ? "cell ready" : "cell not ready yet");
   }
 
   void finish(const std::string& why, bool isError) {

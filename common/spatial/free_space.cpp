@@ -1,5 +1,7 @@
 #include "common/spatial/free_space.h"
 
+#include "common/raycast/sampled_visibility.h"
+
 #include <algorithm>
 #include <cmath>
 #include <deque>
@@ -74,6 +76,10 @@ FreeSpace FreeSpace::build(const RayQuery& rays, const Box3f& bounds,
           }
           if (ceiling - y >= options.headroom) { best = y; break; }
         }
+        // A floor inside a closed solid (the ground under a building whose
+        // bottom face the vertical ray does not report apart from the ground)
+        // is no place to stand: its walls are invisible to vertical rays.
+        if (best && insideSolid(rays, {c.x, *best + 1.0f, c.y})) best.reset();
         if (best) {
           candidate[fs.index(i, k)] = 1;
           fs.floor_[fs.index(i, k)] = *best;

@@ -2,7 +2,8 @@
 //
 // A regular grid over the scene's XZ extent. For each column a vertical ray
 // collects every surface; a column is walkable at the lowest upward-facing
-// surface with at least `headroom` metres free above it. Columns closer than
+// surface with at least `headroom` metres free above it and a point 1 m above
+// it outside every closed solid (insideSolid). Columns closer than
 // `viewerRadius` to an unwalkable column are removed, then only the largest
 // 4-connected set whose neighbouring floors differ by at most the step
 // height is kept (the street network of a city, the corridors and rooms of a

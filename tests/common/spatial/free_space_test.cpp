@@ -9,6 +9,7 @@ namespace {
 
 using testing::addBox;
 using testing::addGround;
+using testing::addFaces;
 
 struct World {
   Scene scene;
@@ -35,6 +36,27 @@ TEST(FreeSpace, GroundAroundABuildingIsWalkableAndItsFootprintAndRoofAreNot) {
   for (const auto& c : fs.walkableColumns()) {
     const glm::vec2 p = fs.columnCentre(c.x, c.y);
     EXPECT_FALSE(p.x > -5.3f && p.x < 5.3f && p.y > -5.3f && p.y < 5.3f) << p.x << "," << p.y;
+  }
+}
+
+TEST(FreeSpace, TheGroundInsideABuildingWithoutABottomFaceIsNoPlaceToStand) {
+  // Walls and a roof only, standing on the ground: vertical rays see the roof
+  // high above the ground inside, so only the walls (invisible to them) tell
+  // that the inside is closed.
+  World w;
+  addGround(w.scene, -20, -20, 20, 20);
+  const float l = -5, h = 5, top = 12;
+  addFaces(w.scene, "open_bottom_building",
+           {{{l, 0, l}, {l, 0, h}, {l, top, h}, {l, top, l}},
+            {{h, 0, l}, {h, top, l}, {h, top, h}, {h, 0, h}},
+            {{l, 0, l}, {l, top, l}, {h, top, l}, {h, 0, l}},
+            {{l, 0, h}, {h, 0, h}, {h, top, h}, {l, top, h}},
+            {{l, top, l}, {l, top, h}, {h, top, h}, {h, top, l}}});
+  const FreeSpace fs = w.build();
+  EXPECT_TRUE(fs.floorAt({15, 10}).has_value());
+  for (const auto& c : fs.walkableColumns()) {
+    const glm::vec2 p = fs.columnCentre(c.x, c.y);
+    EXPECT_FALSE(p.x > l && p.x < h && p.y > l && p.y < h) << "inside at " << p.x << "," << p.y;
   }
 }
 
