@@ -414,10 +414,12 @@ void Session::maybeCull() {
   if (server_.config().policy != StreamPolicy::Visibility || cullingInFlight_ || needed_.empty()) return;
   const auto it = cellSets_.find(needed_.front());
   if (it == cellSets_.end() || cursor_[it->first] >= it->second->size()) return;  // not loaded, or complete
+  // A new current cell is culled at once; the same cell again at most every 250 ms.
   const auto now = Clock::now();
-  if (seconds(now - lastCull_) < 0.25) return;
+  if (culledCell_ == it->first && seconds(now - lastCull_) < 0.25) return;
   lastCull_ = now;
   cullingInFlight_ = true;
+  culledCell_ = it->first;
   if (!viewer_) {
     CullingOptions o;
     o.method = CullingMethod::HierarchyUpdating;
@@ -425,13 +427,14 @@ void Session::maybeCull() {
     viewer_ = std::make_unique<CullingViewer>(world_.culling(), o);
   }
   asio::post(server_.workers(), [self = shared_from_this(), eye = position_, yaw = yaw_, pitch = pitch_,
-                                 set = it->second] {
+                                 set = it->second, cell = it->first] {
     const FrameResult r = self->viewer_->frame(eye, yaw, pitch);
     FaceList visible;
     std::set_intersection(r.faces.begin(), r.faces.end(), set->begin(), set->end(), std::back_inserter(visible));
-    asio::post(self->strand_, [self, visible = std::move(visible)]() mutable {
+    asio::post(self->strand_, [self, visible = std::move(visible), cell]() mutable {
       self->cullingInFlight_ = false;
       self->visibleNow_ = std::move(visible);
+      self->visibleNowCell_ = cell;
       self->pump();
     });
   });
@@ -514,6 +517,12 @@ void Session::pump() {
   updateNeededCells();
   maybeCull();
   if (produceInFlight_ || queued_ > cfg.geometryWatermarkBytes) return;
+  // Nothing goes before the current cell's face set is known, and under the
+  // visibility policy before its culling: what the client sees from its pose
+  // goes first. (maybeCull starts the culling of a new current cell at once;
+  // its result pumps again.)
+  if (needed_.empty() || !cellSets_.count(needed_.front())) return;
+  if (cfg.policy == StreamPolicy::Visibility && visibleNowCell_ != needed_.front() && cullingInFlight_) return;
   if (cfg.maxClientKbps > 0.0) {
     const auto now = Clock::now();
     const double rate = cfg.maxClientKbps * 1000.0 / 8.0;  // bytes per second

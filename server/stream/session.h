@@ -124,6 +124,7 @@ class Session : public std::enable_shared_from_this<Session> {
   std::map<uint32_t, size_t> cursor_;              // per loaded cell: faces before this index are held
   std::set<uint32_t> requested_, announced_;
   FaceList visibleNow_;
+  uint32_t culledCell_ = UINT32_MAX, visibleNowCell_ = UINT32_MAX;  // cell of the culling in flight / of visibleNow_
   bool cullingInFlight_ = false, produceInFlight_ = false;
   Clock::time_point lastCull_;
   std::unique_ptr<CullingViewer> viewer_;

@@ -9,7 +9,10 @@
 
 #include "common/raycast/ray_query.h"
 #include "common/generate/path.h"
+#include "common/spatial/free_space.h"
 #include "server/visibility/epsilon_pvs.h"
+#include "server/visibility/pvs_bake.h"
+#include "tests/common/support/temp_dir.h"
 #include "tests/server/stream/stream_test_support.h"
 
 namespace vistream {
@@ -161,6 +164,50 @@ TEST(StreamServer, StreamsTheCellsPvsWithinTheRadiusOnceThenSaysCellReady) {
   }
 }
 
+TEST(StreamServer, FacesSeenFromThePoseArriveBeforeFacesBehindTheViewer) {
+  // The box behind the viewer has the lowest face IDs, so only the
+  // visible-first order can send it after the boxes in view.
+  Scene scene;
+  testing::addGround(scene, -40, -40, 40, 40);
+  const uint32_t behind = testing::addBox(scene, "behind", {-2, 0, 34}, {2, 3, 38});
+  // Enough objects on both sides that the kD-tree separates front and back.
+  for (int i = 0; i < 8; ++i)
+    testing::addBox(scene, "ahead_" + std::to_string(i), {-20.0f + 5.0f * float(i), 0, -12}, {-17.0f + 5.0f * float(i), 3, -9});
+  for (int i = 0; i < 8; ++i)
+    testing::addBox(scene, "back_" + std::to_string(i), {-20.0f + 5.0f * float(i), 0, 24}, {-17.0f + 5.0f * float(i), 3, 27});
+  finalizeScene(scene);
+  scene.name = "ahead";
+  StreamServerConfig cfg;
+  cfg.batchBytes = 400;  // about five faces a frame, so the order shows
+  ServerFixture fx(cfg, std::move(scene));
+  TestClient c(fx.port());
+  c.hello("", wire::kProtocolVersion, 60.0f);
+  ASSERT_TRUE(c.nextOf(Payload::Welcome));
+  const glm::dvec3 eye(0.5, 1.7, 5.5);
+  c.pose(eye, 0.0f);  // looking along -Z at the boxes ahead
+  const Received r = receiveUntilReady(c, *fx.world().cellOf(glm::vec3(eye)));
+  ASSERT_TRUE(r.ready);
+  // Faces that rays through the 60-degree frustum hit.
+  const FlatTriangles tris = flattenScene(fx.world().scene(), true);
+  const auto rays = makeEmbreeRayQuery(tris);
+  std::set<uint32_t> seen;
+  const double th = std::tan(30.0 * 3.14159265358979323846 / 180.0);
+  for (int y = 0; y < 24; ++y)
+    for (int x = 0; x < 32; ++x) {
+      const glm::vec3 d(float(th * ((x + 0.5) / 16.0 - 1.0)), float(0.75 * th * ((y + 0.5) / 12.0 - 1.0)), -1.0f);
+      const Hit h = rays->firstHit(Ray{glm::vec3(eye), glm::normalize(d), 0.0f, 60.0f});
+      if (h.valid()) seen.insert(tris.faceIds[h.triangle]);
+    }
+  size_t lastSeen = 0, firstBehind = r.faces.size();
+  for (size_t i = 0; i < r.faces.size(); ++i) {
+    if (seen.count(r.faces[i])) lastSeen = i;
+    if (r.faces[i] >= behind && r.faces[i] < behind + 6) firstBehind = std::min(firstBehind, i);
+  }
+  ASSERT_GT(seen.size(), 6u);
+  ASSERT_LT(firstBehind, r.faces.size()) << "the box behind is within the radius and must come eventually";
+  EXPECT_LT(lastSeen, firstBehind) << "a face behind the viewer came before one in view";
+}
+
 TEST(StreamServer, RadiusPolicyStreamsEverythingWithinTheRadiusVisibleOrNot) {
   StreamServerConfig cfg;
   cfg.policy = StreamPolicy::Radius;
@@ -279,6 +326,49 @@ TEST(StreamServer, PvsOnlyModeAnswersRequestsAndSendsNoGeometry) {
   EXPECT_FALSE(wire::envelopeOf(*g)->payload_as_PvsReply()->found());
   c.pose(point);
   EXPECT_FALSE(c.nextOf(Payload::Geometry, 1.0));
+}
+
+TEST(StreamServer, ServesPvsFromABakedDatabaseAndRejectsADatabaseOfAnotherScene) {
+  testing::TempDir dir;
+  const auto db = dir.path() / "street.db";
+  {
+    const Scene scene = testing::streetScene();
+    const FlatTriangles tris = flattenScene(scene, true);
+    const auto rays = makeEmbreeRayQuery(tris);
+    const FreeSpace fs = FreeSpace::build(*rays, scene.bounds());
+    BakeOptions bo;
+    bo.cellSize = glm::vec3(4.0f, 2.0f, 4.0f);
+    bo.threads = 1;
+    bakePvs(scene, EpsilonPvs(scene), fs, bo, db);
+  }
+  StreamWorldOptions wo;
+  wo.pvsDatabase = db;
+  ServerFixture fx({}, testing::streetScene(), wo);
+  const PvsDatabase baked = PvsDatabase::open(db);
+  EXPECT_EQ(fx.world().grid().dims(), baked.header().dims);
+  TestClient c(fx.port());
+  c.hello();
+  ASSERT_TRUE(c.nextOf(Payload::Welcome));
+  const uint32_t linear = baked.cellIndices().front();
+  wire::PvsRequestT req;
+  req.by_cell = true;
+  req.cell = std::make_unique<wire::CellIndex>(wire::toWire(fx.world().grid().cellAt(linear)));
+  c.sendRaw(wire::encodeMessage(std::move(req)));
+  const auto f = c.nextOf(Payload::PvsReply);
+  ASSERT_TRUE(f);
+  const auto* ids = wire::envelopeOf(*f)->payload_as_PvsReply()->face_ids();
+  EXPECT_EQ(std::vector<uint32_t>(ids->begin(), ids->end()), *baked.cell(linear));
+  EXPECT_EQ(fx.world().cacheStats().pvsFromDatabase, 1u);
+  // Another scene: a clear error naming the database.
+  Scene other = testing::streetScene();
+  testing::addBox(other, "extra", {0, 0, 25}, {1, 1, 26});
+  finalizeScene(other);
+  try {
+    StreamWorld w(std::move(other), wo);
+    ADD_FAILURE() << "a database of another scene was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("street.db"), std::string::npos) << e.what();
+  }
 }
 
 TEST(StreamServer, AvatarsGoOnlyToClientsThatCanSeeThemAndWantThem) {

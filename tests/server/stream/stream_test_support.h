@@ -35,9 +35,7 @@ inline Scene streetScene() {
 
 class ServerFixture {
  public:
-  explicit ServerFixture(StreamServerConfig config = {}, Scene scene = streetScene(), float cellSize = 4.0f) {
-    StreamWorldOptions wo;
-    wo.cellSize = cellSize;
+  explicit ServerFixture(StreamServerConfig config = {}, Scene scene = streetScene(), StreamWorldOptions wo = {}) {
     world_ = std::make_unique<StreamWorld>(std::move(scene), wo);
     config.port = 0;
     config.workerThreads = 2;
