@@ -68,12 +68,14 @@ std::optional<std::vector<uint8_t>> FrameDecoder::next() {
   }
   if (buffered() < kFrameHeaderBytes + size) return std::nullopt;
   const uint8_t* data = buffer_.data() + start_ + kFrameHeaderBytes;
-  flatbuffers::Verifier verifier(data, size);
+  // Verified in its own allocation: FlatBuffers aligns fields relative to
+  // the buffer's start, so it must start aligned (the stream offset need not be).
+  std::vector<uint8_t> frame(data, data + size);
+  flatbuffers::Verifier verifier(frame.data(), frame.size());
   if (size == 0 || !VerifyEnvelopeBuffer(verifier)) {
     error_ = fmt::format("frame of {} bytes failed FlatBuffers verification", size);
     return std::nullopt;
   }
-  std::vector<uint8_t> frame(data, data + size);
   start_ += kFrameHeaderBytes + size;
   return frame;
 }
