@@ -43,10 +43,7 @@ int main(int argc, char** argv) {
     o.avatars = !noAvatars;
     if (pathFile.empty() == pathsMode.empty()) throwInputError("give exactly one of --path P.csv and --paths auto");
     if (!pathsMode.empty() && pathsMode != "auto") throwInputError("--paths: expected 'auto', got '{}'", pathsMode);
-    if (!tokenFile.empty()) {
-      std::ifstream f(tokenFile);
-      if (!f || !std::getline(f, o.token) || o.token.empty()) throwInputError("--token-file {}: cannot read a token", tokenFile);
-    }
+    if (!tokenFile.empty()) o.token = readTokenFile(tokenFile);
     Scene scene;
     if (!sceneSpec.empty()) {
       scene = openScene(sceneSpec);

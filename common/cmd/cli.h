@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdio>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -39,6 +40,18 @@ int runToolApp(const char* tool, CLI::App& app, int argc, char** argv, const std
     std::fprintf(stderr, "%s: error: %s\n", tool, e.what());
     return 1;
   }
+}
+
+// The shared secret in the first line of a token file (trailing spaces and a
+// CR removed). Throws InputError naming `option` and the file if it cannot be
+// read or the line is empty.
+inline std::string readTokenFile(const std::string& path, const char* option = "--token-file") {
+  std::ifstream f(path);
+  std::string token;
+  if (!f || !std::getline(f, token)) throwInputError("{} {}: cannot read it", option, path);
+  while (!token.empty() && (token.back() == '\r' || token.back() == ' ')) token.pop_back();
+  if (token.empty()) throwInputError("{} {}: the first line is empty", option, path);
+  return token;
 }
 
 // Splits "a,b,c" into {"a", "b", "c"}; an empty string gives one empty item.

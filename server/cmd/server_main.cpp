@@ -48,13 +48,7 @@ int main(int argc, char** argv) {
   app.add_option("--max-frames-per-s", cfg.maxFramesPerSecond, "inbound frames per second per client");
   return runToolApp("vistream-server", app, argc, argv, logLevel, [&]() -> int {
     cfg.policy = parseStreamPolicy(policy);
-    if (!tokenFile.empty()) {
-      std::ifstream f(tokenFile);
-      if (!f) throwInputError("--token-file {}: cannot read it", tokenFile);
-      std::getline(f, cfg.token);
-      while (!cfg.token.empty() && (cfg.token.back() == '\r' || cfg.token.back() == ' ')) cfg.token.pop_back();
-      if (cfg.token.empty()) throwInputError("--token-file {}: the first line is empty", tokenFile);
-    }
+    if (!tokenFile.empty()) cfg.token = readTokenFile(tokenFile);
     if (!(cfg.defaultRadius > 0.0f)) throwInputError("--radius must be positive");
     if (cfg.maxClientKbps < 0.0) throwInputError("--max-client-kbps must be >= 0");
     if (cfg.ioThreads == 0) throwInputError("--threads must be at least 1");

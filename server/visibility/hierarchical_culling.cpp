@@ -239,7 +239,11 @@ CullingScene::CullingScene(const Scene& scene) : scene_(scene) {
     for (uint32_t item : tree_.items(int32_t(n))) faceShare_[n] += double(objectFaces[item]) / double(leavesHolding[item]);
   // Children come after their parent in the depth-first layout.
   for (size_t n = tree_.nodes().size(); n-- > 1;) faceShare_[size_t(tree_.node(int32_t(n)).parent)] += faceShare_[n];
-  drawMsPerFace_ = measureDrawMsPerFace(scene);
+}
+
+double CullingScene::drawMsPerFace() const {
+  std::call_once(drawCostOnce_, [this] { drawMsPerFace_ = measureDrawMsPerFace(scene_); });
+  return drawMsPerFace_;
 }
 
 std::vector<size_t> CullingScene::bestOccluders(const glm::dvec3& viewpoint, size_t k) const {
@@ -263,7 +267,10 @@ std::vector<size_t> CullingScene::bestOccluders(const glm::dvec3& viewpoint, siz
 }
 
 CullingViewer::CullingViewer(const CullingScene& scene, const CullingOptions& options)
-    : scene_(scene), options_(options), state_(scene.tree().nodes().size()), rng_(options.seed) {}
+    : scene_(scene), options_(options), state_(scene.tree().nodes().size()), rng_(options.seed) {
+  // Adaptive skipping weighs drawing costs: measure them now, not inside a frame's timing.
+  if (options_.method == CullingMethod::Adaptive) (void)scene_.drawMsPerFace();
+}
 
 namespace {
 

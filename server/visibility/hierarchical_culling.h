@@ -49,6 +49,7 @@
 #pragma once
 
 #include <cstdint>
+#include <mutex>
 #include <random>
 #include <string>
 #include <vector>
@@ -111,7 +112,9 @@ class CullingScene {
   // as the mean time to draw one of the scene's faces with a software
   // z-buffer rasterizer at 640x480 (this machine has no GPU; see
   // measureDrawMsPerFace in the .cpp for the views used).
-  double drawMsPerFace() const { return drawMsPerFace_; }
+  // Measured on first use (not at construction: a server that never asks
+  // for frame times never pays for it). Thread-safe.
+  double drawMsPerFace() const;
 
  private:
   const Scene& scene_;
@@ -124,7 +127,8 @@ class CullingScene {
   std::vector<CandidateShape> shapes_;
   std::vector<size_t> nodeFaces_;
   std::vector<double> faceShare_;
-  double drawMsPerFace_ = 0.0;
+  mutable std::once_flag drawCostOnce_;
+  mutable double drawMsPerFace_ = 0.0;
 };
 
 class CullingViewer {

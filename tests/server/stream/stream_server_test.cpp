@@ -18,7 +18,7 @@
 namespace vistream {
 namespace {
 
-using testing::errorCodeOf;
+using testing::nextErrorCode;
 using testing::ServerFixture;
 using testing::TestClient;
 using wire::ErrorCode;
@@ -412,9 +412,7 @@ TEST(StreamServer, WrongProtocolVersionGetsUnsupportedVersionAndIsClosed) {
   ServerFixture fx;
   TestClient bad(fx.port());
   bad.hello("", 99);
-  const auto f = bad.nextOf(Payload::Error);
-  ASSERT_TRUE(f);
-  EXPECT_EQ(errorCodeOf(*f), ErrorCode::UnsupportedVersion);
+  EXPECT_EQ(nextErrorCode(bad), ErrorCode::UnsupportedVersion);
   EXPECT_TRUE(bad.closedWithin(3.0));
   expectOthersStillServed(fx);
 }
@@ -425,9 +423,7 @@ TEST(StreamServer, BadTokenGetsBadTokenAndTheRightOneGetsIn) {
   ServerFixture fx(cfg);
   TestClient bad(fx.port());
   bad.hello("guess");
-  const auto f = bad.nextOf(Payload::Error);
-  ASSERT_TRUE(f);
-  EXPECT_EQ(errorCodeOf(*f), ErrorCode::BadToken);
+  EXPECT_EQ(nextErrorCode(bad), ErrorCode::BadToken);
   EXPECT_TRUE(bad.closedWithin(3.0));
   TestClient good(fx.port());
   good.hello("s3cret");
@@ -441,9 +437,7 @@ TEST(StreamServer, MalformedFrameGetsMalformedFrameAndIsClosed) {
   ASSERT_TRUE(innocent.nextOf(Payload::Welcome));
   TestClient bad(fx.port());
   bad.sendRaw({8, 0, 0, 0, 0xde, 0xad, 0xbe, 0xef, 0x01, 0x02, 0x03, 0x04});
-  const auto f = bad.nextOf(Payload::Error);
-  ASSERT_TRUE(f);
-  EXPECT_EQ(errorCodeOf(*f), ErrorCode::MalformedFrame);
+  EXPECT_EQ(nextErrorCode(bad), ErrorCode::MalformedFrame);
   EXPECT_TRUE(bad.closedWithin(3.0));
   innocent.pose({0.0, 1.7, 8.0});
   EXPECT_TRUE(innocent.nextOf(Payload::Geometry));
@@ -453,9 +447,7 @@ TEST(StreamServer, OversizedFrameGetsFrameTooLargeBeforeAnyBuffering) {
   ServerFixture fx;
   TestClient bad(fx.port());
   bad.sendRaw({0xff, 0xff, 0xff, 0x7f});
-  const auto f = bad.nextOf(Payload::Error);
-  ASSERT_TRUE(f);
-  EXPECT_EQ(errorCodeOf(*f), ErrorCode::FrameTooLarge);
+  EXPECT_EQ(nextErrorCode(bad), ErrorCode::FrameTooLarge);
   EXPECT_TRUE(bad.closedWithin(3.0));
   expectOthersStillServed(fx);
 }
@@ -465,9 +457,7 @@ TEST(StreamServer, OutOfOrderFramesGetOutOfOrder) {
   {
     TestClient bad(fx.port());
     bad.pose({0.0, 1.7, 8.0});  // before Hello
-    const auto f = bad.nextOf(Payload::Error);
-    ASSERT_TRUE(f);
-    EXPECT_EQ(errorCodeOf(*f), ErrorCode::OutOfOrder);
+    EXPECT_EQ(nextErrorCode(bad), ErrorCode::OutOfOrder);
     EXPECT_TRUE(bad.closedWithin(3.0));
   }
   {
@@ -475,17 +465,13 @@ TEST(StreamServer, OutOfOrderFramesGetOutOfOrder) {
     bad.hello();
     ASSERT_TRUE(bad.nextOf(Payload::Welcome));
     bad.sendRaw(wire::encodeMessage(wire::WelcomeT{}));  // a server message
-    const auto f = bad.nextOf(Payload::Error);
-    ASSERT_TRUE(f);
-    EXPECT_EQ(errorCodeOf(*f), ErrorCode::OutOfOrder);
+    EXPECT_EQ(nextErrorCode(bad), ErrorCode::OutOfOrder);
   }
   {
     TestClient bad(fx.port());
     bad.hello();
     bad.hello();  // twice
-    const auto f = bad.nextOf(Payload::Error);
-    ASSERT_TRUE(f);
-    EXPECT_EQ(errorCodeOf(*f), ErrorCode::OutOfOrder);
+    EXPECT_EQ(nextErrorCode(bad), ErrorCode::OutOfOrder);
   }
   expectOthersStillServed(fx);
 }
@@ -496,9 +482,7 @@ TEST(StreamServer, NonFinitePoseGetsBadRequest) {
   bad.hello();
   ASSERT_TRUE(bad.nextOf(Payload::Welcome));
   bad.pose({std::nan(""), 1.7, 8.0});
-  const auto f = bad.nextOf(Payload::Error);
-  ASSERT_TRUE(f);
-  EXPECT_EQ(errorCodeOf(*f), ErrorCode::BadRequest);
+  EXPECT_EQ(nextErrorCode(bad), ErrorCode::BadRequest);
   expectOthersStillServed(fx);
 }
 
@@ -526,9 +510,7 @@ TEST(StreamServer, SilentClientsTimeOut) {
   cfg.helloTimeoutS = 0.3;
   ServerFixture fx(cfg);
   TestClient silent(fx.port());
-  const auto f = silent.nextOf(Payload::Error, 3.0);
-  ASSERT_TRUE(f);
-  EXPECT_EQ(errorCodeOf(*f), ErrorCode::Timeout);
+  EXPECT_EQ(nextErrorCode(silent, 3.0), ErrorCode::Timeout);
   EXPECT_TRUE(silent.closedWithin(3.0));
 }
 
@@ -571,9 +553,7 @@ TEST(StreamServer, ClientsBeyondTheMaximumGetTooManyClients) {
   first.hello();
   ASSERT_TRUE(first.nextOf(Payload::Welcome));
   TestClient second(fx.port());
-  const auto f = second.nextOf(Payload::Error);
-  ASSERT_TRUE(f);
-  EXPECT_EQ(errorCodeOf(*f), ErrorCode::TooManyClients);
+  EXPECT_EQ(nextErrorCode(second), ErrorCode::TooManyClients);
   EXPECT_TRUE(second.closedWithin(3.0));
   first.pose({0.0, 1.7, 8.0});
   EXPECT_TRUE(first.nextOf(Payload::Geometry));
@@ -587,9 +567,7 @@ TEST(StreamServer, AFloodOfFramesGetsRateLimited) {
   bad.hello();
   ASSERT_TRUE(bad.nextOf(Payload::Welcome));
   for (int i = 0; i < 200; ++i) bad.pose({0.0, 1.7, 8.0});
-  const auto f = bad.nextOf(Payload::Error);
-  ASSERT_TRUE(f);
-  EXPECT_EQ(errorCodeOf(*f), ErrorCode::RateLimited);
+  EXPECT_EQ(nextErrorCode(bad), ErrorCode::RateLimited);
   expectOthersStillServed(fx);
 }
 

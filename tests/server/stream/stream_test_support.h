@@ -154,9 +154,12 @@ class TestClient {
   uint64_t bytes_ = 0;
 };
 
-inline wire::ErrorCode errorCodeOf(const std::vector<uint8_t>& frame) {
-  const auto* e = wire::envelopeOf(frame);
-  return e->payload_type() == wire::Payload::Error ? e->payload_as_Error()->code() : wire::ErrorCode::None;
+// The code of the next Error frame within the timeout, or nothing.
+inline std::optional<wire::ErrorCode> nextErrorCode(TestClient& c, double timeoutS = 5.0) {
+  const auto f = c.nextOf(wire::Payload::Error, timeoutS);
+  if (!f) return std::nullopt;
+  return wire::envelopeOf(*f)->payload_as_Error()->code();
 }
+
 
 }  // namespace vistream::testing
