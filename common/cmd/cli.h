@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <fstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <CLI/CLI.hpp>
@@ -23,11 +24,11 @@ inline void setUpToolApp(CLI::App& app, std::string& logLevel) {
   app.add_option("--log-level", logLevel, "trace, debug, info, warn, error, critical, off");
 }
 
-// Parses, sets up logging and runs `dispatch` (which returns the exit code),
-// turning errors into exit codes as described above.
-template <typename Dispatch>
-int runToolApp(const char* tool, CLI::App& app, int argc, char** argv, const std::string& logLevel,
-               Dispatch&& dispatch) {
+// Parses, sets up logging at `logLevel` and runs `body` (which returns the
+// exit code), turning errors into exit codes as described above. Tools
+// without subcommands call it directly.
+template <typename Body>
+int runFlatToolApp(const char* tool, CLI::App& app, int argc, char** argv, const std::string& logLevel, Body&& body) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -35,11 +36,18 @@ int runToolApp(const char* tool, CLI::App& app, int argc, char** argv, const std
   }
   try {
     initLogging(logLevel);
-    return dispatch();
+    return body();
   } catch (const std::exception& e) {
     std::fprintf(stderr, "%s: error: %s\n", tool, e.what());
     return 1;
   }
+}
+
+// The same for a tool with subcommands (set up by setUpToolApp).
+template <typename Dispatch>
+int runToolApp(const char* tool, CLI::App& app, int argc, char** argv, const std::string& logLevel,
+               Dispatch&& dispatch) {
+  return runFlatToolApp(tool, app, argc, argv, logLevel, std::forward<Dispatch>(dispatch));
 }
 
 // The shared secret in the first line of a token file (trailing spaces and a

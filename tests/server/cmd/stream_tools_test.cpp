@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "tests/common/support/box_scenes.h"
 #include "tests/common/support/run_tool.h"
 #include "tests/common/support/temp_dir.h"
 
@@ -23,14 +24,7 @@ std::string streetObj() {
   std::string o = "o ground\nv -40 0 -40\nv -40 0 40\nv 40 0 40\nv 40 0 -40\nf 1 2 3 4\n";
   int base = 5;
   auto box = [&](const std::string& name, double x0, double z0, double x1, double z1, double h) {
-    o += "o " + name + "\n";
-    for (int k = 0; k < 8; ++k)
-      o += "v " + std::to_string((k & 1) ? x1 : x0) + " " + std::to_string((k & 2) ? h : 0.0) + " " +
-           std::to_string((k & 4) ? z1 : z0) + "\n";
-    for (const auto& f : {std::array{0, 4, 6, 2}, {1, 3, 7, 5}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 2, 3, 1}, {4, 5, 7, 6}})
-      o += "f " + std::to_string(base + f[0]) + " " + std::to_string(base + f[1]) + " " + std::to_string(base + f[2]) +
-           " " + std::to_string(base + f[3]) + "\n";
-    base += 8;
+    vistream::testing::appendBoxObj(o, base, name, x0, z0, x1, z1, h);
   };
   for (int i = 0; i < 6; ++i) {
     box("west_" + std::to_string(i), -12, -30 + 10 * i, -6, -24 + 10 * i, 8);

@@ -1,0 +1,54 @@
+// Walking a client renderer along a path: cameras from path files, image
+// comparison against the reference, and the JSON/table summaries that
+// `vistream-client --headless` and `vistream-client-bench` print.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "client/farfield/pipeline.h"
+#include "client/render/camera.h"
+#include "client/render/image.h"
+#include "common/generate/path.h"
+#include "common/scene/scene.h"
+
+namespace vistream {
+
+// One camera per path sample, positions converted from file coordinates
+// with `origin` (the scene's local origin).
+std::vector<Camera> camerasFromPath(const std::vector<PathSample>& path, const glm::dvec3& origin, int width,
+                                    int height, float vfovDeg);
+
+// Parses "WxH" (e.g. 640x480); throws InputError naming `option`.
+glm::ivec2 parseImageSize(const std::string& text, const char* option = "--size");
+
+struct ImageDifference {
+  double differingFraction = 0.0;  // pixels whose colour differs in any channel
+  double meanColourError = 0.0;    // mean absolute channel difference over all pixels, in [0, 1]
+  // Differing pixels inside a uniform 3x3 patch of the reference: holes and
+  // wrong surfaces, as opposed to pixels on edges, where a rasterizer and
+  // exact rays (or two rasterizers) may legitimately disagree.
+  size_t interiorDiffering = 0;
+};
+// Throws std::logic_error if the sizes differ.
+ImageDifference compareImages(const ImageRgb8& image, const ImageRgb8& reference);
+
+struct FrameRecord {
+  size_t frame = 0;
+  double t = 0.0;
+  FrameReport report;
+  bool compared = false;
+  ImageDifference difference;
+};
+
+// The headless JSON contract: frames, mean_frame_ms, pixels (means of
+// polygon, horizon, cache, ray_hit, ray_miss), per_frame records, plus
+// extensions (mode, size, stage summaries, error against the reference).
+nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const PipelineOptions& options, int width,
+                               int height);
+// The same for people: an aligned table of pixel classes and stage times.
+std::string walkthroughTable(const std::vector<FrameRecord>& frames, const PipelineOptions& options);
+
+}  // namespace vistream

@@ -1,0 +1,341 @@
+// vistream-client: the thin client. Renders the near field as polygons and
+// the far field through the thesis's pixel pipeline (horizon tracing,
+// panoramic image cache, ray casting), from a local scene (--scene) or from
+// what a vistream-server streams (--host/--port); in a window (OpenGL) or
+// headless (software near field, PNG frames, statistics).
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include "client/app/walkthrough.h"
+#include "client/farfield/pipeline.h"
+#include "client/gl/gl_renderer.h"
+#include "client/gl/gl_window.h"
+#include "client/net/stream_client.h"
+#include "client/render/render_geometry.h"
+#include "common/cmd/cli.h"
+#include "common/core/error.h"
+#include "common/core/log.h"
+#include "common/core/progress.h"
+#include "common/core/timer.h"
+#include "common/generate/path.h"
+#include "common/generate/scene_spec.h"
+#include "common/raycast/ray_query.h"
+#include "common/spatial/free_space.h"
+
+namespace vistream {
+namespace {
+
+struct Args {
+  std::string scene, host, pathFile, size = "640x480", outDir, mode = "pipeline", logLevel = "warn", token;
+  uint16_t port = 7070;
+  bool headless = false, json = false, noCache = false, compare = false;
+  size_t frames = 0;
+  float vfov = 60.0f;
+  float nearDistance = 0.0f;
+  float streamRadius = 0.0f;
+  size_t pixelBudget = 20'000;
+  float maxStalePixels = 2.0f;
+  float horizonCell = 8.0f;
+  int horizonSubsample = 4;
+  double pathSpeed = 1.0;
+  double waitS = 20.0;
+};
+
+RenderMode parseMode(const std::string& m) {
+  if (m == "pipeline") return RenderMode::Pipeline;
+  if (m == "raycast-all") return RenderMode::RaycastAll;
+  if (m == "geometry-all") return RenderMode::GeometryAll;
+  throwInputError("--mode {}: expected pipeline, raycast-all or geometry-all", m);
+}
+
+std::string frameName(size_t i) { return fmt::format("frame_{:05d}.png", i); }
+
+// The path to walk: a file, or "auto" (generated through the scene's free space).
+std::vector<PathSample> loadPath(const Args& a, const Scene* scene, size_t frames) {
+  if (a.pathFile != "auto") return readPath(a.pathFile);
+  if (!scene) throwInputError("--path auto needs --scene (the path is generated through its free space)");
+  const FlatTriangles tris = flattenScene(*scene, true);
+  const auto rays = makeEmbreeRayQuery(tris);
+  const FreeSpace fs = FreeSpace::build(*rays, scene->bounds());
+  PathOptions po;
+  po.frames = frames ? frames : 300;
+  po.speed = a.pathSpeed;
+  return generatePath(*scene, fs, po);
+}
+
+PipelineOptions pipelineOptions(const Args& a, const Scene* scene, RenderMode mode) {
+  PipelineOptions o;
+  o.mode = mode;
+  o.nearDistance = a.nearDistance > 0.0f ? a.nearDistance : (scene ? scene->environment.nearFieldRadius : 150.0f);
+  o.pixelBudget = a.pixelBudget;
+  o.cache = !a.noCache;
+  o.maxStalePixels = a.maxStalePixels;
+  o.horizonCellSize = a.horizonCell;
+  o.horizonSubsampleMoving = a.horizonSubsample;
+  if (scene) {
+    o.horizonAllowed = scene->environment.sky != SkyMode::None;
+    const Box3f b = scene->bounds();
+    o.farFieldAllowed = !b.empty() && glm::length(b.extent()) > o.nearDistance;
+  }
+  return o;
+}
+
+void printSummary(const Args& a, const std::vector<FrameRecord>& records, const PipelineOptions& o, glm::ivec2 size) {
+  if (a.json) {
+    std::printf("%s\n", walkthroughJson(records, o, size.x, size.y).dump(2).c_str());
+  } else {
+    std::printf("%s", walkthroughTable(records, o).c_str());
+    if (!a.outDir.empty()) std::printf("\nframes written to %s/frame_00000.png ...\n", a.outDir.c_str());
+  }
+}
+
+// The geometry a renderer draws, and the renderer built over it. Local
+// scenes build it once; connected clients rebuild it when the server sent or
+// evicted geometry (at most every `minRebuildS` seconds).
+struct LiveGeometry {
+  std::unique_ptr<RenderGeometry> geometry;
+  std::unique_ptr<FrameRenderer> renderer, reference;
+  PipelineOptions options;
+  bool sceneHasFarField = true;  // the scene as a whole reaches beyond d
+  bool compare = false;
+  uint64_t version = ~uint64_t(0);
+  Stopwatch sinceRebuild;
+
+  void set(RenderGeometry g) {
+    // The renderers hold references to the geometry: drop them first.
+    renderer.reset();
+    reference.reset();
+    geometry = std::make_unique<RenderGeometry>(std::move(g));
+    options.farFieldAllowed = sceneHasFarField && geometry->size() > 0 &&
+                              glm::length(geometry->bounds.extent()) > options.nearDistance;
+    renderer = std::make_unique<FrameRenderer>(*geometry, options);
+    if (compare) {
+      PipelineOptions r = options;
+      r.mode = RenderMode::RaycastAll;
+      reference = std::make_unique<FrameRenderer>(*geometry, r);
+    }
+    sinceRebuild = Stopwatch();
+  }
+  // Connected: pick up what arrived.
+  void refresh(StreamClient& net, bool force, double minRebuildS = 0.5) {
+    const uint64_t v = net.version();
+    if (v == version || (!force && sinceRebuild.ms() < 1000.0 * minRebuildS)) return;
+    version = v;
+    set(net.snapshot());
+  }
+};
+
+// Headless: software near field, PNG frames, statistics.
+int runHeadless(const Args& a, LiveGeometry& live, const std::vector<Camera>& cameras, glm::ivec2 size,
+                StreamClient* net) {
+  std::vector<FrameRecord> records;
+  ImageRgb8 image, refImage;
+  ProgressBar bar(fmt::format("rendering {} frames ({})", cameras.size(), renderModeName(live.options.mode)),
+                  cameras.size());
+  for (size_t i = 0; i < cameras.size(); ++i) {
+    if (net) {
+      // Each frame waits for the server to complete the view cell it stands in,
+      // so a headless walk renders what a patient user would see.
+      const glm::vec3 velocity = i > 0 ? (cameras[i].eye - cameras[i - 1].eye) * 30.0f : glm::vec3(0.0f);
+      net->sendPose(cameras[i].eye, cameras[i].yawDeg, cameras[i].pitchDeg, velocity);
+      if (!net->waitForCell(a.waitS) && !net->error().empty()) throwInputError("connection lost: {}", net->error());
+      live.refresh(*net, /*force=*/true);
+    }
+    FrameRecord r;
+    r.frame = i;
+    r.report = live.renderer->render(cameras[i], image);
+    if (live.reference) {
+      live.reference->render(cameras[i], refImage);
+      r.compared = true;
+      r.difference = compareImages(image, refImage);
+    }
+    if (!a.outDir.empty()) writePng(image, std::filesystem::path(a.outDir) / frameName(i));
+    records.push_back(r);
+    bar.advance();
+  }
+  bar.finish();
+  printSummary(a, records, live.options, size);
+  return 0;
+}
+
+// Windowed: OpenGL near field; along a path (frames written if --out) or interactive.
+int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, glm::ivec2 size, Camera start,
+              StreamClient* net) {
+  const PipelineOptions& o = live.options;
+  GlWindowOptions wo;
+  wo.width = size.x;
+  wo.height = size.y;
+  wo.title = "vistream";
+  wo.vsync = cameras.empty();
+  GlWindow window(wo);
+  GlRenderer gl;
+  gl.upload(*live.geometry);
+  const RenderGeometry* uploaded = live.geometry.get();
+  ImageRgb8 farImage;
+  std::vector<uint32_t> near;
+  std::vector<FrameRecord> records;
+  if (!cameras.empty()) {
+    for (size_t i = 0; i < cameras.size() && !window.shouldClose(); ++i) {
+      FrameRecord r;
+      r.frame = i;
+      r.report = live.renderer->renderFarField(cameras[i], farImage, near);
+      gl.draw(cameras[i], farImage, near, live.renderer->polygonDistance());
+      if (!a.outDir.empty()) writePng(gl.readBack(size.x, size.y), std::filesystem::path(a.outDir) / frameName(i));
+      window.swapBuffers();
+      Camera ignored = cameras[i];
+      window.navigate(ignored, 0.0, 0.0f);
+      records.push_back(r);
+    }
+    printSummary(a, records, o, size);
+    return 0;
+  }
+  Camera cam = start;
+  Stopwatch clock;
+  double last = 0.0;
+  while (!window.shouldClose()) {
+    const double now = clock.ms() / 1000.0;
+    window.navigate(cam, now - last, 8.0f);
+    last = now;
+    cam.width = window.framebufferWidth();
+    cam.height = window.framebufferHeight();
+    if (cam.width < 16 || cam.height < 16) continue;
+    if (net) {
+      net->sendPose(cam.eye, cam.yawDeg, cam.pitchDeg);
+      live.refresh(*net, /*force=*/false);
+      if (live.geometry.get() != uploaded) {
+        gl.upload(*live.geometry);
+        uploaded = live.geometry.get();
+      }
+    }
+    const FrameReport rep = live.renderer->renderFarField(cam, farImage, near);
+    const PixelCounts& p = rep.pixels;
+    std::vector<HudLine> hud = {
+        {fmt::format("frame {:.1f} ms  near {} triangles  d = {:.0f} m", rep.ms.total, rep.nearTriangles,
+                     o.nearDistance)},
+        {fmt::format("pixels: polygon {}  horizon {}  cache {}  ray hit {}  ray miss {}", p.polygon, p.horizon,
+                     p.cache, p.rayHit, p.rayMiss)},
+        {fmt::format("triangles held {}  received {:.1f} MB  far field {}  horizon {}  cache {}", live.geometry->size(),
+                     net ? double(net->bytesReceived()) / 1e6 : 0.0,
+                     rep.farFieldRan ? "on" : "off", rep.horizonRan ? "on" : "off", rep.cacheRan ? "on" : "off")},
+    };
+    gl.draw(cam, farImage, near, live.renderer->polygonDistance(), hud);
+    window.swapBuffers();
+  }
+  return 0;
+}
+
+int run(const Args& a) {
+  const bool local = !a.scene.empty(), connected = !a.host.empty();
+  if (local == connected) throwInputError("give either --scene (local) or --host (connected), not {}", local ? "both" : "neither");
+  if (a.headless && a.pathFile.empty()) throwInputError("--headless needs --path (a path file, or auto)");
+  const glm::ivec2 size = parseImageSize(a.size);
+  const RenderMode mode = parseMode(a.mode);
+  if (a.horizonSubsample < 1) throwInputError("--horizon-subsample {}: must be at least 1", a.horizonSubsample);
+  if (!(a.horizonCell > 0.0f)) throwInputError("--horizon-cell {}: must be positive", a.horizonCell);
+  if (!(a.maxStalePixels >= 0.0f)) throwInputError("--max-stale-px {}: must not be negative", a.maxStalePixels);
+  if (!(a.vfov > 1.0f && a.vfov < 170.0f)) throwInputError("--fov {}: must lie in (1, 170) degrees", a.vfov);
+  if (!a.outDir.empty()) {
+    std::error_code ec;
+    std::filesystem::create_directories(a.outDir, ec);
+    if (ec) throwInputError("--out {}: cannot create it: {}", a.outDir, ec.message());
+  }
+
+  std::optional<Scene> scene;
+  std::unique_ptr<StreamClient> net;
+  RenderGeometry geometry;
+  glm::dvec3 origin(0.0);
+  if (local) {
+    scene = openScene(a.scene);
+    geometry = renderGeometryFromScene(*scene);
+    origin = scene->origin;
+  } else {
+    StreamClientOptions so;
+    so.host = a.host;
+    so.port = a.port;
+    so.token = a.token;
+    so.radius = a.streamRadius;
+    net = std::make_unique<StreamClient>(so);
+    origin = net->origin();
+  }
+  std::vector<PathSample> path;
+  if (!a.pathFile.empty()) {
+    path = loadPath(a, scene ? &*scene : nullptr, a.frames);
+    if (path.empty()) throwInputError("--path {}: no rows", a.pathFile);
+    if (a.frames > path.size())
+      throwInputError("--frames {}: the path has only {} rows", a.frames, path.size());
+    if (a.frames) path.resize(a.frames);
+  }
+  std::vector<Camera> cameras = camerasFromPath(path, origin, size.x, size.y, a.vfov);
+  PipelineOptions o = pipelineOptions(a, scene ? &*scene : nullptr, mode);
+  if (net) {
+    // Connected: walk the path's first pose until the server's data for it has arrived.
+    Camera first;
+    if (!cameras.empty()) first = cameras.front();
+    net->sendPose(first.eye, first.yawDeg, first.pitchDeg);
+    if (!net->waitForCell(a.waitS))
+      spdlog::warn("the server did not complete the first view cell within {:.0f} s; rendering what arrived", a.waitS);
+    geometry = net->snapshot();
+    if (!(a.nearDistance > 0.0f)) o.nearDistance = std::min(150.0f, 0.5f * net->radius());
+    spdlog::info("holding {} triangles from {}:{}", geometry.size(), a.host, a.port);
+  }
+  LiveGeometry live;
+  live.options = o;
+  live.sceneHasFarField = o.farFieldAllowed;
+  live.compare = a.compare;
+  live.set(std::move(geometry));
+  if (net) live.version = net->version();
+  if (a.headless) return runHeadless(a, live, cameras, size, net.get());
+  Camera start;
+  start.width = size.x;
+  start.height = size.y;
+  start.vfovDeg = a.vfov;
+  if (!cameras.empty()) start = cameras.front();
+  else if (!live.geometry->bounds.empty()) start.eye = live.geometry->bounds.center();
+  return runWindow(a, live, cameras, size, start, net.get());
+}
+
+}  // namespace
+}  // namespace vistream
+
+int main(int argc, char** argv) {
+  using namespace vistream;
+  Args a;
+  CLI::App app{
+      "vistream-client: renders a walkthrough; near field as polygons, far field by horizon tracing, a panoramic "
+      "image cache and ray casting (Wimmer 2001, chapter 4)"};
+  app.add_option("--scene", a.scene, "local mode: a scene file or built-in name (city1, bigcity, terrain, ...)");
+  app.add_option("--host", a.host, "connected mode: the vistream-server to stream from");
+  app.add_option("--port", a.port, "the server's port")->capture_default_str();
+  app.add_option("--token", a.token, "the server's shared secret, if it asks for one");
+  app.add_flag("--headless", a.headless, "no window: software near field, PNG frames and statistics");
+  app.add_option("--path", a.pathFile, "path file (CSV t,x,y,z,yaw_deg,pitch_deg), or auto");
+  app.add_option("--frames", a.frames, "frames to render (default: every row of the path)");
+  app.add_option("--size", a.size, "image size WIDTHxHEIGHT")->capture_default_str();
+  app.add_option("--fov", a.vfov, "vertical field of view, degrees")->capture_default_str();
+  app.add_option("--out", a.outDir, "write DIR/frame_00000.png, ...");
+  app.add_flag("--json", a.json, "print one JSON object (frames, mean_frame_ms, pixels, per_frame, ...)");
+  app.add_option("--mode", a.mode, "pipeline | raycast-all | geometry-all")->capture_default_str();
+  app.add_option("--near-distance", a.nearDistance, "near-field distance d, metres (default: the scene's, or the server's)");
+  app.add_option("--stream-radius", a.streamRadius,
+                 "connected: radius the server streams within, metres (default: the server's); the far field is what "
+                 "arrives beyond --near-distance");
+  app.add_option("--pixel-budget", a.pixelBudget, "rays a frame for refreshing cached pixels")->capture_default_str();
+  app.add_flag("--no-cache", a.noCache, "switch the panoramic image cache off (trace every far-field pixel)");
+  app.add_option("--max-stale-px", a.maxStalePixels,
+                 "cached pixels expire when far-field geometry at d may have moved this many pixels")
+      ->capture_default_str();
+  app.add_option("--horizon-cell", a.horizonCell, "height-field cell size for horizon tracing, metres")->capture_default_str();
+  app.add_option("--horizon-subsample", a.horizonSubsample, "trace every k-th column while moving")->capture_default_str();
+  app.add_option("--path-speed", a.pathSpeed, "relative walking speed of --path auto")->capture_default_str();
+  app.add_option("--wait", a.waitS, "connected: seconds to wait for the first view cell")->capture_default_str();
+  app.add_flag("--compare", a.compare, "also render raycast-all and report the image error of every frame");
+  app.add_option("--log-level", a.logLevel, "trace, debug, info, warn, error, critical, off")->capture_default_str();
+  return runFlatToolApp("vistream-client", app, argc, argv, a.logLevel, [&] { return run(a); });
+}

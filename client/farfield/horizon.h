@@ -1,0 +1,69 @@
+// Horizon tracing (thesis section 4.5).
+//
+// A 2D height field over X/Z holds the highest point of the geometry in each
+// cell. For every pixel column, a 2D ray through the height field finds the
+// steepest slope (height above the eye over horizontal distance) of the far
+// field under the column; a pixel whose view ray climbs more steeply than that
+// cannot hit far-field geometry and is sky. The result is conservative:
+//  - the trace covers the whole wedge of azimuths the column spans (with a
+//    pitched camera a column is not a vertical plane, so the wedge includes
+//    the azimuths of its top and bottom pixels), using max-dilated copies of
+//    the height field as wide as the wedge at each distance;
+//  - a cell's height above the eye counts at the shortest horizontal
+//    distance from the eye to the (dilated) cell, and a height below the eye
+//    at the longest (farther ground lies closer to the horizon);
+//  - an uncovered pixel sees nothing within d of the eye along its ray (all
+//    of that is drawn as polygons), so a point rising r above the eye counts
+//    no nearer than sqrt(d^2 - r^2) horizontally.
+// Subsampling while moving (the thesis's graceful degradation) traces every
+// k-th column with a wedge k columns wide, which fills the columns between
+// with the maximum of their neighbourhood and stays conservative.
+//
+// Thread safety: trace() is const and may run concurrently.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "client/render/camera.h"
+#include "client/render/render_geometry.h"
+
+namespace vistream {
+
+struct HorizonStats {
+  size_t columnsTraced = 0;
+  size_t cellsVisited = 0;
+};
+
+class HorizonMap {
+ public:
+  HorizonMap() = default;
+  // cellSize in metres (the resolution knob of the thesis: coarser is faster
+  // but overestimates the horizon).
+  HorizonMap(const RenderGeometry& geometry, float cellSize);
+
+  float cellSize() const { return cell_; }
+  glm::ivec2 dims() const { return dims_; }
+
+  // Per pixel column, the steepest far-field slope (-infinity if the column
+  // sees no far-field geometry). `subsample` >= 1 traces every k-th column.
+  std::vector<float> trace(const Camera& camera, float nearDistance, int subsample, HorizonStats* stats = nullptr) const;
+
+  // The slope of the view ray through a pixel centre: dy / |d_xz| (infinity straight up).
+  static float raySlope(const glm::vec3& dir);
+
+ private:
+  float height(int level, int x, int z) const { return levels_[size_t(level)][size_t(z) * size_t(dims_.x) + size_t(x)]; }
+  float traceWedge(const glm::vec3& eye, float azimuth, float halfAngle, float nearDistance, size_t& cells) const;
+
+  glm::vec2 lo_{0.0f};
+  float cell_ = 1.0f;
+  glm::ivec2 dims_{0, 0};
+  float maxHeight_ = 0.0f;
+  std::vector<std::vector<float>> levels_;  // level k: max over a (2r_k+1)^2 neighbourhood, r_k = 2^k - 1
+  std::vector<int> radius_;
+};
+
+}  // namespace vistream

@@ -1,0 +1,129 @@
+// The client's frame pipeline (thesis chapter 4, Figure 4.4): near field as
+// polygons, then for every pixel the polygons leave uncovered, in order:
+// horizon tracing (sky), the panoramic image cache, and ray casting.
+//
+// Modes:
+//  - Pipeline:    the thesis's pipeline as above;
+//  - RaycastAll:  every pixel ray cast (the reference image);
+//  - GeometryAll: every triangle in the view frustum drawn, no far field
+//                 (full polygon rendering, the baseline of Figure 4.8).
+// Each stage runs only where the frame calls for it, and the FrameReport
+// says which ran and why (far field off when all geometry lies within d of
+// the viewer; horizon tracing off without open sky; the cache off when asked).
+//
+// render() draws the near field with the software rasterizer (headless);
+// renderFarField() leaves the near field to the caller (OpenGL) and fills
+// only the pixels its opacity buffer (with a 1/8-pixel inset, see
+// SoftwareRasterizer::coverage) leaves uncovered.
+//
+// Near field and far field meet at distance d along each pixel's ray, not at
+// a grid cell: polygons are drawn only up to d (fragments beyond are
+// dropped), and a pixel whose nearest polygon lies beyond d is left to the
+// far field, whose rays hit whatever is first. A near-field triangle that
+// reaches far beyond d (a long street's ground) can therefore never hide a
+// far-field object standing on it.
+//
+// Thread safety: one FrameRenderer per viewer; its work runs on TBB.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "client/farfield/field_grid.h"
+#include "client/farfield/horizon.h"
+#include "client/farfield/image_cache.h"
+#include "client/render/camera.h"
+#include "client/render/image.h"
+#include "client/render/render_geometry.h"
+#include "client/render/soft_raster.h"
+#include "common/raycast/ray_query.h"
+
+namespace vistream {
+
+enum class RenderMode { Pipeline, RaycastAll, GeometryAll };
+const char* renderModeName(RenderMode m);
+
+struct PipelineOptions {
+  RenderMode mode = RenderMode::Pipeline;
+  float nearDistance = 150.0f;    // d, metres
+  size_t pixelBudget = 20'000;    // rays a frame for cache refreshes (the must-trace pixels come on top)
+  bool cache = true;              // panoramic image cache on/off
+  float maxStalePixels = 2.0f;    // a cached texel expires when the viewer moved so far that far-field
+                                  // geometry at distance d may have shifted by this many pixels
+  float horizonCellSize = 8.0f;   // metres, the height field's resolution
+  int horizonSubsampleMoving = 4; // trace every k-th column while the viewer moves
+  bool horizonAllowed = true;     // the scene has open sky (SceneEffects::horizonTracing)
+  bool farFieldAllowed = true;    // the scene has geometry beyond d (SceneEffects::farFieldRayCasting)
+  float gridCellSize = 0.0f;      // near-field grid cell, metres (0: automatic)
+  PanoramicCacheOptions cacheOptions;
+};
+
+// Table 4.1 of the thesis: where each pixel's colour came from.
+struct PixelCounts {
+  size_t polygon = 0;     // covered by near-field polygons
+  size_t horizon = 0;     // culled by horizon tracing (sky)
+  size_t cache = 0;       // taken from the image cache
+  size_t rayHit = 0;      // ray cast and hit
+  size_t rayMiss = 0;     // ray cast and missed (sky)
+  size_t background = 0;  // no far field to look at (far field off): sky colour
+};
+
+struct StageTimes {
+  double nearSelect = 0, nearDraw = 0, opacity = 0, horizon = 0, cache = 0, raycast = 0, compose = 0, total = 0;
+};
+
+struct FrameReport {
+  PixelCounts pixels;
+  StageTimes ms;
+  size_t nearTriangles = 0;
+  bool moving = false;
+  bool farFieldRan = false, horizonRan = false, cacheRan = false;
+  std::string farFieldWhy, horizonWhy, cacheWhy;
+  CachePlanStats cachePlan;
+  HorizonStats horizonStats;
+  nlohmann::json toJson() const;
+};
+
+class FrameRenderer {
+ public:
+  // `geometry` must outlive the renderer.
+  FrameRenderer(const RenderGeometry& geometry, const PipelineOptions& options);
+  ~FrameRenderer();
+
+  const PipelineOptions& options() const { return options_; }
+  // The headless frame: software near field plus the far field.
+  FrameReport render(const Camera& camera, ImageRgb8& out);
+  // For an OpenGL near field: the triangles to draw (`near`) and the
+  // far-field image (valid wherever the opacity buffer is uncovered).
+  FrameReport renderFarField(const Camera& camera, ImageRgb8& farImage, std::vector<uint32_t>& near);
+  // How far from the eye polygons are drawn: d in pipeline mode, unlimited
+  // in geometry-all. An OpenGL near field discards fragments beyond it.
+  float polygonDistance() const;
+  // Forgets the cache and the motion history (after a geometry change).
+  void reset();
+
+ private:
+  FrameReport run(const Camera& camera, ImageRgb8& out, std::vector<uint32_t>* glNear);
+
+  const RenderGeometry& geometry_;
+  PipelineOptions options_;
+  FieldGrid grid_;
+  HorizonMap horizon_;
+  std::unique_ptr<RayQuery> rays_;
+  std::unique_ptr<PanoramicCache> cache_;
+  SoftwareRasterizer raster_;
+  IdBuffer ids_;
+  std::vector<uint8_t> covered_;
+  std::vector<uint32_t> near_, stamp_;
+  uint32_t stampValue_ = 0;
+  bool havePrevious_ = false;
+  glm::vec3 previousEye_{0.0f};
+  float previousYaw_ = 0.0f, previousPitch_ = 0.0f;
+  float cachePixelAngle_ = 0.0f;
+};
+
+}  // namespace vistream

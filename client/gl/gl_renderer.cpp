@@ -1,0 +1,386 @@
+#include "client/gl/gl_renderer.h"
+
+// libepoxy loads the GL entry points. stb_easy_font keeps its implementation
+// in the header, all of it static: this file is its only user, so the HUD
+// font lives in this translation unit.
+#include <cmath>
+#include <epoxy/gl.h>
+#include <stb/stb_easy_font.h>
+
+#include <algorithm>
+#include <cstddef>
+#include <cstring>
+#include <stdexcept>
+
+#include "common/core/check.h"
+
+namespace vistream {
+namespace {
+
+// stb_easy_font's glyphs are about 7 px tall on a 12 px line; doubled, the
+// HUD reads at a normal viewing distance on a 640 x 480 window and up.
+constexpr float kHudScale = 2.0f;
+constexpr float kHudMarginPx = 4.0f;    // from the window corner to the box
+constexpr float kHudPaddingPx = 4.0f;   // from the box edge to the text
+constexpr float kHudLineUnits = 12.0f;  // stb_easy_font's line pitch, in font units
+
+// The near field: each vertex carries its triangle's colour; `flat` and an
+// unorm8 attribute make the framebuffer byte equal to the byte on the CPU.
+constexpr const char* kNearVertex = R"(#version 330 core
+layout(location = 0) in vec3 position;
+layout(location = 1) in vec3 colour;
+uniform mat4 rotationProjection;
+uniform vec3 eye;
+flat out vec3 triangleColour;
+out vec3 fromEye;
+void main() {
+  // Relative to the eye first, so positions far from the origin keep their precision.
+  fromEye = position - eye;
+  gl_Position = rotationProjection * vec4(fromEye, 1.0);
+  triangleColour = colour;
+}
+)";
+// Fragments beyond the near-field distance are left to the far field.
+constexpr const char* kNearFragment = R"(#version 330 core
+flat in vec3 triangleColour;
+in vec3 fromEye;
+uniform float maxDistance;
+out vec4 fragColour;
+void main() {
+  if (length(fromEye) > maxDistance) discard;
+  fragColour = vec4(triangleColour, 1.0);
+}
+)";
+
+// The far-field image: one triangle covering the viewport, each pixel
+// fetching exactly its texel. The image is uploaded top row first, so texture
+// row 0 is the top of the screen while gl_FragCoord counts from the bottom.
+constexpr const char* kImageVertex = R"(#version 330 core
+void main() {
+  const vec2 corners[3] = vec2[3](vec2(-1.0, -1.0), vec2(3.0, -1.0), vec2(-1.0, 3.0));
+  gl_Position = vec4(corners[gl_VertexID], 0.0, 1.0);
+}
+)";
+constexpr const char* kImageFragment = R"(#version 330 core
+uniform sampler2D image;
+out vec4 fragColour;
+void main() {
+  ivec2 size = textureSize(image, 0);
+  ivec2 p = ivec2(gl_FragCoord.xy);
+  fragColour = vec4(texelFetch(image, ivec2(p.x, size.y - 1 - p.y), 0).rgb, 1.0);
+}
+)";
+
+// The HUD: positions in pixels, row 0 at the top, one colour per draw.
+constexpr const char* kHudVertex = R"(#version 330 core
+layout(location = 0) in vec2 pixel;
+uniform vec2 viewport;
+void main() {
+  gl_Position = vec4(pixel.x / viewport.x * 2.0 - 1.0, 1.0 - pixel.y / viewport.y * 2.0, 0.0, 1.0);
+}
+)";
+constexpr const char* kHudFragment = R"(#version 330 core
+uniform vec4 colour;
+out vec4 fragColour;
+void main() { fragColour = colour; }
+)";
+
+struct Buffer {
+  GLuint id = 0;
+  Buffer() { glGenBuffers(1, &id); }
+  ~Buffer() { glDeleteBuffers(1, &id); }
+  Buffer(const Buffer&) = delete;
+  Buffer& operator=(const Buffer&) = delete;
+};
+
+struct VertexArray {
+  GLuint id = 0;
+  VertexArray() { glGenVertexArrays(1, &id); }
+  ~VertexArray() { glDeleteVertexArrays(1, &id); }
+  VertexArray(const VertexArray&) = delete;
+  VertexArray& operator=(const VertexArray&) = delete;
+};
+
+struct Texture {
+  GLuint id = 0;
+  Texture() { glGenTextures(1, &id); }
+  ~Texture() { glDeleteTextures(1, &id); }
+  Texture(const Texture&) = delete;
+  Texture& operator=(const Texture&) = delete;
+};
+
+struct Shader {
+  GLuint id = 0;
+  Shader(GLenum type, const char* source) : id(glCreateShader(type)) {
+    glShaderSource(id, 1, &source, nullptr);
+    glCompileShader(id);
+    GLint ok = GL_FALSE;
+    glGetShaderiv(id, GL_COMPILE_STATUS, &ok);
+    if (ok != GL_TRUE) {
+      const std::string log = infoLog();
+      glDeleteShader(id);
+      throw std::runtime_error("OpenGL shader does not compile: " + log);
+    }
+  }
+  ~Shader() { glDeleteShader(id); }
+  Shader(const Shader&) = delete;
+  Shader& operator=(const Shader&) = delete;
+
+  std::string infoLog() const {
+    GLint length = 0;
+    glGetShaderiv(id, GL_INFO_LOG_LENGTH, &length);
+    std::string log(size_t(std::max(length, 1)), '\0');
+    glGetShaderInfoLog(id, GLsizei(log.size()), nullptr, log.data());
+    return log.c_str();
+  }
+};
+
+struct Program {
+  GLuint id = 0;
+  Program(const char* vertexSource, const char* fragmentSource) {
+    const Shader vertex(GL_VERTEX_SHADER, vertexSource);
+    const Shader fragment(GL_FRAGMENT_SHADER, fragmentSource);
+    id = glCreateProgram();
+    glAttachShader(id, vertex.id);
+    glAttachShader(id, fragment.id);
+    glLinkProgram(id);
+    glDetachShader(id, vertex.id);
+    glDetachShader(id, fragment.id);
+    GLint ok = GL_FALSE;
+    glGetProgramiv(id, GL_LINK_STATUS, &ok);
+    if (ok != GL_TRUE) {
+      GLint length = 0;
+      glGetProgramiv(id, GL_INFO_LOG_LENGTH, &length);
+      std::string log(size_t(std::max(length, 1)), '\0');
+      glGetProgramInfoLog(id, GLsizei(log.size()), nullptr, log.data());
+      glDeleteProgram(id);
+      throw std::runtime_error("OpenGL program does not link: " + std::string(log.c_str()));
+    }
+  }
+  ~Program() { glDeleteProgram(id); }
+  Program(const Program&) = delete;
+  Program& operator=(const Program&) = delete;
+
+  GLint uniform(const char* name) const { return glGetUniformLocation(id, name); }
+};
+
+struct NearVertex {
+  glm::vec3 position;
+  glm::u8vec3 colour;
+  uint8_t pad = 0;
+};
+static_assert(sizeof(NearVertex) == 16);
+
+// One vertex as stb_easy_font writes it.
+struct FontVertex {
+  float x, y, z;
+  uint8_t rgba[4];
+};
+static_assert(sizeof(FontVertex) == 16);
+
+}  // namespace
+
+struct GlRenderer::Impl {
+  Program nearProgram{kNearVertex, kNearFragment};
+  Program imageProgram{kImageVertex, kImageFragment};
+  Program hudProgram{kHudVertex, kHudFragment};
+  GLint rotationProjection = nearProgram.uniform("rotationProjection");
+  GLint eye = nearProgram.uniform("eye");
+  GLint maxDistance = nearProgram.uniform("maxDistance");
+  GLint image = imageProgram.uniform("image");
+  GLint hudViewport = hudProgram.uniform("viewport");
+  GLint hudColour = hudProgram.uniform("colour");
+
+  VertexArray nearArray;
+  Buffer nearVertices;
+  Buffer nearIndices;
+  size_t triangleCount = 0;
+  std::vector<GLuint> indices;  // scratch, reused every frame
+
+  VertexArray emptyArray;  // core profile draws need a bound vertex array
+  Texture farTexture;
+  int farWidth = 0, farHeight = 0;
+
+  VertexArray hudArray;
+  Buffer hudVertices;
+  std::vector<glm::vec2> hudScratch;
+
+  Impl() {
+    glBindVertexArray(nearArray.id);
+    glBindBuffer(GL_ARRAY_BUFFER, nearVertices.id);
+    glEnableVertexAttribArray(0);
+    glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(NearVertex),
+                          reinterpret_cast<const void*>(offsetof(NearVertex, position)));
+    glEnableVertexAttribArray(1);
+    glVertexAttribPointer(1, 3, GL_UNSIGNED_BYTE, GL_TRUE, sizeof(NearVertex),
+                          reinterpret_cast<const void*>(offsetof(NearVertex, colour)));
+    glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, nearIndices.id);  // recorded in the vertex array
+
+    glBindVertexArray(hudArray.id);
+    glBindBuffer(GL_ARRAY_BUFFER, hudVertices.id);
+    glEnableVertexAttribArray(0);
+    glVertexAttribPointer(0, 2, GL_FLOAT, GL_FALSE, sizeof(glm::vec2), nullptr);
+    glBindVertexArray(0);
+
+    glBindTexture(GL_TEXTURE_2D, farTexture.id);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAX_LEVEL, 0);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+  }
+
+  void drawFarField(const ImageRgb8& farField) {
+    glBindTexture(GL_TEXTURE_2D, farTexture.id);
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+    if (farField.width != farWidth || farField.height != farHeight) {
+      glTexImage2D(GL_TEXTURE_2D, 0, GL_RGB8, farField.width, farField.height, 0, GL_RGB,
+                   GL_UNSIGNED_BYTE, farField.pixels.data());
+      farWidth = farField.width;
+      farHeight = farField.height;
+    } else {
+      glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, farField.width, farField.height, GL_RGB,
+                      GL_UNSIGNED_BYTE, farField.pixels.data());
+    }
+    glUseProgram(imageProgram.id);
+    glUniform1i(image, 0);
+    glActiveTexture(GL_TEXTURE0);
+    glBindVertexArray(emptyArray.id);
+    glDrawArrays(GL_TRIANGLES, 0, 3);
+  }
+
+  void drawNear(const Camera& camera, std::span<const uint32_t> near, float nearDistance) {
+    if (near.empty()) return;
+    indices.resize(3 * near.size());
+    for (size_t i = 0; i < near.size(); ++i) {
+      const uint32_t t = near[i];
+      VS_CHECK_LT(size_t(t), triangleCount);
+      indices[3 * i] = 3 * t;
+      indices[3 * i + 1] = 3 * t + 1;
+      indices[3 * i + 2] = 3 * t + 2;
+    }
+    glBindVertexArray(nearArray.id);
+    const GLsizeiptr bytes = GLsizeiptr(indices.size() * sizeof(GLuint));
+    // Orphan last frame's list, so the driver need not wait for the GPU to finish with it.
+    glBufferData(GL_ELEMENT_ARRAY_BUFFER, bytes, nullptr, GL_STREAM_DRAW);
+    glBufferSubData(GL_ELEMENT_ARRAY_BUFFER, 0, bytes, indices.data());
+    glUseProgram(nearProgram.id);
+    const glm::mat4 rp = camera.rotationProjection();
+    glUniformMatrix4fv(rotationProjection, 1, GL_FALSE, &rp[0][0]);
+    glUniform3f(eye, camera.eye.x, camera.eye.y, camera.eye.z);
+    glUniform1f(maxDistance, std::isfinite(nearDistance) ? nearDistance : 3.0e38f);
+    glEnable(GL_DEPTH_TEST);
+    glDepthFunc(GL_LESS);
+    glDrawElements(GL_TRIANGLES, GLsizei(indices.size()), GL_UNSIGNED_INT, nullptr);
+    glDisable(GL_DEPTH_TEST);
+  }
+
+  void drawHud(const Camera& camera, std::span<const HudLine> hud) {
+    if (hud.empty()) return;
+    // The box first (6 vertices), then the text as triangles.
+    hudScratch.assign(6, glm::vec2(0.0f));
+    std::vector<char> font;
+    float widthUnits = 0.0f;
+    for (size_t i = 0; i < hud.size(); ++i) {
+      // stb_easy_font only knows printable ASCII and takes a mutable string.
+      std::string text = hud[i].text;
+      for (char& c : text)
+        if (c < 32 || c > 126) c = '?';
+      widthUnits = std::max(widthUnits, float(stb_easy_font_width(text.data())));
+      font.resize(text.size() * 1024 + 64);  // 16 quads a character, more than any glyph needs
+      const int quads = stb_easy_font_print(0.0f, float(i) * kHudLineUnits, text.data(), nullptr,
+                                            font.data(), int(font.size()));
+      for (int q = 0; q < quads; ++q) {
+        FontVertex v[4];
+        std::memcpy(v, font.data() + size_t(q) * sizeof(v), sizeof(v));
+        for (int k : {0, 1, 2, 0, 2, 3})
+          hudScratch.push_back(kHudMarginPx + kHudPaddingPx +
+                               kHudScale * glm::vec2(v[k].x, v[k].y));
+      }
+    }
+    const glm::vec2 lo(kHudMarginPx);
+    const glm::vec2 hi =
+        lo + 2.0f * kHudPaddingPx +
+        kHudScale * glm::vec2(widthUnits, float(hud.size()) * kHudLineUnits - 2.0f);
+    const glm::vec2 box[6] = {lo, {hi.x, lo.y}, hi, lo, hi, {lo.x, hi.y}};
+    std::copy(std::begin(box), std::end(box), hudScratch.begin());
+
+    glBindVertexArray(hudArray.id);
+    glBindBuffer(GL_ARRAY_BUFFER, hudVertices.id);
+    glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(hudScratch.size() * sizeof(glm::vec2)),
+                 hudScratch.data(), GL_STREAM_DRAW);
+    glUseProgram(hudProgram.id);
+    glUniform2f(hudViewport, float(camera.width), float(camera.height));
+    glEnable(GL_BLEND);
+    glBlendFunc(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA);
+    glUniform4f(hudColour, 0.0f, 0.0f, 0.0f, 0.6f);
+    glDrawArrays(GL_TRIANGLES, 0, 6);
+    glDisable(GL_BLEND);
+    glUniform4f(hudColour, 1.0f, 1.0f, 1.0f, 1.0f);
+    glDrawArrays(GL_TRIANGLES, 6, GLsizei(hudScratch.size() - 6));
+  }
+};
+
+GlRenderer::GlRenderer() : impl_(std::make_unique<Impl>()) {}
+
+GlRenderer::~GlRenderer() = default;
+
+void GlRenderer::upload(const RenderGeometry& geometry) {
+  const size_t n = geometry.size();
+  VS_CHECK_EQ(geometry.triangles.positions.size(), 3 * n);
+  VS_CHECK_EQ(geometry.colours.size(), n);
+  std::vector<NearVertex> vertices(3 * n);
+  for (size_t i = 0; i < vertices.size(); ++i)
+    vertices[i] = NearVertex{geometry.triangles.positions[i], geometry.colours[i / 3]};
+  glBindBuffer(GL_ARRAY_BUFFER, impl_->nearVertices.id);
+  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(vertices.size() * sizeof(NearVertex)), vertices.data(),
+               GL_STATIC_DRAW);
+  impl_->triangleCount = n;
+}
+
+void GlRenderer::draw(const Camera& camera, const ImageRgb8& farField, std::span<const uint32_t> near,
+                      float nearDistance, std::span<const HudLine> hud) {
+  // Every byte drawn is a byte computed on the CPU: no dithering, no sRGB
+  // conversion, no multisampling; triangles are two-sided.
+  glDisable(GL_DITHER);
+  glDisable(GL_FRAMEBUFFER_SRGB);
+  glDisable(GL_MULTISAMPLE);
+  glDisable(GL_CULL_FACE);
+  glDisable(GL_BLEND);
+  glDisable(GL_DEPTH_TEST);
+  glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+  glDepthMask(GL_TRUE);
+  glViewport(0, 0, camera.width, camera.height);
+
+  const bool farFits =
+      farField.width == camera.width && farField.height == camera.height && farField.width > 0 &&
+      farField.height > 0 &&
+      farField.pixels.size() == size_t(farField.width) * size_t(farField.height) * 3;
+  if (farFits) {
+    impl_->drawFarField(farField);
+    glClearDepth(1.0);
+    glClear(GL_DEPTH_BUFFER_BIT);
+  } else {
+    glClearColor(0.0f, 0.0f, 0.0f, 1.0f);
+    glClearDepth(1.0);
+    glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+  }
+  impl_->drawNear(camera, near, nearDistance);
+  impl_->drawHud(camera, hud);
+  glBindVertexArray(0);
+  glUseProgram(0);
+}
+
+ImageRgb8 GlRenderer::readBack(int width, int height) const {
+  ImageRgb8 out(width, height);
+  const size_t row = size_t(width) * 3;
+  std::vector<uint8_t> bottomUp(row * size_t(height));
+  glPixelStorei(GL_PACK_ALIGNMENT, 1);
+  glReadPixels(0, 0, width, height, GL_RGB, GL_UNSIGNED_BYTE, bottomUp.data());
+  for (int y = 0; y < height; ++y)
+    std::memcpy(out.pixels.data() + size_t(y) * row, bottomUp.data() + size_t(height - 1 - y) * row,
+                row);
+  return out;
+}
+
+}  // namespace vistream

@@ -1,0 +1,290 @@
+#include "client/net/stream_client.h"
+
+#include <utility>  // before Boost.Asio, whose awaitable.hpp uses std::exchange
+#include <chrono>
+#include <condition_variable>
+#include <deque>
+#include <map>
+#include <mutex>
+#include <set>
+#include <thread>
+
+#include <boost/asio.hpp>
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include "common/core/error.h"
+#include "protocol/geometry/geometry_codec.h"
+#include "protocol/wire/messages.h"
+
+namespace vistream {
+
+namespace asio = boost::asio;
+using asio::ip::tcp;
+using namespace vistream::wire;
+
+namespace {
+struct HeldFace {
+  uint16_t material = 0;
+  std::vector<glm::vec3> corners;
+};
+struct IvecLess {
+  bool operator()(const glm::ivec3& a, const glm::ivec3& b) const {
+    return a.x != b.x ? a.x < b.x : a.y != b.y ? a.y < b.y : a.z < b.z;
+  }
+};
+}  // namespace
+
+struct StreamClient::Impl : std::enable_shared_from_this<StreamClient::Impl> {
+  asio::io_context io;
+  tcp::socket socket{io};
+  std::thread thread;
+  FrameDecoder decoder{64u << 20};
+  std::array<uint8_t, 1 << 16> buffer{};
+  std::deque<std::shared_ptr<std::vector<uint8_t>>> outbox;
+
+  mutable std::mutex mutex;
+  std::condition_variable changed;
+  bool welcomed = false, ended = false;
+  std::string endReason;
+  glm::dvec3 origin{0.0};
+  float radius = 0.0f;
+  glm::vec3 gridOrigin{0.0f}, cellSize{1.0f};
+  glm::ivec3 dims{1};
+  std::vector<glm::vec3> materials;
+  glm::vec3 sky{0.55f, 0.7f, 0.9f};
+  std::map<uint32_t, HeldFace> faces;
+  std::set<glm::ivec3, IvecLess> ready;
+  glm::ivec3 poseCell{0};
+  uint64_t version = 0, bytes = 0;
+
+  void finish(const std::string& why) {
+    {
+      std::lock_guard lock(mutex);
+      if (ended) return;
+      ended = true;
+      endReason = why;
+    }
+    changed.notify_all();
+    boost::system::error_code ignored;
+    socket.close(ignored);
+  }
+  void send(std::vector<uint8_t> frame) {
+    asio::post(io, [self = shared_from_this(), buf = std::make_shared<std::vector<uint8_t>>(std::move(frame))] {
+      self->outbox.push_back(buf);
+      if (self->outbox.size() == 1) self->writeNext();
+    });
+  }
+  void writeNext() {
+    if (outbox.empty()) return;
+    asio::async_write(socket, asio::buffer(*outbox.front()),
+                      [self = shared_from_this()](const boost::system::error_code& ec, size_t) {
+                        if (ec) return self->finish("write: " + ec.message());
+                        self->outbox.pop_front();
+                        self->writeNext();
+                      });
+  }
+  void read() {
+    socket.async_read_some(asio::buffer(buffer), [self = shared_from_this()](const boost::system::error_code& ec, size_t n) {
+      if (ec) return self->finish("connection closed: " + ec.message());
+      {
+        std::lock_guard lock(self->mutex);
+        self->bytes += n;
+      }
+      if (!self->decoder.feed(std::span<const uint8_t>(self->buffer.data(), n)))
+        return self->finish("bad frame from the server: " + self->decoder.error());
+      while (auto frame = self->decoder.next())
+        if (!self->onFrame(*envelopeOf(*frame))) return;
+      if (self->decoder.failed()) return self->finish("bad frame from the server: " + self->decoder.error());
+      self->read();
+    });
+  }
+  // False when the session ended.
+  bool onFrame(const Envelope& e) {
+    switch (e.payload_type()) {
+      case Payload::Welcome: {
+        const Welcome& w = *e.payload_as_Welcome();
+        if (!w.grid() || !w.grid()->cell_size() || !w.grid()->origin() || !w.grid()->dims() || !w.local_origin()) {
+          finish("the server's Welcome has no usable grid");
+          return false;
+        }
+        std::lock_guard lock(mutex);
+        origin = fromWire(*w.local_origin());
+        radius = w.near_field_radius_m();
+        gridOrigin = fromWire(*w.grid()->origin());
+        cellSize = fromWire(*w.grid()->cell_size());
+        dims = fromWire(*w.grid()->dims());
+        if (w.environment_colour()) sky = fromWire(*w.environment_colour());
+        if (w.materials())
+          for (const MaterialInfo* m : *w.materials())
+            materials.push_back(m && m->diffuse() ? fromWire(*m->diffuse()) : glm::vec3(0.8f));
+        welcomed = true;
+        changed.notify_all();
+        return true;
+      }
+      case Payload::Geometry: {
+        DecodedGeometry g;
+        std::string error;
+        if (!decodeGeometry(*e.payload_as_Geometry(), g, error)) {
+          finish("bad geometry from the server: " + error);
+          return false;
+        }
+        std::lock_guard lock(mutex);
+        size_t index = 0;
+        for (size_t f = 0; f < g.faces.size(); ++f) {
+          HeldFace& h = faces[g.faces[f]];
+          h.material = g.materials[f];
+          h.corners.clear();
+          for (uint16_t t = 0; t < g.triangleCounts[f]; ++t, index += 3)
+            for (int k = 0; k < 3; ++k) h.corners.push_back(g.positions[g.indices[index + size_t(k)]]);
+        }
+        ++version;
+        changed.notify_all();
+        return true;
+      }
+      case Payload::Evict: {
+        std::lock_guard lock(mutex);
+        if (const auto* ids = e.payload_as_Evict()->face_ids())
+          for (uint32_t f : *ids) faces.erase(f);
+        ready.clear();  // the server announces complete cells again
+        ++version;
+        return true;
+      }
+      case Payload::CellReady: {
+        const CellReady& r = *e.payload_as_CellReady();
+        if (!r.cell()) return true;
+        std::lock_guard lock(mutex);
+        ready.insert(fromWire(*r.cell()));
+        changed.notify_all();
+        return true;
+      }
+      case Payload::Error: {
+        const Error& err = *e.payload_as_Error();
+        finish(fmt::format("the server refused: {}: {}", EnumNameErrorCode(err.code()), err.text() ? err.text()->str() : ""));
+        return false;
+      }
+      case Payload::Bye:
+        finish("the server said bye");
+        return false;
+      default: return true;
+    }
+  }
+};
+
+StreamClient::StreamClient(const StreamClientOptions& o) : impl_(std::make_shared<Impl>()) {
+  Impl& s = *impl_;
+  const std::string where = fmt::format("{}:{}", o.host, o.port);
+  try {
+    tcp::resolver resolver(s.io);
+    const auto endpoints = resolver.resolve(o.host, std::to_string(o.port));
+    asio::connect(s.socket, endpoints);
+  } catch (const boost::system::system_error& e) {
+    throwInputError("cannot connect to {}: {}", where, e.code().message());
+  }
+  boost::system::error_code ignored;
+  s.socket.set_option(tcp::no_delay(true), ignored);
+  HelloT hello;
+  hello.protocol_version = kProtocolVersion;
+  hello.auth_token = o.token;
+  hello.client_name = "vistream-client";
+  hello.capabilities = std::make_unique<CapabilitiesT>();
+  hello.capabilities->near_field_radius_m = o.radius;
+  hello.capabilities->wants_avatars = false;
+  s.send(encodeMessage(std::move(hello)));
+  s.read();
+  s.thread = std::thread([self = impl_] { self->io.run(); });
+  std::unique_lock lock(s.mutex);
+  if (!s.changed.wait_for(lock, std::chrono::duration<double>(o.timeoutS), [&] { return s.welcomed || s.ended; })) {
+    lock.unlock();
+    s.finish("no Welcome");
+    throwInputError("{}: no Welcome within {:.0f} s", where, o.timeoutS);
+  }
+  if (!s.welcomed) {
+    const std::string why = s.endReason;
+    lock.unlock();
+    throwInputError("{}: {}", where, why);
+  }
+}
+
+StreamClient::~StreamClient() {
+  if (!impl_) return;
+  impl_->send(encodeBye("client closed"));
+  asio::post(impl_->io, [self = impl_] {
+    // Let the Bye leave, then close.
+    auto timer = std::make_shared<asio::steady_timer>(self->io, std::chrono::milliseconds(100));
+    timer->async_wait([self, timer](const boost::system::error_code&) { self->finish("closed"); });
+  });
+  if (impl_->thread.joinable()) impl_->thread.join();
+}
+
+glm::dvec3 StreamClient::origin() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->origin;
+}
+
+float StreamClient::radius() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->radius;
+}
+
+void StreamClient::sendPose(const glm::vec3& eye, float yawDeg, float pitchDeg, const glm::vec3& velocity) {
+  {
+    std::lock_guard lock(impl_->mutex);
+    impl_->poseCell = glm::clamp(glm::ivec3(glm::floor((eye - impl_->gridOrigin) / impl_->cellSize)), glm::ivec3(0),
+                                 glm::max(impl_->dims - 1, glm::ivec3(0)));
+  }
+  PoseT pose;
+  pose.position = std::make_unique<Vec3d>(toWire(glm::dvec3(eye)));
+  pose.yaw_deg = yawDeg;
+  pose.pitch_deg = pitchDeg;
+  pose.velocity = std::make_unique<Vec3f>(toWire(velocity));
+  impl_->send(encodeMessage(std::move(pose)));
+}
+
+bool StreamClient::waitForCell(double timeoutS) {
+  std::unique_lock lock(impl_->mutex);
+  return impl_->changed.wait_for(lock, std::chrono::duration<double>(timeoutS),
+                                 [&] { return impl_->ended || impl_->ready.count(impl_->poseCell) > 0; }) &&
+         !impl_->ended;
+}
+
+RenderGeometry StreamClient::snapshot() const {
+  std::lock_guard lock(impl_->mutex);
+  RenderGeometry g;
+  std::vector<uint16_t> material;
+  for (const auto& [id, f] : impl_->faces)
+    for (size_t i = 0; i + 2 < f.corners.size(); i += 3) {
+      for (int k = 0; k < 3; ++k) g.triangles.positions.push_back(f.corners[i + size_t(k)]);
+      g.triangles.faceIds.push_back(id);
+      g.triangles.objectIds.push_back(0);
+      g.triangles.degenerate.push_back(isDegenerateTriangle(f.corners[i], f.corners[i + 1], f.corners[i + 2]) ? 1 : 0);
+      material.push_back(f.material);
+    }
+  g.sky = encodeColour(impl_->sky);
+  recolour(g, [&](size_t t) {
+    return material[t] < impl_->materials.size() ? impl_->materials[material[t]] : glm::vec3(0.8f);
+  });
+  return g;
+}
+
+uint64_t StreamClient::version() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->version;
+}
+
+uint64_t StreamClient::bytesReceived() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->bytes;
+}
+
+size_t StreamClient::facesHeld() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->faces.size();
+}
+
+std::string StreamClient::error() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->endReason;
+}
+
+}  // namespace vistream

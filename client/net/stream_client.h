@@ -1,0 +1,54 @@
+// The rendering client's connection to a vistream-server: Hello, then poses
+// out and geometry in, on a background thread. The renderer takes snapshots
+// of the triangles held so far.
+//
+// Thread safety: every public method may be called from any thread; the
+// socket lives on an internal io thread.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include <glm/glm.hpp>
+
+#include "client/render/render_geometry.h"
+
+namespace vistream {
+
+struct StreamClientOptions {
+  std::string host = "127.0.0.1";
+  uint16_t port = 7070;
+  std::string token;
+  float radius = 0.0f;  // near-field radius to ask for (0: the server's)
+  double timeoutS = 10.0;  // for connecting and for the Welcome
+};
+
+class StreamClient {
+ public:
+  // Connects and waits for the Welcome; throws InputError naming the server
+  // and the reason (refused, timed out, rejected with an Error message).
+  explicit StreamClient(const StreamClientOptions& options);
+  ~StreamClient();  // says Bye and closes
+  StreamClient(const StreamClient&) = delete;
+  StreamClient& operator=(const StreamClient&) = delete;
+
+  glm::dvec3 origin() const;  // file coordinates of the local frame
+  float radius() const;       // the near-field radius the server streams within
+  // Sends the viewer's pose (local frame).
+  void sendPose(const glm::vec3& eye, float yawDeg, float pitchDeg, const glm::vec3& velocity = glm::vec3(0.0f));
+  // Waits until the server reports the view cell of the last pose complete.
+  bool waitForCell(double timeoutS);
+  // The triangles held now, coloured with the server's materials.
+  RenderGeometry snapshot() const;
+  uint64_t version() const;         // changes whenever geometry arrives or is evicted
+  uint64_t bytesReceived() const;
+  size_t facesHeld() const;
+  std::string error() const;        // why the session ended, empty while it runs
+
+ private:
+  struct Impl;
+  std::shared_ptr<Impl> impl_;
+};
+
+}  // namespace vistream

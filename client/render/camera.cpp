@@ -1,0 +1,44 @@
+#include "client/render/camera.h"
+
+#include <cmath>
+
+#include <glm/gtc/matrix_transform.hpp>
+
+namespace vistream {
+
+glm::vec3 Camera::forward() const {
+  const float yaw = glm::radians(yawDeg), pitch = glm::radians(pitchDeg);
+  return {-std::sin(yaw) * std::cos(pitch), std::sin(pitch), -std::cos(yaw) * std::cos(pitch)};
+}
+
+glm::vec3 Camera::right() const {
+  const float yaw = glm::radians(yawDeg);
+  return {std::cos(yaw), 0.0f, -std::sin(yaw)};
+}
+
+glm::vec3 Camera::up() const { return glm::cross(right(), forward()); }
+
+glm::mat4 Camera::view() const {
+  return glm::translate(glm::lookAt(glm::vec3(0.0f), forward(), up()), -eye);
+}
+
+glm::mat4 Camera::rotationProjection() const { return projection() * glm::lookAt(glm::vec3(0.0f), forward(), up()); }
+
+glm::mat4 Camera::viewProjection() const { return projection() * view(); }
+
+glm::mat4 Camera::projection() const {
+  return glm::perspective(glm::radians(vfovDeg), aspect(), zNear, zFar);
+}
+
+glm::vec3 Camera::rayDirection(float px, float py) const {
+  const float t = std::tan(0.5f * glm::radians(vfovDeg));
+  const float sx = (2.0f * px / float(width) - 1.0f) * t * aspect();
+  const float sy = (1.0f - 2.0f * py / float(height)) * t;
+  return forward() + sx * right() + sy * up();
+}
+
+float Camera::halfHfov() const { return std::atan(std::tan(0.5f * glm::radians(vfovDeg)) * aspect()); }
+
+float Camera::pixelAngle() const { return 2.0f * std::tan(0.5f * glm::radians(vfovDeg)) / float(height); }
+
+}  // namespace vistream

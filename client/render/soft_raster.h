@@ -1,0 +1,83 @@
+// A software triangle rasterizer for the client: the headless near field
+// (colour via triangle IDs, with a depth test) and the opacity buffer (which
+// pixels the near field covers, no depth, no shading), as in the thesis's
+// section 4.6, where a fast software renderer makes the opacity buffer so
+// nothing is read back from the GPU.
+//
+// Rules (chosen to match OpenGL's rasterization of the same triangles):
+//  - a pixel is drawn when its centre lies inside the triangle; vertices are
+//    snapped to 1/256 pixel and edge functions are exact integers, with the
+//    top-left rule for centres exactly on an edge, so two triangles sharing an
+//    edge never both draw, or both miss, a pixel on it;
+//  - triangles are clipped against the near plane and a guard band in
+//    homogeneous clip space; both windings are drawn (two-sided);
+//  - depth is the view depth w (1/w interpolated linearly in screen space,
+//    which orders fragments exactly as OpenGL's NDC z); less-than test;
+//  - vertices are transformed relative to the eye (Camera::rotationProjection);
+//  - a maximum distance along the view ray (the near-field distance d) drops
+//    fragments beyond it, as the OpenGL near field's fragment shader does.
+// Coverage with an inset counts a pixel only if its centre lies at least
+// `insetPx` inside every edge: a subset of what OpenGL draws, so a pixel the
+// opacity buffer calls covered is never left empty by the GPU.
+//
+// Thread safety: an instance is used by one thread at a time; it runs its own
+// work on TBB internally.
+#pragma once
+
+#include <cstdint>
+#include <limits>
+#include <span>
+#include <vector>
+
+#include "client/render/camera.h"
+#include "common/scene/scene.h"
+
+namespace vistream {
+
+inline constexpr uint32_t kNoTriangle = 0xffffffffu;
+
+struct IdBuffer {
+  int width = 0, height = 0;
+  std::vector<uint32_t> ids;  // per pixel, row 0 at the top: triangle index or kNoTriangle
+  std::vector<float> depth;   // per pixel, view depth (metres along the view axis); +inf where nothing was drawn
+
+  void reset(int w, int h);
+  uint32_t at(int x, int y) const { return ids[size_t(y) * size_t(width) + size_t(x)]; }
+};
+
+struct RasterStats {
+  size_t trianglesIn = 0;      // triangles handed in
+  size_t trianglesSetUp = 0;   // after clipping and culling (a clipped triangle may count twice)
+};
+
+class SoftwareRasterizer {
+ public:
+  // Draws `which` (indices into `triangles`) into `out` with a depth test,
+  // after clearing it to the camera's size. Pixels whose nearest fragment lies
+  // farther than maxDistance from the eye (along the pixel's ray) stay empty.
+  RasterStats draw(const Camera& camera, const FlatTriangles& triangles, std::span<const uint32_t> which,
+                   IdBuffer& out, float maxDistance = std::numeric_limits<float>::infinity());
+  // Marks in `covered` (one byte a pixel, 1 = covered) every pixel whose
+  // centre lies at least insetPx inside one of the triangles, with its
+  // nearest such fragment at most maxDistance * (1 - 1e-4) from the eye: a
+  // subset of what OpenGL draws with the same maximum distance.
+  RasterStats coverage(const Camera& camera, const FlatTriangles& triangles, std::span<const uint32_t> which,
+                       float insetPx, std::vector<uint8_t>& covered,
+                       float maxDistance = std::numeric_limits<float>::infinity());
+
+ private:
+  struct ScreenTriangle {
+    int64_t x[3], y[3];  // 1/256 pixel, y down
+    float invW[3];  // 1 / view depth
+    uint32_t id;
+    int minX, maxX, minY, maxY;  // pixel bounds, clamped to the image
+  };
+  void setUp(const Camera& camera, const FlatTriangles& triangles, std::span<const uint32_t> which);
+  void fill(const Camera& camera, float insetPx, IdBuffer& out);
+  // Clears pixels whose fragment lies beyond maxDistance along the pixel ray.
+  static void dropBeyond(const Camera& camera, float maxDistance, IdBuffer& out);
+  std::vector<ScreenTriangle> screen_;
+  IdBuffer scratch_;
+};
+
+}  // namespace vistream

@@ -1,0 +1,157 @@
+// vistream-client as a user runs it: headless walks over a local scene and
+// over a server, the JSON contract, the three modes side by side, PNG frames,
+// and clear errors for bad arguments.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "client/app/walkthrough.h"
+#include "client/render/image.h"
+#include "tests/common/support/box_scenes.h"
+#include "tests/common/support/run_tool.h"
+#include "tests/common/support/temp_dir.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+using vistream::testing::runTool;
+
+// A street 300 m long between boxes, open to the sky.
+std::string streetObj() {
+  std::string o = "o ground\nv -60 0 -320\nv -60 0 20\nv 60 0 20\nv 60 0 -320\nf 1 2 3 4\n";
+  int base = 5;
+  auto box = [&](const std::string& name, double x0, double z0, double x1, double z1, double h) {
+    vistream::testing::appendBoxObj(o, base, name, x0, z0, x1, z1, h);
+  };
+  for (int i = 0; i < 30; ++i) {
+    box("west_" + std::to_string(i), -20, -10.0 * i - 8, -6, -10.0 * i, 6 + (i * 7) % 13);
+    box("east_" + std::to_string(i), 6, -10.0 * i - 8, 20, -10.0 * i, 5 + (i * 5) % 11);
+  }
+  return o;
+}
+
+const char* kWalk = "t,x,y,z,yaw_deg,pitch_deg\n0,0,1.7,10,0,0\n0.1,0,1.7,9.9,2,0\n0.2,0,1.7,9.8,4,1\n";
+
+nlohmann::json parseJson(const std::string& text) { return nlohmann::json::parse(text); }
+
+TEST(ClientTool, AHeadlessWalkWritesFramesAndTheJsonContract) {
+  vistream::testing::TempDir dir;
+  const fs::path scene = dir.write("street.obj", streetObj());
+  const fs::path path = dir.write("walk.csv", kWalk);
+  const fs::path out = dir.path() / "frames";
+  const auto r = runTool("vistream-client", "--scene " + scene.string() + " --headless --path " + path.string() +
+                                                " --frames 3 --size 160x120 --near-distance 40 --out " + out.string() +
+                                                " --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  const auto j = parseJson(r.out);
+  EXPECT_EQ(j["frames"], 3);
+  EXPECT_GT(j["mean_frame_ms"].get<double>(), 0.0);
+  for (const char* k : {"polygon", "horizon", "cache", "ray_hit", "ray_miss"}) EXPECT_TRUE(j["pixels"].contains(k)) << k;
+  ASSERT_EQ(j["per_frame"].size(), 3u);
+  for (const auto& f : j["per_frame"]) {
+    const auto& p = f["pixels"];
+    const size_t total = p["polygon"].get<size_t>() + p["horizon"].get<size_t>() + p["cache"].get<size_t>() +
+                         p["ray_hit"].get<size_t>() + p["ray_miss"].get<size_t>() + p["background"].get<size_t>();
+    EXPECT_EQ(total, 160u * 120u) << "every pixel has exactly one class";
+    EXPECT_TRUE(f["stages"]["far_field"]["ran"].get<bool>()) << "the street reaches beyond d = 40 m";
+  }
+  for (int i = 0; i < 3; ++i) {
+    const auto img = vistream::readPng(out / ("frame_0000" + std::to_string(i) + ".png"));
+    EXPECT_EQ(img.width, 160);
+    EXPECT_EQ(img.height, 120);
+  }
+}
+
+TEST(ClientTool, TheThreeModesRenderTheSameImagesSideBySide) {
+  vistream::testing::TempDir dir;
+  const fs::path scene = dir.write("street.obj", streetObj());
+  const fs::path path = dir.write("walk.csv", kWalk);
+  std::map<std::string, nlohmann::json> runs;
+  for (const std::string mode : {"pipeline", "raycast-all", "geometry-all"}) {
+    const auto r = runTool("vistream-client", "--scene " + scene.string() + " --headless --path " + path.string() +
+                                                  " --size 200x150 --near-distance 40 --mode " + mode + " --out " +
+                                                  (dir.path() / mode).string() + " --json");
+    ASSERT_EQ(r.status, 0) << mode << ": " << r.err;
+    runs[mode] = parseJson(r.out);
+  }
+  for (const auto& f : runs["raycast-all"]["per_frame"])
+    EXPECT_EQ(f["pixels"]["ray_hit"].get<size_t>() + f["pixels"]["ray_miss"].get<size_t>(), 200u * 150u);
+  for (const auto& f : runs["geometry-all"]["per_frame"]) {
+    EXPECT_EQ(f["pixels"]["ray_hit"].get<size_t>() + f["pixels"]["ray_miss"].get<size_t>(), 0u);
+    EXPECT_EQ(f["pixels"]["polygon"].get<size_t>() + f["pixels"]["background"].get<size_t>(), 200u * 150u);
+  }
+  for (int i = 0; i < 3; ++i) {
+    const std::string name = "frame_0000" + std::to_string(i) + ".png";
+    const auto ref = vistream::readPng(dir.path() / "raycast-all" / name);
+    for (const std::string mode : {"pipeline", "geometry-all"}) {
+      const auto d = vistream::compareImages(vistream::readPng(dir.path() / mode / name), ref);
+      EXPECT_LT(d.differingFraction, 0.01) << mode << " frame " << i;
+    }
+  }
+}
+
+TEST(ClientTool, ConnectedHeadlessRendersWhatTheServerStreams) {
+  vistream::testing::TempDir dir;
+  const fs::path scene = dir.write("street.obj", streetObj());
+  const fs::path path = dir.write("walk.csv", kWalk);
+  const std::string bin = VISTREAM_BIN_DIR, d = dir.path().string();
+  // The server streams within 400 m, so it sends the whole street and the
+  // connected frames must match the local ones.
+  const std::string script = bin + "/vistream-server --scene " + scene.string() + " --port 0 --port-file " + d +
+                             "/port --radius 400 --log-level warn > " + d + "/server.log 2>&1 & echo $! > " + d +
+                             "/pid; for i in $(seq 1 300); do [ -s " + d + "/port ] && break; sleep 0.1; done; " + bin +
+                             "/vistream-client --host 127.0.0.1 --port $(cat " + d + "/port) --headless --path " +
+                             path.string() + " --size 160x120 --near-distance 40 --out " + d + "/net --json > " + d +
+                             "/net.json 2> " + d + "/client.err; echo $? > " + d + "/status; kill -TERM $(cat " + d +
+                             "/pid); wait $(cat " + d + "/pid) 2>/dev/null";
+  ASSERT_EQ(std::system(("bash -c '" + script + "'").c_str()), 0);
+  std::ifstream st(dir.path() / "status");
+  int status = -1;
+  st >> status;
+  std::ifstream err(dir.path() / "client.err");
+  ASSERT_EQ(status, 0) << std::string((std::istreambuf_iterator<char>(err)), {});
+  const auto local = runTool("vistream-client", "--scene " + scene.string() + " --headless --path " + path.string() +
+                                                    " --size 160x120 --near-distance 40 --out " + d + "/local --json");
+  ASSERT_EQ(local.status, 0) << local.err;
+  for (int i = 0; i < 3; ++i) {
+    const std::string name = "frame_0000" + std::to_string(i) + ".png";
+    const auto diff = vistream::compareImages(vistream::readPng(dir.path() / "net" / name),
+                                              vistream::readPng(dir.path() / "local" / name));
+    // Streamed corners are quantized to 16 bits, which may move an edge by a pixel.
+    EXPECT_LT(diff.differingFraction, 0.02) << "frame " << i;
+  }
+}
+
+TEST(ClientTool, BadArgumentsGetAClearErrorAndANonZeroExit) {
+  vistream::testing::TempDir dir;
+  const fs::path scene = dir.write("street.obj", streetObj());
+  const fs::path path = dir.write("walk.csv", kWalk);
+  const std::string common = "--scene " + scene.string() + " --headless --path " + path.string();
+  const std::pair<std::string, std::string> cases[] = {
+      {common + " --size 640by480", "--size"},
+      {common + " --size 8x8", "--size"},
+      {common + " --mode fancy", "--mode"},
+      {common + " --frames 99", "--frames"},
+      {common + " --horizon-subsample 0", "--horizon-subsample"},
+      {"--headless --path " + path.string(), "--scene"},
+      {"--scene " + scene.string() + " --headless", "--path"},
+      {"--scene " + scene.string() + " --headless --path " + (dir.path() / "missing.csv").string(), "missing.csv"},
+      {"--host 127.0.0.1 --port 1 --headless --path " + path.string(), "127.0.0.1:1"},
+  };
+  for (const auto& [args, mention] : cases) {
+    const auto r = runTool("vistream-client", args);
+    EXPECT_NE(r.status, 0) << args;
+    EXPECT_NE(r.err.find(mention), std::string::npos) << args << "\n" << r.err;
+  }
+  const auto help = runTool("vistream-client", "--help");
+  EXPECT_EQ(help.status, 0);
+  EXPECT_NE(help.out.find("--headless"), std::string::npos);
+  EXPECT_EQ(runTool("vistream-client-bench", "--help").status, 0);
+}
+
+}  // namespace

@@ -1,0 +1,239 @@
+// The frame pipeline against its reference: every pixel ray cast
+// (RaycastAll), on generated scenes and on the hard cases of the issue.
+#include "client/farfield/pipeline.h"
+
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include "client/app/walkthrough.h"
+#include "common/generate/generate.h"
+#include "common/generate/path.h"
+#include "common/spatial/free_space.h"
+
+namespace vistream {
+namespace {
+
+// Adds an axis-aligned box as 12 triangles.
+void addBox(RenderGeometry& g, glm::vec3 lo, glm::vec3 hi) {
+  const glm::vec3 c[8] = {{lo.x, lo.y, lo.z}, {hi.x, lo.y, lo.z}, {hi.x, hi.y, lo.z}, {lo.x, hi.y, lo.z},
+                          {lo.x, lo.y, hi.z}, {hi.x, lo.y, hi.z}, {hi.x, hi.y, hi.z}, {lo.x, hi.y, hi.z}};
+  const int q[6][4] = {{0, 1, 2, 3}, {5, 4, 7, 6}, {4, 0, 3, 7}, {1, 5, 6, 2}, {3, 2, 6, 7}, {4, 5, 1, 0}};
+  for (const auto& f : q)
+    for (const auto& t : {std::array<int, 3>{f[0], f[1], f[2]}, std::array<int, 3>{f[0], f[2], f[3]}}) {
+      for (int k : t) g.triangles.positions.push_back(c[k]);
+      g.triangles.faceIds.push_back(uint32_t(g.triangles.faceIds.size() / 2));
+      g.triangles.objectIds.push_back(0);
+      g.triangles.degenerate.push_back(0);
+    }
+}
+
+void finish(RenderGeometry& g) {
+  recolour(g, [&](size_t t) {
+    // A distinct colour per box so a wrong triangle shows as a wrong pixel.
+    const float h = float((t / 12) % 7) / 7.0f;
+    return glm::vec3(0.3f + 0.6f * h, 0.8f - 0.5f * h, 0.5f);
+  });
+}
+
+// A long street: ground, and buildings on both sides for `length` metres along -Z.
+RenderGeometry streetScene(float length, glm::vec3 offset = glm::vec3(0.0f)) {
+  RenderGeometry g;
+  addBox(g, offset + glm::vec3(-200.0f, -1.0f, -length - 200.0f), offset + glm::vec3(200.0f, 0.0f, 200.0f));
+  for (float z = 0.0f; z > -length; z -= 25.0f) {
+    const float h = 10.0f + std::fmod(std::abs(z) * 0.37f, 30.0f);
+    addBox(g, offset + glm::vec3(-30.0f, 0.0f, z - 20.0f), offset + glm::vec3(-8.0f, h, z));
+    addBox(g, offset + glm::vec3(8.0f, 0.0f, z - 20.0f), offset + glm::vec3(30.0f, h * 0.8f + 5.0f, z));
+  }
+  finish(g);
+  return g;
+}
+
+Camera cameraAt(glm::vec3 eye, float yaw, float pitch = 0.0f) {
+  Camera c;
+  c.eye = eye;
+  c.yawDeg = yaw;
+  c.pitchDeg = pitch;
+  c.width = 320;
+  c.height = 240;
+  return c;
+}
+
+struct Check {
+  FrameReport report;
+  ImageDifference diff;
+  size_t interior = 0;
+};
+
+struct Renderers {
+  FrameRenderer pipeline, reference;
+  Renderers(const RenderGeometry& g, PipelineOptions o)
+      : pipeline(g, o), reference(g, [&] {
+          o.mode = RenderMode::RaycastAll;
+          return o;
+        }()) {}
+  // Renders both and compares.
+  Check frame(const Camera& c) {
+    ImageRgb8 a, b;
+    Check k;
+    k.report = pipeline.render(c, a);
+    reference.render(c, b);
+    k.diff = compareImages(a, b);
+    k.interior = k.diff.interiorDiffering;
+    return k;
+  }
+};
+
+PipelineOptions optionsWithD(float d) {
+  PipelineOptions o;
+  o.nearDistance = d;
+  o.horizonCellSize = 4.0f;
+  return o;
+}
+
+TEST(Pipeline, LookingAlongAStreetToTheHorizonMatchesTheReference) {
+  const RenderGeometry g = streetScene(1500.0f);
+  Renderers r(g, optionsWithD(60.0f));
+  const auto [report, diff, interior] = r.frame(cameraAt({0.0f, 1.7f, -5.0f}, 0.0f));
+  EXPECT_TRUE(report.farFieldRan) << report.farFieldWhy;
+  EXPECT_TRUE(report.horizonRan) << report.horizonWhy;
+  EXPECT_GT(report.pixels.rayHit, 0u) << "the far end of the street is ray cast";
+  EXPECT_GT(report.pixels.horizon, 0u) << "the sky above the street is culled";
+  EXPECT_EQ(interior, 0u) << "holes or stale pixels";
+  EXPECT_LT(diff.differingFraction, 0.005);
+}
+
+TEST(Pipeline, StandingAtTheNearFieldBorderLeavesNoHole) {
+  const RenderGeometry g = streetScene(1500.0f);
+  // A wall whose cells straddle the near-field distance in front of the viewer.
+  for (float d : {40.0f, 45.0f, 47.5f, 50.0f})
+    for (float z : {-20.0f, -27.5f, -30.0f})
+      for (float yaw : {0.0f, 30.0f, 90.0f}) {
+        // A fresh renderer each time: the image cache plays no part here.
+        Renderers r(g, optionsWithD(d));
+        const auto [report, diff, interior] = r.frame(cameraAt({0.0f, 1.7f, z}, yaw));
+        EXPECT_EQ(interior, 0u) << "d " << d << " z " << z << " yaw " << yaw;
+        EXPECT_LT(diff.differingFraction, 0.005) << "d " << d << " z " << z << " yaw " << yaw;
+      }
+}
+
+TEST(Pipeline, TurningHalfwayRoundInOneFrameShowsNoStalePixels) {
+  const RenderGeometry g = streetScene(1500.0f);
+  PipelineOptions o = optionsWithD(60.0f);
+  o.pixelBudget = 0;  // only pixels the cache must refresh are traced
+  Renderers r(g, o);
+  for (int i = 0; i < 5; ++i) (void)r.frame(cameraAt({0.0f, 1.7f, -100.0f - 0.05f * float(i)}, 0.0f));
+  const auto [report, diff, interior] = r.frame(cameraAt({0.0f, 1.7f, -100.3f}, 180.0f));
+  EXPECT_GT(report.cachePlan.mustTrace, 0u) << "directions never seen are traced";
+  EXPECT_EQ(interior, 0u) << "holes or stale pixels";
+  EXPECT_LT(diff.differingFraction, 0.005);
+}
+
+TEST(Pipeline, TeleportingNeverShowsTheOldView) {
+  const RenderGeometry g = streetScene(1500.0f);
+  PipelineOptions o = optionsWithD(60.0f);
+  o.pixelBudget = 0;
+  Renderers r(g, o);
+  for (int i = 0; i < 5; ++i) (void)r.frame(cameraAt({0.0f, 1.7f, -50.0f - 0.05f * float(i)}, 0.0f));
+  const auto [report, diff, interior] = r.frame(cameraAt({0.0f, 1.7f, -700.0f}, 0.0f));
+  EXPECT_EQ(report.cachePlan.reused, 0u) << "nothing cached 650 m away is valid here";
+  EXPECT_EQ(interior, 0u) << "holes or stale pixels";
+  EXPECT_LT(diff.differingFraction, 0.005);
+}
+
+TEST(Pipeline, ReusesCachedPixelsWhenStandingStillAndStaysExact) {
+  const RenderGeometry g = streetScene(1500.0f);
+  PipelineOptions o = optionsWithD(60.0f);
+  o.pixelBudget = 0;
+  Renderers r(g, o);
+  (void)r.frame(cameraAt({0.0f, 1.7f, -5.0f}, 0.0f));
+  const auto [report, diff, interior] = r.frame(cameraAt({0.0f, 1.7f, -5.0f}, 0.0f));
+  EXPECT_GT(report.pixels.cache, 0u);
+  EXPECT_EQ(report.pixels.rayHit + report.pixels.rayMiss, 0u) << "nothing moved, nothing to retrace";
+  EXPECT_EQ(interior, 0u) << "holes or stale pixels";
+  EXPECT_LT(diff.differingFraction, 0.005);
+}
+
+TEST(Pipeline, ASceneWithNoSkySkipsHorizonTracingAndStillMatches) {
+  // A closed hall 300 m long: walls, floor and ceiling.
+  RenderGeometry g;
+  addBox(g, {-10.0f, -1.0f, -300.0f}, {10.0f, 0.0f, 10.0f});
+  addBox(g, {-10.0f, 6.0f, -300.0f}, {10.0f, 7.0f, 10.0f});
+  addBox(g, {-11.0f, 0.0f, -300.0f}, {-10.0f, 6.0f, 10.0f});
+  addBox(g, {10.0f, 0.0f, -300.0f}, {11.0f, 6.0f, 10.0f});
+  for (float z = -20.0f; z > -290.0f; z -= 30.0f) addBox(g, {-3.0f, 0.0f, z - 1.0f}, {3.0f, 3.0f, z});
+  finish(g);
+  Renderers r(g, optionsWithD(40.0f));
+  const auto [report, diff, interior] = r.frame(cameraAt({0.0f, 1.7f, 0.0f}, 0.0f, 10.0f));
+  EXPECT_FALSE(report.horizonRan);
+  EXPECT_NE(report.horizonWhy.find("ceiling"), std::string::npos) << report.horizonWhy;
+  EXPECT_TRUE(report.farFieldRan);
+  EXPECT_EQ(interior, 0u) << "holes or stale pixels";
+  EXPECT_LT(diff.differingFraction, 0.005);
+}
+
+TEST(Pipeline, ASceneEntirelyWithinDSwitchesTheFarFieldOff) {
+  RenderGeometry g;
+  addBox(g, {-20.0f, -1.0f, -20.0f}, {20.0f, 0.0f, 20.0f});
+  addBox(g, {-5.0f, 0.0f, -15.0f}, {5.0f, 8.0f, -10.0f});
+  finish(g);
+  Renderers r(g, optionsWithD(100.0f));
+  const auto [report, diff, interior] = r.frame(cameraAt({0.0f, 1.7f, 0.0f}, 0.0f, 5.0f));
+  EXPECT_FALSE(report.farFieldRan);
+  EXPECT_FALSE(report.horizonRan);
+  EXPECT_FALSE(report.cacheRan);
+  EXPECT_NE(report.farFieldWhy.find("within d"), std::string::npos) << report.farFieldWhy;
+  EXPECT_EQ(report.pixels.rayHit + report.pixels.rayMiss, 0u);
+  EXPECT_GT(report.pixels.background, 0u) << "the sky is background colour";
+  EXPECT_EQ(interior, 0u) << "holes or stale pixels";
+  EXPECT_LT(diff.differingFraction, 0.005);
+}
+
+TEST(Pipeline, FarFromTheOriginTheImageStillMatches) {
+  const glm::vec3 offset(50'000.0f, 0.0f, -30'000.0f);
+  const RenderGeometry g = streetScene(1500.0f, offset);
+  Renderers r(g, optionsWithD(60.0f));
+  const auto [report, diff, interior] = r.frame(cameraAt(offset + glm::vec3(0.0f, 1.7f, -5.0f), 0.0f));
+  EXPECT_TRUE(report.farFieldRan);
+  EXPECT_EQ(interior, 0u);
+  EXPECT_LT(diff.differingFraction, 0.005);
+}
+
+TEST(Pipeline, GeometryAllDrawsEveryVisibleTriangleAsPolygons) {
+  const RenderGeometry g = streetScene(800.0f);
+  PipelineOptions o = optionsWithD(60.0f);
+  o.mode = RenderMode::GeometryAll;
+  Renderers r(g, o);
+  const auto [report, diff, interior] = r.frame(cameraAt({0.0f, 1.7f, -5.0f}, 10.0f));
+  EXPECT_FALSE(report.farFieldRan);
+  EXPECT_EQ(report.pixels.rayHit + report.pixels.rayMiss, 0u);
+  EXPECT_EQ(interior, 0u) << "holes or stale pixels";
+  EXPECT_LT(diff.differingFraction, 0.005);
+}
+
+// A walk through a generated city: with the cache and a budget the image
+// stays within 1% of the reference on every frame.
+TEST(Pipeline, AWalkThroughCity1StaysWithinOnePercentOfTheReference) {
+  const Scene scene = toScene(generate("city1"));
+  const RenderGeometry g = renderGeometryFromScene(scene);
+  const FlatTriangles tris = flattenScene(scene, true);
+  const auto rays = makeEmbreeRayQuery(tris);
+  const FreeSpace fs = FreeSpace::build(*rays, scene.bounds());
+  PathOptions po;
+  po.frames = 40;
+  po.speed = 2.0;
+  const auto cams = camerasFromPath(generatePath(scene, fs, po), scene.origin, 320, 240, 60.0f);
+  PipelineOptions o = optionsWithD(60.0f);
+  o.pixelBudget = 500;
+  Renderers r(g, o);
+  size_t cached = 0;
+  for (const Camera& c : cams) {
+    const auto [report, diff, interior] = r.frame(c);
+    cached += report.pixels.cache;
+    EXPECT_LT(diff.differingFraction, 0.01);
+  }
+  EXPECT_GT(cached, 0u) << "the cache served pixels on the walk";
+}
+
+}  // namespace
+}  // namespace vistream

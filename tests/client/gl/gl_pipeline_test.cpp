@@ -1,0 +1,65 @@
+// The OpenGL path of the client against its headless path: the same pose
+// through FrameRenderer::renderFarField + GlRenderer (OpenGL near field,
+// opacity buffer with an inset) and through FrameRenderer::render (software
+// near field) gives the same frame, up to pixels on triangle edges.
+#include <gtest/gtest.h>
+
+#include <memory>
+
+#include "client/app/walkthrough.h"
+#include "client/farfield/pipeline.h"
+#include "client/gl/gl_renderer.h"
+#include "client/gl/gl_window.h"
+#include "common/core/error.h"
+#include "common/generate/generate.h"
+#include "common/generate/path.h"
+#include "common/spatial/free_space.h"
+
+namespace vistream {
+namespace {
+
+TEST(GlPipeline, AnOpenGLFrameMatchesTheHeadlessFrameOfTheSamePose) {
+  constexpr int kW = 320, kH = 240;
+  std::unique_ptr<GlWindow> window;
+  try {
+    window = std::make_unique<GlWindow>(GlWindowOptions{kW, kH, "gl_pipeline_test", false, false});
+  } catch (const InputError& e) {
+    FAIL() << "cannot open an OpenGL window: " << e.what() << " (run through ctest, which uses xvfb-run)";
+  }
+  const Scene scene = toScene(generate("city1"));
+  const RenderGeometry g = renderGeometryFromScene(scene);
+  const FlatTriangles tris = flattenScene(scene, true);
+  const auto rays = makeEmbreeRayQuery(tris);
+  const FreeSpace fs = FreeSpace::build(*rays, scene.bounds());
+  PathOptions po;
+  po.frames = 12;
+  po.speed = 3.0;
+  const auto cams = camerasFromPath(generatePath(scene, fs, po), scene.origin, kW, kH, 60.0f);
+  PipelineOptions o;
+  o.nearDistance = 60.0f;
+  for (RenderMode mode : {RenderMode::Pipeline, RenderMode::GeometryAll}) {
+    o.mode = mode;
+    FrameRenderer headless(g, o), forGl(g, o);
+    GlRenderer gl;
+    gl.upload(g);
+    ImageRgb8 soft, farImage;
+    std::vector<uint32_t> near;
+    size_t farPixels = 0;
+    for (size_t i = 0; i < cams.size(); i += 3) {
+      headless.render(cams[i], soft);
+      const FrameReport r = forGl.renderFarField(cams[i], farImage, near);
+      farPixels += r.pixels.rayHit + r.pixels.rayMiss + r.pixels.cache + r.pixels.horizon;
+      gl.draw(cams[i], farImage, near, forGl.polygonDistance());
+      const ImageRgb8 frame = gl.readBack(kW, kH);
+      const ImageDifference d = compareImages(frame, soft);
+      EXPECT_LT(d.differingFraction, 0.005) << renderModeName(mode) << " frame " << i;
+      EXPECT_EQ(d.interiorDiffering, 0u) << renderModeName(mode) << " frame " << i;
+    }
+    if (mode == RenderMode::Pipeline) {
+      EXPECT_GT(farPixels, 0u) << "the far field took part";
+    }
+  }
+}
+
+}  // namespace
+}  // namespace vistream
