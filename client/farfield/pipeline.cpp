@@ -174,6 +174,7 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector
   std::vector<uint32_t> candidates;
   std::vector<glm::vec3> dirs;
   const glm::u8vec3 sky = geometry_.sky;
+  const Camera::PixelRays pixelRays = camera.pixelRays();
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
       const size_t p = size_t(y) * size_t(W) + size_t(x);
@@ -187,7 +188,7 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector
         out.set(x, y, sky);
         continue;
       }
-      const glm::vec3 dir = camera.rayDirection(float(x) + 0.5f, float(y) + 0.5f);
+      const glm::vec3 dir = pixelRays.at(float(x) + 0.5f, float(y) + 0.5f);
       if (rep.horizonRan && HorizonMap::raySlope(dir) > slopes[size_t(x)]) {
         ++rep.pixels.horizon;
         out.set(x, y, sky);

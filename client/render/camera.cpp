@@ -30,11 +30,13 @@ glm::mat4 Camera::projection() const {
   return glm::perspective(glm::radians(vfovDeg), aspect(), zNear, zFar);
 }
 
-glm::vec3 Camera::rayDirection(float px, float py) const {
+glm::vec3 Camera::rayDirection(float px, float py) const { return pixelRays().at(px, py); }
+
+Camera::PixelRays Camera::pixelRays() const {
   const float t = std::tan(0.5f * glm::radians(vfovDeg));
-  const float sx = (2.0f * px / float(width) - 1.0f) * t * aspect();
-  const float sy = (1.0f - 2.0f * py / float(height)) * t;
-  return forward() + sx * right() + sy * up();
+  const glm::vec3 r = right() * (t * aspect()), u = up() * t;
+  // sx = 2 px / W - 1, sy = 1 - 2 py / H.
+  return {forward() - r + u, r * (2.0f / float(width)), u * (-2.0f / float(height))};
 }
 
 float Camera::halfHfov() const { return std::atan(std::tan(0.5f * glm::radians(vfovDeg)) * aspect()); }

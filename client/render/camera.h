@@ -39,7 +39,15 @@ struct Camera {
 
   // The (unnormalised) direction of the ray through pixel coordinates (px, py)
   // in window space, row 0 at the top; a pixel centre is (x + 0.5, y + 0.5).
+  // Its component along forward() is 1.
   glm::vec3 rayDirection(float px, float py) const;
+
+  // rayDirection() for many pixels: the basis is computed once.
+  struct PixelRays {
+    glm::vec3 origin, perX, perY;  // direction = origin + px * perX + py * perY
+    glm::vec3 at(float px, float py) const { return origin + px * perX + py * perY; }
+  };
+  PixelRays pixelRays() const;
   // Horizontal half field of view, radians.
   float halfHfov() const;
   // The angle one pixel spans at the image centre, radians.

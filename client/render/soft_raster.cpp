@@ -42,7 +42,7 @@ void IdBuffer::reset(int w, int h) {
   width = w;
   height = h;
   ids.assign(size_t(w) * size_t(h), kNoTriangle);
-  depth.assign(size_t(w) * size_t(h), std::numeric_limits<float>::infinity());
+  inverseDepth.assign(size_t(w) * size_t(h), 0.0f);
 }
 
 void SoftwareRasterizer::setUp(const Camera& camera, const FlatTriangles& triangles,
@@ -227,12 +227,13 @@ void SoftwareRasterizer::fill(const Camera& camera, float insetPx, IdBuffer& out
     scanTriangle(s.x, s.y, s.minX, s.maxX, ya, yb, g, [&](int y, int xa, int xb, const int64_t* e) {
       double q = (double(e[1]) * s.invW[0] + double(e[2]) * s.invW[1] + double(e[0]) * s.invW[2]) / area;
       const size_t row = size_t(y) * size_t(W);
-      float* depth = out.depth.data() + row;
+      float* depth = out.inverseDepth.data() + row;
       uint32_t* ids = out.ids.data() + row;
+      // Nearer is a larger 1/w: no division per pixel.
       for (int x = xa; x <= xb; ++x, q += dqdx) {
-        const float w = float(1.0 / q);
-        if (w < depth[x]) {
-          depth[x] = w;
+        const float qf = float(q);
+        if (qf > depth[x]) {
+          depth[x] = qf;
           ids[x] = s.id;
         }
       }
@@ -243,13 +244,14 @@ void SoftwareRasterizer::fill(const Camera& camera, float insetPx, IdBuffer& out
 void SoftwareRasterizer::dropBeyond(const Camera& camera, float maxDistance, IdBuffer& out) {
   if (!std::isfinite(maxDistance)) return;
   const int W = camera.width;
+  const Camera::PixelRays rays = camera.pixelRays();
   tbb::parallel_for(0, camera.height, [&](int y) {
     for (int x = 0; x < W; ++x) {
       const size_t p = size_t(y) * size_t(W) + size_t(x);
       if (out.ids[p] == kNoTriangle) continue;
       // rayDirection has a unit component along the view axis, so its
       // length times the view depth is the distance along the ray.
-      const float dist = out.depth[p] * glm::length(camera.rayDirection(float(x) + 0.5f, float(y) + 0.5f));
+      const float dist = glm::length(rays.at(float(x) + 0.5f, float(y) + 0.5f)) / out.inverseDepth[p];
       if (dist > maxDistance) out.ids[p] = kNoTriangle;
     }
   });

@@ -11,8 +11,8 @@
 //    edge never both draw, or both miss, a pixel on it;
 //  - triangles are clipped against the near plane and a guard band in
 //    homogeneous clip space; both windings are drawn (two-sided);
-//  - depth is the view depth w (1/w interpolated linearly in screen space,
-//    which orders fragments exactly as OpenGL's NDC z); less-than test;
+//  - depth is 1/w, the inverse view depth, interpolated linearly in screen
+//    space (it orders fragments exactly as OpenGL's NDC z); the larger wins;
 //  - vertices are transformed relative to the eye (Camera::rotationProjection);
 //  - a maximum distance along the view ray (the near-field distance d) drops
 //    fragments beyond it, as the OpenGL near field's fragment shader does.
@@ -39,7 +39,7 @@ inline constexpr uint32_t kNoTriangle = 0xffffffffu;
 struct IdBuffer {
   int width = 0, height = 0;
   std::vector<uint32_t> ids;  // per pixel, row 0 at the top: triangle index or kNoTriangle
-  std::vector<float> depth;   // per pixel, view depth (metres along the view axis); +inf where nothing was drawn
+  std::vector<float> inverseDepth;  // per pixel, 1 / view depth (1/metres along the view axis); 0 where nothing was drawn
 
   void reset(int w, int h);
   uint32_t at(int x, int y) const { return ids[size_t(y) * size_t(width) + size_t(x)]; }
