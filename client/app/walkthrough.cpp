@@ -171,6 +171,7 @@ nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const Pip
       {"options",
        {{"near_distance", o.nearDistance},
         {"pixel_budget", o.pixelBudget},
+        {"polygon_budget", o.polygonBudget},
         {"cache", o.cache},
         {"max_stale_pixels", o.maxStalePixels},
         {"horizon_cell_size", o.horizonCellSize},

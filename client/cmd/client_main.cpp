@@ -40,7 +40,8 @@ struct Args {
   float vfov = 60.0f;
   float nearDistance = 0.0f;
   float streamRadius = 0.0f;
-  size_t pixelBudget = 20'000;
+  size_t pixelBudget = 2'000;
+  size_t polygonBudget = 500'000;
   float maxStalePixels = 2.0f;
   float horizonCell = 8.0f;
   int horizonSubsample = 4;
@@ -75,6 +76,7 @@ PipelineOptions pipelineOptions(const Args& a, const Scene* scene, RenderMode mo
   o.mode = mode;
   o.nearDistance = a.nearDistance > 0.0f ? a.nearDistance : (scene ? scene->environment.nearFieldRadius : 150.0f);
   o.pixelBudget = a.pixelBudget;
+  o.polygonBudget = a.polygonBudget;
   o.cache = !a.noCache;
   o.maxStalePixels = a.maxStalePixels;
   o.horizonCellSize = a.horizonCell;
@@ -327,6 +329,9 @@ int main(int argc, char** argv) {
                  "connected: radius the server streams within, metres (default: the server's); the far field is what "
                  "arrives beyond --near-distance");
   app.add_option("--pixel-budget", a.pixelBudget, "rays a frame for refreshing cached pixels")->capture_default_str();
+  app.add_option("--polygon-budget", a.polygonBudget,
+                 "scenes with at most this many triangles are drawn whole, without a far field (0: always split at d)")
+      ->capture_default_str();
   app.add_flag("--no-cache", a.noCache, "switch the panoramic image cache off (trace every far-field pixel)");
   app.add_option("--max-stale-px", a.maxStalePixels,
                  "cached pixels expire when far-field geometry at d may have moved this many pixels")

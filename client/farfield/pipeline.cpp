@@ -85,7 +85,9 @@ void FrameRenderer::reset() {
 }
 
 float FrameRenderer::polygonDistance() const {
-  return options_.mode == RenderMode::Pipeline ? options_.nearDistance : std::numeric_limits<float>::infinity();
+  const bool wholeScene = options_.polygonBudget > 0 && geometry_.size() <= options_.polygonBudget;
+  return options_.mode == RenderMode::Pipeline && !wholeScene ? options_.nearDistance
+                                                              : std::numeric_limits<float>::infinity();
 }
 
 FrameReport FrameRenderer::render(const Camera& camera, ImageRgb8& out) { return run(camera, out, nullptr); }
@@ -110,12 +112,16 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector
   if (out.width != W || out.height != H) out = ImageRgb8(W, H);
 
   // 1. Near field: the triangles to draw as polygons.
+  // A scene small enough for the polygon budget is drawn whole: the far
+  // field would cost more than it saves.
+  const bool wholeScene = mode == RenderMode::Pipeline && options_.polygonBudget > 0 &&
+                          geometry_.size() <= options_.polygonBudget;
   Stopwatch clock;
   if (mode == RenderMode::RaycastAll)
     near_.clear();
   else
-    grid_.nearField(camera, mode == RenderMode::GeometryAll ? std::numeric_limits<float>::infinity() : d, near_,
-                    stamp_, stampValue_);
+    grid_.nearField(camera, mode == RenderMode::GeometryAll || wholeScene ? std::numeric_limits<float>::infinity() : d,
+                    near_, stamp_, stampValue_);
   rep.nearTriangles = near_.size();
   rep.ms.nearSelect = clock.ms();
 
@@ -140,6 +146,9 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector
   } else if (mode == RenderMode::RaycastAll) {
     rep.farFieldRan = true;
     rep.farFieldWhy = "raycast-all casts a ray through every pixel";
+  } else if (wholeScene) {
+    rep.farFieldWhy = fmt::format("the whole scene ({} triangles) fits the polygon budget of {}: drawn as polygons",
+                                  geometry_.size(), options_.polygonBudget);
   } else if (!options_.farFieldAllowed) {
     rep.farFieldWhy = "the scene has no geometry beyond d";
   } else if (!grid_.anythingBeyond(camera.eye, d)) {

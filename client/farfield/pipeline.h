@@ -50,7 +50,9 @@ const char* renderModeName(RenderMode m);
 struct PipelineOptions {
   RenderMode mode = RenderMode::Pipeline;
   float nearDistance = 150.0f;    // d, metres
-  size_t pixelBudget = 20'000;    // rays a frame for cache refreshes (the must-trace pixels come on top)
+  size_t pixelBudget = 2'000;     // rays a frame for cache refreshes (the must-trace pixels come on top)
+  size_t polygonBudget = 500'000; // a scene with at most this many triangles is drawn whole as polygons,
+                                  // with no far field (0: always split at d)
   bool cache = true;              // panoramic image cache on/off
   float maxStalePixels = 2.0f;    // a cached texel expires when the viewer moved so far that far-field
                                   // geometry at distance d may have shifted by this many pixels

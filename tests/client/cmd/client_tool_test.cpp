@@ -45,7 +45,7 @@ TEST(ClientTool, AHeadlessWalkWritesFramesAndTheJsonContract) {
   const fs::path path = dir.write("walk.csv", kWalk);
   const fs::path out = dir.path() / "frames";
   const auto r = runTool("vistream-client", "--scene " + scene.string() + " --headless --path " + path.string() +
-                                                " --frames 3 --size 160x120 --near-distance 40 --out " + out.string() +
+                                                " --frames 3 --size 160x120 --near-distance 40 --polygon-budget 0 --out " + out.string() +
                                                 " --json");
   ASSERT_EQ(r.status, 0) << r.err;
   const auto j = parseJson(r.out);
@@ -74,7 +74,7 @@ TEST(ClientTool, TheThreeModesRenderTheSameImagesSideBySide) {
   std::map<std::string, nlohmann::json> runs;
   for (const std::string mode : {"pipeline", "raycast-all", "geometry-all"}) {
     const auto r = runTool("vistream-client", "--scene " + scene.string() + " --headless --path " + path.string() +
-                                                  " --size 200x150 --near-distance 40 --mode " + mode + " --out " +
+                                                  " --size 200x150 --near-distance 40 --polygon-budget 0 --mode " + mode + " --out " +
                                                   (dir.path() / mode).string() + " --json");
     ASSERT_EQ(r.status, 0) << mode << ": " << r.err;
     runs[mode] = parseJson(r.out);

@@ -84,8 +84,11 @@ struct Renderers {
   }
 };
 
+// The thesis's split at d, whatever the scene's size (these scenes are small
+// enough for the polygon budget, which would draw them whole).
 PipelineOptions optionsWithD(float d) {
   PipelineOptions o;
+  o.polygonBudget = 0;
   o.nearDistance = d;
   o.horizonCellSize = 4.0f;
   return o;
@@ -187,6 +190,23 @@ TEST(Pipeline, ASceneEntirelyWithinDSwitchesTheFarFieldOff) {
   EXPECT_GT(report.pixels.background, 0u) << "the sky is background colour";
   EXPECT_EQ(interior, 0u) << "holes or stale pixels";
   EXPECT_LT(diff.differingFraction, 0.005);
+}
+
+TEST(Pipeline, ASceneWithinThePolygonBudgetIsDrawnWholeWithoutAFarField) {
+  const RenderGeometry g = streetScene(1500.0f);
+  PipelineOptions o = optionsWithD(60.0f);
+  o.polygonBudget = g.size();
+  Renderers r(g, o);
+  const auto [report, diff, interior] = r.frame(cameraAt({0.0f, 1.7f, -5.0f}, 0.0f));
+  EXPECT_FALSE(report.farFieldRan);
+  EXPECT_NE(report.farFieldWhy.find("polygon budget"), std::string::npos) << report.farFieldWhy;
+  EXPECT_EQ(report.pixels.rayHit + report.pixels.rayMiss, 0u);
+  EXPECT_EQ(interior, 0u);
+  EXPECT_LT(diff.differingFraction, 0.005);
+  // One triangle more than the budget allows, and the far field is back.
+  o.polygonBudget = g.size() - 1;
+  Renderers split(g, o);
+  EXPECT_TRUE(split.frame(cameraAt({0.0f, 1.7f, -5.0f}, 0.0f)).report.farFieldRan);
 }
 
 TEST(Pipeline, FarFromTheOriginTheImageStillMatches) {

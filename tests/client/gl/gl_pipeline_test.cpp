@@ -36,6 +36,7 @@ TEST(GlPipeline, AnOpenGLFrameMatchesTheHeadlessFrameOfTheSamePose) {
   po.speed = 3.0;
   const auto cams = camerasFromPath(generatePath(scene, fs, po), scene.origin, kW, kH, 60.0f);
   PipelineOptions o;
+  o.polygonBudget = 0;  // split at d although city1 is small enough to draw whole
   o.nearDistance = 60.0f;
   for (RenderMode mode : {RenderMode::Pipeline, RenderMode::GeometryAll}) {
     o.mode = mode;
