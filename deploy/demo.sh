@@ -70,6 +70,13 @@ for _ in $(seq 1 240); do [ -s "$work/port" ] && break; kill -0 $server 2>/dev/n
 if [ ! -s "$work/port" ]; then echo "demo: the server did not start:"; cat "$work/server.log"; exit 1; fi
 "$bin/vistream-loadtest" --port "$(cat "$work/port")" --clients 20 --path "$work/walk.csv" --duration 15 \
   --scene city1 --log-level warn
+
+echo
+echo "== 8. a rendering client on the same server: near field as polygons, far field by horizon tracing,"
+echo "==    image cache and ray casting (Wimmer 2001, chapter 4); PNG frames in $work/frames =="
+"$bin/vistream-client" --host 127.0.0.1 --port "$(cat "$work/port")" --headless --path "$work/walk.csv" \
+  --frames 60 --size 640x480 --near-distance 60 --stream-radius 400 --polygon-budget 0 --out "$work/frames" \
+  --log-level warn
 kill -INT $server
 wait $server || true
 trap - EXIT

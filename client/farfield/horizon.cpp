@@ -117,7 +117,7 @@ float HorizonMap::traceWedge(const glm::vec3& eye, float azimuth, float halfAngl
     // Whatever is left cannot climb above best: stop.
     const float reachNow = reachMax * 1.4143f;
     const float rise = maxHeight_ - eyeY;
-    const float lowerDist = std::max(tEnter - reachNow, rise < nearDistance ? std::sqrt(nearDistance * nearDistance - rise * rise) : 0.0f);
+    const float lowerDist = std::max(nearDistance, tEnter - reachNow);
     const float bound = rise >= 0.0f ? (lowerDist > 0.0f ? rise / lowerDist : std::numeric_limits<float>::infinity())
                                      : rise / (t1 + reachNow);
     if (bound <= best) break;
@@ -136,12 +136,7 @@ float HorizonMap::traceWedge(const glm::vec3& eye, float azimuth, float halfAngl
         // steeply; below it, the farthest point lies closest to the horizon.
         float slope;
         if (h > eyeY) {
-          // Uncovered pixels see nothing nearer than d along the ray, so a
-          // point rising (h - eyeY) lies at least sqrt(d^2 - rise^2) away
-          // horizontally.
-          const float up = h - eyeY;
-          const float minXZ = up < nearDistance ? std::sqrt(nearDistance * nearDistance - up * up) : 0.0f;
-          const float dist = std::max(minXZ, glm::length(glm::clamp(e, dlo, dhi) - e));
+          const float dist = std::max(nearDistance, glm::length(glm::clamp(e, dlo, dhi) - e));
           slope = dist > 0.0f ? (h - eyeY) / dist : std::numeric_limits<float>::infinity();
         } else {
           const glm::vec2 far = glm::max(glm::abs(dlo - e), glm::abs(dhi - e));

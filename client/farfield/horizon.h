@@ -12,9 +12,9 @@
 //  - a cell's height above the eye counts at the shortest horizontal
 //    distance from the eye to the (dilated) cell, and a height below the eye
 //    at the longest (farther ground lies closer to the horizon);
-//  - an uncovered pixel sees nothing within d of the eye along its ray (all
-//    of that is drawn as polygons), so a point rising r above the eye counts
-//    no nearer than sqrt(d^2 - r^2) horizontally.
+//  - the caller asks only about pixels no near-field polygon reaches at all,
+//    which can see only far-field geometry, and that lies farther than d
+//    horizontally (FieldGrid): no height counts nearer than d.
 // Subsampling while moving (the thesis's graceful degradation) traces every
 // k-th column with a wedge k columns wide, which fills the columns between
 // with the maximum of their neighbourhood and stays conservative.

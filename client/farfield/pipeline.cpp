@@ -136,7 +136,8 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector
     rep.ms.nearDraw = clock.ms();
     clock = Stopwatch();
     covered_.resize(pixels);
-    for (size_t p = 0; p < pixels; ++p) covered_[p] = ids_.ids[p] != kNoTriangle;
+    for (size_t p = 0; p < pixels; ++p)
+      covered_[p] = ids_.ids[p] == kNoTriangle ? kUncovered : ids_.ids[p] == kBeyondDistance ? kBeyond : kCovered;
     rep.ms.opacity = clock.ms();
   }
 
@@ -187,7 +188,7 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
       const size_t p = size_t(y) * size_t(W) + size_t(x);
-      if (covered_[p]) {
+      if (covered_[p] == kCovered) {
         ++rep.pixels.polygon;
         if (!glNear) out.set(x, y, geometry_.colours[ids_.ids[p]]);
         continue;
@@ -198,7 +199,9 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector
         continue;
       }
       const glm::vec3 dir = pixelRays.at(float(x) + 0.5f, float(y) + 0.5f);
-      if (rep.horizonRan && HorizonMap::raySlope(dir) > slopes[size_t(x)]) {
+      // Only pixels no polygon reaches can be sky: the horizon bounds the far
+      // field, and a pixel with a polygon beyond d sees at least that.
+      if (rep.horizonRan && covered_[p] == kUncovered && HorizonMap::raySlope(dir) > slopes[size_t(x)]) {
         ++rep.pixels.horizon;
         out.set(x, y, sky);
         continue;
@@ -208,7 +211,7 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector
     }
   if (glNear)
     for (size_t p = 0; p < pixels; ++p)
-      if (covered_[p]) out.set(int(p % size_t(W)), int(p / size_t(W)), sky);
+      if (covered_[p] == kCovered) out.set(int(p % size_t(W)), int(p / size_t(W)), sky);
 
   // 5. The image cache decides which candidates to retrace.
   clock = Stopwatch();

@@ -124,9 +124,10 @@ void SoftwareRasterizer::setUp(const Camera& camera, const FlatTriangles& triang
         const int64_t ly = std::min({s.y[0], s.y[1], s.y[2]}), hy = std::max({s.y[0], s.y[1], s.y[2]});
         auto firstPixel = [](int64_t lo) { return int(std::floor(double(lo - kSub / 2) / double(kSub))); };
         s.minX = std::max(0, firstPixel(lx));
-        s.maxX = std::min(camera.width - 1, int(std::floor(double(hx - kSub / 2) / double(kSub))));
+        // Half a pixel of margin on the far sides, for coverage with an outset.
+        s.maxX = std::min(camera.width - 1, int(std::floor(double(hx) / double(kSub))));
         s.minY = std::max(0, firstPixel(ly));
-        s.maxY = std::min(camera.height - 1, int(std::floor(double(hy - kSub / 2) / double(kSub))));
+        s.maxY = std::min(camera.height - 1, int(std::floor(double(hy) / double(kSub))));
         if (s.minX > s.maxX || s.minY > s.maxY) continue;
         part.push_back(s);
       }
@@ -205,26 +206,34 @@ void SoftwareRasterizer::fill(const Camera& camera, float insetPx, IdBuffer& out
   out.reset(camera.width, camera.height);
   const size_t bands = size_t((camera.height + kBandRows - 1) / kBandRows);
   std::vector<std::vector<uint32_t>> bins(bands);
+  // An outset reaches past the triangle's bounds: at most 8 outsets (the
+  // mitre of a 15 degree corner; sharper corners are cut there).
+  const int margin = insetPx < 0.0f ? int(std::ceil(-8.0f * insetPx)) + 1 : 0;
   for (uint32_t i = 0; i < screen_.size(); ++i)
-    for (int b = screen_[i].minY / kBandRows; b <= screen_[i].maxY / kBandRows; ++b) bins[size_t(b)].push_back(i);
+    for (int b = std::max(0, screen_[i].minY - margin) / kBandRows;
+         b <= std::min(camera.height - 1, screen_[i].maxY + margin) / kBandRows; ++b)
+      bins[size_t(b)].push_back(i);
   const int W = camera.width;
   forBands(camera.height, bins, [&](uint32_t i, int y0, int y1) {
     const ScreenTriangle& s = screen_[i];
-    const int ya = std::max(y0, s.minY), yb = std::min(y1, s.maxY);
     const double area = double((s.x[1] - s.x[0]) * (s.y[2] - s.y[0]) - (s.x[2] - s.x[0]) * (s.y[1] - s.y[0]));
     std::array<int64_t, 3> extra{};
-    if (insetPx > 0.0f)
+    if (insetPx != 0.0f)
       for (int k = 0; k < 3; ++k) {
         const int j = (k + 1) % 3;
         const double len = std::hypot(double(s.x[j] - s.x[k]), double(s.y[j] - s.y[k]));
-        extra[size_t(k)] = int64_t(std::ceil(double(insetPx) * double(kSub) * len));
+        // Rounded away from the triangle's own edge: an inset never grows, an outset never shrinks.
+        const double e = double(insetPx) * double(kSub) * len;
+        extra[size_t(k)] = int64_t(insetPx > 0.0f ? std::ceil(e) : std::floor(e));
       }
     const Edges g = edgesOf(s.x, s.y, extra);
+    const int minX = std::max(0, s.minX - margin), maxX = std::min(camera.width - 1, s.maxX + margin);
+    const int ya2 = std::max(y0, s.minY - margin), yb2 = std::min(y1, s.maxY + margin);
     // 1/w is linear in the edge functions: (E1 q0 + E2 q1 + E0 q2) / area
     // (E0 is the edge 0->1, opposite vertex 2, and so on).
     const double dqdx =
         -(double(g.dy[1]) * s.invW[0] + double(g.dy[2]) * s.invW[1] + double(g.dy[0]) * s.invW[2]) * kSub / area;
-    scanTriangle(s.x, s.y, s.minX, s.maxX, ya, yb, g, [&](int y, int xa, int xb, const int64_t* e) {
+    scanTriangle(s.x, s.y, minX, maxX, ya2, yb2, g, [&](int y, int xa, int xb, const int64_t* e) {
       double q = (double(e[1]) * s.invW[0] + double(e[2]) * s.invW[1] + double(e[0]) * s.invW[2]) / area;
       const size_t row = size_t(y) * size_t(W);
       float* depth = out.inverseDepth.data() + row;
@@ -252,7 +261,7 @@ void SoftwareRasterizer::dropBeyond(const Camera& camera, float maxDistance, IdB
       // rayDirection has a unit component along the view axis, so its
       // length times the view depth is the distance along the ray.
       const float dist = glm::length(rays.at(float(x) + 0.5f, float(y) + 0.5f)) / out.inverseDepth[p];
-      if (dist > maxDistance) out.ids[p] = kNoTriangle;
+      if (dist > maxDistance) out.ids[p] = kBeyondDistance;
     }
   });
 }
@@ -272,7 +281,15 @@ RasterStats SoftwareRasterizer::coverage(const Camera& camera, const FlatTriangl
   fill(camera, insetPx, scratch_);
   dropBeyond(camera, maxDistance * (1.0f - 1e-4f), scratch_);
   covered.resize(scratch_.ids.size());
-  for (size_t p = 0; p < covered.size(); ++p) covered[p] = scratch_.ids[p] != kNoTriangle;
+  for (size_t p = 0; p < covered.size(); ++p) covered[p] = scratch_.ids[p] == kNoTriangle ? kUncovered
+                                                          : scratch_.ids[p] == kBeyondDistance ? kBeyond
+                                                                                               : kCovered;
+  // Pixels some grown triangle reaches are not certainly empty.
+  if (insetPx > 0.0f) {
+    fill(camera, -insetPx, scratch_);
+    for (size_t p = 0; p < covered.size(); ++p)
+      if (covered[p] == kUncovered && scratch_.ids[p] != kNoTriangle) covered[p] = kBeyond;
+  }
   return {which.size(), screen_.size()};
 }
 

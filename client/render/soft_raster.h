@@ -35,10 +35,19 @@
 namespace vistream {
 
 inline constexpr uint32_t kNoTriangle = 0xffffffffu;
+// A pixel whose nearest fragment lies beyond the maximum distance.
+inline constexpr uint32_t kBeyondDistance = 0xfffffffeu;
+
+// What the opacity buffer says of a pixel.
+enum Coverage : uint8_t {
+  kUncovered = 0,  // no polygon at all (not even beyond the maximum distance)
+  kCovered = 1,    // a polygon within the maximum distance
+  kBeyond = 2,     // polygons, but the nearest lies beyond the maximum distance (or it is undecided)
+};
 
 struct IdBuffer {
   int width = 0, height = 0;
-  std::vector<uint32_t> ids;  // per pixel, row 0 at the top: triangle index or kNoTriangle
+  std::vector<uint32_t> ids;  // per pixel, row 0 at the top: triangle index, kNoTriangle or kBeyondDistance
   std::vector<float> inverseDepth;  // per pixel, 1 / view depth (1/metres along the view axis); 0 where nothing was drawn
 
   void reset(int w, int h);
@@ -54,13 +63,17 @@ class SoftwareRasterizer {
  public:
   // Draws `which` (indices into `triangles`) into `out` with a depth test,
   // after clearing it to the camera's size. Pixels whose nearest fragment lies
-  // farther than maxDistance from the eye (along the pixel's ray) stay empty.
+  // farther than maxDistance from the eye (along the pixel's ray) get
+  // kBeyondDistance.
   RasterStats draw(const Camera& camera, const FlatTriangles& triangles, std::span<const uint32_t> which,
                    IdBuffer& out, float maxDistance = std::numeric_limits<float>::infinity());
-  // Marks in `covered` (one byte a pixel, 1 = covered) every pixel whose
-  // centre lies at least insetPx inside one of the triangles, with its
-  // nearest such fragment at most maxDistance * (1 - 1e-4) from the eye: a
-  // subset of what OpenGL draws with the same maximum distance.
+  // The opacity buffer for an OpenGL near field, one Coverage a pixel:
+  // kCovered where the pixel centre lies at least insetPx inside a triangle
+  // whose fragment there is at most maxDistance * (1 - 1e-4) from the eye (a
+  // subset of what OpenGL draws with the same maximum distance); kUncovered
+  // where no triangle grown by insetPx reaches the centre (a subset of what
+  // OpenGL leaves empty; the growth is mitred, cut at 8 insetPx at corners
+  // sharper than 15 degrees); kBeyond for the rest.
   RasterStats coverage(const Camera& camera, const FlatTriangles& triangles, std::span<const uint32_t> which,
                        float insetPx, std::vector<uint8_t>& covered,
                        float maxDistance = std::numeric_limits<float>::infinity());

@@ -223,7 +223,7 @@ TEST_F(GlFrame, DrawsEveryPixelTheInsetCoverageCallsCovered) {
   soft.coverage(camera_, s.g.triangles, s.near, 0.1f, covered);
   int coveredCount = 0;
   const auto [count, first] = mismatches(frame, [&](int x, int y) -> std::optional<glm::u8vec3> {
-    if (!covered[size_t(y) * kWidth + size_t(x)]) return std::nullopt;
+    if (covered[size_t(y) * kWidth + size_t(x)] != kCovered) return std::nullopt;
     ++coveredCount;
     if (frame.at(x, y) != s.background) return std::nullopt;
     return glm::u8vec3(0, 0, 0);  // any triangle colour; reported as "want (0, 0, 0)"

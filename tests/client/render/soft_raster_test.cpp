@@ -162,6 +162,17 @@ Camera randomCamera(uint32_t seed) {
 
 // Exact window-space geometry: the signed distance (px) from p to the nearest
 // edge line of a convex polygon, positive inside.
+// True if p lies within `margin` of the polygon's bounding box.
+template <size_t N>
+bool withinBounds(const std::array<glm::dvec2, N>& poly, glm::dvec2 p, double margin) {
+  glm::dvec2 lo(1e300), hi(-1e300);
+  for (const glm::dvec2& v : poly) {
+    lo = glm::min(lo, v);
+    hi = glm::max(hi, v);
+  }
+  return p.x >= lo.x - margin && p.x <= hi.x + margin && p.y >= lo.y - margin && p.y <= hi.y + margin;
+}
+
 template <size_t N>
 double insideDistance(const std::array<glm::dvec2, N>& poly, glm::dvec2 p) {
   double area = 0.0;
@@ -319,14 +330,22 @@ TEST(SoftwareRasterizer, CoverageWithAnInsetCountsOnlyCentresThatFarInsideATrian
       SCOPED_TRACE("triangle " + std::to_string(i) + " inset " + std::to_string(inset));
       std::vector<uint8_t> covered;
       raster.coverage(cam, f, std::vector<uint32_t>{0}, inset, covered);
-      size_t wrong = 0;
+      size_t wrong = 0, wrongEmpty = 0;
       for (int y = 0; y < cam.height; ++y)
         for (int x = 0; x < cam.width; ++x) {
           const double in = insideDistance(w, {x + 0.5, y + 0.5});
           if (std::abs(in - inset) < 0.01) continue;  // within the snapping of the corners
-          wrong += bool(covered[size_t(y) * size_t(cam.width) + size_t(x)]) != (in > inset);
+          wrong += (covered[size_t(y) * size_t(cam.width) + size_t(x)] == kCovered) != (in > inset);
+          // Called certainly empty only outside the triangle grown by the
+          // inset (the growth is mitred at the corners, so some pixels farther
+          // out may be left undecided, which is safe).
+          if (inset > 0.0f && std::abs(in + inset) >= 0.01 &&
+              covered[size_t(y) * size_t(cam.width) + size_t(x)] == kUncovered && in >= -inset &&
+              withinBounds(w, {x + 0.5, y + 0.5}, 8.0 * inset))
+            ++wrongEmpty;
         }
       EXPECT_EQ(wrong, 0u);
+      EXPECT_EQ(wrongEmpty, 0u);
     }
   }
 }
@@ -346,7 +365,7 @@ TEST(SoftwareRasterizer, CoverageWithAnInsetIsASubsetOfWhatDrawFills) {
     size_t inset = 0, notDrawn = 0, noRayHit = 0;
     for (int y = 0; y < cam.height; ++y)
       for (int x = 0; x < cam.width; ++x) {
-        if (!covered[size_t(y) * size_t(cam.width) + size_t(x)]) continue;
+        if (covered[size_t(y) * size_t(cam.width) + size_t(x)] != kCovered) continue;
         ++inset;
         notDrawn += ids.at(x, y) == kNoTriangle;
         noRayHit += !oracle.first(x + 0.5, y + 0.5).valid();
