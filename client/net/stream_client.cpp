@@ -174,13 +174,31 @@ struct StreamClient::Impl : std::enable_shared_from_this<StreamClient::Impl> {
 StreamClient::StreamClient(const StreamClientOptions& o) : impl_(std::make_shared<Impl>()) {
   Impl& s = *impl_;
   const std::string where = fmt::format("{}:{}", o.host, o.port);
+  tcp::resolver::results_type endpoints;
   try {
     tcp::resolver resolver(s.io);
-    const auto endpoints = resolver.resolve(o.host, std::to_string(o.port));
-    asio::connect(s.socket, endpoints);
+    endpoints = resolver.resolve(o.host, std::to_string(o.port));
   } catch (const boost::system::system_error& e) {
-    throwInputError("cannot connect to {}: {}", where, e.code().message());
+    throwInputError("cannot resolve {}: {}", where, e.code().message());
   }
+  // Connect with a deadline: an unreachable host must not hang the client.
+  boost::system::error_code connectError = asio::error::timed_out;
+  bool connected = false;
+  asio::async_connect(s.socket, endpoints, [&](const boost::system::error_code& ec, const tcp::endpoint&) {
+    connectError = ec;
+    connected = !ec;
+  });
+  s.io.run_for(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+      std::chrono::duration<double>(o.timeoutS)));
+  if (!connected) {
+    boost::system::error_code ignored;
+    s.socket.close(ignored);
+    throwInputError("cannot connect to {}: {}", where,
+                    connectError == asio::error::timed_out || connectError == asio::error::operation_aborted
+                        ? fmt::format("no answer within {:.0f} s", o.timeoutS)
+                        : connectError.message());
+  }
+  s.io.restart();
   boost::system::error_code ignored;
   s.socket.set_option(tcp::no_delay(true), ignored);
   HelloT hello;
@@ -192,16 +210,17 @@ StreamClient::StreamClient(const StreamClientOptions& o) : impl_(std::make_share
   hello.capabilities->wants_avatars = false;
   s.send(encodeMessage(std::move(hello)));
   s.read();
-  s.thread = std::thread([self = impl_] { self->io.run(); });
+  // The io thread never owns the Impl: the StreamClient joins it first.
+  s.thread = std::thread([&io = s.io] { io.run(); });
   std::unique_lock lock(s.mutex);
-  if (!s.changed.wait_for(lock, std::chrono::duration<double>(o.timeoutS), [&] { return s.welcomed || s.ended; })) {
+  const bool answered =
+      s.changed.wait_for(lock, std::chrono::duration<double>(o.timeoutS), [&] { return s.welcomed || s.ended; });
+  if (!answered || !s.welcomed) {
+    const std::string why = answered ? s.endReason : fmt::format("no Welcome within {:.0f} s", o.timeoutS);
     lock.unlock();
-    s.finish("no Welcome");
-    throwInputError("{}: no Welcome within {:.0f} s", where, o.timeoutS);
-  }
-  if (!s.welcomed) {
-    const std::string why = s.endReason;
-    lock.unlock();
+    s.finish(why);
+    s.io.stop();
+    s.thread.join();
     throwInputError("{}: {}", where, why);
   }
 }

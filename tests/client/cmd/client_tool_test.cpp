@@ -154,4 +154,28 @@ TEST(ClientTool, BadArgumentsGetAClearErrorAndANonZeroExit) {
   EXPECT_EQ(runTool("vistream-client-bench", "--help").status, 0);
 }
 
+TEST(ClientTool, AServerThatSendsGarbageEndsTheClientWithAClearError) {
+  vistream::testing::TempDir dir;
+  const fs::path path = dir.write("walk.csv", kWalk);
+  const std::string d = dir.path().string();
+  // A "server" that answers every connection with an HTTP error page.
+  const fs::path fake = dir.write("fake.py",
+                                  "import socket\n"
+                                  "s = socket.socket(); s.bind(('127.0.0.1', 0)); s.listen(1)\n"
+                                  "open('" + d + "/port', 'w').write(str(s.getsockname()[1]))\n"
+                                  "c, _ = s.accept(); c.sendall(b'HTTP/1.1 400 Bad Request\\r\\n\\r\\n'); c.recv(1024); c.close()\n");
+  const std::string script = "python3 " + fake.string() + " & for i in $(seq 1 100); do [ -s " + d +
+                             "/port ] && break; sleep 0.1; done; " + VISTREAM_BIN_DIR +
+                             "/vistream-client --host 127.0.0.1 --port $(cat " + d + "/port) --headless --path " +
+                             path.string() + " > " + d + "/out 2> " + d + "/err; echo $? > " + d + "/status; wait";
+  ASSERT_EQ(std::system(("bash -c '" + script + "'").c_str()), 0);
+  std::ifstream st(dir.path() / "status");
+  int status = 0;
+  st >> status;
+  std::ifstream err(dir.path() / "err");
+  const std::string text((std::istreambuf_iterator<char>(err)), {});
+  EXPECT_EQ(status, 1);
+  EXPECT_NE(text.find("bad frame from the server"), std::string::npos) << text;
+}
+
 }  // namespace
