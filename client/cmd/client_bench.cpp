@@ -202,7 +202,7 @@ void writePlots(const std::string& dir, const std::string& scene, const std::vec
     }
   }
   std::ofstream g(base.string() + ".gp");
-  g << "set terminal pngcairo size 1200,900\nset output '" << base.string() << ".png'\n"
+  g << "set terminal pngcairo size 1200,900 noenhanced\nset output '" << base.string() << ".png'\n"
     << "set multiplot layout 2,2 title '" << scene << ": Wimmer 2001, Figures 4.8 and 4.9, accuracy against time'\n"
     << "set xlabel 'frame'\nset ylabel 'frame time (ms)'\nset logscale y\nset key top left\n"
     << "plot '" << base.string() << "_frames.dat' using 1:2 with lines title 'geometry-all', '' using 1:3 with lines "
@@ -212,7 +212,7 @@ void writePlots(const std::string& dir, const std::string& scene, const std::vec
     g << (i ? ", " : "") << "'" << base.string() << "_distance.dat' using 1:" << i + 2 << " with lines title 'd = "
       << dRuns[i]->config.value << " m'";
   g << "\nunset logscale y\nset xlabel 'frame time (ms)'\nset ylabel 'pixels differing from raycast-all (%)'\n"
-    << "set multiplot next\nplot ";
+    << "plot ";
   for (size_t i = 0; i < knobs.size(); ++i)
     g << (i ? ", " : "") << "'" << base.string() << "_accuracy.dat' index " << i
       << " using 1:2 with linespoints title '" << knobs[i] << "'";
