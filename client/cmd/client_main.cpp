@@ -3,6 +3,7 @@
 // panoramic image cache, ray casting), from a local scene (--scene) or from
 // what a vistream-server streams (--host/--port); in a window (OpenGL) or
 // headless (software near field, PNG frames, statistics).
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -108,6 +109,7 @@ struct LiveGeometry {
   bool sceneHasFarField = true;  // the scene as a whole reaches beyond d
   bool compare = false;
   uint64_t version = ~uint64_t(0);
+  size_t faces = 0;  // distinct face IDs held
   Stopwatch sinceRebuild;
 
   void set(RenderGeometry g) {
@@ -115,6 +117,9 @@ struct LiveGeometry {
     renderer.reset();
     reference.reset();
     geometry = std::make_unique<RenderGeometry>(std::move(g));
+    std::vector<uint32_t> ids = geometry->triangles.faceIds;
+    std::sort(ids.begin(), ids.end());
+    faces = size_t(std::unique(ids.begin(), ids.end()) - ids.begin());
     options.farFieldAllowed = sceneHasFarField && geometry->size() > 0 &&
                               glm::length(geometry->bounds.extent()) > options.nearDistance;
     renderer = std::make_unique<FrameRenderer>(*geometry, options);
@@ -200,9 +205,11 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
   }
   Camera cam = start;
   Stopwatch clock;
-  double last = 0.0;
+  double last = 0.0, frameMs = 0.0;
   while (!window.shouldClose()) {
     const double now = clock.ms() / 1000.0;
+    // Frame time: wall time between frames (pipeline, OpenGL and swap), smoothed.
+    frameMs = frameMs == 0.0 ? 1000.0 * (now - last) : 0.9 * frameMs + 100.0 * (now - last);
     window.navigate(cam, now - last, 8.0f);
     last = now;
     cam.width = window.framebufferWidth();
@@ -219,11 +226,11 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
     const FrameReport rep = live.renderer->renderFarField(cam, farImage, near);
     const PixelCounts& p = rep.pixels;
     std::vector<HudLine> hud = {
-        {fmt::format("frame {:.1f} ms  near {} triangles  d = {:.0f} m", rep.ms.total, rep.nearTriangles,
-                     o.nearDistance)},
+        {fmt::format("frame {:.1f} ms (pipeline {:.1f} ms)  near {} triangles  d = {:.0f} m", frameMs, rep.ms.total,
+                     rep.nearTriangles, o.nearDistance)},
         {fmt::format("pixels: polygon {}  horizon {}  cache {}  ray hit {}  ray miss {}", p.polygon, p.horizon,
                      p.cache, p.rayHit, p.rayMiss)},
-        {fmt::format("triangles held {}  received {:.1f} MB  far field {}  horizon {}  cache {}", live.geometry->size(),
+        {fmt::format("faces held {}  received {:.1f} MB  far field {}  horizon {}  cache {}", live.faces,
                      net ? double(net->bytesReceived()) / 1e6 : 0.0,
                      rep.farFieldRan ? "on" : "off", rep.horizonRan ? "on" : "off", rep.cacheRan ? "on" : "off")},
     };
