@@ -190,6 +190,15 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
   std::vector<FrameRecord> records;
   if (!cameras.empty()) {
     for (size_t i = 0; i < cameras.size() && !window.shouldClose(); ++i) {
+      if (net) {
+        net->sendPose(cameras[i].eye, cameras[i].yawDeg, cameras[i].pitchDeg);
+        if (!net->waitForCell(a.waitS) && !net->error().empty()) throwInputError("connection lost: {}", net->error());
+        live.refresh(*net, /*force=*/true);
+        if (live.geometry.get() != uploaded) {
+          gl.upload(*live.geometry);
+          uploaded = live.geometry.get();
+        }
+      }
       FrameRecord r;
       r.frame = i;
       r.report = live.renderer->renderFarField(cameras[i], farImage, near);
@@ -216,6 +225,7 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
     cam.height = window.framebufferHeight();
     if (cam.width < 16 || cam.height < 16) continue;
     if (net) {
+      if (!net->error().empty()) throwInputError("connection lost: {}", net->error());
       net->sendPose(cam.eye, cam.yawDeg, cam.pitchDeg);
       live.refresh(*net, /*force=*/false);
       if (live.geometry.get() != uploaded) {

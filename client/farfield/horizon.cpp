@@ -10,6 +10,7 @@ namespace vistream {
 namespace {
 
 constexpr float kLowest = -std::numeric_limits<float>::infinity();
+constexpr int kMaxCells = 2048;
 
 float azimuthOf(const glm::vec3& d) { return std::atan2(-d.x, -d.z); }
 
@@ -30,9 +31,10 @@ float HorizonMap::raySlope(const glm::vec3& d) {
 
 HorizonMap::HorizonMap(const RenderGeometry& g, float cellSize) {
   if (g.size() == 0 || g.bounds.empty()) return;
-  cell_ = std::max(cellSize, 0.01f);
   lo_ = {g.bounds.lo.x, g.bounds.lo.z};
   const glm::vec2 ext = glm::max(glm::vec2(g.bounds.hi.x, g.bounds.hi.z) - lo_, glm::vec2(1e-3f));
+  // At most kMaxCells a side: the levels cost cells x log(cells) of memory.
+  cell_ = std::max({cellSize, 0.01f, std::max(ext.x, ext.y) / float(kMaxCells)});
   dims_ = glm::max(glm::ivec2(glm::ceil(ext / cell_)), glm::ivec2(1));
   std::vector<float> base(size_t(dims_.x) * size_t(dims_.y), kLowest);
   maxHeight_ = kLowest;
@@ -54,7 +56,8 @@ HorizonMap::HorizonMap(const RenderGeometry& g, float cellSize) {
   levels_.push_back(std::move(base));
   radius_.push_back(0);
   const int maxDim = std::max(dims_.x, dims_.y);
-  while (radius_.back() < maxDim) {
+  // The widest level covers the whole grid from any cell within reach of it.
+  while (radius_.back() < 2 * maxDim) {
     const int s = radius_.back() + 1;
     const std::vector<float>& prev = levels_.back();
     std::vector<float> tmp(prev.size()), next(prev.size());
@@ -86,18 +89,18 @@ float HorizonMap::traceWedge(const glm::vec3& eye, float azimuth, float halfAngl
   const float reachMax = float(radius_.back() + 1) * cell_;
   // The part of the ray within the grid's bounds grown by the widest reach.
   const glm::vec2 blo = lo_ - reachMax, bhi = lo_ + glm::vec2(dims_) * cell_ + reachMax;
-  float t0 = 0.0f, t1 = std::numeric_limits<float>::infinity();
-  for (int a = 0; a < 2; ++a) {
-    if (std::abs(dir[a]) < 1e-12f) {
-      if (e[a] < blo[a] || e[a] > bhi[a]) return kLowest;
-      continue;
-    }
-    float ta = (blo[a] - e[a]) / dir[a], tb = (bhi[a] - e[a]) / dir[a];
-    if (ta > tb) std::swap(ta, tb);
-    t0 = std::max(t0, ta);
-    t1 = std::min(t1, tb);
+  // Every point of the grown grid projects onto the ray within [t0, t1]: a
+  // wedge reaches points beside the ray, so the ray itself is not clipped to
+  // the grid but walked over the whole projected extent.
+  float t0 = std::numeric_limits<float>::infinity(), t1 = 0.0f;
+  for (int k = 0; k < 4; ++k) {
+    const glm::vec2 corner((k & 1) ? bhi.x : blo.x, (k & 2) ? bhi.y : blo.y);
+    const float t = glm::dot(corner - e, dir);
+    t0 = std::min(t0, t);
+    t1 = std::max(t1, t);
   }
-  if (t0 > t1) return kLowest;
+  t0 = std::max(t0, 0.0f);
+  if (t1 <= t0) return kLowest;
   // Amanatides-Woo over (virtual, unbounded) cells.
   const glm::vec2 start = e + dir * t0;
   glm::ivec2 c(glm::floor((start - lo_) / cell_));

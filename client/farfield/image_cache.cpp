@@ -9,12 +9,17 @@
 namespace vistream {
 namespace {
 constexpr float kTwoPi = 6.28318530718f;
+constexpr size_t kMaxTexels = size_t(1) << 26;  // 64 Mi texels, 512 MiB
 }
 
 PanoramicCache::PanoramicCache(float pixelAngle, const PanoramicCacheOptions& options) : options_(options) {
-  const float texelAngle = pixelAngle / std::max(options.texelsPerPixel, 0.05f);
+  float texelAngle = pixelAngle / std::max(options.texelsPerPixel, 0.05f);
+  maxSlope_ = std::clamp(options.maxSlope, 0.01f, 100.0f);
+  // At most kMaxTexels: a tiny field of view on a huge image would otherwise
+  // ask for a panorama of many gigabytes.
+  const double wanted = double(kTwoPi) / texelAngle * 2.0 * maxSlope_ / texelAngle;
+  if (wanted > double(kMaxTexels)) texelAngle *= float(std::sqrt(wanted / double(kMaxTexels)));
   columns_ = std::max(16, int(std::ceil(kTwoPi / texelAngle)));
-  maxSlope_ = std::max(options.maxSlope, 0.01f);
   rows_ = std::max(4, int(std::ceil(2.0f * maxSlope_ / texelAngle)));
   clear();
 }

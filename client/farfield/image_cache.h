@@ -39,6 +39,7 @@ namespace vistream {
 
 struct PanoramicCacheOptions {
   float texelsPerPixel = 1.0f;  // angular resolution relative to a screen pixel at the image centre
+                                // (coarser if the panorama would exceed 64 Mi texels)
   float maxSlope = 1.7320508f;  // rays steeper than tan(60 deg) up or down are not cached
   float recordSpacing = 0.01f;  // metres the observer moves before a new confidence record opens
   bool retraceEdges = true;     // texels whose 4 neighbours differ in colour are always retraced

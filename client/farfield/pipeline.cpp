@@ -249,7 +249,9 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector
   std::vector<uint32_t> rayOf;
   for (size_t i = 0; i < candidates.size(); ++i)
     if (trace[i]) {
-      rays.push_back(Ray{camera.eye, dirs[i], 0.0f, std::numeric_limits<float>::infinity()});
+      // dirs[i] has a unit component along the view axis, so t is the view
+      // depth: starting at zNear clips rays exactly where polygons are clipped.
+      rays.push_back(Ray{camera.eye, dirs[i], camera.zNear, std::numeric_limits<float>::infinity()});
       rayOf.push_back(uint32_t(i));
     }
   std::vector<Hit> hits;

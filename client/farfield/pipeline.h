@@ -105,7 +105,8 @@ class FrameRenderer {
   // How far from the eye polygons are drawn: d in pipeline mode, unlimited
   // in geometry-all. An OpenGL near field discards fragments beyond it.
   float polygonDistance() const;
-  // Forgets the cache and the motion history (after a geometry change).
+  // Forgets the cache and the motion history. The geometry must not change
+  // under a renderer: build a new one for new geometry.
   void reset();
 
  private:

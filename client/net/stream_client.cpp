@@ -2,6 +2,7 @@
 
 #include <utility>  // before Boost.Asio, whose awaitable.hpp uses std::exchange
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <deque>
 #include <map>
@@ -57,6 +58,7 @@ struct StreamClient::Impl : std::enable_shared_from_this<StreamClient::Impl> {
   std::set<glm::ivec3, IvecLess> ready;
   glm::ivec3 poseCell{0};
   uint64_t version = 0, bytes = 0;
+  size_t trianglesHeld = 0, maxTriangles = 0;
 
   void finish(const std::string& why) {
     {
@@ -70,6 +72,10 @@ struct StreamClient::Impl : std::enable_shared_from_this<StreamClient::Impl> {
     socket.close(ignored);
   }
   void send(std::vector<uint8_t> frame) {
+    {
+      std::lock_guard lock(mutex);
+      if (ended) return;  // nothing would carry it, and the post would never run
+    }
     asio::post(io, [self = shared_from_this(), buf = std::make_shared<std::vector<uint8_t>>(std::move(frame))] {
       self->outbox.push_back(buf);
       if (self->outbox.size() == 1) self->writeNext();
@@ -104,8 +110,20 @@ struct StreamClient::Impl : std::enable_shared_from_this<StreamClient::Impl> {
     switch (e.payload_type()) {
       case Payload::Welcome: {
         const Welcome& w = *e.payload_as_Welcome();
-        if (!w.grid() || !w.grid()->cell_size() || !w.grid()->origin() || !w.grid()->dims() || !w.local_origin()) {
+        if (!w.grid() || !isFinite(w.grid()->cell_size()) || !isFinite(w.grid()->origin()) || !w.grid()->dims() ||
+            !isFinite(w.local_origin()) || !(w.grid()->cell_size()->x() > 0.0f) ||
+            !(w.grid()->cell_size()->y() > 0.0f) || !(w.grid()->cell_size()->z() > 0.0f) ||
+            !(std::isfinite(w.near_field_radius_m()) && w.near_field_radius_m() >= 0.0f)) {
           finish("the server's Welcome has no usable grid");
+          return false;
+        }
+        bool again;
+        {
+          std::lock_guard lock(mutex);
+          again = welcomed;
+        }
+        if (again) {
+          finish("the server sent a second Welcome");
           return false;
         }
         std::lock_guard lock(mutex);
@@ -114,10 +132,11 @@ struct StreamClient::Impl : std::enable_shared_from_this<StreamClient::Impl> {
         gridOrigin = fromWire(*w.grid()->origin());
         cellSize = fromWire(*w.grid()->cell_size());
         dims = fromWire(*w.grid()->dims());
-        if (w.environment_colour()) sky = fromWire(*w.environment_colour());
+        if (isFinite(w.environment_colour())) sky = glm::clamp(fromWire(*w.environment_colour()), 0.0f, 1.0f);
         if (w.materials())
           for (const MaterialInfo* m : *w.materials())
-            materials.push_back(m && m->diffuse() ? fromWire(*m->diffuse()) : glm::vec3(0.8f));
+            materials.push_back(m && isFinite(m->diffuse()) ? glm::clamp(fromWire(*m->diffuse()), 0.0f, 1.0f)
+                                                           : glm::vec3(0.8f));
         welcomed = true;
         changed.notify_all();
         return true;
@@ -129,23 +148,42 @@ struct StreamClient::Impl : std::enable_shared_from_this<StreamClient::Impl> {
           finish("bad geometry from the server: " + error);
           return false;
         }
-        std::lock_guard lock(mutex);
-        size_t index = 0;
-        for (size_t f = 0; f < g.faces.size(); ++f) {
-          HeldFace& h = faces[g.faces[f]];
-          h.material = g.materials[f];
-          h.corners.clear();
-          for (uint16_t t = 0; t < g.triangleCounts[f]; ++t, index += 3)
-            for (int k = 0; k < 3; ++k) h.corners.push_back(g.positions[g.indices[index + size_t(k)]]);
+        for (const glm::vec3& p : g.positions)
+          if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
+            finish("the server sent geometry with non-finite positions");
+            return false;
+          }
+        bool tooMuch = false;
+        {
+          std::lock_guard lock(mutex);
+          size_t index = 0;
+          for (size_t f = 0; f < g.faces.size(); ++f) {
+            HeldFace& h = faces[g.faces[f]];
+            trianglesHeld -= h.corners.size() / 3;
+            h.material = g.materials[f];
+            h.corners.clear();
+            for (uint16_t t = 0; t < g.triangleCounts[f]; ++t, index += 3)
+              for (int k = 0; k < 3; ++k) h.corners.push_back(g.positions[g.indices[index + size_t(k)]]);
+            trianglesHeld += h.corners.size() / 3;
+          }
+          tooMuch = trianglesHeld > maxTriangles;
+          ++version;
         }
-        ++version;
+        if (tooMuch) {
+          finish(fmt::format("the server sent more than {} triangles", maxTriangles));
+          return false;
+        }
         changed.notify_all();
         return true;
       }
       case Payload::Evict: {
         std::lock_guard lock(mutex);
         if (const auto* ids = e.payload_as_Evict()->face_ids())
-          for (uint32_t f : *ids) faces.erase(f);
+          for (uint32_t f : *ids)
+            if (auto it = faces.find(f); it != faces.end()) {
+              trianglesHeld -= it->second.corners.size() / 3;
+              faces.erase(it);
+            }
         ready.clear();  // the server announces complete cells again
         ++version;
         return true;
@@ -173,6 +211,7 @@ struct StreamClient::Impl : std::enable_shared_from_this<StreamClient::Impl> {
 
 StreamClient::StreamClient(const StreamClientOptions& o) : impl_(std::make_shared<Impl>()) {
   Impl& s = *impl_;
+  s.maxTriangles = o.maxTriangles;
   const std::string where = fmt::format("{}:{}", o.host, o.port);
   tcp::resolver::results_type endpoints;
   try {
@@ -218,9 +257,9 @@ StreamClient::StreamClient(const StreamClientOptions& o) : impl_(std::make_share
   if (!answered || !s.welcomed) {
     const std::string why = answered ? s.endReason : fmt::format("no Welcome within {:.0f} s", o.timeoutS);
     lock.unlock();
-    s.finish(why);
-    s.io.stop();
+    s.io.stop();  // the io thread must not touch the socket while finish() closes it
     s.thread.join();
+    s.finish(why);
     throwInputError("{}: {}", where, why);
   }
 }

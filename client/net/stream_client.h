@@ -1,6 +1,9 @@
 // The rendering client's connection to a vistream-server: Hello, then poses
 // out and geometry in, on a background thread. The renderer takes snapshots
-// of the triangles held so far.
+// of the triangles held so far. Everything from the server is checked: a
+// Welcome without a finite grid, a second Welcome, geometry that does not
+// decode or has non-finite positions, or more than maxTriangles held end the
+// session with a message in error(); once ended, poses are dropped.
 //
 // Thread safety: every public method may be called from any thread; the
 // socket lives on an internal io thread.
@@ -22,6 +25,7 @@ struct StreamClientOptions {
   std::string token;
   float radius = 0.0f;  // near-field radius to ask for (0: the server's)
   double timeoutS = 10.0;  // for connecting and for the Welcome
+  size_t maxTriangles = 50'000'000;  // the session ends if the server sends more (no unbounded memory)
 };
 
 class StreamClient {

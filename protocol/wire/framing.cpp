@@ -76,6 +76,14 @@ std::optional<std::vector<uint8_t>> FrameDecoder::next() {
     error_ = fmt::format("frame of {} bytes failed FlatBuffers verification", size);
     return std::nullopt;
   }
+  // The Verifier accepts a union whose type is set but whose table is
+  // absent; every reader would then dereference null. Not a valid message.
+  const Envelope* envelope = GetEnvelope(frame.data());
+  if (envelope->payload_type() != Payload::NONE && envelope->payload() == nullptr) {
+    error_ = fmt::format("frame of {} bytes names a {} payload but carries none", size,
+                         EnumNamePayload(envelope->payload_type()));
+    return std::nullopt;
+  }
   start_ += kFrameHeaderBytes + size;
   return frame;
 }

@@ -40,6 +40,7 @@ class FrameDecoder {
 
   // The next complete, verified frame's bytes (without the length prefix),
   // or nothing if no complete frame is buffered yet or the stream is bad.
+  // A verified frame's envelope always carries the payload its type names.
   std::optional<std::vector<uint8_t>> next();
 
   bool failed() const { return !error_.empty(); }

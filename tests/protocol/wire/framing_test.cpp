@@ -71,5 +71,22 @@ TEST(FrameDecoder, RejectsAnEmptyFrame) {
   EXPECT_TRUE(decoder.failed());
 }
 
+// The FlatBuffers Verifier accepts a union whose type is set but whose table
+// is missing; readers would dereference null (found in review: one such frame
+// crashed the server before authentication).
+TEST(FrameDecoder, RejectsAFrameThatNamesAPayloadButCarriesNone) {
+  for (Payload type : {Payload::Hello, Payload::Welcome, Payload::Geometry, Payload::Error}) {
+    flatbuffers::FlatBufferBuilder b;
+    EnvelopeBuilder e(b);
+    e.add_payload_type(type);
+    b.Finish(e.Finish());
+    FrameDecoder decoder;
+    ASSERT_TRUE(decoder.feed(encodeFrame(b)));
+    EXPECT_FALSE(decoder.next().has_value()) << EnumNamePayload(type);
+    EXPECT_TRUE(decoder.failed());
+    EXPECT_NE(decoder.error().find("carries none"), std::string::npos) << decoder.error();
+  }
+}
+
 }  // namespace
 }  // namespace vistream::wire

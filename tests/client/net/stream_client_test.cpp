@@ -1,0 +1,120 @@
+// StreamClient against scripted servers: whatever a server sends, the client
+// ends the session with a message naming the problem, never crashes, and
+// never holds more than its limit.
+#include "client/net/stream_client.h"
+
+#include <gtest/gtest.h>
+
+#include <utility>  // before Boost.Asio
+#include <boost/asio.hpp>
+#include <thread>
+
+#include "common/core/error.h"
+#include "protocol/geometry/geometry_codec.h"
+#include "protocol/wire/messages.h"
+
+namespace vistream {
+namespace {
+
+namespace asio = boost::asio;
+using asio::ip::tcp;
+using namespace vistream::wire;
+
+// A server on a loopback port that, once a client connects, sends `frames`
+// and then keeps the connection open until the client closes it.
+class ScriptedServer {
+ public:
+  explicit ScriptedServer(std::vector<std::vector<uint8_t>> frames) : acceptor_(io_, {asio::ip::make_address("127.0.0.1"), 0}) {
+    port_ = acceptor_.local_endpoint().port();
+    thread_ = std::thread([this, frames = std::move(frames)] {
+      tcp::socket s(io_);
+      boost::system::error_code ec;
+      acceptor_.accept(s, ec);
+      if (ec) return;
+      for (const auto& f : frames) asio::write(s, asio::buffer(f), ec);
+      std::array<uint8_t, 4096> buf;
+      while (!ec) s.read_some(asio::buffer(buf), ec);  // until the client leaves
+    });
+  }
+  ~ScriptedServer() { thread_.join(); }
+  uint16_t port() const { return port_; }
+
+ private:
+  asio::io_context io_;
+  tcp::acceptor acceptor_;
+  uint16_t port_ = 0;
+  std::thread thread_;
+};
+
+WelcomeT goodWelcome() {
+  WelcomeT w;
+  w.protocol_version = kProtocolVersion;
+  w.local_origin = std::make_unique<Vec3d>(0.0, 0.0, 0.0);
+  w.grid = std::make_unique<CellGridT>();
+  w.grid->origin = std::make_unique<Vec3f>(0.0f, 0.0f, 0.0f);
+  w.grid->cell_size = std::make_unique<Vec3f>(4.0f, 4.0f, 4.0f);
+  w.grid->dims = std::make_unique<CellIndex>(10, 2, 10);
+  w.near_field_radius_m = 100.0f;
+  return w;
+}
+
+StreamClientOptions to(const ScriptedServer& server) {
+  StreamClientOptions o;
+  o.port = server.port();
+  o.timeoutS = 5.0;
+  return o;
+}
+
+std::string errorOfConnecting(const StreamClientOptions& o) {
+  try {
+    StreamClient c(o);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(StreamClient, RefusesAWelcomeWithAZeroCellSize) {
+  WelcomeT w = goodWelcome();
+  w.grid->cell_size = std::make_unique<Vec3f>(4.0f, 0.0f, 4.0f);
+  ScriptedServer server({encodeMessage(std::move(w))});
+  EXPECT_NE(errorOfConnecting(to(server)).find("no usable grid"), std::string::npos);
+}
+
+TEST(StreamClient, RefusesAFrameThatNamesAPayloadButCarriesNone) {
+  flatbuffers::FlatBufferBuilder b;
+  EnvelopeBuilder e(b);
+  e.add_payload_type(Payload::Welcome);
+  b.Finish(e.Finish());
+  ScriptedServer server({encodeFrame(b)});
+  EXPECT_NE(errorOfConnecting(to(server)).find("carries none"), std::string::npos);
+}
+
+TEST(StreamClient, EndsTheSessionWhenTheServerSendsMoreTrianglesThanItsLimit) {
+  std::vector<FaceTriangles> faces;
+  for (uint32_t f = 0; f < 20; ++f)
+    faces.push_back({f, 0, {{float(f), 0, 0}, {float(f) + 1, 0, 0}, {float(f), 1, 0}}});
+  ScriptedServer server({encodeMessage(goodWelcome()), encodeMessage(encodeGeometry(faces))});
+  StreamClientOptions o = to(server);
+  o.maxTriangles = 10;
+  StreamClient client(o);
+  for (int i = 0; i < 200 && client.error().empty(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  EXPECT_NE(client.error().find("more than 10 triangles"), std::string::npos) << client.error();
+  client.sendPose({0, 1.7f, 0}, 0, 0);  // dropped, not queued forever
+}
+
+TEST(StreamClient, HoldsWhatAWellBehavedServerSends) {
+  std::vector<FaceTriangles> faces;
+  for (uint32_t f = 0; f < 5; ++f)
+    faces.push_back({f, 0, {{float(f), 0, 0}, {float(f) + 1, 0, 0}, {float(f), 1, 0}}});
+  ScriptedServer server({encodeMessage(goodWelcome()), encodeMessage(encodeGeometry(faces))});
+  StreamClient client(to(server));
+  for (int i = 0; i < 200 && client.facesHeld() < 5; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  EXPECT_EQ(client.facesHeld(), 5u);
+  const RenderGeometry g = client.snapshot();
+  EXPECT_EQ(g.size(), 5u);
+  EXPECT_TRUE(client.error().empty()) << client.error();
+}
+
+}  // namespace
+}  // namespace vistream
