@@ -82,29 +82,22 @@ struct Means {
 
 Means means(const std::vector<FrameRecord>& frames) {
   Means m;
+  PixelCounts p;
   for (const FrameRecord& f : frames) {
-    const PixelCounts& p = f.report.pixels;
-    m.polygon += double(p.polygon);
-    m.horizon += double(p.horizon);
-    m.cache += double(p.cache);
-    m.rayHit += double(p.rayHit);
-    m.rayMiss += double(p.rayMiss);
-    m.background += double(p.background);
-    const StageTimes& s = f.report.ms;
-    m.ms.nearSelect += s.nearSelect;
-    m.ms.nearDraw += s.nearDraw;
-    m.ms.opacity += s.opacity;
-    m.ms.horizon += s.horizon;
-    m.ms.cache += s.cache;
-    m.ms.raycast += s.raycast;
-    m.ms.compose += s.compose;
-    m.ms.total += s.total;
+    p += f.report.pixels;
+    m.ms += f.report.ms;
     if (f.compared) {
       ++m.compared;
       m.differing += f.difference.differingFraction;
       m.colourError += f.difference.meanColourError;
     }
   }
+  m.polygon = double(p.polygon);
+  m.horizon = double(p.horizon);
+  m.cache = double(p.cache);
+  m.rayHit = double(p.rayHit);
+  m.rayMiss = double(p.rayMiss);
+  m.background = double(p.background);
   const double n = frames.empty() ? 1.0 : double(frames.size());
   for (double* v : {&m.polygon, &m.horizon, &m.cache, &m.rayHit, &m.rayMiss, &m.background, &m.ms.nearSelect,
                     &m.ms.nearDraw, &m.ms.opacity, &m.ms.horizon, &m.ms.cache, &m.ms.raycast, &m.ms.compose,

@@ -31,7 +31,6 @@
 #include "common/core/timer.h"
 #include "common/generate/path.h"
 #include "common/generate/scene_spec.h"
-#include "common/spatial/free_space.h"
 
 namespace vistream {
 namespace {
@@ -92,14 +91,7 @@ Result runConfig(const RenderGeometry& g, const std::vector<Camera>& cams, const
       r.differing = diff / n;
       r.colourError = err / n;
       r.perFrame = pixels;
-      for (const PixelCounts& p : pixels) {
-        r.meanPixels.polygon += p.polygon;
-        r.meanPixels.horizon += p.horizon;
-        r.meanPixels.cache += p.cache;
-        r.meanPixels.rayHit += p.rayHit;
-        r.meanPixels.rayMiss += p.rayMiss;
-        r.meanPixels.background += p.background;
-      }
+      for (const PixelCounts& p : pixels) r.meanPixels += p;
       for (size_t* v : {&r.meanPixels.polygon, &r.meanPixels.horizon, &r.meanPixels.cache, &r.meanPixels.rayHit,
                         &r.meanPixels.rayMiss, &r.meanPixels.background})
         *v = size_t(double(*v) / n + 0.5);
@@ -230,16 +222,10 @@ int runBench(const BenchArgs& a) {
   for (const std::string& spec : splitCommaList(a.scenes)) {
     const Scene scene = openScene(spec);
     const RenderGeometry g = renderGeometryFromScene(scene);
-    std::vector<PathSample> path;
-    {
-      const FlatTriangles tris = flattenScene(scene, true);
-      const auto rays = makeEmbreeRayQuery(tris);
-      const FreeSpace fs = FreeSpace::build(*rays, scene.bounds());
-      PathOptions po;
-      po.frames = a.frames;
-      po.speed = a.speed;
-      path = generatePath(scene, fs, po);
-    }
+    PathOptions po;
+    po.frames = a.frames;
+    po.speed = a.speed;
+    const std::vector<PathSample> path = generatePath(scene, po);
     const std::vector<Camera> cams = camerasFromPath(path, scene.origin, size.x, size.y, 60.0f);
     // The knob sweeps run the thesis's pipeline whatever the scene's size
     // (polygon budget 0); the "auto" row shows what the client decides.

@@ -27,8 +27,6 @@
 #include "common/core/timer.h"
 #include "common/generate/path.h"
 #include "common/generate/scene_spec.h"
-#include "common/raycast/ray_query.h"
-#include "common/spatial/free_space.h"
 
 namespace vistream {
 namespace {
@@ -63,13 +61,10 @@ std::string frameName(size_t i) { return fmt::format("frame_{:05d}.png", i); }
 std::vector<PathSample> loadPath(const Args& a, const Scene* scene, size_t frames) {
   if (a.pathFile != "auto") return readPath(a.pathFile);
   if (!scene) throwInputError("--path auto needs --scene (the path is generated through its free space)");
-  const FlatTriangles tris = flattenScene(*scene, true);
-  const auto rays = makeEmbreeRayQuery(tris);
-  const FreeSpace fs = FreeSpace::build(*rays, scene->bounds());
   PathOptions po;
   po.frames = frames ? frames : 300;
   po.speed = a.pathSpeed;
-  return generatePath(*scene, fs, po);
+  return generatePath(*scene, po);
 }
 
 PipelineOptions pipelineOptions(const Args& a, const Scene* scene, RenderMode mode) {

@@ -21,8 +21,7 @@ FieldGrid::FieldGrid(const RenderGeometry& g, float cellSize) {
   lo_ = lo;
   dims_ = glm::max(glm::ivec2(glm::ceil(ext / cell_)), glm::ivec2(1));
   const size_t cells = size_t(dims_.x) * size_t(dims_.y);
-  auto cellRange = [&](size_t t, glm::ivec2& a, glm::ivec2& b) {
-    const Box3f box = g.triangles.triangleBounds(t);
+  auto cellRange = [&](const Box3f& box, glm::ivec2& a, glm::ivec2& b) {
     a = glm::clamp(glm::ivec2(glm::floor((glm::vec2(box.lo.x, box.lo.z) - lo_) / cell_)), glm::ivec2(0), dims_ - 1);
     b = glm::clamp(glm::ivec2(glm::floor((glm::vec2(box.hi.x, box.hi.z) - lo_) / cell_)), glm::ivec2(0), dims_ - 1);
   };
@@ -30,8 +29,8 @@ FieldGrid::FieldGrid(const RenderGeometry& g, float cellSize) {
   cellY_.assign(cells, glm::vec2(std::numeric_limits<float>::max(), std::numeric_limits<float>::lowest()));
   for (size_t t = 0; t < g.size(); ++t) {
     glm::ivec2 a, b;
-    cellRange(t, a, b);
     const Box3f box = g.triangles.triangleBounds(t);
+    cellRange(box, a, b);
     for (int z = a.y; z <= b.y; ++z)
       for (int x = a.x; x <= b.x; ++x) {
         const size_t c = size_t(z) * size_t(dims_.x) + size_t(x);
@@ -45,7 +44,7 @@ FieldGrid::FieldGrid(const RenderGeometry& g, float cellSize) {
   std::vector<uint32_t> fill(cellStart_.begin(), cellStart_.end() - 1);
   for (size_t t = 0; t < g.size(); ++t) {
     glm::ivec2 a, b;
-    cellRange(t, a, b);
+    cellRange(g.triangles.triangleBounds(t), a, b);
     for (int z = a.y; z <= b.y; ++z)
       for (int x = a.x; x <= b.x; ++x) items_[fill[size_t(z) * size_t(dims_.x) + size_t(x)]++] = uint32_t(t);
   }

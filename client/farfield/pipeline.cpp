@@ -75,6 +75,9 @@ FrameRenderer::FrameRenderer(const RenderGeometry& geometry, const PipelineOptio
   grid_ = FieldGrid(geometry, options.gridCellSize);
   horizon_ = HorizonMap(geometry, options.horizonCellSize);
   rays_ = makeEmbreeRayQuery(geometry.triangles);
+  // A scene small enough for the polygon budget is drawn whole: the far
+  // field would cost more than it saves.
+  wholeScene_ = options.polygonBudget > 0 && geometry.size() <= options.polygonBudget;
 }
 
 FrameRenderer::~FrameRenderer() = default;
@@ -85,9 +88,8 @@ void FrameRenderer::reset() {
 }
 
 float FrameRenderer::polygonDistance() const {
-  const bool wholeScene = options_.polygonBudget > 0 && geometry_.size() <= options_.polygonBudget;
-  return options_.mode == RenderMode::Pipeline && !wholeScene ? options_.nearDistance
-                                                              : std::numeric_limits<float>::infinity();
+  return options_.mode == RenderMode::Pipeline && !wholeScene_ ? options_.nearDistance
+                                                               : std::numeric_limits<float>::infinity();
 }
 
 FrameReport FrameRenderer::render(const Camera& camera, ImageRgb8& out) { return run(camera, out, nullptr); }
@@ -112,10 +114,7 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector
   if (out.width != W || out.height != H) out = ImageRgb8(W, H);
 
   // 1. Near field: the triangles to draw as polygons.
-  // A scene small enough for the polygon budget is drawn whole: the far
-  // field would cost more than it saves.
-  const bool wholeScene = mode == RenderMode::Pipeline && options_.polygonBudget > 0 &&
-                          geometry_.size() <= options_.polygonBudget;
+  const bool wholeScene = mode == RenderMode::Pipeline && wholeScene_;
   Stopwatch clock;
   if (mode == RenderMode::RaycastAll)
     near_.clear();

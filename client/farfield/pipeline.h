@@ -72,10 +72,32 @@ struct PixelCounts {
   size_t rayHit = 0;      // ray cast and hit
   size_t rayMiss = 0;     // ray cast and missed (sky)
   size_t background = 0;  // no far field to look at (far field off): sky colour
+
+  PixelCounts& operator+=(const PixelCounts& o) {
+    polygon += o.polygon;
+    horizon += o.horizon;
+    cache += o.cache;
+    rayHit += o.rayHit;
+    rayMiss += o.rayMiss;
+    background += o.background;
+    return *this;
+  }
 };
 
 struct StageTimes {
   double nearSelect = 0, nearDraw = 0, opacity = 0, horizon = 0, cache = 0, raycast = 0, compose = 0, total = 0;
+
+  StageTimes& operator+=(const StageTimes& o) {
+    nearSelect += o.nearSelect;
+    nearDraw += o.nearDraw;
+    opacity += o.opacity;
+    horizon += o.horizon;
+    cache += o.cache;
+    raycast += o.raycast;
+    compose += o.compose;
+    total += o.total;
+    return *this;
+  }
 };
 
 struct FrameReport {
@@ -123,6 +145,7 @@ class FrameRenderer {
   std::vector<uint8_t> covered_;
   std::vector<uint32_t> near_, stamp_;
   uint32_t stampValue_ = 0;
+  bool wholeScene_ = false;  // within the polygon budget: no near/far split
   bool havePrevious_ = false;
   glm::vec3 previousEye_{0.0f};
   float previousYaw_ = 0.0f, previousPitch_ = 0.0f;

@@ -12,6 +12,7 @@
 #include <fmt/format.h>
 
 #include "common/core/error.h"
+#include "common/raycast/ray_query.h"
 
 namespace vistream {
 namespace {
@@ -221,6 +222,12 @@ void writePath(const std::vector<PathSample>& samples, const std::filesystem::pa
   std::error_code ec;
   std::filesystem::rename(tmp, path, ec);
   if (ec) throwInputError("{}: cannot rename into place: {}", path.string(), ec.message());
+}
+
+std::vector<PathSample> generatePath(const Scene& scene, const PathOptions& options) {
+  const FlatTriangles triangles = flattenScene(scene, /*staticOnly=*/true);
+  const auto rays = makeEmbreeRayQuery(triangles);
+  return generatePath(scene, FreeSpace::build(*rays, scene.bounds()), options);
 }
 
 }  // namespace vistream

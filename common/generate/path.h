@@ -45,6 +45,9 @@ inline constexpr double kWalkingSpeed = 1.4;  // m/s at relative speed 1.0
 // given speed. Throws InputError if the scene has no free space.
 std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& freeSpace,
                                      const PathOptions& options);
+// The same, building the free space of the scene's static geometry first
+// (for callers that need one path and no free space of their own).
+std::vector<PathSample> generatePath(const Scene& scene, const PathOptions& options);
 
 // Reads a path file; throws InputError naming the file and line on a bad
 // header, a non-numeric or non-finite field, a missing column or t going backwards.

@@ -9,7 +9,6 @@
 #include "client/app/walkthrough.h"
 #include "common/generate/generate.h"
 #include "common/generate/path.h"
-#include "common/spatial/free_space.h"
 
 namespace vistream {
 namespace {
@@ -236,13 +235,10 @@ TEST(Pipeline, GeometryAllDrawsEveryVisibleTriangleAsPolygons) {
 TEST(Pipeline, AWalkThroughCity1StaysWithinOnePercentOfTheReference) {
   const Scene scene = toScene(generate("city1"));
   const RenderGeometry g = renderGeometryFromScene(scene);
-  const FlatTriangles tris = flattenScene(scene, true);
-  const auto rays = makeEmbreeRayQuery(tris);
-  const FreeSpace fs = FreeSpace::build(*rays, scene.bounds());
   PathOptions po;
   po.frames = 40;
   po.speed = 2.0;
-  const auto cams = camerasFromPath(generatePath(scene, fs, po), scene.origin, 320, 240, 60.0f);
+  const auto cams = camerasFromPath(generatePath(scene, po), scene.origin, 320, 240, 60.0f);
   PipelineOptions o = optionsWithD(60.0f);
   o.pixelBudget = 500;
   Renderers r(g, o);

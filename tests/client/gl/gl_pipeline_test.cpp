@@ -13,7 +13,6 @@
 #include "common/core/error.h"
 #include "common/generate/generate.h"
 #include "common/generate/path.h"
-#include "common/spatial/free_space.h"
 #include "tests/common/support/run_tool.h"
 #include "tests/common/support/temp_dir.h"
 
@@ -30,13 +29,10 @@ TEST(GlPipeline, AnOpenGLFrameMatchesTheHeadlessFrameOfTheSamePose) {
   }
   const Scene scene = toScene(generate("city1"));
   const RenderGeometry g = renderGeometryFromScene(scene);
-  const FlatTriangles tris = flattenScene(scene, true);
-  const auto rays = makeEmbreeRayQuery(tris);
-  const FreeSpace fs = FreeSpace::build(*rays, scene.bounds());
   PathOptions po;
   po.frames = 12;
   po.speed = 3.0;
-  const auto cams = camerasFromPath(generatePath(scene, fs, po), scene.origin, kW, kH, 60.0f);
+  const auto cams = camerasFromPath(generatePath(scene, po), scene.origin, kW, kH, 60.0f);
   PipelineOptions o;
   o.polygonBudget = 0;  // split at d although city1 is small enough to draw whole
   o.nearDistance = 60.0f;
