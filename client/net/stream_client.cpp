@@ -36,7 +36,10 @@ struct IvecLess {
 };
 }  // namespace
 
-struct StreamClient::Impl : std::enable_shared_from_this<StreamClient::Impl> {
+// Handlers hold a plain pointer: StreamClient joins the io thread before the
+// Impl goes, and a shared pointer in a handler left queued would keep the
+// Impl (which owns the io_context holding that handler) alive forever.
+struct StreamClient::Impl {
   asio::io_context io;
   tcp::socket socket{io};
   std::thread thread;
@@ -76,7 +79,7 @@ struct StreamClient::Impl : std::enable_shared_from_this<StreamClient::Impl> {
       std::lock_guard lock(mutex);
       if (ended) return;  // nothing would carry it, and the post would never run
     }
-    asio::post(io, [self = shared_from_this(), buf = std::make_shared<std::vector<uint8_t>>(std::move(frame))] {
+    asio::post(io, [self = this, buf = std::make_shared<std::vector<uint8_t>>(std::move(frame))] {
       self->outbox.push_back(buf);
       if (self->outbox.size() == 1) self->writeNext();
     });
@@ -84,14 +87,14 @@ struct StreamClient::Impl : std::enable_shared_from_this<StreamClient::Impl> {
   void writeNext() {
     if (outbox.empty()) return;
     asio::async_write(socket, asio::buffer(*outbox.front()),
-                      [self = shared_from_this()](const boost::system::error_code& ec, size_t) {
+                      [self = this](const boost::system::error_code& ec, size_t) {
                         if (ec) return self->finish("write: " + ec.message());
                         self->outbox.pop_front();
                         self->writeNext();
                       });
   }
   void read() {
-    socket.async_read_some(asio::buffer(buffer), [self = shared_from_this()](const boost::system::error_code& ec, size_t n) {
+    socket.async_read_some(asio::buffer(buffer), [self = this](const boost::system::error_code& ec, size_t n) {
       if (ec) return self->finish("connection closed: " + ec.message());
       {
         std::lock_guard lock(self->mutex);
@@ -267,7 +270,7 @@ StreamClient::StreamClient(const StreamClientOptions& o) : impl_(std::make_share
 StreamClient::~StreamClient() {
   if (!impl_) return;
   impl_->send(encodeBye("client closed"));
-  asio::post(impl_->io, [self = impl_] {
+  asio::post(impl_->io, [self = impl_.get()] {
     // Let the Bye leave, then close.
     auto timer = std::make_shared<asio::steady_timer>(self->io, std::chrono::milliseconds(100));
     timer->async_wait([self, timer](const boost::system::error_code&) { self->finish("closed"); });
