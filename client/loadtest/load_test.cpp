@@ -85,16 +85,22 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
   void start() {
     asio::dispatch(strand_, [self = shared_from_this()] {
       self->connectStarted_ = Clock::now();
+      // One timeout for the connect and the Welcome; tick() replaces it.
       self->timer_.expires_after(std::chrono::duration_cast<Clock::duration>(
           std::chrono::duration<double>(self->opt_.connectTimeoutS)));
       self->timer_.async_wait([self](const boost::system::error_code& ec) {
-        if (!ec && !self->connected_) self->finish("connect timed out", true);
+        if (ec || self->welcomed_) return;
+        if (!self->connected_)
+          return self->finish(
+              fmt::format("connect timed out after {:g} s", self->opt_.connectTimeoutS), "connect");
+        self->finish(
+            fmt::format("no Welcome within {:g} s of connecting", self->opt_.connectTimeoutS),
+            "handshake");
       });
       self->socket_.async_connect(self->shared_.endpoint, [self](const boost::system::error_code& ec) {
         if (self->done_) return;
-        if (ec) return self->finish("connect: " + ec.message(), true);
+        if (ec) return self->finish("connect: " + ec.message(), "connect");
         self->connected_ = true;
-        self->timer_.cancel();
         boost::system::error_code ignored;
         self->socket_.set_option(tcp::no_delay(true), ignored);
         HelloT hello;
@@ -112,9 +118,27 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
     });
   }
 
+  // Called from any thread once the run's deadline has passed: closes the
+  // connection; a client still connecting or walking is counted as cut off,
+  // one already saying Bye finishes cleanly.
+  void cutOffAtDeadline() {
+    asio::post(strand_, [self = shared_from_this()] {
+      if (self->done_) return;
+      if (self->walkEnded_) return self->finish("", "");
+      self->cutOff = true;
+      const char* stage = !self->connected_  ? "connecting"
+                          : !self->welcomed_ ? "waiting for the Welcome"
+                                             : "walking";
+      self->finish(fmt::format("cut off at the deadline while {}", stage), "cut_off");
+    });
+  }
+
   // Results, read after the io_context has stopped.
+  std::string errorReason;  // the first error's kind (a key of errors_by_reason); empty: none
+  bool cutOff = false;
   uint64_t missesWhilePending = 0;
-  uint64_t bytes = 0, misses = 0, checks = 0, errors = 0, geometryFrames = 0, facesReceived = 0, cellEntries = 0;
+  uint64_t bytes = 0, misses = 0, checks = 0, geometryFrames = 0, facesReceived = 0,
+           cellEntries = 0;
   std::vector<double> latencies;
   double initialLoadMs = -1.0;
   std::vector<double> cpuPerClient;
@@ -131,7 +155,7 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
     if (outbox_.empty() || done_) return;
     asio::async_write(socket_, asio::buffer(*outbox_.front()), [self = shared_from_this()](const boost::system::error_code& ec, size_t) {
       if (self->done_) return;
-      if (ec) return self->finish("write: " + ec.message(), true);
+      if (ec) return self->finish("write: " + ec.message(), "write");
       self->outbox_.pop_front();
       self->writeNext();
     });
@@ -139,15 +163,18 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
   void read() {
     socket_.async_read_some(asio::buffer(buffer_), [self = shared_from_this()](const boost::system::error_code& ec, size_t n) {
       if (self->done_) return;
-      if (ec) return self->finish("connection closed by the server: " + ec.message(), !self->walkEnded_);
+      if (ec)
+        return self->finish("connection closed by the server: " + ec.message(),
+                            self->walkEnded_ ? "" : "closed_by_server");
       self->bytes += n;
       if (!self->decoder_.feed(std::span<const uint8_t>(self->buffer_.data(), n)))
-        return self->finish("bad frame from the server: " + self->decoder_.error(), true);
+        return self->finish("bad frame from the server: " + self->decoder_.error(), "bad_frame");
       while (auto frame = self->decoder_.next()) {
         self->onFrame(*envelopeOf(*frame));
         if (self->done_) return;
       }
-      if (self->decoder_.failed()) return self->finish("bad frame from the server: " + self->decoder_.error(), true);
+      if (self->decoder_.failed())
+        return self->finish("bad frame from the server: " + self->decoder_.error(), "bad_frame");
       self->read();
     });
   }
@@ -156,10 +183,13 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
     const auto now = Clock::now();
     switch (e.payload_type()) {
       case Payload::Welcome: {
+        // A second Welcome would restart the walk (and so its end): refused.
+        if (welcomed_) return finish("a second Welcome", "protocol");
         const Welcome& w = *e.payload_as_Welcome();
         if (!w.grid() || !w.grid()->cell_size() || !w.grid()->origin() || !w.grid()->dims() || !w.local_origin() ||
             w.face_count() > (64u << 20))
-          return finish("Welcome without a usable grid", true);
+          return finish("Welcome without a usable grid", "handshake");
+        welcomed_ = true;
         origin_ = fromWire(*w.local_origin());
         gridOrigin_ = fromWire(*w.grid()->origin());
         cellSize_ = fromWire(*w.grid()->cell_size());
@@ -173,7 +203,7 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
       case Payload::Geometry: {
         DecodedGeometry g;
         std::string error;
-        if (!decodeGeometry(*e.payload_as_Geometry(), g, error)) return finish(error, true);
+        if (!decodeGeometry(*e.payload_as_Geometry(), g, error)) return finish(error, "bad_frame");
         ++geometryFrames;
         for (uint32_t f : g.faces)
           if ((f >> 6) < held_.size()) {
@@ -210,9 +240,12 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
       }
       case Payload::Error: {
         const Error& err = *e.payload_as_Error();
-        return finish(fmt::format("server error {}: {}", EnumNameErrorCode(err.code()), err.text() ? err.text()->str() : ""), true);
+        return finish(fmt::format("server error {}: {}", EnumNameErrorCode(err.code()),
+                                  err.text() ? err.text()->str() : ""),
+                      "server_error");
       }
-      case Payload::Bye: return finish("server said bye", !walkEnded_);
+      case Payload::Bye:
+        return finish("server said bye", walkEnded_ ? "" : "closed_by_server");
       default: return;  // Avatar, PvsReply: not measured
     }
   }
@@ -229,7 +262,8 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
       send(encodeBye("load test finished"));
       // Let the Bye go out, then close.
       timer_.expires_after(std::chrono::milliseconds(200));
-      timer_.async_wait([self = shared_from_this()](const boost::system::error_code&) { self->finish("", false); });
+      timer_.async_wait(
+          [self = shared_from_this()](const boost::system::error_code&) { self->finish("", ""); });
       return;
     }
     const PathPoint p = pointAt(*path_, offset_ + elapsed * opt_.speed);
@@ -294,12 +328,14 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
                     ready_.count(cell_) ? "cell ready" : "cell not ready yet");
   }
 
-  void finish(const std::string& why, bool isError) {
+  // Ends the client, once. `reason` empty: a clean end; otherwise the kind
+  // of error (see errors_by_reason in README.md) and `why` the message.
+  void finish(const std::string& why, const char* reason) {
     if (done_) return;
     done_ = true;
-    if (isError) {
-      ++errors;
-      if (firstError.empty()) firstError = why;
+    if (*reason) {
+      errorReason = reason;
+      firstError = why;
       spdlog::debug("client {}: {}", index_, why);
     }
     if (walkedS == 0.0 && walkStarted_ != Clock::time_point{}) walkedS = std::chrono::duration<double>(Clock::now() - walkStarted_).count();
@@ -319,7 +355,7 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
   std::deque<std::shared_ptr<std::vector<uint8_t>>> outbox_;
   const std::vector<PathSample>* path_ = nullptr;
   double offset_ = 0.0;
-  bool connected_ = false, done_ = false, walkEnded_ = false, hasCell_ = false;
+  bool connected_ = false, welcomed_ = false, done_ = false, walkEnded_ = false, hasCell_ = false;
   Clock::time_point connectStarted_, helloSent_, walkStarted_;
   glm::dvec3 origin_{0.0};
   glm::vec3 gridOrigin_{0.0f}, cellSize_{1.0f};
@@ -342,8 +378,15 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
   if (options.clients == 0) throwInputError("--clients must be at least 1");
   if (options.paths.empty() || std::any_of(options.paths.begin(), options.paths.end(), [](const auto& p) { return p.empty(); }))
     throwInputError("no path to walk");
-  if (!(options.durationS > 0.0) || !(options.fps > 0.0) || !(options.speed >= 0.0))
+  if (!(options.durationS > 0.0) || !(options.fps > 0.0) || !(options.speed >= 0.0) ||
+      !std::isfinite(options.durationS) || !std::isfinite(options.speed))
     throwInputError("--duration and --fps must be positive and --speed non-negative");
+  if (!(options.connectTimeoutS > 0.0) || !std::isfinite(options.connectTimeoutS))
+    throwInputError("--connect-timeout must be positive");
+  const double graceS =
+      options.graceS.value_or(options.connectTimeoutS + kDefaultGraceBeyondConnectS);
+  if (!(graceS >= 0.0) || !std::isfinite(graceS))
+    throwInputError("--grace must be zero or positive");
   Shared shared{options, nullptr, {}, {}};
   if (options.scene) {
     shared.triangles = flattenScene(*options.scene, true);
@@ -357,39 +400,69 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
     if (ec || results.empty()) throwInputError("--host {}: cannot resolve it: {}", options.host, ec.message());
     shared.endpoint = *results.begin();
   }
+  const auto started = Clock::now();
+  const auto deadline = started + std::chrono::duration_cast<Clock::duration>(
+                                      std::chrono::duration<double>(options.durationS + graceS));
   std::vector<std::shared_ptr<SimClient>> clients;
   for (size_t i = 0; i < options.clients; ++i) {
     clients.push_back(std::make_shared<SimClient>(io, shared, i));
     clients.back()->start();
   }
-  const auto started = Clock::now();
+  // Runs until every client has finished (the io_context runs out of work) or
+  // the deadline, whichever comes first; then closes whatever is still open.
+  // Closing cancels every pending operation, so the second run ends at once;
+  // its own bound only guards against a handler that never returns control.
   std::vector<std::thread> threads;
-  for (unsigned t = 1; t < std::max(1u, options.threads); ++t) threads.emplace_back([&io] { io.run(); });
-  io.run();
+  for (unsigned t = 1; t < std::max(1u, options.threads); ++t)
+    threads.emplace_back([&io, deadline] { io.run_until(deadline); });
+  io.run_until(deadline);
   for (auto& t : threads) t.join();
+  io.restart();
+  for (const auto& c : clients) c->cutOffAtDeadline();
+  io.run_for(std::chrono::seconds(2));
   const double wall = std::chrono::duration<double>(Clock::now() - started).count();
 
   std::vector<double> latencies, initial, cpu, bytesPerS;
-  uint64_t misses = 0, checks = 0, errors = 0, entries = 0, frames = 0, faces = 0, totalBytes = 0, pendingMisses = 0;
-  size_t loaded = 0;
-  std::string firstError;
-  for (const auto& c : clients) {
+  uint64_t misses = 0, checks = 0, entries = 0, frames = 0, faces = 0, totalBytes = 0,
+           pendingMisses = 0;
+  size_t loaded = 0, failed = 0;
+  std::string firstError, firstFailure;
+  auto failedClients = nlohmann::json::array(), cutOffClients = nlohmann::json::array();
+  std::map<std::string, uint64_t> byReason;
+  for (size_t i = 0; i < clients.size(); ++i) {
+    const SimClient* c = clients[i].get();
     latencies.insert(latencies.end(), c->latencies.begin(), c->latencies.end());
     if (c->initialLoadMs >= 0.0) {
       initial.push_back(c->initialLoadMs);
       ++loaded;
     }
+    // A client that ended cleanly without its initial load failed too: the
+    // server served it nothing usable.
+    std::string reason = c->errorReason, error = c->firstError;
+    if (reason.empty() && c->initialLoadMs < 0.0) {
+      reason = "not_loaded";
+      error = fmt::format(
+          "never received the CellReady of the cell it stood in ({:.1f} s of walking)", c->walkedS);
+    }
+    if (!reason.empty()) {
+      ++failed;
+      ++byReason[reason];
+      failedClients.push_back({{"client", i}, {"reason", reason}, {"error", error}});
+      if (firstError.empty()) {
+        firstError = error;
+        firstFailure = fmt::format("client {}: {}", i, error);
+      }
+    }
+    if (c->cutOff) cutOffClients.push_back(i);
     cpu.insert(cpu.end(), c->cpuPerClient.begin(), c->cpuPerClient.end());
     bytesPerS.push_back(c->walkedS > 0.0 ? double(c->bytes) / c->walkedS : 0.0);
     misses += c->misses;
     pendingMisses += c->missesWhilePending;
     checks += c->checks;
-    errors += c->errors;
     entries += c->cellEntries;
     frames += c->geometryFrames;
     faces += c->facesReceived;
     totalBytes += c->bytes;
-    if (firstError.empty()) firstError = c->firstError;
   }
   double meanBytes = 0.0;
   for (double b : bytesPerS) meanBytes += b / double(bytesPerS.size());
@@ -408,12 +481,27 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
                  {"frames_checked", checks},
                  {"initial_load_ms", percentiles(initial)},
                  {"clients_loaded", loaded},
+                 {"clients_not_loaded", clients.size() - loaded},
+                 {"clients_cut_off", cutOffClients.size()},
+                 {"cut_off_clients", cutOffClients},
+                 {"grace_s", graceS},
                  {"geometry_frames", frames},
                  {"faces_received", faces},
                  {"bytes_per_face", faces ? double(totalBytes) / double(faces) : 0.0},
-                 {"errors", errors},
+                 {"errors", failed},
+                 {"errors_by_reason", byReason},
+                 {"failed_clients", failedClients},
                  {"first_error", firstError},
-                 {"server_cpu_ms_per_s_per_client", cpu.empty() ? nlohmann::json(nullptr) : nlohmann::json(cpuMean)}};
+                 {"server_cpu_ms_per_s_per_client",
+                  cpu.empty() ? nlohmann::json(nullptr) : nlohmann::json(cpuMean)}};
+  if (failed > 0) {
+    std::string reasons;
+    for (const auto& [reason, n] : byReason)
+      reasons += fmt::format("{}{} {}", reasons.empty() ? "" : ", ", reason, n);
+    report.failure =
+        fmt::format("{} of {} clients failed ({}); {} of {} got their initial load; first: {}",
+                    failed, clients.size(), reasons, loaded, clients.size(), firstFailure);
+  }
   return report;
 }
 

@@ -8,15 +8,26 @@
 //
 // Time: each client sends a Pose every 1/fps seconds of wall time; its
 // position is the path's at (start offset + elapsed * speed); past the path's
-// end it turns round and walks back, so it never teleports. Path files are in file coordinates; the client converts with the
-// Welcome's local origin.
+// end it turns round and walks back, so it never teleports. Path files are in file coordinates; the
+// client converts with the Welcome's local origin.
+//
+// Failing honestly: a client fails if its connection, handshake or stream
+// ends with an error, or if it never gets its initial load (the CellReady of
+// the cell it stands in, which says it holds that cell's whole face set). A
+// run where any client failed is a failed run (LoadTestReport::failure), so
+// a server that serves nothing never reports success.
+//
+// Bounded time: the run ends by `durationS + graceS` seconds after it
+// started, whatever the server does (accepts and never answers, answers the
+// Hello and then stalls, stops reading). At that deadline every socket still
+// open is closed and its client counted as cut off.
 #pragma once
 
 #include <cstdint>
+#include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "common/generate/path.h"
 #include "common/scene/scene.h"
@@ -38,16 +49,34 @@ struct LoadTestOptions {
   bool avatars = true;            // ask for avatar updates
   std::string token;
   unsigned threads = 1;
+  // Seconds from the start of a client's TCP connect to the server's Welcome;
+  // a client without a Welcome by then fails ("handshake").
   double connectTimeoutS = 10.0;
+  // Seconds after durationS before the run is cut off (see above); unset:
+  // connectTimeoutS + kDefaultGraceBeyondConnectS, which a server that
+  // answers within the connect timeout never reaches.
+  std::optional<double> graceS;
   const Scene* scene = nullptr;   // local copy for visibility checks; null: no checks
 };
 
+// What the default grace allows beyond the connect timeout: the final Bye
+// (flushed for 0.2 s) and scheduling noise.
+inline constexpr double kDefaultGraceBeyondConnectS = 2.0;
+
 struct LoadTestReport {
   nlohmann::json json;  // the keys documented in README.md ("vistream-loadtest")
+  // One line saying why the run failed (how many clients failed, for which
+  // reasons, the first error); empty when every client connected, got its
+  // initial load and finished without an error.
+  std::string failure;
 };
 
-// Runs the test; throws InputError on bad options. Connection failures and
-// protocol errors are counted in the report's `errors`, not thrown.
+// Runs the test; throws InputError on bad options. Connection failures,
+// protocol errors, clients never loaded and clients cut off at the deadline
+// are counted in the report's `errors` (one per failed client) and summed up
+// in `failure`, not thrown. Returns by durationS + graceS after the clients
+// start connecting (plus at most 2 s to close their sockets); resolving the
+// host and building the ray query for `scene` come before that.
 LoadTestReport runLoadTest(const LoadTestOptions& options);
 
 }  // namespace vistream

@@ -50,6 +50,7 @@ bool FrameDecoder::feed(std::span<const uint8_t> bytes) {
     for (size_t i = 0; i < kFrameHeaderBytes; ++i) size |= uint32_t(buffer_[start_ + i]) << (8 * i);
     if (size > max_) {
       error_ = fmt::format("frame of {} bytes exceeds the maximum of {}", size, max_);
+      kind_ = FrameError::TooLarge;
       buffer_.clear();
       start_ = 0;
       return false;
@@ -64,6 +65,7 @@ std::optional<std::vector<uint8_t>> FrameDecoder::next() {
   for (size_t i = 0; i < kFrameHeaderBytes; ++i) size |= uint32_t(buffer_[start_ + i]) << (8 * i);
   if (size > max_) {
     error_ = fmt::format("frame of {} bytes exceeds the maximum of {}", size, max_);
+    kind_ = FrameError::TooLarge;
     return std::nullopt;
   }
   if (buffered() < kFrameHeaderBytes + size) return std::nullopt;
@@ -74,6 +76,7 @@ std::optional<std::vector<uint8_t>> FrameDecoder::next() {
   flatbuffers::Verifier verifier(frame.data(), frame.size());
   if (size == 0 || !VerifyEnvelopeBuffer(verifier)) {
     error_ = fmt::format("frame of {} bytes failed FlatBuffers verification", size);
+    kind_ = FrameError::Malformed;
     return std::nullopt;
   }
   // The Verifier accepts a union whose type is set but whose table is
@@ -82,6 +85,7 @@ std::optional<std::vector<uint8_t>> FrameDecoder::next() {
   if (envelope->payload_type() != Payload::NONE && envelope->payload() == nullptr) {
     error_ = fmt::format("frame of {} bytes names a {} payload but carries none", size,
                          EnumNamePayload(envelope->payload_type()));
+    kind_ = FrameError::Malformed;
     return std::nullopt;
   }
   start_ += kFrameHeaderBytes + size;

@@ -30,6 +30,10 @@ std::vector<uint8_t> encodeHello(uint32_t version, const std::string& token);
 std::vector<uint8_t> encodeError(ErrorCode code, const std::string& text);
 std::vector<uint8_t> encodeBye(const std::string& reason);
 
+// Why a stream was refused: a frame longer than the maximum (known from its
+// length prefix alone) or bytes that are not a valid frame.
+enum class FrameError : uint8_t { None, TooLarge, Malformed };
+
 class FrameDecoder {
  public:
   explicit FrameDecoder(uint32_t maxFrameBytes = kDefaultMaxFrameBytes) : max_(maxFrameBytes) {}
@@ -45,6 +49,8 @@ class FrameDecoder {
 
   bool failed() const { return !error_.empty(); }
   const std::string& error() const { return error_; }
+  // The same kind for the same bytes, however they were split into reads.
+  FrameError errorKind() const { return kind_; }
   size_t buffered() const { return buffer_.size() - start_; }
 
  private:
@@ -52,6 +58,7 @@ class FrameDecoder {
   std::vector<uint8_t> buffer_;
   size_t start_ = 0;
   std::string error_;
+  FrameError kind_ = FrameError::None;
 };
 
 // The verified envelope inside a frame returned by FrameDecoder::next().

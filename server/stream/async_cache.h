@@ -5,12 +5,23 @@
 // that finished it) with the shared, immutable value. At most `capacity`
 // finished values are kept; the least recently used is dropped first.
 //
+// Cancellation: a request may carry an Interest (a token its requester
+// holds). A computation that has not started when every waiter's interest
+// has expired is not run at all: the entry is dropped and no callback is
+// invoked (the requester, having let go of its interest, no longer waits).
+// A computation that has started runs to the end and is cached. Requests
+// without an interest are never cancelled. This is what bounds the work a
+// client can leave behind on the shared pool: a session that moves on or
+// closes drops its interests, and its queued computations cost a lock each.
+//
+// Errors: a computation that throws caches nothing; its waiters are called
+// with a null pointer and the next request computes again.
+//
 // Thread safety: every member may be called from any thread.
 #pragma once
 
-#include <boost/asio/post.hpp>
-
 #include <atomic>
+#include <boost/asio/post.hpp>
 #include <cstdint>
 #include <functional>
 #include <list>
@@ -21,14 +32,26 @@
 
 namespace vistream {
 
+// A requester's token: while some copy lives, the requester still wants the
+// result. Drop every copy to cancel.
+using Interest = std::shared_ptr<const int>;
+inline Interest makeInterest() {
+  return std::make_shared<const int>(0);
+}
+
 template <class Key, class Value, class Hash = std::hash<Key>>
 class AsyncCache {
  public:
   using Ptr = std::shared_ptr<const Value>;
   using Callback = std::function<void(Ptr)>;
   using Compute = std::function<Value(const Key&)>;
+  // Called with the key and the exception's message when a computation throws.
+  using OnError = std::function<void(const Key&, const char*)>;
 
-  AsyncCache(size_t capacity, Compute compute) : capacity_(capacity ? capacity : 1), compute_(std::move(compute)) {}
+  AsyncCache(size_t capacity, Compute compute, OnError onError = {})
+      : capacity_(capacity ? capacity : 1),
+        compute_(std::move(compute)),
+        onError_(std::move(onError)) {}
 
   // The value if it is cached (counts as a hit and a use), else null.
   Ptr find(const Key& key) {
@@ -41,9 +64,10 @@ class AsyncCache {
   }
 
   // Calls `done` with the value: at once (on this thread) if cached, else
-  // when the computation posted to `executor` finishes.
+  // when the computation posted to `executor` finishes. With an `interest`,
+  // the request lapses once the interest has expired (see above).
   template <class Executor>
-  void get(const Key& key, Executor executor, Callback done) {
+  void get(const Key& key, Executor executor, Callback done, const Interest& interest = nullptr) {
     std::unique_lock lock(mutex_);
     auto it = entries_.find(key);
     if (it != entries_.end() && it->second.value) {
@@ -55,21 +79,74 @@ class AsyncCache {
       return;
     }
     ++misses_;
-    if (it != entries_.end()) {  // being computed
-      it->second.waiters.push_back(std::move(done));
+    Waiter w{std::move(done), interest, interest == nullptr};
+    if (it != entries_.end()) {  // queued or being computed
+      it->second.waiters.push_back(std::move(w));
       return;
     }
     Entry& e = entries_[key];
-    e.waiters.push_back(std::move(done));
+    e.waiters.push_back(std::move(w));
     lock.unlock();
-    boost::asio::post(executor, [this, key] {
-      Ptr value = std::make_shared<const Value>(compute_(key));
-      std::vector<Callback> waiters;
-      {
-        std::lock_guard guard(mutex_);
-        Entry& entry = entries_[key];
+    boost::asio::post(executor, [this, key] { run(key); });
+  }
+
+  uint64_t hits() const { return hits_; }
+  uint64_t misses() const { return misses_; }
+  uint64_t computed() const { return computed_; }
+  // Computations dropped before they started because nobody waited any more.
+  uint64_t cancelled() const { return cancelled_; }
+  size_t size() const {
+    std::lock_guard lock(mutex_);
+    return lru_.size();
+  }
+
+ private:
+  struct Waiter {
+    Callback done;
+    std::weak_ptr<const int> interest;
+    bool unconditional = false;
+    bool wanted() const { return unconditional || !interest.expired(); }
+  };
+  struct Entry {
+    Ptr value;
+    bool running = false;
+    std::vector<Waiter> waiters;
+    typename std::list<Key>::iterator position;
+  };
+  void touch(Entry& e) { lru_.splice(lru_.begin(), lru_, e.position); }
+
+  void run(const Key& key) {
+    {
+      std::lock_guard guard(mutex_);
+      auto it = entries_.find(key);
+      if (it == entries_.end() || it->second.value || it->second.running) return;
+      Entry& entry = it->second;
+      bool wanted = false;
+      for (const Waiter& w : entry.waiters) wanted = wanted || w.wanted();
+      if (!wanted) {
+        entries_.erase(it);  // the callbacks (and what they hold) go with it
+        ++cancelled_;
+        return;
+      }
+      entry.running = true;
+    }
+    Ptr value;
+    try {
+      value = std::make_shared<const Value>(compute_(key));
+    } catch (const std::exception& e) {
+      if (onError_) onError_(key, e.what());
+    }
+    std::vector<Waiter> waiters;
+    {
+      std::lock_guard guard(mutex_);
+      auto it = entries_.find(key);
+      waiters.swap(it->second.waiters);
+      if (!value) {
+        entries_.erase(it);
+      } else {
+        Entry& entry = it->second;
         entry.value = value;
-        waiters.swap(entry.waiters);
+        entry.running = false;
         lru_.push_front(key);
         entry.position = lru_.begin();
         ++computed_;
@@ -78,32 +155,17 @@ class AsyncCache {
           lru_.pop_back();
         }
       }
-      for (auto& w : waiters) w(value);
-    });
+    }
+    for (auto& w : waiters) w.done(value);
   }
-
-  uint64_t hits() const { return hits_; }
-  uint64_t misses() const { return misses_; }
-  uint64_t computed() const { return computed_; }
-  size_t size() const {
-    std::lock_guard lock(mutex_);
-    return lru_.size();
-  }
-
- private:
-  struct Entry {
-    Ptr value;
-    std::vector<Callback> waiters;
-    typename std::list<Key>::iterator position;
-  };
-  void touch(Entry& e) { lru_.splice(lru_.begin(), lru_, e.position); }
 
   size_t capacity_;
   Compute compute_;
-  mutable std::mutex mutex_;
+  OnError onError_;
+  mutable std::mutex mutex_;  // guards entries_ and lru_
   std::unordered_map<Key, Entry, Hash> entries_;
   std::list<Key> lru_;
-  std::atomic<uint64_t> hits_{0}, misses_{0}, computed_{0};
+  std::atomic<uint64_t> hits_{0}, misses_{0}, computed_{0}, cancelled_{0};
 };
 
 }  // namespace vistream

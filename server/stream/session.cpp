@@ -1,11 +1,11 @@
 #include "server/stream/session.h"
 
-#include <boost/asio/bind_executor.hpp>
-#include <boost/asio/post.hpp>
-#include <boost/asio/write.hpp>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <boost/asio/bind_executor.hpp>
+#include <boost/asio/post.hpp>
+#include <boost/asio/write.hpp>
 #include <cmath>
 
 #include "protocol/geometry/geometry_codec.h"
@@ -17,12 +17,19 @@ namespace asio = boost::asio;
 using namespace wire;
 
 namespace {
-double seconds(std::chrono::steady_clock::duration d) { return std::chrono::duration<double>(d).count(); }
+// Samples along the velocity when prefetching: bounds the work of one pose
+// whatever speed and horizon.
+constexpr int kMaxPrefetchSteps = 32;
+
+double seconds(std::chrono::steady_clock::duration d) {
+  return std::chrono::duration<double>(d).count();
+}
 
 bool sameToken(const std::string& a, const std::string& b) {
   // Constant time in the token's length.
   unsigned diff = unsigned(a.size() != b.size());
-  for (size_t i = 0; i < a.size(); ++i) diff |= unsigned(uint8_t(a[i]) ^ uint8_t(i < b.size() ? b[i] : 0));
+  for (size_t i = 0; i < a.size(); ++i)
+    diff |= unsigned(uint8_t(a[i]) ^ uint8_t(i < b.size() ? b[i] : 0));
   return diff == 0;
 }
 }  // namespace
@@ -59,6 +66,7 @@ void Session::reject(ErrorCode code, const std::string& text) {
 void Session::shutdown(const std::string& reason) {
   asio::dispatch(strand_, [self = shared_from_this(), reason] {
     if (self->state_ == State::Closed || self->state_ == State::Closing) return;
+    self->cancelWork();
     self->send(std::make_shared<const std::vector<uint8_t>>(encodeBye(reason)));
     self->state_ = State::Closing;
     self->closingSince_ = Clock::now();
@@ -80,47 +88,57 @@ Session::Snapshot Session::snapshot() const {
 void Session::read() {
   socket_.async_read_some(
       asio::buffer(readBuffer_),
-      asio::bind_executor(strand_, [self = shared_from_this()](const boost::system::error_code& ec, size_t n) {
-        if (self->state_ == State::Closed) return;
-        if (ec) {
-          if (self->decoder_.buffered() > 0)
-            spdlog::warn("session {}: connection lost in the middle of a frame ({} bytes buffered): {}", self->id_,
-                         self->decoder_.buffered(), ec.message());
-          self->close(ec == asio::error::eof ? "client closed the connection" : "read error");
-          return;
-        }
-        self->lastInbound_ = Clock::now();
-        if (!self->decoder_.feed(std::span<const uint8_t>(self->readBuffer_.data(), n))) {
-          const bool tooLarge = self->decoder_.error().find("exceeds") != std::string::npos;
-          self->fail(tooLarge ? ErrorCode::FrameTooLarge : ErrorCode::MalformedFrame, self->decoder_.error());
-          return;
-        }
-        while (self->state_ == State::AwaitHello || self->state_ == State::Active) {
-          auto frame = self->decoder_.next();
-          if (!frame) {
-            if (self->decoder_.failed()) self->fail(ErrorCode::MalformedFrame, self->decoder_.error());
-            break;
-          }
-          // Inbound rate limit over one-second windows.
-          const auto now = Clock::now();
-          if (now - self->windowStart_ >= std::chrono::seconds(1)) {
-            self->windowStart_ = now;
-            self->framesInWindow_ = 0;
-          }
-          if (++self->framesInWindow_ > self->server_.config().maxFramesPerSecond) {
-            self->fail(ErrorCode::RateLimited,
-                       fmt::format("more than {} frames per second", self->server_.config().maxFramesPerSecond));
-            break;
-          }
-          self->onFrame(*envelopeOf(*frame));
-        }
-        if (self->state_ == State::AwaitHello || self->state_ == State::Active) self->read();
-      }));
+      asio::bind_executor(
+          strand_, [self = shared_from_this()](const boost::system::error_code& ec, size_t n) {
+            if (self->state_ == State::Closed) return;
+            if (ec) {
+              if (self->decoder_.buffered() > 0)
+                self->server_.peerWarnings().warn(
+                    "session {}: connection lost in the middle of a frame ({} bytes buffered): {}",
+                    self->id_, self->decoder_.buffered(), ec.message());
+              self->close(ec == asio::error::eof ? "client closed the connection" : "read error");
+              return;
+            }
+            self->onBytes(std::span<const uint8_t>(self->readBuffer_.data(), n));
+            if (self->state_ == State::AwaitHello || self->state_ == State::Active) self->read();
+          }));
+}
+
+void Session::onBytes(std::span<const uint8_t> bytes) {
+  const auto errorCode = [this] {
+    return decoder_.errorKind() == FrameError::TooLarge ? ErrorCode::FrameTooLarge
+                                                        : ErrorCode::MalformedFrame;
+  };
+  if (!decoder_.feed(bytes)) return fail(errorCode(), decoder_.error());
+  const auto now = Clock::now();
+  unsigned frames = 0;
+  while (state_ == State::AwaitHello || state_ == State::Active) {
+    auto frame = decoder_.next();
+    if (!frame) {
+      if (decoder_.failed()) return fail(errorCode(), decoder_.error());
+      break;
+    }
+    ++frames;
+    lastInbound_ = now;  // the idle timeout counts whole frames, not bytes
+    // Inbound rate limit over one-second windows.
+    if (now - windowStart_ >= std::chrono::seconds(1)) {
+      windowStart_ = now;
+      framesInWindow_ = 0;
+    }
+    if (++framesInWindow_ > server_.config().maxFramesPerSecond)
+      return fail(ErrorCode::RateLimited, fmt::format("more than {} frames per second",
+                                                      server_.config().maxFramesPerSecond));
+    onFrame(*envelopeOf(*frame));
+  }
+  // A frame has a deadline from its first byte (housekeeping checks it).
+  if (frames > 0 || !midFrame_) frameStarted_ = now;
+  midFrame_ = decoder_.buffered() > 0;
 }
 
 void Session::onFrame(const Envelope& envelope) {
   switch (envelope.payload_type()) {
-    case Payload::Hello: return onHello(*envelope.payload_as_Hello());
+    case Payload::Hello:
+      return onHello(*envelope.payload_as_Hello());
     case Payload::Pose:
       if (state_ != State::Active) return fail(ErrorCode::OutOfOrder, "Pose before Hello");
       return onPose(*envelope.payload_as_Pose());
@@ -128,17 +146,20 @@ void Session::onFrame(const Envelope& envelope) {
       if (state_ != State::Active) return fail(ErrorCode::OutOfOrder, "PvsRequest before Hello");
       return onPvsRequest(*envelope.payload_as_PvsRequest());
     case Payload::Bye:
-      spdlog::info("session {}: client said bye", id_);
+      spdlog::debug("session {}: client said bye", id_);
       return close("bye");
     case Payload::Error: {
       const auto* e = envelope.payload_as_Error();
-      spdlog::warn("session {}: client reported error {}: {}", id_, int(e->code()),
-                   e->text() ? e->text()->str() : std::string());
+      server_.peerWarnings().warn("session {}: client reported error {}: {}", id_, int(e->code()),
+                                  e->text() ? e->text()->str() : std::string());
       return close("client error");
     }
     default:
-      return fail(ErrorCode::OutOfOrder,
-                  fmt::format("{} is a server-to-client message", payloadName(envelope.payload_type())));
+      if (envelope.payload_type() > Payload::MAX || envelope.payload_type() == Payload::NONE)
+        return fail(ErrorCode::MalformedFrame,
+                    fmt::format("unknown payload type {}", unsigned(envelope.payload_type())));
+      return fail(ErrorCode::OutOfOrder, fmt::format("{} is a server-to-client message",
+                                                     payloadName(envelope.payload_type())));
   }
 }
 
@@ -147,14 +168,16 @@ void Session::onHello(const Hello& hello) {
   if (state_ != State::AwaitHello) return fail(ErrorCode::OutOfOrder, "second Hello");
   if (hello.protocol_version() != kProtocolVersion)
     return fail(ErrorCode::UnsupportedVersion,
-                fmt::format("protocol version {} is not supported (server speaks {})", hello.protocol_version(),
-                            kProtocolVersion));
-  if (!cfg.token.empty() && !sameToken(hello.auth_token() ? hello.auth_token()->str() : std::string(), cfg.token))
+                fmt::format("protocol version {} is not supported (server speaks {})",
+                            hello.protocol_version(), kProtocolVersion));
+  if (!cfg.token.empty() &&
+      !sameToken(hello.auth_token() ? hello.auth_token()->str() : std::string(), cfg.token))
     return fail(ErrorCode::BadToken, "bad auth token");
   radius_ = cfg.defaultRadius;
   if (const Capabilities* caps = hello.capabilities()) {
     const float r = caps->near_field_radius_m();
-    if (!std::isfinite(r) || r < 0.0f) return fail(ErrorCode::BadRequest, "near_field_radius_m must be finite and >= 0");
+    if (!std::isfinite(r) || r < 0.0f)
+      return fail(ErrorCode::BadRequest, "near_field_radius_m must be finite and >= 0");
     if (r > 0.0f) radius_ = std::min(r, cfg.maxRadius);
     budget_ = caps->memory_budget_bytes();
     wantsGeometry_ = caps->wants_geometry();
@@ -198,11 +221,30 @@ void Session::onHello(const Hello& hello) {
 }
 
 void Session::onPose(const Pose& pose) {
-  if (!isFinite(pose.position()) || !std::isfinite(pose.yaw_deg()) || !std::isfinite(pose.pitch_deg()) ||
-      (pose.velocity() && !isFinite(pose.velocity())))
-    return fail(ErrorCode::BadRequest, "Pose with a missing or non-finite position, orientation or velocity");
-  position_ = fromWire(*pose.position());
-  velocity_ = pose.velocity() ? fromWire(*pose.velocity()) : glm::vec3(0.0f);
+  const StreamServerConfig& cfg = server_.config();
+  if (!isFinite(pose.position()) || !std::isfinite(pose.yaw_deg()) ||
+      !std::isfinite(pose.pitch_deg()) || (pose.velocity() && !isFinite(pose.velocity())))
+    return fail(ErrorCode::BadRequest,
+                "Pose with a missing or non-finite position, orientation or velocity");
+  // Plausibility: everything below samples the client's neighbourhood, so a
+  // position far outside the scene or an absurd speed is refused outright.
+  const glm::dvec3 p = fromWire(*pose.position());
+  const Box3f bounds = world_.scene().bounds();
+  const glm::dvec3 lo = glm::dvec3(bounds.lo) - cfg.poseMarginM,
+                   hi = glm::dvec3(bounds.hi) + cfg.poseMarginM;
+  if (bounds.empty() || glm::any(glm::lessThan(p, lo)) || glm::any(glm::greaterThan(p, hi)))
+    return fail(ErrorCode::BadRequest, fmt::format("Pose.position ({:.6g}, {:.6g}, {:.6g}) lies "
+                                                   "more than {:.0f} m outside the scene's bounds",
+                                                   p.x, p.y, p.z, cfg.poseMarginM));
+  const glm::vec3 v = pose.velocity() ? fromWire(*pose.velocity()) : glm::vec3(0.0f);
+  const double speed = glm::length(glm::dvec3(v));  // in double: a float's square may overflow
+  if (!(speed <= cfg.maxSpeedMps))
+    return fail(ErrorCode::BadRequest,
+                fmt::format("Pose.velocity: a speed of {:.6g} m/s exceeds the server's limit of "
+                            "{:.6g} m/s",
+                            speed, cfg.maxSpeedMps));
+  position_ = p;
+  velocity_ = v;
   yaw_ = pose.yaw_deg();
   pitch_ = pose.pitch_deg();
   const auto cell = world_.cellOf(glm::vec3(position_));
@@ -225,10 +267,13 @@ void Session::onPvsRequest(const PvsRequest& request) {
     const glm::ivec3 c = request.cell() ? fromWire(*request.cell()) : glm::ivec3(-1);
     if (world_.grid().contains(c)) cell = c;
   } else if (isFinite(request.point())) {
-    const glm::vec3 p(fromWire(*request.point()));
-    const glm::vec3 rel = (p - world_.grid().origin()) / world_.grid().cellSize();
-    const glm::ivec3 c(glm::floor(rel));
-    if (world_.grid().contains(c)) cell = c;
+    const glm::dvec3 rel = (fromWire(*request.point()) - glm::dvec3(world_.grid().origin())) /
+                           glm::dvec3(world_.grid().cellSize());
+    const glm::dvec3 f = glm::floor(rel);
+    // In double, and range-checked before the conversion to int.
+    if (glm::all(glm::greaterThanEqual(f, glm::dvec3(0.0))) &&
+        glm::all(glm::lessThan(f, glm::dvec3(world_.grid().dims()))))
+      cell = glm::ivec3(f);
   }
   const uint32_t requestId = request.request_id();
   if (!cell) {
@@ -237,22 +282,59 @@ void Session::onPvsRequest(const PvsRequest& request) {
     reply.found = false;
     return send(std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(reply))));
   }
-  world_.pvs(*cell, server_.workers(), [self = shared_from_this(), requestId, c = *cell](FaceListPtr faces) {
-    PvsReplyT reply;
-    reply.request_id = requestId;
-    reply.cell = std::make_unique<CellIndex>(toWire(c));
-    reply.face_ids = *faces;
-    reply.found = true;
-    auto frame = std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(reply)));
-    asio::post(self->strand_, [self, frame] {
-      if (self->state_ == State::Active) self->send(frame);
-    });
-  });
+  const StreamServerConfig& cfg = server_.config();
+  if (pvsWaiting_.size() >= cfg.maxPvsRequestsWaiting)
+    return fail(ErrorCode::RateLimited,
+                fmt::format("more than {} PvsRequests waiting for their replies",
+                            cfg.maxPvsRequestsWaiting));
+  pvsWaiting_.push_back({requestId, *cell});
+  dispatchPvsRequests();
+}
+
+void Session::dispatchPvsRequests() {
+  while (state_ == State::Active && pvsInFlight_ < server_.config().maxPvsRequestsInFlight &&
+         !pvsWaiting_.empty()) {
+    const PendingPvs r = pvsWaiting_.front();
+    pvsWaiting_.pop_front();
+    ++pvsInFlight_;
+    world_.pvs(
+        r.cell, server_.workers(),
+        [self = shared_from_this(), r](FaceListPtr faces) {
+          std::shared_ptr<const std::vector<uint8_t>> frame;
+          if (faces) {
+            PvsReplyT reply;
+            reply.request_id = r.requestId;
+            reply.cell = std::make_unique<CellIndex>(toWire(r.cell));
+            reply.face_ids = *faces;
+            reply.found = true;
+            frame = std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(reply)));
+          }
+          asio::post(self->strand_, [self, frame, r] {
+            --self->pvsInFlight_;
+            if (self->state_ != State::Active) return;
+            if (!frame)
+              return self->fail(ErrorCode::Internal,
+                                fmt::format("the PVS of cell ({}, {}, {}) could not be computed",
+                                            r.cell.x, r.cell.y, r.cell.z));
+            self->send(frame);
+            self->dispatchPvsRequests();
+          });
+        },
+        pvsInterest_);
+  }
+}
+
+void Session::cancelWork() {
+  requested_.clear();
+  pvsWaiting_.clear();
+  pvsInterest_.reset();
 }
 
 void Session::fail(ErrorCode code, const std::string& text) {
   if (state_ == State::Closed || state_ == State::Closing) return;
-  spdlog::warn("session {}: {} ({}); closing it", id_, text, EnumNameErrorCode(code));
+  server_.peerWarnings().warn("session {}: {} ({}); closing it", id_, text,
+                              EnumNameErrorCode(code));
+  cancelWork();
   send(std::make_shared<const std::vector<uint8_t>>(encodeError(code, text)));
   state_ = State::Closing;
   closingSince_ = Clock::now();
@@ -266,6 +348,7 @@ void Session::close(const char* why) {
   socket_.shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
   socket_.close(ignored);
   housekeepingTimer_.cancel();
+  cancelWork();
   queue_.clear();
   queued_ = 0;
   queuedAtomic_ = 0;
@@ -282,7 +365,8 @@ void Session::send(std::shared_ptr<const std::vector<uint8_t>> frame) {
   queuedAtomic_ = queued_;
   queue_.push_back(std::move(frame));
   if (queued_ > server_.config().sendQueueLimitBytes) {
-    spdlog::warn("session {}: client is not reading ({} bytes queued); closing it", id_, queued_);
+    server_.peerWarnings().warn("session {}: client is not reading ({} bytes queued); closing it",
+                                id_, queued_);
     close("not reading");
     return;
   }
@@ -293,33 +377,44 @@ void Session::writeNext() {
   if (writing_ || queue_.empty() || state_ == State::Closed) return;
   writing_ = true;
   writeStarted_ = Clock::now();
-  asio::async_write(socket_, asio::buffer(*queue_.front()),
-                    asio::bind_executor(strand_, [self = shared_from_this()](const boost::system::error_code& ec, size_t n) {
-                      self->writing_ = false;
-                      if (self->state_ == State::Closed) return;
-                      if (ec) return self->close("write error");
-                      self->bytesSent_ += n;
-                      self->server_.countSent(n);
-                      self->queued_ -= self->queue_.front()->size();
-                      self->queuedAtomic_ = self->queued_;
-                      self->queue_.pop_front();
-                      if (self->state_ == State::Closing && self->queue_.empty()) return self->close("closing");
-                      self->writeNext();
-                      self->pump();
-                    }));
+  asio::async_write(
+      socket_, asio::buffer(*queue_.front()),
+      asio::bind_executor(
+          strand_, [self = shared_from_this()](const boost::system::error_code& ec, size_t n) {
+            self->writing_ = false;
+            if (self->state_ == State::Closed) return;
+            if (ec) return self->close("write error");
+            self->bytesSent_ += n;
+            self->server_.countSent(n);
+            self->queued_ -= self->queue_.front()->size();
+            self->queuedAtomic_ = self->queued_;
+            self->queue_.pop_front();
+            if (self->state_ == State::Closing && self->queue_.empty())
+              return self->close("closing");
+            self->writeNext();
+            self->pump();
+          }));
 }
 
 void Session::housekeeping() {
   if (state_ == State::Closed) return;
   const StreamServerConfig& cfg = server_.config();
   const auto now = Clock::now();
-  if (state_ == State::Closing && seconds(now - closingSince_) > 2.0) return close("closing timed out");
+  if (state_ == State::Closing && seconds(now - closingSince_) > 2.0)
+    return close("closing timed out");
   if (state_ == State::AwaitHello && seconds(now - started_) > cfg.helloTimeoutS)
     return fail(ErrorCode::Timeout, fmt::format("no Hello within {:.1f} s", cfg.helloTimeoutS));
   if (state_ == State::Active && seconds(now - lastInbound_) > cfg.idleTimeoutS)
-    return fail(ErrorCode::Timeout, fmt::format("nothing received for {:.1f} s", cfg.idleTimeoutS));
+    return fail(ErrorCode::Timeout,
+                fmt::format("no whole frame received for {:.1f} s", cfg.idleTimeoutS));
+  if ((state_ == State::AwaitHello || state_ == State::Active) && midFrame_ &&
+      seconds(now - frameStarted_) > cfg.frameTimeoutS)
+    return fail(ErrorCode::Timeout,
+                fmt::format("a frame begun {:.1f} s ago is still incomplete ({} bytes buffered)",
+                            seconds(now - frameStarted_), decoder_.buffered()));
   if (writing_ && seconds(now - writeStarted_) > cfg.writeStallTimeoutS) {
-    spdlog::warn("session {}: a write has not finished in {:.1f} s; closing it", id_, cfg.writeStallTimeoutS);
+    server_.peerWarnings().warn("session {}: a write has not finished in {:.1f} s; closing it", id_,
+                                cfg.writeStallTimeoutS);
     return close("write stalled");
   }
   if (state_ == State::Active && seconds(now - lastClientStats_) >= cfg.clientStatsIntervalS) {
@@ -336,9 +431,10 @@ void Session::housekeeping() {
   }
   pump();  // the bandwidth bucket refills
   housekeepingTimer_.expires_after(std::chrono::milliseconds(100));
-  housekeepingTimer_.async_wait(asio::bind_executor(strand_, [self = shared_from_this()](const boost::system::error_code& ec) {
-    if (!ec) self->housekeeping();
-  }));
+  housekeepingTimer_.async_wait(asio::bind_executor(
+      strand_, [self = shared_from_this()](const boost::system::error_code& ec) {
+        if (!ec) self->housekeeping();
+      }));
 }
 
 // ---- streaming ------------------------------------------------------------------
@@ -365,19 +461,25 @@ void Session::updateNeededCells() {
     const uint32_t l = uint32_t(grid.linearIndex(c));
     if (std::find(needed.begin(), needed.end(), l) == needed.end()) needed.push_back(l);
   };
-  // Ahead along the velocity, then the ring around the current cell.
-  const float speed = glm::length(velocity_);
+  // Ahead along the velocity, then the ring around the current cell. The
+  // speed is below --max-speed (onPose) and the samples are at most
+  // kMaxPrefetchSteps, spaced half a cell or more.
+  const StreamServerConfig& cfg = server_.config();
+  const float speed = float(std::min(double(glm::length(velocity_)), cfg.maxSpeedMps));
   if (speed > 1e-3f) {
-    const float step = 0.5f * std::min(grid.cellSize().x, grid.cellSize().z);
-    const double horizon = server_.config().prefetchSeconds * speed;
-    for (double d = step; d <= horizon; d += step)
-      if (auto c = world_.cellOf(glm::vec3(position_) + velocity_ / speed * float(d))) add(*c);
+    const double horizon = cfg.prefetchSeconds * speed;
+    const double step =
+        std::max(0.5 * std::min(grid.cellSize().x, grid.cellSize().z), horizon / kMaxPrefetchSteps);
+    const glm::vec3 direction = glm::normalize(velocity_);
+    for (int i = 1; i <= kMaxPrefetchSteps && double(i) * step <= horizon; ++i)
+      if (auto c = world_.cellOf(glm::vec3(position_) + direction * float(double(i) * step)))
+        add(*c);
   }
   // Neighbours the client could step into before their face sets would
   // arrive: those whose shared side or corner lies within the margin.
   const Box3f box = grid.cellBox(cell_);
   const glm::vec3 p(position_);
-  const float margin = std::max(2.0f, float(server_.config().prefetchSeconds) * std::max(speed, 1.4f));
+  const float margin = std::max(2.0f, float(cfg.prefetchSeconds) * std::max(speed, 1.4f));
   for (int dz = -1; dz <= 1; ++dz)
     for (int dx = -1; dx <= 1; ++dx) {
       const bool nearX = dx == 0 || (dx < 0 ? p.x - box.lo.x : box.hi.x - p.x) <= margin;
@@ -394,26 +496,48 @@ void Session::updateNeededCells() {
       ++it;
     }
   }
+  // Cells no longer needed are cancelled (newest pose wins); then the
+  // needed ones are requested in order, a bounded number at a time.
+  for (auto it = requested_.begin(); it != requested_.end();)
+    it = std::find(needed_.begin(), needed_.end(), it->first) == needed_.end()
+             ? requested_.erase(it)
+             : std::next(it);
   for (uint32_t l : needed_) {
+    if (requested_.size() >= cfg.maxCellRequests) break;
     if (cellSets_.count(l) || requested_.count(l)) continue;
-    requested_.insert(l);
-    world_.cellFaceSet(grid.cellAt(l), server_.config().policy, radius_, server_.workers(),
-                       [self = shared_from_this(), l](FaceListPtr faces) {
-                         asio::post(self->strand_, [self, l, faces] {
-                           self->requested_.erase(l);
-                           if (std::find(self->needed_.begin(), self->needed_.end(), l) == self->needed_.end()) return;
-                           self->cellSets_[l] = faces;
-                           self->cursor_[l] = 0;
-                           self->pump();
-                         });
-                       });
+    Interest interest = makeInterest();
+    requested_[l] = interest;
+    world_.cellFaceSet(
+        grid.cellAt(l), cfg.policy, radius_, server_.workers(),
+        [self = shared_from_this(), l](FaceListPtr faces) {
+          asio::post(self->strand_, [self, l, faces] {
+            // A result nobody asked for any more (cancelled, or answered
+            // already through a request that joined the same computation).
+            if (self->requested_.erase(l) == 0 || self->state_ != State::Active) return;
+            if (!faces) {
+              const glm::ivec3 c = self->world_.grid().cellAt(l);
+              return self->fail(
+                  ErrorCode::Internal,
+                  fmt::format("the face set of cell ({}, {}, {}) could not be computed", c.x, c.y,
+                              c.z));
+            }
+            if (std::find(self->needed_.begin(), self->needed_.end(), l) == self->needed_.end())
+              return;
+            self->cellSets_[l] = faces;
+            self->cursor_[l] = 0;
+            self->pump();
+          });
+        },
+        interest);
   }
 }
 
 void Session::maybeCull() {
-  if (server_.config().policy != StreamPolicy::Visibility || cullingInFlight_ || needed_.empty()) return;
+  if (server_.config().policy != StreamPolicy::Visibility || cullingInFlight_ || needed_.empty())
+    return;
   const auto it = cellSets_.find(needed_.front());
-  if (it == cellSets_.end() || cursor_[it->first] >= it->second->size()) return;  // not loaded, or complete
+  if (it == cellSets_.end() || cursor_[it->first] >= it->second->size())
+    return;  // not loaded, or complete
   // A new current cell is culled at once; the same cell again at most every 250 ms.
   const auto now = Clock::now();
   if (culledCell_ == it->first && seconds(now - lastCull_) < 0.25) return;
@@ -426,11 +550,12 @@ void Session::maybeCull() {
     o.collectFaces = true;
     viewer_ = std::make_unique<CullingViewer>(world_.culling(), o);
   }
-  asio::post(server_.workers(), [self = shared_from_this(), eye = position_, yaw = yaw_, pitch = pitch_,
-                                 set = it->second, cell = it->first] {
+  asio::post(server_.workers(), [self = shared_from_this(), eye = position_, yaw = yaw_,
+                                 pitch = pitch_, set = it->second, cell = it->first] {
     const FrameResult r = self->viewer_->frame(eye, yaw, pitch);
     FaceList visible;
-    std::set_intersection(r.faces.begin(), r.faces.end(), set->begin(), set->end(), std::back_inserter(visible));
+    std::set_intersection(r.faces.begin(), r.faces.end(), set->begin(), set->end(),
+                          std::back_inserter(visible));
     asio::post(self->strand_, [self, visible = std::move(visible), cell]() mutable {
       self->cullingInFlight_ = false;
       self->visibleNow_ = std::move(visible);
@@ -494,7 +619,8 @@ void Session::maybeEvict() {
   for (size_t w = 0; w < held_.size(); ++w)
     for (uint64_t bits = held_[w]; bits; bits &= bits - 1) {
       const uint32_t f = uint32_t(w * 64 + size_t(__builtin_ctzll(bits)));
-      if (!keep[f]) candidates.emplace_back(glm::length(world_.faceCentre(f) - glm::vec3(position_)), f);
+      if (!keep[f])
+        candidates.emplace_back(glm::length(world_.faceCentre(f) - glm::vec3(position_)), f);
     }
   if (candidates.empty()) return;
   std::sort(candidates.begin(), candidates.end(), std::greater<>());
@@ -522,11 +648,14 @@ void Session::pump() {
   // goes first. (maybeCull starts the culling of a new current cell at once;
   // its result pumps again.)
   if (needed_.empty() || !cellSets_.count(needed_.front())) return;
-  if (cfg.policy == StreamPolicy::Visibility && visibleNowCell_ != needed_.front() && cullingInFlight_) return;
+  if (cfg.policy == StreamPolicy::Visibility && visibleNowCell_ != needed_.front() &&
+      cullingInFlight_)
+    return;
   if (cfg.maxClientKbps > 0.0) {
     const auto now = Clock::now();
     const double rate = cfg.maxClientKbps * 1000.0 / 8.0;  // bytes per second
-    tokens_ = std::min(std::max(rate * 0.25, double(cfg.batchBytes)), tokens_ + rate * seconds(now - lastRefill_));
+    tokens_ = std::min(std::max(rate * 0.25, double(cfg.batchBytes)),
+                       tokens_ + rate * seconds(now - lastRefill_));
     lastRefill_ = now;
     if (tokens_ <= 0.0) return;  // housekeeping pumps again as the bucket refills
   }

@@ -11,19 +11,27 @@
 //
 // Every handler runs on the session's strand; work for the worker pool
 // captures a shared_ptr to the session and posts its result back.
+//
+// What a client can make the server do is bounded: every loop driven by a
+// client's values has a fixed number of steps (prefetch samples at most
+// kMaxPrefetchSteps points along the velocity, which must be below
+// --max-speed), implausible poses are refused, at most maxCellRequests cell
+// face sets and maxPvsRequestsInFlight PvsRequests are outstanding on the
+// shared worker pool (the rest wait here, bounded, or are refused), and a
+// session that moves on or ends cancels what it no longer needs.
 #pragma once
 
+#include <array>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/steady_timer.hpp>
 #include <boost/asio/strand.hpp>
-
-#include <array>
 #include <chrono>
 #include <deque>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <set>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -67,6 +75,11 @@ class Session : public std::enable_shared_from_this<Session> {
   void onHello(const wire::Hello& hello);
   void onPose(const wire::Pose& pose);
   void onPvsRequest(const wire::PvsRequest& request);
+  void dispatchPvsRequests();
+  void onBytes(std::span<const uint8_t> bytes);
+  // Drops every interest in visibility work: queued computations nobody
+  // else waits for are not run.
+  void cancelWork();
   void fail(wire::ErrorCode code, const std::string& text);
   void close(const char* why);
   void send(std::shared_ptr<const std::vector<uint8_t>> frame);
@@ -92,12 +105,15 @@ class Session : public std::enable_shared_from_this<Session> {
   State state_ = State::AwaitHello;
   wire::FrameDecoder decoder_;
   std::array<uint8_t, 16384> readBuffer_{};
+  bool midFrame_ = false;           // part of a frame is buffered
+  Clock::time_point frameStarted_;  // when its first byte arrived
 
   std::deque<std::shared_ptr<const std::vector<uint8_t>>> queue_;
   size_t queued_ = 0;
   std::atomic<size_t> queuedAtomic_{0};
   bool writing_ = false;
-  Clock::time_point writeStarted_, lastInbound_, started_, closingSince_, lastClientStats_, windowStart_;
+  Clock::time_point writeStarted_, lastInbound_, started_, closingSince_, lastClientStats_,
+      windowStart_;
   unsigned framesInWindow_ = 0;
   uint64_t bytesSent_ = 0;
 
@@ -119,12 +135,21 @@ class Session : public std::enable_shared_from_this<Session> {
   std::vector<uint64_t> held_;
   uint64_t heldBytes_ = 0;
   uint32_t heldCount_ = 0;
-  std::vector<uint32_t> needed_;                   // linear cell indices, current first
-  std::map<uint32_t, FaceListPtr> cellSets_;       // loaded face sets of needed cells
-  std::map<uint32_t, size_t> cursor_;              // per loaded cell: faces before this index are held
-  std::set<uint32_t> requested_, announced_;
+  std::vector<uint32_t> needed_;              // linear cell indices, current first
+  std::map<uint32_t, FaceListPtr> cellSets_;  // loaded face sets of needed cells
+  std::map<uint32_t, size_t> cursor_;         // per loaded cell: faces before this index are held
+  std::map<uint32_t, Interest> requested_;    // face sets being computed (at most maxCellRequests)
+  std::set<uint32_t> announced_;
+  struct PendingPvs {
+    uint32_t requestId;
+    glm::ivec3 cell;
+  };
+  std::deque<PendingPvs> pvsWaiting_;
+  unsigned pvsInFlight_ = 0;
+  Interest pvsInterest_ = makeInterest();
   FaceList visibleNow_;
-  uint32_t culledCell_ = UINT32_MAX, visibleNowCell_ = UINT32_MAX;  // cell of the culling in flight / of visibleNow_
+  uint32_t culledCell_ = UINT32_MAX,
+           visibleNowCell_ = UINT32_MAX;  // cell of the culling in flight / of visibleNow_
   bool cullingInFlight_ = false, produceInFlight_ = false;
   Clock::time_point lastCull_;
   std::unique_ptr<CullingViewer> viewer_;

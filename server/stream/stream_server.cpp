@@ -1,10 +1,10 @@
 #include "server/stream/stream_server.h"
 
-#include <boost/asio/post.hpp>
-#include <boost/asio/signal_set.hpp>
 #include <spdlog/spdlog.h>
 #include <sys/resource.h>
 
+#include <boost/asio/post.hpp>
+#include <boost/asio/signal_set.hpp>
 #include <unordered_map>
 
 #include "common/core/error.h"
@@ -28,10 +28,13 @@ double processCpuMs() {
 StreamServer::StreamServer(StreamWorld& world, StreamServerConfig config)
     : world_(world),
       config_(std::move(config)),
-      workers_(config_.workerThreads ? config_.workerThreads : std::max(1u, std::thread::hardware_concurrency())),
+      workers_(config_.workerThreads ? config_.workerThreads
+                                     : std::max(1u, std::thread::hardware_concurrency())),
       acceptor_(io_),
       avatarTimer_(io_),
-      statsTimer_(io_) {}
+      statsTimer_(io_),
+      acceptRetryTimer_(io_),
+      maxClients_(config_.maxClients) {}
 
 StreamServer::~StreamServer() {
   stop();
@@ -47,49 +50,111 @@ void StreamServer::start() {
   if (!ec) acceptor_.set_option(tcp::acceptor::reuse_address(true), ec);
   if (!ec) acceptor_.bind(endpoint, ec);
   if (!ec) acceptor_.listen(asio::socket_base::max_listen_connections, ec);
-  if (ec) throwInputError("cannot listen on {}:{}: {}", config_.bindAddress, config_.port, ec.message());
+  if (ec)
+    throwInputError("cannot listen on {}:{}: {}", config_.bindAddress, config_.port, ec.message());
   port_ = acceptor_.local_endpoint().port();
+  fitOpenFileLimit();
   lastStats_ = std::chrono::steady_clock::now();
   lastCpuMs_ = processCpuMs();
-  spdlog::info("vistream-server listening on {}:{} ({} policy{}, {} I/O threads)", config_.bindAddress, port_,
-               streamPolicyName(config_.policy), config_.pvsOnly ? ", PVS only" : "", config_.ioThreads);
+  spdlog::info("vistream-server listening on {}:{} ({} policy{}, {} I/O threads)",
+               config_.bindAddress, port_, streamPolicyName(config_.policy),
+               config_.pvsOnly ? ", PVS only" : "", config_.ioThreads);
   accept();
   avatarTick();
   statsTick();
 }
 
+// Every session holds one descriptor, and the server needs a few of its own
+// (listening socket, signal and timer plumbing, files, a rejected client's
+// socket while its Error is written): without them accept() fails with
+// EMFILE. Raise the soft limit as far as the hard one allows; what still
+// does not fit lowers the maximum, and the log says so.
+void StreamServer::fitOpenFileLimit() {
+  constexpr rlim_t kReserve = 64;
+  const rlim_t need = rlim_t(config_.maxClients) + kReserve;
+  rlimit limit{};
+  if (getrlimit(RLIMIT_NOFILE, &limit) != 0 || limit.rlim_cur == RLIM_INFINITY ||
+      limit.rlim_cur >= need)
+    return;
+  const rlim_t before = limit.rlim_cur;
+  rlimit raised = limit;
+  raised.rlim_cur = limit.rlim_max == RLIM_INFINITY ? need : std::min(need, limit.rlim_max);
+  if (raised.rlim_cur > before && setrlimit(RLIMIT_NOFILE, &raised) == 0) limit = raised;
+  if (limit.rlim_cur >= need) {
+    spdlog::info("raised the open-file limit from {} to {} for --max-clients {}", before,
+                 limit.rlim_cur, config_.maxClients);
+    return;
+  }
+  maxClients_ = limit.rlim_cur > 2 * kReserve ? size_t(limit.rlim_cur - kReserve)
+                                              : size_t(limit.rlim_cur / 2);
+  spdlog::warn(
+      "the open-file limit is {} (hard limit {}): --max-clients lowered from {} to {}",
+      limit.rlim_cur,
+      limit.rlim_max == RLIM_INFINITY ? std::string("none") : std::to_string(limit.rlim_max),
+      config_.maxClients, maxClients_);
+}
+
 void StreamServer::accept() {
-  acceptor_.async_accept(asio::make_strand(io_), [this](const boost::system::error_code& ec, tcp::socket socket) {
-    if (ec) {
-      if (ec != asio::error::operation_aborted) spdlog::warn("accept: {}", ec.message());
-      if (!stopping_ && acceptor_.is_open()) accept();
-      return;
-    }
-    boost::system::error_code ignored;
-    socket.set_option(tcp::no_delay(true), ignored);
-    uint32_t id;
-    bool full;
-    {
-      std::lock_guard lock(sessionsMutex_);
-      id = nextId_++;
-      full = sessions_.size() >= config_.maxClients;
-    }
-    auto session = std::make_shared<Session>(*this, std::move(socket), id);
-    if (full || stopping_) {
-      ++rejected_;
-      session->reject(wire::ErrorCode::TooManyClients,
-                      stopping_ ? std::string("server is shutting down")
-                                : fmt::format("the server takes at most {} clients", config_.maxClients));
-    } else {
-      ++accepted_;
-      {
-        std::lock_guard lock(sessionsMutex_);
-        sessions_[id] = session;
-      }
-      session->start();
-    }
-    if (!stopping_) accept();
-  });
+  acceptor_.async_accept(
+      asio::make_strand(io_), [this](const boost::system::error_code& ec, tcp::socket socket) {
+        if (ec) {
+          if (ec == asio::error::operation_aborted || stopping_ || !acceptor_.is_open()) return;
+          // Out of descriptors: retrying at once would spin (and log) in a tight
+          // loop until a session ends. Back off, 10 ms doubling to 1 s.
+          const bool outOfDescriptors = ec == boost::system::errc::too_many_files_open ||
+                                        ec == boost::system::errc::too_many_files_open_in_system ||
+                                        ec == boost::system::errc::not_enough_memory ||
+                                        ec == boost::system::errc::no_buffer_space;
+          peerWarnings_.warn("accept: {}{}", ec.message(), outOfDescriptors ? "; backing off" : "");
+          if (!outOfDescriptors) return accept();
+          acceptBackoff_ = std::min<std::chrono::milliseconds>(
+              std::chrono::seconds(1), std::max<std::chrono::milliseconds>(
+                                           std::chrono::milliseconds(10), 2 * acceptBackoff_));
+          acceptRetryTimer_.expires_after(acceptBackoff_);
+          acceptRetryTimer_.async_wait([this](const boost::system::error_code& e) {
+            if (!e && !stopping_) accept();
+          });
+          return;
+        }
+        acceptBackoff_ = std::chrono::milliseconds(0);
+        boost::system::error_code ignored;
+        socket.set_option(tcp::no_delay(true), ignored);
+        const auto remote = socket.remote_endpoint(ignored);
+        const asio::ip::address address = remote.address();
+        uint32_t id;
+        std::string refusal;
+        {
+          std::lock_guard lock(sessionsMutex_);
+          id = nextId_++;
+          if (stopping_)
+            refusal = "server is shutting down";
+          else if (sessions_.size() >= maxClients_)
+            refusal = fmt::format("the server takes at most {} clients", maxClients_);
+          else if (config_.maxClientsPerAddress > 0 &&
+                   perAddress_[address] >= config_.maxClientsPerAddress)
+            refusal = fmt::format("the server takes at most {} clients from one address",
+                                  config_.maxClientsPerAddress);
+          if (refusal.empty()) {
+            ++perAddress_[address];
+            addressOf_[id] = address;
+          } else if (perAddress_.count(address) && perAddress_[address] == 0) {
+            perAddress_.erase(address);
+          }
+        }
+        auto session = std::make_shared<Session>(*this, std::move(socket), id);
+        if (!refusal.empty()) {
+          ++rejected_;
+          session->reject(wire::ErrorCode::TooManyClients, refusal);
+        } else {
+          ++accepted_;
+          {
+            std::lock_guard lock(sessionsMutex_);
+            sessions_[id] = session;
+          }
+          session->start();
+        }
+        if (!stopping_) accept();
+      });
 }
 
 void StreamServer::sessionEnded(uint32_t id) {
@@ -98,6 +163,10 @@ void StreamServer::sessionEnded(uint32_t id) {
     ++ended_;
     departed_.push_back(id);
   }
+  if (auto it = addressOf_.find(id); it != addressOf_.end()) {
+    if (--perAddress_[it->second] == 0) perAddress_.erase(it->second);
+    addressOf_.erase(it);
+  }
 }
 
 size_t StreamServer::sessionCount() const {
@@ -105,7 +174,9 @@ size_t StreamServer::sessionCount() const {
   return sessions_.size();
 }
 
-StreamServer::Counters StreamServer::counters() const { return {accepted_, rejected_, ended_, bytesSent_}; }
+StreamServer::Counters StreamServer::counters() const {
+  return {accepted_, rejected_, ended_, bytesSent_};
+}
 
 void StreamServer::avatarTick() {
   if (stopping_ || config_.avatarHz <= 0.0) return;
@@ -147,7 +218,8 @@ void StreamServer::avatarTick() {
         a->pitch_deg = y.pitchDeg;
         message.avatars.push_back(std::move(a));
       }
-      live[i]->deliverAvatars(std::make_shared<const std::vector<uint8_t>>(wire::encodeMessage(std::move(message))));
+      live[i]->deliverAvatars(
+          std::make_shared<const std::vector<uint8_t>>(wire::encodeMessage(std::move(message))));
     }
   });
   avatarTimer_.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
@@ -164,6 +236,7 @@ void StreamServer::statsTick() {
   const double cpu = processCpuMs();
   if (dt > 0.0) cpuMsPerS_ = (cpu - lastCpuMs_) / dt;
   sinceLog_ += dt;
+  peerWarnings_.flush();
   if (sinceLog_ >= config_.statsIntervalS) {
     sinceLog_ = 0.0;
     size_t sessions = 0, queueSum = 0, queueMax = 0;
@@ -178,11 +251,15 @@ void StreamServer::statsTick() {
     }
     const uint64_t bytes = bytesSent_;
     const auto cs = world_.cacheStats();
-    const double hitRate = cs.hits + cs.misses ? double(cs.hits) / double(cs.hits + cs.misses) : 0.0;
-    spdlog::info("stats: {} sessions, {:.1f} kB/s out, cache hit rate {:.1f}% ({} PVS computed, {} from the database), "
-                 "queues {:.1f} kB total / {:.1f} kB max, CPU {:.0f}%",
-                 sessions, double(bytes - lastBytes_) / 1e3 / config_.statsIntervalS, 100.0 * hitRate, cs.pvsComputed,
-                 cs.pvsFromDatabase, double(queueSum) / 1e3, double(queueMax) / 1e3, cpuMsPerS_ / 10.0);
+    const double hitRate =
+        cs.hits + cs.misses ? double(cs.hits) / double(cs.hits + cs.misses) : 0.0;
+    spdlog::info(
+        "stats: {} sessions, {:.1f} kB/s out, cache hit rate {:.1f}% ({} PVS computed, {} from the "
+        "database, "
+        "{} cancelled unstarted), queues {:.1f} kB total / {:.1f} kB max, CPU {:.0f}%",
+        sessions, double(bytes - lastBytes_) / 1e3 / config_.statsIntervalS, 100.0 * hitRate,
+        cs.pvsComputed, cs.pvsFromDatabase, cs.cancelled, double(queueSum) / 1e3,
+        double(queueMax) / 1e3, cpuMsPerS_ / 10.0);
     lastBytes_ = bytes;
   }
   lastStats_ = now;
@@ -200,6 +277,7 @@ void StreamServer::stop() {
     acceptor_.close(ignored);
     avatarTimer_.cancel();
     statsTimer_.cancel();
+    acceptRetryTimer_.cancel();
     std::vector<std::shared_ptr<Session>> live;
     {
       std::lock_guard lock(sessionsMutex_);
@@ -224,11 +302,12 @@ void StreamServer::run(bool handleSignals) {
     });
   }
   std::vector<std::thread> threads;
-  for (unsigned i = 1; i < std::max(1u, config_.ioThreads); ++i) threads.emplace_back([this] { io_.run(); });
+  for (unsigned i = 1; i < std::max(1u, config_.ioThreads); ++i)
+    threads.emplace_back([this] { io_.run(); });
   io_.run();
   for (auto& t : threads) t.join();
-  spdlog::info("vistream-server stopped: {} sessions served, {} rejected, {:.1f} MB sent", accepted_.load(),
-               rejected_.load(), double(bytesSent_) / 1e6);
+  spdlog::info("vistream-server stopped: {} sessions served, {} rejected, {:.1f} MB sent",
+               accepted_.load(), rejected_.load(), double(bytesSent_) / 1e6);
 }
 
 }  // namespace vistream

@@ -13,12 +13,11 @@
 // frame limit, the send queue limit and the client's memory budget.
 #pragma once
 
+#include <atomic>
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/steady_timer.hpp>
 #include <boost/asio/thread_pool.hpp>
-
-#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <map>
@@ -28,36 +27,50 @@
 #include <thread>
 #include <vector>
 
+#include "common/core/log.h"
 #include "server/stream/stream_world.h"
 
 namespace vistream {
 
 struct StreamServerConfig {
   std::string bindAddress = "127.0.0.1";
-  uint16_t port = 7070;              // 0: any free port (see StreamServer::port())
+  uint16_t port = 7070;  // 0: any free port (see StreamServer::port())
   unsigned ioThreads = 2;
-  unsigned workerThreads = 0;        // 0: hardware concurrency
+  unsigned workerThreads = 0;  // 0: hardware concurrency
   size_t maxClients = 1000;
-  std::string token;                 // empty: no authentication
-  bool pvsOnly = false;              // answer PvsRequest only, send no geometry
+  std::string token;     // empty: no authentication
+  bool pvsOnly = false;  // answer PvsRequest only, send no geometry
   StreamPolicy policy = StreamPolicy::Visibility;
-  float defaultRadius = 200.0f;      // near-field radius when the client names none (metres)
+  float defaultRadius = 200.0f;  // near-field radius when the client names none (metres)
   float maxRadius = 2000.0f;
-  double maxClientKbps = 0.0;        // 0: unlimited
-  double prefetchSeconds = 3.0;      // look-ahead along the client's velocity, and the
-                                     // neighbour margin (this long at walking speed, at least 2 m)
+  double maxClientKbps = 0.0;    // 0: unlimited
+  double prefetchSeconds = 3.0;  // look-ahead along the client's velocity, and the
+                                 // neighbour margin (this long at walking speed, at least 2 m)
   double avatarHz = 2.0;
-  size_t maxAvatars = 16;            // nearest visible avatars per update
-  double statsIntervalS = 5.0;       // the server's log line
-  double clientStatsIntervalS = 2.0; // Stats frames to each client
+  size_t maxAvatars = 16;             // nearest visible avatars per update
+  double statsIntervalS = 5.0;        // the server's log line
+  double clientStatsIntervalS = 2.0;  // Stats frames to each client
   uint32_t maxInboundFrameBytes = 64u << 10;
-  size_t sendQueueLimitBytes = 8u << 20;   // beyond this the client is not reading: closed
+  size_t sendQueueLimitBytes = 8u << 20;       // beyond this the client is not reading: closed
   size_t geometryWatermarkBytes = 256u << 10;  // produce geometry only below this queue depth
-  size_t batchBytes = 48u << 10;     // raw face bytes per Geometry frame
+  size_t batchBytes = 48u << 10;               // raw face bytes per Geometry frame
   double helloTimeoutS = 5.0;
   double idleTimeoutS = 60.0;
   double writeStallTimeoutS = 20.0;
   unsigned maxFramesPerSecond = 400;
+  double frameTimeoutS = 10.0;      // a frame must be whole this long after its first byte
+  size_t maxClientsPerAddress = 0;  // sessions at once from one IP address (0: no limit; behind
+                                    // a proxy every client has the proxy's address)
+  // Plausible poses. A Pose faster than this, or farther than the margin
+  // outside the scene's bounds, gets BadRequest naming the field.
+  double maxSpeedMps = 100.0;
+  double poseMarginM = 1000.0;
+  // Visibility work a session may have outstanding on the shared worker
+  // pool: cell face sets (the newest pose wins, stale ones are cancelled)
+  // and PvsRequests (computed two at a time, a bounded number waiting).
+  unsigned maxCellRequests = 3;
+  unsigned maxPvsRequestsInFlight = 2;
+  size_t maxPvsRequestsWaiting = 64;
 };
 
 class Session;
@@ -84,6 +97,12 @@ class StreamServer {
   void countSent(size_t bytes) { bytesSent_ += bytes; }
   double cpuMsPerSecond() const { return cpuMsPerS_; }
   size_t sessionCount() const;
+  // The limiter for warnings any peer can trigger (a refused or failed
+  // session): a client that churns connections cannot flood the log.
+  LogLimiter& peerWarnings() { return peerWarnings_; }
+  // The configured maximum, or lower when the open-file limit does not
+  // allow it (see start()).
+  size_t maxClients() const { return maxClients_; }
 
   struct Counters {
     uint64_t accepted = 0, rejected = 0, ended = 0, bytesSent = 0;
@@ -91,6 +110,7 @@ class StreamServer {
   Counters counters() const;
 
  private:
+  void fitOpenFileLimit();
   void accept();
   void avatarTick();
   void statsTick();
@@ -100,10 +120,16 @@ class StreamServer {
   boost::asio::io_context io_;
   boost::asio::thread_pool workers_;
   boost::asio::ip::tcp::acceptor acceptor_;
-  boost::asio::steady_timer avatarTimer_, statsTimer_;
+  boost::asio::steady_timer avatarTimer_, statsTimer_, acceptRetryTimer_;
   uint16_t port_ = 0;
-  mutable std::mutex sessionsMutex_;
+  size_t maxClients_ = 0;
+  std::chrono::milliseconds acceptBackoff_{0};
+  LogLimiter peerWarnings_{"session warning"};
+  mutable std::mutex
+      sessionsMutex_;  // guards sessions_, addressOf_, perAddress_, departed_, nextId_
   std::map<uint32_t, std::weak_ptr<Session>> sessions_;
+  std::map<uint32_t, boost::asio::ip::address> addressOf_;
+  std::map<boost::asio::ip::address, size_t> perAddress_;
   std::vector<uint32_t> departed_;  // sessions ended since the last avatar update
   uint32_t nextId_ = 1;
   std::atomic<bool> stopping_{false};

@@ -19,7 +19,9 @@ StreamPolicy parseStreamPolicy(const std::string& name) {
   throwInputError("--policy: expected visibility or radius, got '{}'", name);
 }
 
-const char* streamPolicyName(StreamPolicy p) { return p == StreamPolicy::Visibility ? "visibility" : "radius"; }
+const char* streamPolicyName(StreamPolicy p) {
+  return p == StreamPolicy::Visibility ? "visibility" : "radius";
+}
 
 namespace {
 
@@ -30,14 +32,16 @@ float boxDistance(const Box3f& a, const Box3f& b) {
 
 }  // namespace
 
-StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options) : scene_(std::move(scene)) {
+StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
+    : scene_(std::move(scene)) {
   Stopwatch clock;
   if (!options.pvsDatabase.empty()) {
     database_.emplace(PvsDatabase::open(options.pvsDatabase));
     const PvsDatabaseHeader& h = database_->header();
     if (h.sceneFingerprint != sceneFingerprint(scene_) || h.sceneFaces != scene_.faceCount)
-      throwInputError("--pvs-db {}: baked for scene '{}' ({} faces), not for this scene '{}' ({} faces)",
-                      options.pvsDatabase.string(), h.sceneName, h.sceneFaces, scene_.name, scene_.faceCount);
+      throwInputError(
+          "--pvs-db {}: baked for scene '{}' ({} faces), not for this scene '{}' ({} faces)",
+          options.pvsDatabase.string(), h.sceneName, h.sceneFaces, scene_.name, scene_.faceCount);
     grid_ = h.grid();
   } else {
     if (!(options.cellSize > 0.0f)) throwInputError("--cell-size must be positive");
@@ -59,7 +63,8 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options) : scene
       const uint32_t id = o.mesh.faceIds[t];
       if (id >= faces_.size()) continue;
       wire::FaceTriangles& f = faces_[id];
-      f.material = uint16_t(t < o.mesh.materials.size() ? std::min<uint32_t>(o.mesh.materials[t], 65535) : 0);
+      f.material = uint16_t(
+          t < o.mesh.materials.size() ? std::min<uint32_t>(o.mesh.materials[t], 65535) : 0);
       for (int k = 0; k < 3; ++k) {
         const glm::vec3 p = o.mesh.positions[o.mesh.triangles[t][k]];
         f.corners.push_back(p);
@@ -72,7 +77,8 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options) : scene
   if (!b.empty()) {
     bucketSize_ = std::max(8.0f, std::max(b.hi.x - b.lo.x, b.hi.z - b.lo.z) / 512.0f);
     bucketLo_ = {b.lo.x, b.lo.z};
-    buckets_ = glm::ivec2(int((b.hi.x - b.lo.x) / bucketSize_) + 1, int((b.hi.z - b.lo.z) / bucketSize_) + 1);
+    buckets_ = glm::ivec2(int((b.hi.x - b.lo.x) / bucketSize_) + 1,
+                          int((b.hi.z - b.lo.z) / bucketSize_) + 1);
     bucketFaces_.resize(size_t(buckets_.x) * size_t(buckets_.y));
     for (uint32_t id = 0; id < faceBoxes_.size(); ++id) {
       const Box3f& fb = faceBoxes_[id];
@@ -82,13 +88,19 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options) : scene
       const int z0 = std::clamp(int((fb.lo.z - bucketLo_.y) / bucketSize_), 0, buckets_.y - 1);
       const int z1 = std::clamp(int((fb.hi.z - bucketLo_.y) / bucketSize_), 0, buckets_.y - 1);
       for (int z = z0; z <= z1; ++z)
-        for (int x = x0; x <= x1; ++x) bucketFaces_[size_t(z) * size_t(buckets_.x) + size_t(x)].push_back(id);
+        for (int x = x0; x <= x1; ++x)
+          bucketFaces_[size_t(z) * size_t(buckets_.x) + size_t(x)].push_back(id);
     }
   }
-  pvsCache_ = std::make_unique<AsyncCache<uint32_t, FaceList>>(options.pvsCacheCells,
-                                                               [this](const uint32_t& c) { return computePvs(c); });
+  pvsCache_ = std::make_unique<AsyncCache<uint32_t, FaceList>>(
+      options.pvsCacheCells, [this](const uint32_t& c) { return computePvs(c); },
+      [this](const uint32_t& c, const char* what) {
+        const glm::ivec3 i = grid_.cellAt(c);
+        spdlog::error("PVS of cell ({}, {}, {}) failed: {}", i.x, i.y, i.z, what);
+      });
   faceSetCache_ = std::make_unique<AsyncCache<FaceSetKey, FaceList, FaceSetKeyHash>>(
-      options.faceSetCacheEntries, [this](const FaceSetKey& k) {
+      options.faceSetCacheEntries,
+      [this](const FaceSetKey& k) {
         const Box3f box = grid_.cellBox(grid_.cellAt(k.cell));
         FaceList near = facesWithin(box, float(k.radiusCm) / 100.0f);
         if (k.policy == StreamPolicy::Radius) return near;
@@ -96,12 +108,20 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options) : scene
         const FaceList computed = pvs ? FaceList{} : computePvs(k.cell);
         const FaceList& p = pvs ? *pvs : computed;
         FaceList out;
-        std::set_intersection(p.begin(), p.end(), near.begin(), near.end(), std::back_inserter(out));
+        std::set_intersection(p.begin(), p.end(), near.begin(), near.end(),
+                              std::back_inserter(out));
         return out;
+      },
+      [this](const FaceSetKey& k, const char* what) {
+        const glm::ivec3 i = grid_.cellAt(k.cell);
+        spdlog::error("face set of cell ({}, {}, {}) failed: {}", i.x, i.y, i.z, what);
       });
-  spdlog::info("stream world: scene '{}' ({} faces), {} x {} x {} cells of {:.1f} m, PVS {}, ready in {:.0f} ms",
-               scene_.name, scene_.faceCount, grid_.dims().x, grid_.dims().y, grid_.dims().z, grid_.cellSize().x,
-               database_ ? "from " + database_->path().string() : std::string("on demand"), clock.ms());
+  spdlog::info(
+      "stream world: scene '{}' ({} faces), {} x {} x {} cells of {:.1f} m, PVS {}, ready in "
+      "{:.0f} ms",
+      scene_.name, scene_.faceCount, grid_.dims().x, grid_.dims().y, grid_.dims().z,
+      grid_.cellSize().x,
+      database_ ? "from " + database_->path().string() : std::string("on demand"), clock.ms());
 }
 
 StreamWorld::~StreamWorld() = default;
@@ -117,9 +137,18 @@ const EpsilonPvs& StreamWorld::epsilonPvs() {
 
 FaceList StreamWorld::computePvs(uint32_t linear) {
   if (database_) {
-    if (auto faces = database_->cell(linear)) {
-      ++pvsFromDatabase_;
-      return std::move(*faces);
+    // The database is validated when opened; should a cell still fail to
+    // decode, it is computed on demand (and said once) rather than lost.
+    try {
+      if (auto faces = database_->cell(linear)) {
+        ++pvsFromDatabase_;
+        return std::move(*faces);
+      }
+    } catch (const std::exception& e) {
+      std::call_once(databaseFailureLogged_, [&] {
+        spdlog::error("{}: {}; serving such cells by on-demand computation",
+                      database_->path().string(), e.what());
+      });
     }
   }
   return epsilonPvs().compute(grid_.cellBox(grid_.cellAt(linear))).faces;
@@ -131,32 +160,50 @@ std::optional<glm::ivec3> StreamWorld::cellOf(const glm::vec3& p) const {
   return glm::clamp(glm::ivec3(glm::floor(rel)), glm::ivec3(0), grid_.dims() - 1);
 }
 
-void StreamWorld::pvs(const glm::ivec3& cell, boost::asio::thread_pool& pool, std::function<void(FaceListPtr)> done) {
-  pvsCache_->get(uint32_t(grid_.linearIndex(cell)), pool.get_executor(), std::move(done));
+void StreamWorld::pvs(const glm::ivec3& cell, boost::asio::thread_pool& pool,
+                      std::function<void(FaceListPtr)> done, const Interest& interest) {
+  pvsCache_->get(uint32_t(grid_.linearIndex(cell)), pool.get_executor(), std::move(done), interest);
 }
 
-FaceListPtr StreamWorld::cachedPvs(const glm::ivec3& cell) { return pvsCache_->find(uint32_t(grid_.linearIndex(cell))); }
+FaceListPtr StreamWorld::cachedPvs(const glm::ivec3& cell) {
+  return pvsCache_->find(uint32_t(grid_.linearIndex(cell)));
+}
 
-void StreamWorld::cellFaceSet(const glm::ivec3& cell, StreamPolicy policy, float radius, boost::asio::thread_pool& pool,
-                              std::function<void(FaceListPtr)> done) {
-  const FaceSetKey key{uint32_t(grid_.linearIndex(cell)), uint32_t(std::lround(std::max(0.0f, radius) * 100.0f)), policy};
+void StreamWorld::cellFaceSet(const glm::ivec3& cell, StreamPolicy policy, float radius,
+                              boost::asio::thread_pool& pool, std::function<void(FaceListPtr)> done,
+                              const Interest& interest) {
+  const FaceSetKey key{uint32_t(grid_.linearIndex(cell)),
+                       uint32_t(std::lround(std::max(0.0f, radius) * 100.0f)), policy};
   if (policy == StreamPolicy::Radius) {
-    faceSetCache_->get(key, pool.get_executor(), std::move(done));
+    faceSetCache_->get(key, pool.get_executor(), std::move(done), interest);
     return;
   }
   // The PVS first (shared with PvsRequest and avatars), then the face set.
-  pvs(cell, pool, [this, key, &pool, done = std::move(done)](FaceListPtr) mutable {
-    faceSetCache_->get(key, pool.get_executor(), std::move(done));
-  });
+  // The continuation holds the interest only weakly, so dropping it also
+  // cancels the second stage.
+  pvs(
+      cell, pool,
+      [this, key, &pool, done = std::move(done), weak = std::weak_ptr<const int>(interest),
+       unconditional = interest == nullptr](FaceListPtr p) mutable {
+        if (!p) return done(nullptr);
+        Interest still = weak.lock();
+        if (!unconditional && !still) return;  // cancelled between the stages
+        faceSetCache_->get(key, pool.get_executor(), std::move(done), still);
+      },
+      interest);
 }
 
 FaceList StreamWorld::facesWithin(const Box3f& box, float radius) const {
   FaceList out;
   if (bucketFaces_.empty()) return out;
-  const int x0 = std::clamp(int((box.lo.x - radius - bucketLo_.x) / bucketSize_), 0, buckets_.x - 1);
-  const int x1 = std::clamp(int((box.hi.x + radius - bucketLo_.x) / bucketSize_), 0, buckets_.x - 1);
-  const int z0 = std::clamp(int((box.lo.z - radius - bucketLo_.y) / bucketSize_), 0, buckets_.y - 1);
-  const int z1 = std::clamp(int((box.hi.z + radius - bucketLo_.y) / bucketSize_), 0, buckets_.y - 1);
+  const int x0 =
+      std::clamp(int((box.lo.x - radius - bucketLo_.x) / bucketSize_), 0, buckets_.x - 1);
+  const int x1 =
+      std::clamp(int((box.hi.x + radius - bucketLo_.x) / bucketSize_), 0, buckets_.x - 1);
+  const int z0 =
+      std::clamp(int((box.lo.z - radius - bucketLo_.y) / bucketSize_), 0, buckets_.y - 1);
+  const int z1 =
+      std::clamp(int((box.hi.z + radius - bucketLo_.y) / bucketSize_), 0, buckets_.y - 1);
   for (int z = z0; z <= z1; ++z)
     for (int x = x0; x <= x1; ++x)
       for (uint32_t id : bucketFaces_[size_t(z) * size_t(buckets_.x) + size_t(x)])
@@ -167,7 +214,8 @@ FaceList StreamWorld::facesWithin(const Box3f& box, float radius) const {
 }
 
 bool StreamWorld::cellSeesCell(const glm::ivec3& viewerCell, const glm::ivec3& avatarCell) {
-  const uint64_t key = (uint64_t(grid_.linearIndex(viewerCell)) << 32) | uint64_t(grid_.linearIndex(avatarCell));
+  const uint64_t key =
+      (uint64_t(grid_.linearIndex(viewerCell)) << 32) | uint64_t(grid_.linearIndex(avatarCell));
   {
     std::lock_guard lock(cellPairsMutex_);
     if (auto it = cellPairs_.find(key); it != cellPairs_.end()) return it->second;
@@ -186,7 +234,8 @@ bool StreamWorld::cellSeesCell(const glm::ivec3& viewerCell, const glm::ivec3& a
 
 StreamWorld::CacheStats StreamWorld::cacheStats() const {
   return {pvsCache_->hits() + faceSetCache_->hits(), pvsCache_->misses() + faceSetCache_->misses(),
-          pvsCache_->computed(), pvsFromDatabase_};
+          pvsCache_->computed(), pvsFromDatabase_,
+          pvsCache_->cancelled() + faceSetCache_->cancelled()};
 }
 
 }  // namespace vistream

@@ -13,7 +13,6 @@
 #pragma once
 
 #include <boost/asio/thread_pool.hpp>
-
 #include <filesystem>
 #include <memory>
 #include <mutex>
@@ -59,7 +58,9 @@ class StreamWorld {
   uint32_t faceCount() const { return scene_.faceCount; }
   const wire::FaceTriangles& face(uint32_t id) const { return faces_[id]; }
   // What a client holding the face stores: its decoded triangles and ID.
-  uint32_t faceBytes(uint32_t id) const { return uint32_t(faces_[id].corners.size() * sizeof(glm::vec3) + 8); }
+  uint32_t faceBytes(uint32_t id) const {
+    return uint32_t(faces_[id].corners.size() * sizeof(glm::vec3) + 8);
+  }
   glm::vec3 faceCentre(uint32_t id) const { return faceBoxes_[id].center(); }
 
   // The cell holding a local-frame point (clamped to the grid), or nothing
@@ -67,11 +68,17 @@ class StreamWorld {
   std::optional<glm::ivec3> cellOf(const glm::vec3& p) const;
 
   // The PVS of a cell (all faces, no radius), asynchronously on `pool`.
-  void pvs(const glm::ivec3& cell, boost::asio::thread_pool& pool, std::function<void(FaceListPtr)> done);
+  // With an interest, the request lapses (no computation, no callback) once
+  // the interest has expired before the computation started (async_cache.h).
+  // `done` receives null if the computation failed (logged), never throws.
+  void pvs(const glm::ivec3& cell, boost::asio::thread_pool& pool,
+           std::function<void(FaceListPtr)> done, const Interest& interest = nullptr);
   FaceListPtr cachedPvs(const glm::ivec3& cell);
-  // The faces a cell streams under a policy and radius, asynchronously.
-  void cellFaceSet(const glm::ivec3& cell, StreamPolicy policy, float radius, boost::asio::thread_pool& pool,
-                   std::function<void(FaceListPtr)> done);
+  // The faces a cell streams under a policy and radius, asynchronously; the
+  // same interest and failure rules as pvs().
+  void cellFaceSet(const glm::ivec3& cell, StreamPolicy policy, float radius,
+                   boost::asio::thread_pool& pool, std::function<void(FaceListPtr)> done,
+                   const Interest& interest = nullptr);
   // Faces whose bounding box lies within `radius` of the box (sorted).
   FaceList facesWithin(const Box3f& box, float radius) const;
   // Whether an avatar anywhere in view cell `avatarCell` may be visible from
@@ -85,6 +92,7 @@ class StreamWorld {
 
   struct CacheStats {
     uint64_t hits = 0, misses = 0, pvsComputed = 0, pvsFromDatabase = 0;
+    uint64_t cancelled = 0;  // computations dropped unstarted: nobody waited any more
   };
   CacheStats cacheStats() const;
   bool hasDatabase() const { return database_.has_value(); }
@@ -120,6 +128,7 @@ class StreamWorld {
   std::unique_ptr<AsyncCache<uint32_t, FaceList>> pvsCache_;
   std::unique_ptr<AsyncCache<FaceSetKey, FaceList, FaceSetKeyHash>> faceSetCache_;
   std::atomic<uint64_t> pvsFromDatabase_{0};
+  std::once_flag databaseFailureLogged_;
   std::mutex cellPairsMutex_;
   std::unordered_map<uint64_t, bool> cellPairs_;
 };

@@ -1,14 +1,25 @@
 // End-to-end tests of vistream-server and vistream-loadtest as a user runs
 // them: a server configured from a file, clients walking a path over TCP,
-// the load tester's JSON contract, and SIGTERM stopping the server cleanly.
+// the load tester's JSON contract, SIGTERM stopping the server cleanly, and
+// the load tester failing (exit 1, in bounded time) against servers that
+// accept connections but serve nothing.
+#include <fmt/format.h>
 #include <gtest/gtest.h>
+#include <sys/wait.h>
 
+#include <atomic>
+#include <boost/asio.hpp>
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <thread>
+#include <vector>
 
+#include "protocol/wire/messages.h"
 #include "tests/common/support/box_scenes.h"
 #include "tests/common/support/run_tool.h"
 #include "tests/common/support/temp_dir.h"
@@ -16,8 +27,124 @@
 namespace {
 
 namespace fs = std::filesystem;
+namespace asio = boost::asio;
+using asio::ip::tcp;
 using vistream::testing::runTool;
 using vistream::testing::ToolRun;
+
+// A TCP server on 127.0.0.1 (an ephemeral port) that accepts every
+// connection and then serves nothing: `Silent` never reads or sends a byte;
+// `WelcomeThenSilent` reads the client's first bytes (its Hello), answers with
+// one valid Welcome, built as vistream-server builds it, and then neither
+// reads nor sends again. Connections stay open until the server is destroyed.
+class StallingServer {
+ public:
+  enum class Behaviour { Silent, WelcomeThenSilent };
+
+  explicit StallingServer(Behaviour behaviour)
+      : behaviour_(behaviour),
+        acceptor_(io_, tcp::endpoint(asio::ip::make_address("127.0.0.1"), 0)) {
+    port_ = acceptor_.local_endpoint().port();
+    accept();
+    thread_ = std::thread([this] { io_.run(); });
+  }
+  ~StallingServer() {
+    io_.stop();
+    thread_.join();
+  }
+  StallingServer(const StallingServer&) = delete;
+  StallingServer& operator=(const StallingServer&) = delete;
+
+  uint16_t port() const { return port_; }
+  size_t welcomesSent() const { return welcomesSent_.load(); }
+
+ private:
+  // A grid of 8 x 1 x 8 cells of 10 m around the origin, 100 faces.
+  static std::vector<uint8_t> welcomeFrame() {
+    namespace wire = vistream::wire;
+    wire::WelcomeT w;
+    w.protocol_version = wire::kProtocolVersion;
+    w.scene_id = "stalling";
+    w.session_id = 1;
+    w.bounds_min = std::make_unique<wire::Vec3d>(-40.0, 0.0, -40.0);
+    w.bounds_max = std::make_unique<wire::Vec3d>(40.0, 10.0, 40.0);
+    w.local_origin = std::make_unique<wire::Vec3d>(0.0, 0.0, 0.0);
+    w.grid = std::make_unique<wire::CellGridT>();
+    w.grid->origin = std::make_unique<wire::Vec3f>(-40.0f, 0.0f, -40.0f);
+    w.grid->cell_size = std::make_unique<wire::Vec3f>(10.0f, 10.0f, 10.0f);
+    w.grid->dims = std::make_unique<wire::CellIndex>(8, 1, 8);
+    w.face_count = 100;
+    w.near_field_radius_m = 60.0f;
+    w.policy = "visibility";
+    return wire::encodeMessage(std::move(w));
+  }
+
+  void accept() {
+    acceptor_.async_accept([this](const boost::system::error_code& ec, tcp::socket socket) {
+      if (ec) return;
+      auto s = std::make_shared<tcp::socket>(std::move(socket));
+      sockets_.push_back(s);
+      if (behaviour_ == Behaviour::WelcomeThenSilent) {
+        auto hello = std::make_shared<std::vector<uint8_t>>(4096);
+        s->async_read_some(
+            asio::buffer(*hello), [this, s, hello](const boost::system::error_code& rec, size_t) {
+              if (rec) return;
+              auto frame = std::make_shared<std::vector<uint8_t>>(welcomeFrame());
+              asio::async_write(*s, asio::buffer(*frame),
+                                [this, s, frame](const boost::system::error_code& wec, size_t) {
+                                  if (!wec) ++welcomesSent_;
+                                });
+            });
+      }
+      accept();
+    });
+  }
+
+  Behaviour behaviour_;
+  asio::io_context io_;
+  tcp::acceptor acceptor_;
+  uint16_t port_ = 0;
+  std::vector<std::shared_ptr<tcp::socket>> sockets_;  // only touched on io_'s thread
+  std::atomic<size_t> welcomesSent_{0};
+  std::thread thread_;
+};
+
+// Generous slack for the upper bounds on run time below: they catch a load
+// tester that hangs, not a slow one (the test machine is noisy).
+constexpr double kSlackS = 10.0;
+
+// A 10 m walk inside the stalling server's grid.
+constexpr const char* kShortWalk = "t,x,y,z,yaw_deg,pitch_deg\n0,0,1.7,0,0,0\n4,0,1.7,10,0,0\n";
+
+struct TimedRun {
+  ToolRun run;  // status 124 or 137: killed by timeout(1) at the bound
+  double seconds = 0.0;
+  nlohmann::json json;  // discarded if stdout is not one JSON object
+};
+
+// Runs vistream-loadtest with `args` and times it. A run longer than
+// `boundS` + 2 s is killed (timeout(1)), so a load tester that hangs fails
+// the test instead of hanging it.
+TimedRun timedLoadTest(const vistream::testing::TempDir& dir, const std::string& args,
+                       double boundS) {
+  TimedRun t;
+  const fs::path errFile = dir.path() / "loadtest.err";
+  const std::string cmd = fmt::format("timeout -k 1 {:.0f} {}/vistream-loadtest {} 2>{}",
+                                      boundS + 2.0, VISTREAM_BIN_DIR, args, errFile.string());
+  const auto start = std::chrono::steady_clock::now();
+  FILE* pipe = ::popen(cmd.c_str(), "r");
+  if (!pipe) return t;
+  char buf[4096];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, pipe)) > 0) t.run.out.append(buf, n);
+  const int status = ::pclose(pipe);
+  t.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  t.run.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  std::ifstream err(errFile);
+  t.run.err.assign(std::istreambuf_iterator<char>(err), {});
+  t.json = nlohmann::json::parse(t.run.out, nullptr, false);
+  return t;
+}
 
 // A street: ground, two rows of boxes, a wall at the end.
 std::string streetObj() {
@@ -71,13 +198,118 @@ TEST(StreamTools, AServerFromAConfigFileServesWalkingClientsAndStopsOnSigterm) {
     EXPECT_TRUE(j.contains(key)) << key;
   for (const char* key : {"p50", "p95", "p99"}) EXPECT_TRUE(j["cell_ready_latency_ms"].contains(key)) << key;
   EXPECT_EQ(j["clients"], 3);
-  EXPECT_EQ(j["errors"], 0);
+  EXPECT_EQ(j["errors"], 0) << j.dump();
   EXPECT_EQ(j["clients_loaded"], 3);
+  EXPECT_EQ(j["clients_not_loaded"], 0);
+  EXPECT_EQ(j["clients_cut_off"], 0);
+  EXPECT_EQ(j["cut_off_clients"], nlohmann::json::array());
+  EXPECT_EQ(j["errors_by_reason"], nlohmann::json::object());
+  EXPECT_EQ(j["failed_clients"], nlohmann::json::array());
+  EXPECT_EQ(j["first_error"], "");
   EXPECT_GT(j["frames_checked"].get<int>(), 0);
   EXPECT_EQ(j["visibility_misses"], 0);
   EXPECT_GT(j["bytes_per_client_per_s"].get<double>(), 0.0);
   // SIGTERM: the server said goodbye and exited (no process left).
   EXPECT_EQ(sh("kill -0 $(cat " + d + "/pid) 2>/dev/null && echo alive || echo gone"), "gone\n");
+}
+
+TEST(StreamTools, ALoadTestAgainstAServerThatNeverAnswersFailsAndEndsAtTheDeadline) {
+  StallingServer server(StallingServer::Behaviour::Silent);
+  vistream::testing::TempDir dir;
+  const fs::path path = dir.write("walk.csv", kShortWalk);
+  // The connect timeout (10 s) is longer than the run: the deadline
+  // (duration 1 s + grace 2 s) must end it.
+  const double bound = 1.0 + 2.0 + kSlackS;  // --duration + --grace + slack
+  const TimedRun t =
+      timedLoadTest(dir,
+                    "--port " + std::to_string(server.port()) + " --clients 3 --path " +
+                        path.string() + " --duration 1 --grace 2 --connect-timeout 10 --json",
+                    bound);
+  EXPECT_EQ(t.run.status, 1) << t.run.err;
+  EXPECT_LT(t.seconds, bound);
+  EXPECT_NE(t.run.err.find("vistream-loadtest: error: 3 of 3 clients failed"), std::string::npos)
+      << t.run.err;
+  ASSERT_FALSE(t.json.is_discarded()) << t.run.out;
+  const auto& j = t.json;
+  EXPECT_EQ(j["clients_loaded"], 0);
+  EXPECT_EQ(j["clients_not_loaded"], 3);
+  EXPECT_EQ(j["errors"], 3);
+  EXPECT_EQ(j["errors_by_reason"], nlohmann::json({{"cut_off", 3}}));
+  EXPECT_EQ(j["clients_cut_off"], 3);
+  EXPECT_EQ(j["cut_off_clients"], nlohmann::json({0, 1, 2}));
+  EXPECT_EQ(j["grace_s"], 2.0);
+  EXPECT_EQ(j["first_error"], "cut off at the deadline while waiting for the Welcome");
+  ASSERT_EQ(j["failed_clients"].size(), 3u);
+  EXPECT_EQ(j["failed_clients"][2]["client"], 2);
+  EXPECT_EQ(j["failed_clients"][2]["reason"], "cut_off");
+}
+
+TEST(StreamTools, ALoadTestClientWithoutAWelcomeWithinTheConnectTimeoutFails) {
+  StallingServer server(StallingServer::Behaviour::Silent);
+  vistream::testing::TempDir dir;
+  const fs::path path = dir.write("walk.csv", kShortWalk);
+  const double bound = 1.0 + 5.0 + kSlackS;  // --duration + --grace + slack
+  const TimedRun t =
+      timedLoadTest(dir,
+                    "--port " + std::to_string(server.port()) + " --clients 2 --path " +
+                        path.string() + " --duration 1 --grace 5 --connect-timeout 1 --json",
+                    bound);
+  EXPECT_EQ(t.run.status, 1) << t.run.err;
+  EXPECT_LT(t.seconds, bound);
+  EXPECT_NE(t.run.err.find("vistream-loadtest: error: "), std::string::npos) << t.run.err;
+  ASSERT_FALSE(t.json.is_discarded()) << t.run.out;
+  const auto& j = t.json;
+  EXPECT_EQ(j["clients_loaded"], 0);
+  EXPECT_EQ(j["errors"], 2);
+  EXPECT_EQ(j["errors_by_reason"], nlohmann::json({{"handshake", 2}}));
+  EXPECT_EQ(j["clients_cut_off"], 0);
+  EXPECT_EQ(j["first_error"], "no Welcome within 1 s of connecting");
+}
+
+TEST(StreamTools, ALoadTestAgainstAServerThatWelcomesAndThenStallsFailsWithNoClientLoaded) {
+  StallingServer server(StallingServer::Behaviour::WelcomeThenSilent);
+  vistream::testing::TempDir dir;
+  const fs::path path = dir.write("walk.csv", kShortWalk);
+  const double bound = 1.0 + 2.0 + kSlackS;  // --duration + --grace + slack
+  const TimedRun t =
+      timedLoadTest(dir,
+                    "--port " + std::to_string(server.port()) + " --clients 3 --path " +
+                        path.string() + " --duration 1 --grace 2 --json",
+                    bound);
+  EXPECT_EQ(t.run.status, 1) << t.run.err;
+  EXPECT_LT(t.seconds, bound);
+  EXPECT_EQ(server.welcomesSent(), 3u);
+  EXPECT_NE(t.run.err.find("vistream-loadtest: error: 3 of 3 clients failed (not_loaded 3); 0 of 3 "
+                           "got their initial load"),
+            std::string::npos)
+      << t.run.err;
+  ASSERT_FALSE(t.json.is_discarded()) << t.run.out;
+  const auto& j = t.json;
+  EXPECT_EQ(j["clients_loaded"], 0);
+  EXPECT_EQ(j["clients_not_loaded"], 3);
+  EXPECT_EQ(j["errors"], 3);
+  EXPECT_EQ(j["errors_by_reason"], nlohmann::json({{"not_loaded", 3}}));
+  EXPECT_EQ(j["clients_cut_off"], 0);
+  EXPECT_EQ(j["initial_load_ms"]["count"], 0);
+  EXPECT_EQ(j["faces_received"], 0);
+}
+
+TEST(StreamTools, ALoadTestThatFailedStillPrintsItsTableOnStdout) {
+  StallingServer server(StallingServer::Behaviour::WelcomeThenSilent);
+  vistream::testing::TempDir dir;
+  const fs::path path = dir.write("walk.csv", kShortWalk);
+  const double bound = 1.0 + 2.0 + kSlackS;  // --duration + --grace + slack
+  const TimedRun t =
+      timedLoadTest(dir,
+                    "--port " + std::to_string(server.port()) + " --clients 1 --path " +
+                        path.string() + " --duration 1 --grace 2 --log-level error",
+                    bound);
+  EXPECT_EQ(t.run.status, 1) << t.run.err;
+  EXPECT_NE(t.run.out.find("clients loaded"), std::string::npos) << t.run.out;
+  EXPECT_NE(t.run.out.find("0 of 1"), std::string::npos) << t.run.out;
+  EXPECT_NE(t.run.out.find("not_loaded"), std::string::npos) << t.run.out;
+  EXPECT_EQ(t.run.err.rfind("vistream-loadtest: error: 1 of 1 clients failed", 0), 0u) << t.run.err;
+  EXPECT_EQ(t.run.err.find('\n'), t.run.err.size() - 1) << "one line on stderr: " << t.run.err;
 }
 
 TEST(StreamTools, HelpAndBadArgumentsGiveClearExits) {
@@ -102,6 +334,12 @@ TEST(StreamTools, HelpAndBadArgumentsGiveClearExits) {
   r = runTool("vistream-loadtest", "--clients 0 --path " + dir.write("p.csv", "t,x,y,z,yaw_deg,pitch_deg\n0,0,1.7,0,0,0\n").string());
   EXPECT_EQ(r.status, 1);
   EXPECT_NE(r.err.find("--clients"), std::string::npos) << r.err;
+  r = runTool("vistream-loadtest", "--grace -1 --path " + (dir.path() / "p.csv").string());
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("--grace"), std::string::npos) << r.err;
+  r = runTool("vistream-loadtest", "--connect-timeout 0 --path " + (dir.path() / "p.csv").string());
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("--connect-timeout"), std::string::npos) << r.err;
 }
 
 }  // namespace

@@ -7,8 +7,8 @@
 
 #include <set>
 
-#include "common/raycast/ray_query.h"
 #include "common/generate/path.h"
+#include "common/raycast/ray_query.h"
 #include "common/spatial/free_space.h"
 #include "server/visibility/epsilon_pvs.h"
 #include "server/visibility/pvs_bake.h"
@@ -61,7 +61,8 @@ std::set<uint32_t> expectedFaceSet(const Scene& scene, const Box3f& cell, float 
   std::vector<Box3f> boxes(scene.faceCount);
   for (const Object& o : scene.objects)
     for (size_t t = 0; t < o.mesh.triangles.size(); ++t)
-      for (int k = 0; k < 3; ++k) boxes[o.mesh.faceIds[t]].extend(o.mesh.positions[o.mesh.triangles[t][k]]);
+      for (int k = 0; k < 3; ++k)
+        boxes[o.mesh.faceIds[t]].extend(o.mesh.positions[o.mesh.triangles[t][k]]);
   std::set<uint32_t> out;
   std::vector<uint32_t> candidates;
   if (pvs) {
@@ -70,7 +71,8 @@ std::set<uint32_t> expectedFaceSet(const Scene& scene, const Box3f& cell, float 
     for (uint32_t f = 0; f < scene.faceCount; ++f) candidates.push_back(f);
   }
   for (uint32_t f : candidates) {
-    const glm::vec3 gap = glm::max(glm::vec3(0.0f), glm::max(boxes[f].lo - cell.hi, cell.lo - boxes[f].hi));
+    const glm::vec3 gap =
+        glm::max(glm::vec3(0.0f), glm::max(boxes[f].lo - cell.hi, cell.lo - boxes[f].hi));
     if (glm::length(gap) <= radius) out.insert(f);
   }
   return out;
@@ -130,9 +132,11 @@ TEST(StreamServer, StreamsTheCellsPvsWithinTheRadiusOnceThenSaysCellReady) {
   EXPECT_EQ(held.size(), r.faces.size()) << "a face was sent twice";
   const Scene& scene = fx.world().scene();
   const Box3f box = fx.world().grid().cellBox(cell);
-  for (uint32_t f : expectedFaceSet(scene, box, 40.0f, true)) EXPECT_TRUE(held.count(f)) << "face " << f;
+  for (uint32_t f : expectedFaceSet(scene, box, 40.0f, true))
+    EXPECT_TRUE(held.count(f)) << "face " << f;
   // The independent oracle: every face a ray from the eye hits within the radius is held.
-  for (uint32_t f : facesSeenFrom(scene, glm::vec3(eye), 40.0f)) EXPECT_TRUE(held.count(f)) << "seen face " << f;
+  for (uint32_t f : facesSeenFrom(scene, glm::vec3(eye), 40.0f))
+    EXPECT_TRUE(held.count(f)) << "seen face " << f;
   // Known hidden: the boxes north of the 6 m wall are not sent.
   size_t northHeld = 0;
   for (const Object& o : scene.objects)
@@ -143,7 +147,8 @@ TEST(StreamServer, StreamsTheCellsPvsWithinTheRadiusOnceThenSaysCellReady) {
   std::vector<std::vector<glm::vec3>> corners(scene.faceCount);
   for (const Object& o : scene.objects)
     for (size_t t = 0; t < o.mesh.triangles.size(); ++t)
-      for (int k = 0; k < 3; ++k) corners[o.mesh.faceIds[t]].push_back(o.mesh.positions[o.mesh.triangles[t][k]]);
+      for (int k = 0; k < 3; ++k)
+        corners[o.mesh.faceIds[t]].push_back(o.mesh.positions[o.mesh.triangles[t][k]]);
   for (const auto& g : r.batches) {
     size_t tri = 0;
     for (size_t i = 0; i < g.faces.size(); ++i)
@@ -172,9 +177,11 @@ TEST(StreamServer, FacesSeenFromThePoseArriveBeforeFacesBehindTheViewer) {
   const uint32_t behind = testing::addBox(scene, "behind", {-2, 0, 34}, {2, 3, 38});
   // Enough objects on both sides that the kD-tree separates front and back.
   for (int i = 0; i < 8; ++i)
-    testing::addBox(scene, "ahead_" + std::to_string(i), {-20.0f + 5.0f * float(i), 0, -12}, {-17.0f + 5.0f * float(i), 3, -9});
+    testing::addBox(scene, "ahead_" + std::to_string(i), {-20.0f + 5.0f * float(i), 0, -12},
+                    {-17.0f + 5.0f * float(i), 3, -9});
   for (int i = 0; i < 8; ++i)
-    testing::addBox(scene, "back_" + std::to_string(i), {-20.0f + 5.0f * float(i), 0, 24}, {-17.0f + 5.0f * float(i), 3, 27});
+    testing::addBox(scene, "back_" + std::to_string(i), {-20.0f + 5.0f * float(i), 0, 24},
+                    {-17.0f + 5.0f * float(i), 3, 27});
   finalizeScene(scene);
   scene.name = "ahead";
   StreamServerConfig cfg;
@@ -194,7 +201,8 @@ TEST(StreamServer, FacesSeenFromThePoseArriveBeforeFacesBehindTheViewer) {
   const double th = std::tan(30.0 * 3.14159265358979323846 / 180.0);
   for (int y = 0; y < 24; ++y)
     for (int x = 0; x < 32; ++x) {
-      const glm::vec3 d(float(th * ((x + 0.5) / 16.0 - 1.0)), float(0.75 * th * ((y + 0.5) / 12.0 - 1.0)), -1.0f);
+      const glm::vec3 d(float(th * ((x + 0.5) / 16.0 - 1.0)),
+                        float(0.75 * th * ((y + 0.5) / 12.0 - 1.0)), -1.0f);
       const Hit h = rays->firstHit(Ray{glm::vec3(eye), glm::normalize(d), 0.0f, 60.0f});
       if (h.valid()) seen.insert(tris.faceIds[h.triangle]);
     }
@@ -204,7 +212,8 @@ TEST(StreamServer, FacesSeenFromThePoseArriveBeforeFacesBehindTheViewer) {
     if (r.faces[i] >= behind && r.faces[i] < behind + 6) firstBehind = std::min(firstBehind, i);
   }
   ASSERT_GT(seen.size(), 6u);
-  ASSERT_LT(firstBehind, r.faces.size()) << "the box behind is within the radius and must come eventually";
+  ASSERT_LT(firstBehind, r.faces.size())
+      << "the box behind is within the radius and must come eventually";
   EXPECT_LT(lastSeen, firstBehind) << "a face behind the viewer came before one in view";
 }
 
@@ -221,9 +230,12 @@ TEST(StreamServer, RadiusPolicyStreamsEverythingWithinTheRadiusVisibleOrNot) {
   const Received r = receiveUntilReady(c, cell);
   ASSERT_TRUE(r.ready);
   const std::set<uint32_t> held = r.held();
-  const auto expected = expectedFaceSet(fx.world().scene(), fx.world().grid().cellBox(cell), 40.0f, false);
+  const auto expected =
+      expectedFaceSet(fx.world().scene(), fx.world().grid().cellBox(cell), 40.0f, false);
   for (uint32_t f : expected) EXPECT_TRUE(held.count(f)) << "face " << f;
-  EXPECT_GT(expected.size(), expectedFaceSet(fx.world().scene(), fx.world().grid().cellBox(cell), 40.0f, true).size());
+  EXPECT_GT(
+      expected.size(),
+      expectedFaceSet(fx.world().scene(), fx.world().grid().cellBox(cell), 40.0f, true).size());
 }
 
 TEST(StreamServer, PrefetchesTheCellsAheadSoTheyAreReadyBeforeTheClientArrives) {
@@ -237,7 +249,9 @@ TEST(StreamServer, PrefetchesTheCellsAheadSoTheyAreReadyBeforeTheClientArrives) 
   const glm::ivec3 ahead = *fx.world().cellOf(glm::vec3(eye) + glm::vec3(-4.0f, 0.0f, 0.0f));
   ASSERT_NE(ahead, cell);
   std::set<glm::ivec3, bool (*)(const glm::ivec3&, const glm::ivec3&)> ready(
-      [](const glm::ivec3& a, const glm::ivec3& b) { return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z); });
+      [](const glm::ivec3& a, const glm::ivec3& b) {
+        return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z);
+      });
   for (int i = 0; i < 200 && !(ready.count(ahead) && ready.count(cell)); ++i) {
     auto f = c.next(0.1);
     if (f && wire::envelopeOf(*f)->payload_type() == Payload::CellReady)
@@ -314,7 +328,8 @@ TEST(StreamServer, PvsOnlyModeAnswersRequestsAndSendsNoGeometry) {
   ASSERT_TRUE(reply.found());
   const glm::ivec3 cell = *fx.world().cellOf(glm::vec3(point));
   EXPECT_EQ(wire::fromWire(*reply.cell()), cell);
-  const auto expected = EpsilonPvs(fx.world().scene()).compute(fx.world().grid().cellBox(cell)).faces;
+  const auto expected =
+      EpsilonPvs(fx.world().scene()).compute(fx.world().grid().cellBox(cell)).faces;
   EXPECT_EQ(std::vector<uint32_t>(reply.face_ids()->begin(), reply.face_ids()->end()), expected);
   // Outside the grid: found is false.
   wire::PvsRequestT far;
@@ -499,7 +514,8 @@ TEST(StreamServer, AClientVanishingMidFrameEndsOnlyItsSession) {
     frame.resize(frame.size() / 2);
     bad.sendRaw(frame);
   }  // closed with half a frame sent
-  for (int i = 0; i < 50 && fx.server().sessionCount() > 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  for (int i = 0; i < 50 && fx.server().sessionCount() > 1; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
   EXPECT_EQ(fx.server().sessionCount(), 1u);
   innocent.pose({0.0, 1.7, 8.0});
   EXPECT_TRUE(innocent.nextOf(Payload::Geometry));

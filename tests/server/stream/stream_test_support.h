@@ -4,7 +4,6 @@
 #pragma once
 
 #include <boost/asio.hpp>
-
 #include <chrono>
 #include <memory>
 #include <optional>
@@ -35,7 +34,8 @@ inline Scene streetScene() {
 
 class ServerFixture {
  public:
-  explicit ServerFixture(StreamServerConfig config = {}, Scene scene = streetScene(), StreamWorldOptions wo = {}) {
+  explicit ServerFixture(StreamServerConfig config = {}, Scene scene = streetScene(),
+                         StreamWorldOptions wo = {}) {
     world_ = std::make_unique<StreamWorld>(std::move(scene), wo);
     config.port = 0;
     config.workerThreads = 2;
@@ -43,9 +43,14 @@ class ServerFixture {
     server_->start();
     thread_ = std::thread([this] { server_->run(false); });
   }
-  ~ServerFixture() {
+  ~ServerFixture() { shutDown(); }
+  // Stops the server and waits for its threads and worker pool; the world
+  // (and its statistics) stays.
+  void shutDown() {
+    if (!server_) return;
     server_->stop();
     thread_.join();
+    server_.reset();
   }
   uint16_t port() const { return server_->port(); }
   StreamWorld& world() { return *world_; }
@@ -61,12 +66,15 @@ class TestClient {
  public:
   explicit TestClient(uint16_t port, int receiveBuffer = 0) : socket_(io_), decoder_(64u << 20) {
     socket_.open(boost::asio::ip::tcp::v4());
-    if (receiveBuffer > 0) socket_.set_option(boost::asio::socket_base::receive_buffer_size(receiveBuffer));
+    if (receiveBuffer > 0)
+      socket_.set_option(boost::asio::socket_base::receive_buffer_size(receiveBuffer));
     socket_.connect({boost::asio::ip::make_address("127.0.0.1"), port});
   }
-  void sendRaw(const std::vector<uint8_t>& bytes) { boost::asio::write(socket_, boost::asio::buffer(bytes)); }
-  void hello(const std::string& token = "", uint32_t version = wire::kProtocolVersion, float radius = 0.0f,
-             uint64_t budget = 0, bool avatars = true) {
+  void sendRaw(const std::vector<uint8_t>& bytes) {
+    boost::asio::write(socket_, boost::asio::buffer(bytes));
+  }
+  void hello(const std::string& token = "", uint32_t version = wire::kProtocolVersion,
+             float radius = 0.0f, uint64_t budget = 0, bool avatars = true) {
     wire::HelloT h;
     h.protocol_version = version;
     h.auth_token = token;
@@ -85,8 +93,9 @@ class TestClient {
   }
   // The next frame within the timeout, or nothing (timeout or closed).
   std::optional<std::vector<uint8_t>> next(double timeoutS = 5.0) {
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                                                                  std::chrono::duration<double>(timeoutS));
+    const auto deadline = std::chrono::steady_clock::now() +
+                          std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                              std::chrono::duration<double>(timeoutS));
     while (true) {
       if (auto f = decoder_.next()) return f;
       if (closed_ || decoder_.failed()) return std::nullopt;
@@ -95,11 +104,12 @@ class TestClient {
       bool done = false;
       size_t got = 0;
       boost::system::error_code err;
-      socket_.async_read_some(boost::asio::buffer(buffer_), [&](const boost::system::error_code& ec, size_t n) {
-        done = true;
-        err = ec;
-        got = n;
-      });
+      socket_.async_read_some(boost::asio::buffer(buffer_),
+                              [&](const boost::system::error_code& ec, size_t n) {
+                                done = true;
+                                err = ec;
+                                got = n;
+                              });
       io_.restart();
       io_.run_for(deadline - now);
       if (!done) {
@@ -118,10 +128,12 @@ class TestClient {
   }
   // The next frame of the given payload type (skipping others), or nothing.
   std::optional<std::vector<uint8_t>> nextOf(wire::Payload type, double timeoutS = 5.0) {
-    const auto end = std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                                                            std::chrono::duration<double>(timeoutS));
+    const auto end = std::chrono::steady_clock::now() +
+                     std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                         std::chrono::duration<double>(timeoutS));
     while (std::chrono::steady_clock::now() < end) {
-      const double left = std::chrono::duration<double>(end - std::chrono::steady_clock::now()).count();
+      const double left =
+          std::chrono::duration<double>(end - std::chrono::steady_clock::now()).count();
       auto f = next(std::max(0.01, left));
       if (!f) return std::nullopt;
       if (wire::envelopeOf(*f)->payload_type() == type) return f;
@@ -131,8 +143,9 @@ class TestClient {
   }
   // Reads until the server closes the connection; true if it did in time.
   bool closedWithin(double timeoutS) {
-    const auto end = std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                                                            std::chrono::duration<double>(timeoutS));
+    const auto end = std::chrono::steady_clock::now() +
+                     std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                         std::chrono::duration<double>(timeoutS));
     while (!closed_ && std::chrono::steady_clock::now() < end) {
       auto f = next(0.2);
       if (f) onOther(*f);
@@ -161,5 +174,14 @@ inline std::optional<wire::ErrorCode> nextErrorCode(TestClient& c, double timeou
   return wire::envelopeOf(*f)->payload_as_Error()->code();
 }
 
+// An honest client: Hello, then a pose; true once it holds its cell's whole
+// face set (CellReady) within the timeout.
+inline bool honestClientLoads(uint16_t port, const glm::dvec3& position, double timeoutS) {
+  TestClient c(port);
+  c.hello();
+  if (!c.nextOf(wire::Payload::Welcome, timeoutS)) return false;
+  c.pose(position);
+  return c.nextOf(wire::Payload::CellReady, timeoutS).has_value();
+}
 
 }  // namespace vistream::testing

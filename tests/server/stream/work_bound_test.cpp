@@ -1,0 +1,98 @@
+// Work a client can queue on the shared worker pool is bounded: on city1,
+// where a cell's PVS costs milliseconds, clients that teleport or pile up
+// requests leave nothing behind when they move on, leave or the server
+// stops. Slow (city1's world takes seconds to build): label slow.
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "common/generate/generate.h"
+#include "tests/server/stream/stream_test_support.h"
+
+namespace vistream::testing {
+namespace {
+
+using namespace std::chrono_literals;
+
+// city1 (21,000 faces, PVS computed on demand): a cell's PVS costs enough
+// that queued work shows.
+struct CityServer {
+  explicit CityServer(StreamServerConfig cfg = {}) : server(cfg, toScene(generate("city1"))) {}
+  ServerFixture server;
+  glm::dvec3 streetPoint() {
+    // A cell centre on the free space grid the world built.
+    const ViewCellGrid& g = server.world().grid();
+    return glm::dvec3(g.cellBox(g.dims() / 2).center());
+  }
+  // Positions spread over the whole grid, far apart, a different one each call.
+  glm::dvec3 randomPoint(std::mt19937& rng) {
+    const ViewCellGrid& g = server.world().grid();
+    std::uniform_int_distribution<int> x(0, g.dims().x - 1), z(0, g.dims().z - 1);
+    return glm::dvec3(g.cellBox({x(rng), 0, z(rng)}).center());
+  }
+};
+
+TEST(WorkBound, TeleportingClientsLeaveNoQueuedWorkBehindAndHonestClientsAreServed) {
+  CityServer city;
+  const uint16_t port = city.server.port();
+  std::mt19937 rng(7);
+  constexpr int kAttackers = 4, kPoses = 40;
+  {
+    std::vector<std::unique_ptr<TestClient>> attackers;
+    for (int i = 0; i < kAttackers; ++i) {
+      attackers.push_back(std::make_unique<TestClient>(port));
+      attackers.back()->hello();
+      ASSERT_TRUE(attackers.back()->nextOf(wire::Payload::Welcome));
+    }
+    // Every pose teleports across the city: each once queued up to nine
+    // PVS computations on the shared pool.
+    for (int p = 0; p < kPoses; ++p)
+      for (auto& a : attackers) a->pose(city.randomPoint(rng), 0.0f, glm::vec3(1.4f, 0.0f, 0.0f));
+    // An honest client is served while the attackers are still connected.
+    EXPECT_TRUE(honestClientLoads(port, city.streetPoint(), 60.0));
+  }  // the attackers leave: what they queued is cancelled
+  EXPECT_TRUE(honestClientLoads(port, city.streetPoint() + glm::dvec3(40.0, 0.0, 0.0), 60.0));
+  const auto stats = city.server.world().cacheStats();
+  // Without bounds: ~9 computations per pose (1,440). With them, at most the
+  // few that had started when each pose moved on, and the cancelled rest.
+  EXPECT_LE(stats.pvsComputed, uint64_t(kAttackers * kPoses) / 2)
+      << stats.pvsComputed << " PVS computed";
+  std::printf("teleport attack: %llu PVS computed, %llu cancelled unstarted\n",
+              (unsigned long long)stats.pvsComputed, (unsigned long long)stats.cancelled);
+  EXPECT_GT(stats.cancelled, 0u);
+}
+
+TEST(WorkBound, StoppingTheServerDropsQueuedVisibilityWork) {
+  CityServer city;
+  const uint16_t port = city.server.port();
+  std::mt19937 rng(11);
+  std::vector<std::unique_ptr<TestClient>> clients;
+  for (int i = 0; i < 4; ++i) {
+    clients.push_back(std::make_unique<TestClient>(port));
+    clients.back()->hello();
+    ASSERT_TRUE(clients.back()->nextOf(wire::Payload::Welcome));
+  }
+  // 40 PvsRequests for distinct cells from each client, all at once.
+  for (auto& c : clients)
+    for (int r = 0; r < 40; ++r) {
+      wire::PvsRequestT q;
+      q.request_id = uint32_t(r);
+      q.by_cell = true;
+      q.cell = std::make_unique<wire::CellIndex>(
+          wire::toWire(*city.server.world().cellOf(glm::vec3(city.randomPoint(rng)))));
+      c->sendRaw(wire::encodeMessage(std::move(q)));
+    }
+  std::this_thread::sleep_for(300ms);
+  const uint64_t atStop = city.server.world().cacheStats().pvsComputed;
+  city.server.shutDown();  // returns once the computations already running end
+  const uint64_t after = city.server.world().cacheStats().pvsComputed;
+  // Of 160 requests, only those running when the stop came (two workers)
+  // and a few finishing as it spread may complete afterwards.
+  EXPECT_LE(after - atStop, 8u) << atStop << " computed before the stop, " << after << " after";
+  std::printf("stop: %llu PVS computed before the stop, %llu after\n", (unsigned long long)atStop,
+              (unsigned long long)after);
+  for (auto& c : clients) EXPECT_TRUE(c->closedWithin(5.0));
+}
+
+}  // namespace
+}  // namespace vistream::testing
