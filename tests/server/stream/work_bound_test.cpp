@@ -62,6 +62,60 @@ TEST(WorkBound, TeleportingClientsLeaveNoQueuedWorkBehindAndHonestClientsAreServ
   EXPECT_GT(stats.cancelled, 0u);
 }
 
+// The attack as it was reported: ten connections sending ten teleporting
+// poses a second for ten seconds, five honest clients loading during it and
+// five after. Unbounded, this queued ~8,700 PVS computations, kept both
+// cores busy for a minute after the attackers left and loaded none of the
+// honest clients.
+TEST(WorkBound, TenTeleportingClientsForTenSecondsStarveNoHonestClient) {
+  CityServer city;
+  const uint16_t port = city.server.port();
+  constexpr int kAttackers = 10, kSeconds = 10, kHz = 10;
+  std::atomic<int> poses{0};
+  std::vector<std::thread> attackers;
+  for (int i = 0; i < kAttackers; ++i)
+    attackers.emplace_back([&, i] {
+      std::mt19937 rng(uint32_t(100 + i));
+      TestClient a(port);
+      a.hello();
+      if (!a.nextOf(wire::Payload::Welcome)) return;
+      for (int p = 0; p < kSeconds * kHz; ++p) {
+        a.pose(city.randomPoint(rng), 0.0f, glm::vec3(1.4f, 0.0f, 0.0f));
+        ++poses;
+        std::this_thread::sleep_for(std::chrono::milliseconds(1000 / kHz));
+      }
+    });
+  int loadedDuring = 0, loadedAfter = 0;
+  for (int h = 0; h < 5; ++h) {
+    loadedDuring +=
+        honestClientLoads(port, city.streetPoint() + glm::dvec3(4.0 * h, 0.0, 0.0), 10.0);
+    std::this_thread::sleep_for(1s);
+  }
+  for (auto& t : attackers) t.join();
+  const auto left = std::chrono::steady_clock::now();
+  const auto atLeave = city.server.world().cacheStats();
+  for (int h = 0; h < 5; ++h)
+    loadedAfter +=
+        honestClientLoads(port, city.streetPoint() - glm::dvec3(4.0 * h, 0.0, 8.0), 10.0);
+  const double afterS =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - left).count();
+  const auto end = city.server.world().cacheStats();
+  std::printf(
+      "%d teleporting poses: %llu PVS computed during the attack, %llu cancelled unstarted; "
+      "%d of 5 honest clients loaded during it, %d of 5 after (all five in %.1f s after the "
+      "attackers left, "
+      "%llu more PVS computed meanwhile)\n",
+      poses.load(), (unsigned long long)atLeave.pvsComputed, (unsigned long long)atLeave.cancelled,
+      loadedDuring, loadedAfter, afterS,
+      (unsigned long long)(end.pvsComputed - atLeave.pvsComputed));
+  EXPECT_EQ(loadedDuring, 5);
+  EXPECT_EQ(loadedAfter, 5);
+  EXPECT_GT(atLeave.cancelled, 0u);
+  // Each pose once queued up to nine computations; now most are cancelled
+  // before they start.
+  EXPECT_LT(atLeave.pvsComputed, uint64_t(poses.load()) * 3);
+}
+
 TEST(WorkBound, StoppingTheServerDropsQueuedVisibilityWork) {
   CityServer city;
   const uint16_t port = city.server.port();
