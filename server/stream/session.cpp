@@ -17,10 +17,6 @@ namespace asio = boost::asio;
 using namespace wire;
 
 namespace {
-// Samples along the velocity when prefetching: bounds the work of one pose
-// whatever speed and horizon.
-constexpr int kMaxPrefetchSteps = 32;
-
 double seconds(std::chrono::steady_clock::duration d) {
   return std::chrono::duration<double>(d).count();
 }
@@ -41,9 +37,7 @@ Session::Session(StreamServer& server, asio::ip::tcp::socket socket, uint32_t id
       socket_(std::move(socket)),
       housekeepingTimer_(strand_),
       id_(id),
-      decoder_(server.config().maxInboundFrameBytes) {
-  held_.assign((size_t(world_.faceCount()) + 63) / 64, 0);
-}
+      decoder_(server.config().maxInboundFrameBytes) {}
 
 Session::~Session() = default;
 
@@ -184,6 +178,13 @@ void Session::onHello(const Hello& hello) {
     wantsAvatars_ = caps->wants_avatars();
   }
   state_ = State::Active;
+  StreamSchedulerConfig sc;
+  sc.policy = cfg.policy;
+  sc.prefetchSeconds = cfg.prefetchSeconds;
+  sc.maxSpeedMps = cfg.maxSpeedMps;
+  sc.maxCellRequests = cfg.maxCellRequests;
+  sc.batchBytes = cfg.batchBytes;
+  scheduler_ = std::make_unique<StreamScheduler>(world_, sc, radius_, budget_);
   {
     std::lock_guard lock(snapshotMutex_);
     snapshot_.id = id_;
@@ -244,18 +245,16 @@ void Session::onPose(const Pose& pose) {
                             "{:.6g} m/s",
                             speed, cfg.maxSpeedMps));
   position_ = p;
-  velocity_ = v;
-  yaw_ = pose.yaw_deg();
-  pitch_ = pose.pitch_deg();
   const auto cell = world_.cellOf(glm::vec3(position_));
   hasPose_ = cell.has_value();
   if (cell) cell_ = *cell;
+  scheduler_->setPose(p, v, pose.yaw_deg(), pose.pitch_deg());
   {
     std::lock_guard lock(snapshotMutex_);
     snapshot_.hasPose = hasPose_;
     snapshot_.position = position_;
-    snapshot_.yawDeg = yaw_;
-    snapshot_.pitchDeg = pitch_;
+    snapshot_.yawDeg = pose.yaw_deg();
+    snapshot_.pitchDeg = pose.pitch_deg();
     snapshot_.cell = cell_;
   }
   pump();
@@ -325,7 +324,7 @@ void Session::dispatchPvsRequests() {
 }
 
 void Session::cancelWork() {
-  requested_.clear();
+  if (scheduler_) scheduler_->cancelAll();
   pvsWaiting_.clear();
   pvsInterest_.reset();
 }
@@ -423,8 +422,8 @@ void Session::housekeeping() {
     s.server_time_s = seconds(now.time_since_epoch());
     s.sessions = uint32_t(server_.sessionCount());
     s.bytes_sent = bytesSent_;
-    s.faces_held = heldCount_;
-    s.cells_ready = uint32_t(announced_.size());
+    s.faces_held = scheduler_->heldCount();
+    s.cells_ready = scheduler_->cellsReady();
     s.queue_bytes = uint32_t(std::min<size_t>(queued_, UINT32_MAX));
     s.server_cpu_ms_per_s = server_.cpuMsPerSecond();
     send(std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(s))));
@@ -439,81 +438,15 @@ void Session::housekeeping() {
 
 // ---- streaming ------------------------------------------------------------------
 
-void Session::setHeld(uint32_t face, bool on) {
-  uint64_t& word = held_[face >> 6];
-  const uint64_t bit = uint64_t(1) << (face & 63);
-  if (bool(word & bit) == on) return;
-  word ^= bit;
-  if (on) {
-    heldBytes_ += world_.faceBytes(face);
-    ++heldCount_;
-  } else {
-    heldBytes_ -= world_.faceBytes(face);
-    --heldCount_;
-  }
-}
-
-void Session::updateNeededCells() {
-  const ViewCellGrid& grid = world_.grid();
-  std::vector<uint32_t> needed{uint32_t(grid.linearIndex(cell_))};
-  auto add = [&](const glm::ivec3& c) {
-    if (!grid.contains(c)) return;
-    const uint32_t l = uint32_t(grid.linearIndex(c));
-    if (std::find(needed.begin(), needed.end(), l) == needed.end()) needed.push_back(l);
-  };
-  // Ahead along the velocity, then the ring around the current cell. The
-  // speed is below --max-speed (onPose) and the samples are at most
-  // kMaxPrefetchSteps, spaced half a cell or more.
+void Session::requestFaceSets() {
   const StreamServerConfig& cfg = server_.config();
-  const float speed = float(std::min(double(glm::length(velocity_)), cfg.maxSpeedMps));
-  if (speed > 1e-3f) {
-    const double horizon = cfg.prefetchSeconds * speed;
-    const double step =
-        std::max(0.5 * std::min(grid.cellSize().x, grid.cellSize().z), horizon / kMaxPrefetchSteps);
-    const glm::vec3 direction = glm::normalize(velocity_);
-    for (int i = 1; i <= kMaxPrefetchSteps && double(i) * step <= horizon; ++i)
-      if (auto c = world_.cellOf(glm::vec3(position_) + direction * float(double(i) * step)))
-        add(*c);
-  }
-  // Neighbours the client could step into before their face sets would
-  // arrive: those whose shared side or corner lies within the margin.
-  const Box3f box = grid.cellBox(cell_);
-  const glm::vec3 p(position_);
-  const float margin = std::max(2.0f, float(cfg.prefetchSeconds) * std::max(speed, 1.4f));
-  for (int dz = -1; dz <= 1; ++dz)
-    for (int dx = -1; dx <= 1; ++dx) {
-      const bool nearX = dx == 0 || (dx < 0 ? p.x - box.lo.x : box.hi.x - p.x) <= margin;
-      const bool nearZ = dz == 0 || (dz < 0 ? p.z - box.lo.z : box.hi.z - p.z) <= margin;
-      if (nearX && nearZ) add(cell_ + glm::ivec3(dx, 0, dz));
-    }
-  needed_ = std::move(needed);
-  // Forget the face sets of cells no longer needed (their faces stay held).
-  for (auto it = cellSets_.begin(); it != cellSets_.end();) {
-    if (std::find(needed_.begin(), needed_.end(), it->first) == needed_.end()) {
-      cursor_.erase(it->first);
-      it = cellSets_.erase(it);
-    } else {
-      ++it;
-    }
-  }
-  // Cells no longer needed are cancelled (newest pose wins); then the
-  // needed ones are requested in order, a bounded number at a time.
-  for (auto it = requested_.begin(); it != requested_.end();)
-    it = std::find(needed_.begin(), needed_.end(), it->first) == needed_.end()
-             ? requested_.erase(it)
-             : std::next(it);
-  for (uint32_t l : needed_) {
-    if (requested_.size() >= cfg.maxCellRequests) break;
-    if (cellSets_.count(l) || requested_.count(l)) continue;
-    Interest interest = makeInterest();
-    requested_[l] = interest;
+  for (StreamScheduler::CellRequest& r : scheduler_->takeCellRequests()) {
+    const uint32_t l = r.cell;
     world_.cellFaceSet(
-        grid.cellAt(l), cfg.policy, radius_, server_.workers(),
+        world_.grid().cellAt(l), cfg.policy, radius_, server_.workers(),
         [self = shared_from_this(), l](FaceListPtr faces) {
           asio::post(self->strand_, [self, l, faces] {
-            // A result nobody asked for any more (cancelled, or answered
-            // already through a request that joined the same computation).
-            if (self->requested_.erase(l) == 0 || self->state_ != State::Active) return;
+            if (self->state_ != State::Active || !self->scheduler_->isRequested(l)) return;
             if (!faces) {
               const glm::ivec3 c = self->world_.grid().cellAt(l);
               return self->fail(
@@ -521,136 +454,60 @@ void Session::updateNeededCells() {
                   fmt::format("the face set of cell ({}, {}, {}) could not be computed", c.x, c.y,
                               c.z));
             }
-            if (std::find(self->needed_.begin(), self->needed_.end(), l) == self->needed_.end())
-              return;
-            self->cellSets_[l] = faces;
-            self->cursor_[l] = 0;
-            self->pump();
+            if (self->scheduler_->onFaceSet(l, faces)) self->pump();
           });
         },
-        interest);
+        r.interest);
   }
 }
 
 void Session::maybeCull() {
-  if (server_.config().policy != StreamPolicy::Visibility || cullingInFlight_ || needed_.empty())
-    return;
-  const auto it = cellSets_.find(needed_.front());
-  if (it == cellSets_.end() || cursor_[it->first] >= it->second->size())
-    return;  // not loaded, or complete
-  // A new current cell is culled at once; the same cell again at most every 250 ms.
-  const auto now = Clock::now();
-  if (culledCell_ == it->first && seconds(now - lastCull_) < 0.25) return;
-  lastCull_ = now;
+  if (cullingInFlight_) return;
+  const auto request = scheduler_->takeCullRequest(seconds(Clock::now().time_since_epoch()));
+  if (!request) return;
   cullingInFlight_ = true;
-  culledCell_ = it->first;
   if (!viewer_) {
     CullingOptions o;
     o.method = CullingMethod::HierarchyUpdating;
     o.collectFaces = true;
     viewer_ = std::make_unique<CullingViewer>(world_.culling(), o);
   }
-  asio::post(server_.workers(), [self = shared_from_this(), eye = position_, yaw = yaw_,
-                                 pitch = pitch_, set = it->second, cell = it->first] {
-    const FrameResult r = self->viewer_->frame(eye, yaw, pitch);
+  asio::post(server_.workers(), [self = shared_from_this(), r = *request] {
+    const FrameResult result = self->viewer_->frame(r.eye, r.yawDeg, r.pitchDeg);
     FaceList visible;
-    std::set_intersection(r.faces.begin(), r.faces.end(), set->begin(), set->end(),
-                          std::back_inserter(visible));
-    asio::post(self->strand_, [self, visible = std::move(visible), cell]() mutable {
+    std::set_intersection(result.faces.begin(), result.faces.end(), r.faceSet->begin(),
+                          r.faceSet->end(), std::back_inserter(visible));
+    asio::post(self->strand_, [self, visible = std::move(visible), cell = r.cell]() mutable {
       self->cullingInFlight_ = false;
-      self->visibleNow_ = std::move(visible);
-      self->visibleNowCell_ = cell;
+      if (self->state_ != State::Active) return;
+      self->scheduler_->onCulled(cell, std::move(visible));
       self->pump();
     });
   });
 }
 
-std::vector<uint32_t> Session::selectBatch() {
-  std::vector<uint32_t> batch;
-  size_t bytes = 0;
-  const size_t limit = server_.config().batchBytes;
-  auto take = [&](uint32_t f) {
-    if (held(f) || (budget_ > 0 && heldBytes_ + world_.faceBytes(f) > budget_)) return;
-    setHeld(f, true);
-    batch.push_back(f);
-    bytes += world_.faceBytes(f);
-  };
-  for (uint32_t f : visibleNow_) {
-    if (bytes >= limit) break;
-    take(f);
-  }
-  for (uint32_t l : needed_) {
-    auto it = cellSets_.find(l);
-    if (it == cellSets_.end()) continue;
-    const FaceList& set = *it->second;
-    size_t& c = cursor_[l];
-    while (c < set.size() && bytes < limit) {
-      take(set[c]);
-      if (!held(set[c])) break;  // over budget: this cell cannot complete for now
-      ++c;
-    }
-    if (bytes >= limit) break;
-  }
-  return batch;
-}
-
-void Session::announceReadyCells() {
-  for (uint32_t l : needed_) {
-    auto it = cellSets_.find(l);
-    if (it == cellSets_.end() || announced_.count(l)) continue;
-    size_t& c = cursor_[l];
-    while (c < it->second->size() && held((*it->second)[c])) ++c;
-    if (c < it->second->size()) continue;
-    announced_.insert(l);
+void Session::sendReadyCells() {
+  for (const StreamScheduler::ReadyCell& c : scheduler_->takeReadyCells()) {
     CellReadyT ready;
-    ready.cell = std::make_unique<CellIndex>(toWire(world_.grid().cellAt(l)));
-    ready.faces = uint32_t(it->second->size());
+    ready.cell = std::make_unique<CellIndex>(toWire(c.cell));
+    ready.faces = c.faces;
     send(std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(ready))));
   }
 }
 
-void Session::maybeEvict() {
-  if (budget_ == 0 || heldBytes_ <= budget_ * 9 / 10) return;
-  // Keep what the needed cells stream; evict the rest, farthest first.
-  std::vector<uint8_t> keep(world_.faceCount(), 0);
-  for (const auto& [l, set] : cellSets_)
-    for (uint32_t f : *set) keep[f] = 1;
-  std::vector<std::pair<float, uint32_t>> candidates;
-  for (size_t w = 0; w < held_.size(); ++w)
-    for (uint64_t bits = held_[w]; bits; bits &= bits - 1) {
-      const uint32_t f = uint32_t(w * 64 + size_t(__builtin_ctzll(bits)));
-      if (!keep[f])
-        candidates.emplace_back(glm::length(world_.faceCentre(f) - glm::vec3(position_)), f);
-    }
-  if (candidates.empty()) return;
-  std::sort(candidates.begin(), candidates.end(), std::greater<>());
-  EvictT evict;
-  for (const auto& [d, f] : candidates) {
-    if (heldBytes_ <= budget_ * 7 / 10) break;
-    setHeld(f, false);
-    evict.face_ids.push_back(f);
-  }
-  std::sort(evict.face_ids.begin(), evict.face_ids.end());
-  // Cells announced ready may have lost faces: they are announced again when whole.
-  for (auto it = announced_.begin(); it != announced_.end();)
-    it = cellSets_.count(*it) ? std::next(it) : announced_.erase(it);
-  send(std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(evict))));
-}
-
 void Session::pump() {
   const StreamServerConfig& cfg = server_.config();
-  if (state_ != State::Active || cfg.pvsOnly || !wantsGeometry_ || !hasPose_) return;
-  updateNeededCells();
+  if (state_ != State::Active || cfg.pvsOnly || !wantsGeometry_ || !scheduler_ ||
+      !scheduler_->hasPose())
+    return;
+  requestFaceSets();
   maybeCull();
   if (produceInFlight_ || queued_ > cfg.geometryWatermarkBytes) return;
   // Nothing goes before the current cell's face set is known, and under the
   // visibility policy before its culling: what the client sees from its pose
   // goes first. (maybeCull starts the culling of a new current cell at once;
   // its result pumps again.)
-  if (needed_.empty() || !cellSets_.count(needed_.front())) return;
-  if (cfg.policy == StreamPolicy::Visibility && visibleNowCell_ != needed_.front() &&
-      cullingInFlight_)
-    return;
+  if (!scheduler_->readyToStream(cullingInFlight_)) return;
   if (cfg.maxClientKbps > 0.0) {
     const auto now = Clock::now();
     const double rate = cfg.maxClientKbps * 1000.0 / 8.0;  // bytes per second
@@ -659,12 +516,13 @@ void Session::pump() {
     lastRefill_ = now;
     if (tokens_ <= 0.0) return;  // housekeeping pumps again as the bucket refills
   }
-  maybeEvict();
-  std::vector<uint32_t> batch = selectBatch();
-  if (batch.empty()) {
-    announceReadyCells();
-    return;
+  if (std::vector<uint32_t> evicted = scheduler_->takeEvictions(); !evicted.empty()) {
+    EvictT evict;
+    evict.face_ids = std::move(evicted);
+    send(std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(evict))));
   }
+  std::vector<uint32_t> batch = scheduler_->takeBatch();
+  if (batch.empty()) return sendReadyCells();
   produceInFlight_ = true;
   asio::post(server_.workers(), [self = shared_from_this(), batch = std::move(batch)] {
     std::vector<FaceTriangles> faces;
@@ -676,7 +534,7 @@ void Session::pump() {
       if (self->state_ != State::Active) return;
       self->tokens_ -= double(frame->size());
       self->send(frame);
-      self->announceReadyCells();
+      self->sendReadyCells();
       self->pump();
     });
   });

@@ -12,8 +12,14 @@
 // Every handler runs on the session's strand; work for the worker pool
 // captures a shared_ptr to the session and posts its result back.
 //
+// The session is the transport: it reads and checks frames, holds the
+// conversation's state and moves bytes. What the client gets next is
+// decided by its StreamScheduler (stream_scheduler.h); the session runs the
+// visibility work the scheduler asks for on the worker pool and sends what it
+// emits.
+//
 // What a client can make the server do is bounded: every loop driven by a
-// client's values has a fixed number of steps (prefetch samples at most
+// client's values has a fixed number of steps (the scheduler samples at most
 // kMaxPrefetchSteps points along the velocity, which must be below
 // --max-speed), implausible poses are refused, at most maxCellRequests cell
 // face sets and maxPvsRequestsInFlight PvsRequests are outstanding on the
@@ -36,6 +42,7 @@
 #include <vector>
 
 #include "protocol/wire/messages.h"
+#include "server/stream/stream_scheduler.h"
 #include "server/stream/stream_world.h"
 
 namespace vistream {
@@ -86,15 +93,11 @@ class Session : public std::enable_shared_from_this<Session> {
   void writeNext();
   void housekeeping();
 
-  // Streaming.
+  // Streaming: the scheduler decides, these run its requests and send.
   void pump();
-  void updateNeededCells();
+  void requestFaceSets();
   void maybeCull();
-  void maybeEvict();
-  void announceReadyCells();
-  std::vector<uint32_t> selectBatch();
-  bool held(uint32_t face) const { return (held_[face >> 6] >> (face & 63)) & 1u; }
-  void setHeld(uint32_t face, bool on);
+  void sendReadyCells();
 
   StreamServer& server_;
   StreamWorld& world_;
@@ -122,24 +125,17 @@ class Session : public std::enable_shared_from_this<Session> {
   uint64_t budget_ = 0;
   bool wantsGeometry_ = true, wantsAvatars_ = true;
 
-  // Pose.
+  // Pose (as last received; the scheduler has its own copy).
   bool hasPose_ = false;
   glm::dvec3 position_{0.0};
-  glm::vec3 velocity_{0.0f};
-  float yaw_ = 0.0f, pitch_ = 0.0f;
   glm::ivec3 cell_{0};
-  mutable std::mutex snapshotMutex_;
+  mutable std::mutex snapshotMutex_;  // guards snapshot_
   Snapshot snapshot_;
 
-  // Faces held by the client (a bitset over face IDs) and the cells wanted.
-  std::vector<uint64_t> held_;
-  uint64_t heldBytes_ = 0;
-  uint32_t heldCount_ = 0;
-  std::vector<uint32_t> needed_;              // linear cell indices, current first
-  std::map<uint32_t, FaceListPtr> cellSets_;  // loaded face sets of needed cells
-  std::map<uint32_t, size_t> cursor_;         // per loaded cell: faces before this index are held
-  std::map<uint32_t, Interest> requested_;    // face sets being computed (at most maxCellRequests)
-  std::set<uint32_t> announced_;
+  // What the client gets next (created at Hello), and the work in flight for it.
+  std::unique_ptr<StreamScheduler> scheduler_;
+  bool cullingInFlight_ = false, produceInFlight_ = false;
+  std::unique_ptr<CullingViewer> viewer_;
   struct PendingPvs {
     uint32_t requestId;
     glm::ivec3 cell;
@@ -147,12 +143,6 @@ class Session : public std::enable_shared_from_this<Session> {
   std::deque<PendingPvs> pvsWaiting_;
   unsigned pvsInFlight_ = 0;
   Interest pvsInterest_ = makeInterest();
-  FaceList visibleNow_;
-  uint32_t culledCell_ = UINT32_MAX,
-           visibleNowCell_ = UINT32_MAX;  // cell of the culling in flight / of visibleNow_
-  bool cullingInFlight_ = false, produceInFlight_ = false;
-  Clock::time_point lastCull_;
-  std::unique_ptr<CullingViewer> viewer_;
   double tokens_ = 0.0;
   Clock::time_point lastRefill_;
 };

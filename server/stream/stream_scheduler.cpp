@@ -1,0 +1,204 @@
+#include "server/stream/stream_scheduler.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace vistream {
+
+StreamScheduler::StreamScheduler(const StreamWorld& world, StreamSchedulerConfig config,
+                                 float radius, uint64_t budgetBytes)
+    : world_(world), config_(config), radius_(radius), budget_(budgetBytes) {
+  held_.assign((size_t(world_.faceCount()) + 63) / 64, 0);
+}
+
+void StreamScheduler::setPose(const glm::dvec3& position, const glm::vec3& velocity, float yawDeg,
+                              float pitchDeg) {
+  position_ = position;
+  velocity_ = velocity;
+  yaw_ = yawDeg;
+  pitch_ = pitchDeg;
+  const auto cell = world_.cellOf(glm::vec3(position_));
+  hasPose_ = cell.has_value();
+  if (cell) cell_ = *cell;
+  if (hasPose_) updateNeededCells();
+}
+
+bool StreamScheduler::isNeeded(uint32_t cell) const {
+  return std::find(needed_.begin(), needed_.end(), cell) != needed_.end();
+}
+
+void StreamScheduler::setHeld(uint32_t face, bool on) {
+  uint64_t& word = held_[face >> 6];
+  const uint64_t bit = uint64_t(1) << (face & 63);
+  if (bool(word & bit) == on) return;
+  word ^= bit;
+  if (on) {
+    heldBytes_ += world_.faceBytes(face);
+    ++heldCount_;
+  } else {
+    heldBytes_ -= world_.faceBytes(face);
+    --heldCount_;
+  }
+}
+
+void StreamScheduler::updateNeededCells() {
+  const ViewCellGrid& grid = world_.grid();
+  std::vector<uint32_t> needed{uint32_t(grid.linearIndex(cell_))};
+  auto add = [&](const glm::ivec3& c) {
+    if (!grid.contains(c)) return;
+    const uint32_t l = uint32_t(grid.linearIndex(c));
+    if (std::find(needed.begin(), needed.end(), l) == needed.end()) needed.push_back(l);
+  };
+  // Ahead along the velocity: at most kMaxPrefetchSteps samples, spaced
+  // half a cell or more, whatever the speed.
+  const float speed = float(std::min(double(glm::length(velocity_)), config_.maxSpeedMps));
+  if (speed > 1e-3f) {
+    const double horizon = config_.prefetchSeconds * speed;
+    const double step =
+        std::max(0.5 * std::min(grid.cellSize().x, grid.cellSize().z), horizon / kMaxPrefetchSteps);
+    const glm::vec3 direction = glm::normalize(velocity_);
+    for (int i = 1; i <= kMaxPrefetchSteps && double(i) * step <= horizon; ++i)
+      if (auto c = world_.cellOf(glm::vec3(position_) + direction * float(double(i) * step)))
+        add(*c);
+  }
+  // Neighbours the client could step into before their face sets would
+  // arrive: those whose shared side or corner lies within the margin.
+  const Box3f box = grid.cellBox(cell_);
+  const glm::vec3 p(position_);
+  const float margin = std::max(2.0f, float(config_.prefetchSeconds) * std::max(speed, 1.4f));
+  for (int dz = -1; dz <= 1; ++dz)
+    for (int dx = -1; dx <= 1; ++dx) {
+      const bool nearX = dx == 0 || (dx < 0 ? p.x - box.lo.x : box.hi.x - p.x) <= margin;
+      const bool nearZ = dz == 0 || (dz < 0 ? p.z - box.lo.z : box.hi.z - p.z) <= margin;
+      if (nearX && nearZ) add(cell_ + glm::ivec3(dx, 0, dz));
+    }
+  needed_ = std::move(needed);
+  // Forget the face sets of cells no longer needed (their faces stay held),
+  // and drop their requests: the newest pose wins.
+  for (auto it = cellSets_.begin(); it != cellSets_.end();) {
+    if (isNeeded(it->first)) {
+      ++it;
+    } else {
+      cursor_.erase(it->first);
+      it = cellSets_.erase(it);
+    }
+  }
+  for (auto it = requested_.begin(); it != requested_.end();)
+    it = isNeeded(it->first) ? std::next(it) : requested_.erase(it);
+}
+
+std::vector<StreamScheduler::CellRequest> StreamScheduler::takeCellRequests() {
+  std::vector<CellRequest> out;
+  if (!hasPose_) return out;
+  for (uint32_t l : needed_) {
+    if (requested_.size() >= config_.maxCellRequests) break;
+    if (cellSets_.count(l) || requested_.count(l)) continue;
+    Interest interest = makeInterest();
+    requested_[l] = interest;
+    out.push_back({l, std::move(interest)});
+  }
+  return out;
+}
+
+bool StreamScheduler::onFaceSet(uint32_t cell, FaceListPtr faces) {
+  // A result nobody asks for any more (cancelled, or answered already
+  // through a request that joined the same computation).
+  if (requested_.erase(cell) == 0 || !faces || !isNeeded(cell)) return false;
+  cellSets_[cell] = std::move(faces);
+  cursor_[cell] = 0;
+  return true;
+}
+
+std::optional<StreamScheduler::CullRequest> StreamScheduler::takeCullRequest(double nowS) {
+  if (config_.policy != StreamPolicy::Visibility || needed_.empty()) return std::nullopt;
+  const auto it = cellSets_.find(needed_.front());
+  if (it == cellSets_.end() || cursor_[it->first] >= it->second->size())
+    return std::nullopt;  // not loaded, or complete
+  // A new current cell is culled at once; the same cell again at most every cullIntervalS.
+  if (culledCell_ == it->first && nowS - lastCullS_ < config_.cullIntervalS) return std::nullopt;
+  lastCullS_ = nowS;
+  culledCell_ = it->first;
+  return CullRequest{it->first, position_, yaw_, pitch_, it->second};
+}
+
+void StreamScheduler::onCulled(uint32_t cell, FaceList visible) {
+  visibleNow_ = std::move(visible);
+  visibleNowCell_ = cell;
+}
+
+bool StreamScheduler::readyToStream(bool cullingInFlight) const {
+  if (!hasPose_ || needed_.empty() || !cellSets_.count(needed_.front())) return false;
+  return !(config_.policy == StreamPolicy::Visibility && visibleNowCell_ != needed_.front() &&
+           cullingInFlight);
+}
+
+std::vector<uint32_t> StreamScheduler::takeEvictions() {
+  std::vector<uint32_t> evicted;
+  if (budget_ == 0 || heldBytes_ <= budget_ * 9 / 10) return evicted;
+  // Keep what the needed cells stream; evict the rest, farthest first.
+  std::vector<uint8_t> keep(world_.faceCount(), 0);
+  for (const auto& [l, set] : cellSets_)
+    for (uint32_t f : *set) keep[f] = 1;
+  std::vector<std::pair<float, uint32_t>> candidates;
+  for (size_t w = 0; w < held_.size(); ++w)
+    for (uint64_t bits = held_[w]; bits; bits &= bits - 1) {
+      const uint32_t f = uint32_t(w * 64 + size_t(__builtin_ctzll(bits)));
+      if (!keep[f])
+        candidates.emplace_back(glm::length(world_.faceCentre(f) - glm::vec3(position_)), f);
+    }
+  std::sort(candidates.begin(), candidates.end(), std::greater<>());
+  for (const auto& [d, f] : candidates) {
+    if (heldBytes_ <= budget_ * 7 / 10) break;
+    setHeld(f, false);
+    evicted.push_back(f);
+  }
+  std::sort(evicted.begin(), evicted.end());
+  // Cells announced ready may have lost faces: they are announced again when whole.
+  for (auto it = announced_.begin(); it != announced_.end();)
+    it = cellSets_.count(*it) ? std::next(it) : announced_.erase(it);
+  return evicted;
+}
+
+std::vector<uint32_t> StreamScheduler::takeBatch() {
+  std::vector<uint32_t> batch;
+  size_t bytes = 0;
+  auto take = [&](uint32_t f) {
+    if (held(f) || (budget_ > 0 && heldBytes_ + world_.faceBytes(f) > budget_)) return;
+    setHeld(f, true);
+    batch.push_back(f);
+    bytes += world_.faceBytes(f);
+  };
+  for (uint32_t f : visibleNow_) {
+    if (bytes >= config_.batchBytes) break;
+    take(f);
+  }
+  for (uint32_t l : needed_) {
+    auto it = cellSets_.find(l);
+    if (it == cellSets_.end()) continue;
+    const FaceList& set = *it->second;
+    size_t& c = cursor_[l];
+    while (c < set.size() && bytes < config_.batchBytes) {
+      take(set[c]);
+      if (!held(set[c])) break;  // over budget: this cell cannot complete for now
+      ++c;
+    }
+    if (bytes >= config_.batchBytes) break;
+  }
+  return batch;
+}
+
+std::vector<StreamScheduler::ReadyCell> StreamScheduler::takeReadyCells() {
+  std::vector<ReadyCell> out;
+  for (uint32_t l : needed_) {
+    auto it = cellSets_.find(l);
+    if (it == cellSets_.end() || announced_.count(l)) continue;
+    size_t& c = cursor_[l];
+    while (c < it->second->size() && held((*it->second)[c])) ++c;
+    if (c < it->second->size()) continue;
+    announced_.insert(l);
+    out.push_back({world_.grid().cellAt(l), uint32_t(it->second->size())});
+  }
+  return out;
+}
+
+}  // namespace vistream

@@ -1,0 +1,142 @@
+// What one client gets next: the streaming policy of a session, apart from
+// its socket. The session (session.h) feeds it the client's pose and the
+// results of the visibility work it asks for, and sends what it emits; the
+// scheduler itself does no I/O, starts no threads and reads no clock (times
+// are passed in), so it is tested by feeding it poses and budgets.
+//
+// The policy:
+// - Cells needed: the current view cell first, then the cells ahead along the
+//   velocity (prefetchSeconds of travel, sampled at most kMaxPrefetchSteps
+//   times), then the neighbours whose shared side or corner lies within the
+//   prefetch margin (prefetchSeconds at walking speed, at least 2 m).
+// - Face sets of needed cells are requested in that order, at most
+//   maxCellRequests outstanding; a cell no longer needed has its request
+//   dropped (its Interest expires, so queued work for it is cancelled).
+// - Under the visibility policy nothing streams before the current cell's
+//   face set is known and its culling (faces visible from the pose) has
+//   answered; those faces go first, then the rest of each needed cell in
+//   order. A new current cell is culled at once, the same cell again at most
+//   every cullIntervalS.
+// - Memory budget: a face that would take the client over its budget is not
+//   sent; above 90% of the budget, faces outside every needed cell are
+//   evicted, farthest first, down to 70%.
+// - CellReady once the client holds every face of a needed cell (again after
+//   an eviction took some of them).
+//
+// Not thread-safe: one scheduler per session, used on the session's strand.
+#pragma once
+
+#include <cstdint>
+#include <glm/glm.hpp>
+#include <map>
+#include <optional>
+#include <set>
+#include <vector>
+
+#include "server/stream/stream_world.h"
+
+namespace vistream {
+
+struct StreamSchedulerConfig {
+  StreamPolicy policy = StreamPolicy::Visibility;
+  double prefetchSeconds = 3.0;
+  double maxSpeedMps = 100.0;  // speeds above are clamped (the session refuses them anyway)
+  unsigned maxCellRequests = 3;
+  size_t batchBytes = 48u << 10;  // raw face bytes per batch
+  double cullIntervalS = 0.25;
+};
+
+class StreamScheduler {
+ public:
+  // Samples along the velocity when prefetching: bounds the work of one pose
+  // whatever the speed and horizon.
+  static constexpr int kMaxPrefetchSteps = 32;
+
+  // `radius`: the client's near-field radius (metres); `budgetBytes`: its
+  // memory budget (0: unlimited), counted in StreamWorld::faceBytes.
+  StreamScheduler(const StreamWorld& world, StreamSchedulerConfig config, float radius,
+                  uint64_t budgetBytes);
+
+  // A new pose (local frame; checked for plausibility by the caller).
+  void setPose(const glm::dvec3& position, const glm::vec3& velocity, float yawDeg, float pitchDeg);
+  bool hasPose() const { return hasPose_; }
+  const std::vector<uint32_t>& neededCells() const {
+    return needed_;
+  }  // linear indices, current first
+
+  // ---- visibility work ---------------------------------------------------------
+  struct CellRequest {
+    uint32_t cell;  // linear index
+    Interest
+        interest;  // hand to StreamWorld::cellFaceSet; expires when the cell is no longer wanted
+  };
+  // The face sets to request now (marked as requested).
+  std::vector<CellRequest> takeCellRequests();
+  // A requested face set arrived. False if it was no longer wanted (dropped).
+  bool onFaceSet(uint32_t cell, FaceListPtr faces);
+  bool isRequested(uint32_t cell) const { return requested_.count(cell) > 0; }
+
+  struct CullRequest {
+    uint32_t cell;
+    glm::dvec3 eye;
+    float yawDeg, pitchDeg;
+    FaceListPtr faceSet;  // intersect the culling's faces with this
+  };
+  // The culling to start now, if one is due (visibility policy only); the
+  // caller runs at most one at a time and reports it with onCulled.
+  std::optional<CullRequest> takeCullRequest(double nowS);
+  void onCulled(uint32_t cell, FaceList visible);
+
+  // Drops every request (a closing session): their interests expire.
+  void cancelAll() { requested_.clear(); }
+
+  // ---- what to send ------------------------------------------------------------
+  // Whether streaming may go on: the current cell's face set is known and,
+  // under the visibility policy, not waiting for its first culling.
+  bool readyToStream(bool cullingInFlight) const;
+  // Faces to evict now (sorted; empty if within the budget).
+  std::vector<uint32_t> takeEvictions();
+  // The next batch of faces to send, in order (about batchBytes); marks them held.
+  std::vector<uint32_t> takeBatch();
+  struct ReadyCell {
+    glm::ivec3 cell;
+    uint32_t faces;
+  };
+  // Needed cells the client now holds whole, not announced before.
+  std::vector<ReadyCell> takeReadyCells();
+
+  bool held(uint32_t face) const { return (held_[face >> 6] >> (face & 63)) & 1u; }
+  uint32_t heldCount() const { return heldCount_; }
+  uint64_t heldBytes() const { return heldBytes_; }
+  uint32_t cellsReady() const { return uint32_t(announced_.size()); }
+
+ private:
+  void updateNeededCells();
+  void setHeld(uint32_t face, bool on);
+  bool isNeeded(uint32_t cell) const;
+
+  const StreamWorld& world_;
+  const StreamSchedulerConfig config_;
+  const float radius_;
+  const uint64_t budget_;
+
+  bool hasPose_ = false;
+  glm::dvec3 position_{0.0};
+  glm::vec3 velocity_{0.0f};
+  float yaw_ = 0.0f, pitch_ = 0.0f;
+  glm::ivec3 cell_{0};
+
+  std::vector<uint64_t> held_;  // a bitset over face IDs
+  uint64_t heldBytes_ = 0;
+  uint32_t heldCount_ = 0;
+  std::vector<uint32_t> needed_;              // linear cell indices, current first
+  std::map<uint32_t, FaceListPtr> cellSets_;  // loaded face sets of needed cells
+  std::map<uint32_t, size_t> cursor_;         // per loaded cell: faces before this index are held
+  std::map<uint32_t, Interest> requested_;    // face sets being computed
+  std::set<uint32_t> announced_;
+  FaceList visibleNow_;
+  uint32_t culledCell_ = UINT32_MAX, visibleNowCell_ = UINT32_MAX;
+  double lastCullS_ = -1e300;
+};
+
+}  // namespace vistream
