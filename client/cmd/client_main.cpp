@@ -33,6 +33,7 @@ namespace {
 
 struct Args {
   std::string scene, host, pathFile, size = "640x480", outDir, mode = "pipeline", logLevel = "warn", token;
+  SceneLimits sceneLimits;
   uint16_t port = 7070;
   bool headless = false, json = false, noCache = false, compare = false;
   size_t frames = 0;
@@ -266,7 +267,7 @@ int run(const Args& a) {
   RenderGeometry geometry;
   glm::dvec3 origin(0.0);
   if (local) {
-    scene = openScene(a.scene);
+    scene = openScene(a.scene, a.sceneLimits);
     geometry = renderGeometryFromScene(*scene);
     origin = scene->origin;
   } else {
@@ -325,6 +326,7 @@ int main(int argc, char** argv) {
       "vistream-client: renders a walkthrough; near field as polygons, far field by horizon tracing, a panoramic "
       "image cache and ray casting (Wimmer 2001, chapter 4)"};
   app.add_option("--scene", a.scene, "local mode: a scene file or built-in name (city1, bigcity, terrain, ...)");
+  addSceneLimitsOption(app, a.sceneLimits);
   app.add_option("--host", a.host, "connected mode: the vistream-server to stream from");
   app.add_option("--port", a.port, "the server's port")->capture_default_str();
   app.add_option("--token", a.token, "the server's shared secret, if it asks for one");

@@ -35,6 +35,8 @@ int main(int argc, char** argv) {
   app.add_option("--duration", o.durationS, "seconds each client walks (default 10)");
   app.add_option("--fps", o.fps, "poses per second per client (default 10)");
   app.add_option("--scene", sceneSpec, "the scene, locally: enables visibility-miss checks and --paths auto");
+  SceneLimits sceneLimits;
+  addSceneLimitsOption(app, sceneLimits);
   app.add_option("--check-every", o.checkEvery, "frames between visibility checks (default 10; 0: none)");
   app.add_option("--radius", o.radius, "near-field radius to ask for in metres (0: the server's)");
   app.add_option("--memory-budget", o.memoryBudget, "client memory budget in bytes (0: unlimited)");
@@ -59,7 +61,7 @@ int main(int argc, char** argv) {
     if (!tokenFile.empty()) o.token = readTokenFile(tokenFile);
     Scene scene;
     if (!sceneSpec.empty()) {
-      scene = openScene(sceneSpec);
+      scene = openScene(sceneSpec, sceneLimits);
       o.scene = &scene;
     }
     if (!pathFile.empty()) {

@@ -4,16 +4,16 @@
 // with "tool: error: ..." on stderr, 2 bad usage).
 #pragma once
 
+#include <CLI/CLI.hpp>
 #include <cstdio>
 #include <fstream>
 #include <string>
 #include <utility>
 #include <vector>
 
-#include <CLI/CLI.hpp>
-
 #include "common/core/error.h"
 #include "common/core/log.h"
+#include "common/scene/scene_loader.h"
 
 namespace vistream {
 
@@ -28,7 +28,8 @@ inline void setUpToolApp(CLI::App& app, std::string& logLevel) {
 // exit code), turning errors into exit codes as described above. Tools
 // without subcommands call it directly.
 template <typename Body>
-int runFlatToolApp(const char* tool, CLI::App& app, int argc, char** argv, const std::string& logLevel, Body&& body) {
+int runFlatToolApp(const char* tool, CLI::App& app, int argc, char** argv,
+                   const std::string& logLevel, Body&& body) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -72,6 +73,14 @@ inline std::vector<std::string> splitCommaList(const std::string& text) {
     pos = comma + 1;
   }
   return out;
+}
+
+// Adds --max-scene-triangles, bound to limits.maxTriangles, to a tool or
+// subcommand that loads scene files.
+inline void addSceneLimitsOption(CLI::App& app, SceneLimits& limits) {
+  app.add_option("--max-scene-triangles", limits.maxTriangles,
+                 "refuse scene files that make more triangles (built-in scenes are not limited)")
+      ->capture_default_str();
 }
 
 }  // namespace vistream

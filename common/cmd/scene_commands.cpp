@@ -75,9 +75,9 @@ StaticWorld buildStaticWorld(const Scene& scene) {
   return w;
 }
 
-int cmdInfo(const std::string& spec, bool asJson) {
+int cmdInfo(const std::string& spec, const SceneLimits& limits, bool asJson) {
   Stopwatch clock;
-  const Scene scene = openScene(spec);
+  const Scene scene = openScene(spec, limits);
   const double loadMs = clock.ms();
   const StaticWorld world = buildStaticWorld(scene);
   const FreeSpace fs = FreeSpace::build(*world.rays, scene.bounds());
@@ -130,11 +130,11 @@ int cmdInfo(const std::string& spec, bool asJson) {
   return 0;
 }
 
-int cmdPath(const std::string& spec, double speed, size_t frames, uint64_t seed, double fps,
-            const std::string& out) {
+int cmdPath(const std::string& spec, const SceneLimits& limits, double speed, size_t frames,
+            uint64_t seed, double fps, const std::string& out) {
   if (frames == 0) throwInputError("--frames must be at least 1");
   if (!(fps > 0.0)) throwInputError("--fps must be positive");
-  const Scene scene = openScene(spec);
+  const Scene scene = openScene(spec, limits);
   const StaticWorld world = buildStaticWorld(scene);
   const FreeSpace fs = FreeSpace::build(*world.rays, scene.bounds());
   PathOptions options;
@@ -149,14 +149,14 @@ int cmdPath(const std::string& spec, double speed, size_t frames, uint64_t seed,
   return 0;
 }
 
-int cmdVisible(const std::string& spec, const std::string& cellText, size_t points, int res,
-               uint64_t seed, bool asJson) {
+int cmdVisible(const std::string& spec, const SceneLimits& limits, const std::string& cellText,
+               size_t points, int res, uint64_t seed, bool asJson) {
   const auto v = parseNumberList(cellText, 6, "--cell");
   if (v[0] > v[3] || v[1] > v[4] || v[2] > v[5])
     throwInputError("--cell: expected x0,y0,z0,x1,y1,z1 with x0<=x1, y0<=y1, z0<=z1, got '{}'", cellText);
   if (points == 0) throwInputError("--points must be at least 1");
   if (res < 1 || res > 4096) throwInputError("--res must be in 1..4096, got {}", res);
-  const Scene scene = openScene(spec);
+  const Scene scene = openScene(spec, limits);
   const StaticWorld world = buildStaticWorld(scene);
   const Box3f cell(scene.toLocal({v[0], v[1], v[2]}), scene.toLocal({v[3], v[4], v[5]}));
   SampledVisibilityOptions options;
@@ -198,10 +198,15 @@ int runSceneTool(int argc, char** argv) {
   gen->add_option("--out,-o", out, "output OBJ file")->required();
   gen->add_flag("--json", asJson, "print statistics as JSON");
 
+  // Every subcommand that loads a scene file takes the triangle limit.
+  SceneLimits limits;
+  auto addSceneLimits = [&](CLI::App* sub) { addSceneLimitsOption(*sub, limits); };
+
   auto* info = app.add_subcommand("info", "objects, faces, bounds and the effects a scene calls for");
   std::string scene;
   info->add_option("scene", scene, "SCENE")->required();
   info->add_flag("--json", asJson, "one JSON object on stdout");
+  addSceneLimits(info);
 
   auto* path = app.add_subcommand("path", "generate a walkthrough path through the free space");
   double speed = 1.0, fps = 30.0;
@@ -212,6 +217,7 @@ int runSceneTool(int argc, char** argv) {
   path->add_option("--fps", fps, "frames per second (default 30)");
   path->add_option("--seed", seed, "random seed");
   path->add_option("--out,-o", out, "output CSV (t,x,y,z,yaw_deg,pitch_deg)")->required();
+  addSceneLimits(path);
 
   auto* visible = app.add_subcommand("visible", "sampled ground truth: faces seen from a view cell");
   std::string cell;
@@ -223,12 +229,13 @@ int runSceneTool(int argc, char** argv) {
   visible->add_option("--res", res, "rays per cube-map face side");
   visible->add_option("--seed", seed, "seed for the random viewpoints");
   visible->add_flag("--json", asJson, "one JSON object on stdout: faces, stats");
+  addSceneLimits(visible);
 
   return runToolApp("vistream-scene", app, argc, argv, logLevel, [&]() -> int {
     if (*gen) return cmdGenerate(genType, preset, seed, out, asJson);
-    if (*info) return cmdInfo(scene, asJson);
-    if (*path) return cmdPath(scene, speed, frames, seed, fps, out);
-    if (*visible) return cmdVisible(scene, cell, points, res, seed, asJson);
+    if (*info) return cmdInfo(scene, limits, asJson);
+    if (*path) return cmdPath(scene, limits, speed, frames, seed, fps, out);
+    if (*visible) return cmdVisible(scene, limits, cell, points, res, seed, asJson);
     return 2;
   });
 }

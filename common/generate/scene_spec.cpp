@@ -12,9 +12,9 @@
 
 namespace vistream {
 
-Scene openScene(const std::string& spec) {
+Scene openScene(const std::string& spec, const SceneLimits& limits) {
   std::error_code ec;
-  if (std::filesystem::exists(spec, ec)) return loadScene(spec);
+  if (std::filesystem::exists(spec, ec)) return loadScene(spec, limits);
   std::string type = spec;
   uint64_t seed = 1;
   if (const size_t at = spec.find('@'); at != std::string::npos) {

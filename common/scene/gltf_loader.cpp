@@ -4,8 +4,20 @@
 // bounds-checked here because a glTF file is untrusted input: an accessor can
 // claim more elements than its buffer holds, and an index can point past the
 // vertex array. Images are not decoded: only their references are kept.
+//
+// Before tinygltf sees the bytes, this file checks what tinygltf does not:
+// the .glb container (header and chunk lengths against the file size), the
+// JSON nesting depth (tinygltf converts `extras` recursively) and the size of
+// every file it reads. After parsing and before building meshes, the
+// triangles and vertices every mesh instance will produce are counted from
+// accessor counts against SceneLimits. The node hierarchy is walked with an
+// explicit stack: a chain of 20,000 nodes must not overflow the call stack.
+#include <algorithm>
+#include <cctype>
 #include <cmath>
-#include <functional>
+#include <cstring>
+#include <limits>
+#include <string_view>
 
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
@@ -20,6 +32,66 @@ namespace vistream {
 namespace {
 
 constexpr int kTriangles = 4, kTriangleStrip = 5, kTriangleFan = 6;
+
+uint32_t readU32(const std::string& bytes, size_t at) {
+  uint32_t v = 0;
+  std::memcpy(&v, bytes.data() + at, 4);  // glb is little-endian, as is every target we build for
+  return v;
+}
+
+// Validates the binary glTF container against the file's size and returns
+// its JSON chunk. tinygltf's own checks give confusing messages ("must have 4
+// bytes or more bytes, but got 4") and leave the BIN chunk's 8-byte header out
+// of its bound. Layout: 12-byte header (magic, version, length), then chunks
+// of (length, type, payload); the first is JSON, the optional second BIN.
+std::string_view glbJsonChunk(const std::string& bytes, const std::string& file) {
+  constexpr uint32_t kMagic = 0x46546C67, kJson = 0x4E4F534A, kBin = 0x004E4942;
+  const uint64_t size = bytes.size();
+  if (size < 12)
+    throwInputError("{}: {} bytes, too short for a binary glTF header (12 bytes)", file, size);
+  if (readU32(bytes, 0) != kMagic)
+    throwInputError("{}: not a binary glTF file (it does not start with 'glTF')", file);
+  if (const uint32_t version = readU32(bytes, 4); version != 2)
+    throwInputError("{}: binary glTF version {} is not supported (expected 2)", file, version);
+  const uint64_t length = readU32(bytes, 8);
+  if (length > size)
+    throwInputError("{}: the glb header declares {} bytes, but the file has only {}", file, length,
+                    size);
+  if (length < 20)
+    throwInputError("{}: the glb declares {} bytes, too short for a JSON chunk header", file,
+                    length);
+  const uint64_t jsonLength = readU32(bytes, 12);
+  if (readU32(bytes, 16) != kJson) throwInputError("{}: the first glb chunk is not JSON", file);
+  if (20 + jsonLength > length)
+    throwInputError("{}: the JSON chunk length {} exceeds the file size ({} bytes)", file,
+                    jsonLength, length);
+  const uint64_t next = 20 + jsonLength;
+  if (next < length) {
+    if (next + 8 > length)
+      throwInputError("{}: truncated chunk header at byte {} ({} bytes in the file)", file, next,
+                      length);
+    const uint64_t chunkLength = readU32(bytes, size_t(next));
+    const bool bin = readU32(bytes, size_t(next) + 4) == kBin;
+    if (next + 8 + chunkLength > length)
+      throwInputError("{}: the {} chunk length {} at byte {} exceeds the file size ({} bytes)",
+                      file, bin ? "BIN" : "second", chunkLength, next, length);
+  }
+  return std::string_view(bytes).substr(20, size_t(jsonLength));
+}
+
+// tinygltf reads external buffers and images through this: the same checks
+// and size limit as the scene file itself.
+bool readLimitedFile(std::vector<unsigned char>* out, std::string* err, const std::string& path,
+                     void* userData) {
+  try {
+    const std::string bytes = readSceneFile(path, *static_cast<const SceneLimits*>(userData));
+    out->assign(bytes.begin(), bytes.end());
+    return true;
+  } catch (const InputError& e) {
+    if (err) *err = e.what();
+    return false;
+  }
+}
 
 // Keeps image references without decoding pixels.
 bool keepImageUndecoded(tinygltf::Image*, const int, std::string*, std::string*, int, int,
@@ -53,15 +125,21 @@ class AccessorReader {
     if (acc.count > limit || acc.count > (size_t(1) << 32))
       throwInputError("{}: {}: accessor {} claims {} elements, more than the file's buffers can hold",
                       file_, what, accessorIndex, acc.count);
-    std::vector<double> out(acc.count * size_t(components), 0.0);
-    if (acc.bufferView < 0) return out;  // all zeros, per the specification
+    const size_t elemSize = size_t(compSize) * size_t(components);
+    if (acc.bufferView < 0) {
+      // All zeros, per the specification; bounded like stored data would be.
+      if (acc.count * elemSize > limit)
+        throwInputError("{}: {}: accessor {} claims {} elements, more than the file's buffers can "
+                        "hold",
+                        file_, what, accessorIndex, acc.count);
+      return std::vector<double>(acc.count * size_t(components), 0.0);
+    }
     if (size_t(acc.bufferView) >= model_.bufferViews.size())
       throwInputError("{}: {}: buffer view {} does not exist", file_, what, acc.bufferView);
     const tinygltf::BufferView& view = model_.bufferViews[size_t(acc.bufferView)];
     if (view.buffer < 0 || size_t(view.buffer) >= model_.buffers.size())
       throwInputError("{}: {}: buffer {} does not exist", file_, what, view.buffer);
     const std::vector<unsigned char>& data = model_.buffers[size_t(view.buffer)].data;
-    const size_t elemSize = size_t(compSize) * size_t(components);
     const size_t stride = view.byteStride ? view.byteStride : elemSize;
     const size_t begin = view.byteOffset + acc.byteOffset;
     if (acc.count > 0) {
@@ -71,6 +149,8 @@ class AccessorReader {
         throwInputError("{}: {}: accessor {} reads past its buffer ({} elements of {} bytes)",
                         file_, what, accessorIndex, acc.count, elemSize);
     }
+    // Allocated only now that the view is known to hold every element.
+    std::vector<double> out(acc.count * size_t(components), 0.0);
     for (size_t i = 0; i < acc.count; ++i) {
       const unsigned char* p = data.data() + begin + i * stride;
       for (int c = 0; c < components; ++c) {
@@ -114,24 +194,117 @@ glm::dmat4 localMatrix(const tinygltf::Node& node) {
   return m;
 }
 
+// The nodes the geometry pass starts from: the default scene's roots (or the
+// first scene's, or every parentless node when there is no scene).
+std::vector<int> rootNodes(const tinygltf::Model& model) {
+  if (model.defaultScene >= 0 && size_t(model.defaultScene) < model.scenes.size())
+    return model.scenes[size_t(model.defaultScene)].nodes;
+  if (!model.scenes.empty()) return model.scenes[0].nodes;
+  std::vector<uint8_t> hasParent(model.nodes.size(), 0);
+  for (const auto& n : model.nodes)
+    for (int c : n.children)
+      if (c >= 0 && size_t(c) < model.nodes.size()) hasParent[size_t(c)] = 1;
+  std::vector<int> roots;
+  for (size_t i = 0; i < model.nodes.size(); ++i)
+    if (!hasParent[i]) roots.push_back(int(i));
+  return roots;
+}
+
+uint64_t saturatingAdd(uint64_t a, uint64_t b) {
+  return a > std::numeric_limits<uint64_t>::max() - b ? std::numeric_limits<uint64_t>::max()
+                                                      : a + b;
+}
+
+// Counts the triangles and vertices the geometry pass will build, from
+// accessor counts alone (nothing is read or allocated), and throws
+// SceneLimitError over the limits. Every mesh instance counts: one mesh
+// under 1,000 nodes is built 1,000 times. What the geometry pass would
+// reject (missing nodes or accessors, counts no buffer can back, cycles) is
+// skipped here and reported there, before it allocates.
+void checkGeometryLimits(const tinygltf::Model& model, const std::vector<int>& roots,
+                         const std::string& file, const SceneLimits& limits) {
+  uint64_t bufferBytes = 0;
+  for (const auto& b : model.buffers) bufferBytes += b.data.size();
+  auto countOf = [&](int accessor) -> uint64_t {
+    if (accessor < 0 || size_t(accessor) >= model.accessors.size()) return 0;
+    const uint64_t count = model.accessors[size_t(accessor)].count;
+    return count > bufferBytes ? 0 : count;
+  };
+  uint64_t triangles = 0, vertices = 0;
+  std::vector<uint8_t> visited(model.nodes.size(), 0);
+  std::vector<int> stack(roots.rbegin(), roots.rend());
+  while (!stack.empty()) {
+    const int ni = stack.back();
+    stack.pop_back();
+    if (ni < 0 || size_t(ni) >= model.nodes.size() || visited[size_t(ni)]) continue;
+    visited[size_t(ni)] = 1;
+    const auto& node = model.nodes[size_t(ni)];
+    if (node.mesh >= 0 && size_t(node.mesh) < model.meshes.size()) {
+      for (const auto& prim : model.meshes[size_t(node.mesh)].primitives) {
+        if (prim.mode != kTriangles && prim.mode != kTriangleStrip && prim.mode != kTriangleFan &&
+            prim.mode != -1)
+          continue;
+        const auto pos = prim.attributes.find("POSITION");
+        const uint64_t nv = pos == prim.attributes.end() ? 0 : countOf(pos->second);
+        const uint64_t n = prim.indices >= 0 ? countOf(prim.indices) : nv;
+        const bool strip = prim.mode == kTriangleStrip || prim.mode == kTriangleFan;
+        triangles = saturatingAdd(triangles, strip ? (n >= 3 ? n - 2 : 0) : n / 3);
+        vertices = saturatingAdd(vertices, nv);
+      }
+    }
+    for (auto c = node.children.rbegin(); c != node.children.rend(); ++c) stack.push_back(*c);
+  }
+  if (triangles > triangleLimit(limits))
+    throwSceneLimit(file, triangles, triangleLimit(limits), "triangles");
+  if (vertices > vertexLimit(limits))
+    throwSceneLimit(file, vertices, vertexLimit(limits), "vertices");
+}
+
+// Node transforms become float in Scene::nodes (for skins and animations).
+void checkNodeTransform(const tinygltf::Node& node, size_t index, const std::string& file) {
+  for (const auto* values : {&node.matrix, &node.translation, &node.rotation, &node.scale})
+    for (double v : *values)
+      if (!std::isfinite(float(v)))
+        throwInputError("{}: node {} has transform value {}, which is not a finite float", file,
+                        index, v);
+}
+
 }  // namespace
 
-Scene loadGltf(const std::filesystem::path& path) {
+Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits) {
   const std::string file = path.string();
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) throwInputError("{}: no such file", file);
-  if (std::filesystem::file_size(path, ec) == 0) throwInputError("{}: file is empty", file);
+  const std::string bytes = readSceneFile(path, limits);
+  if (bytes.empty()) throwInputError("{}: file is empty", file);
+  if (bytes.size() > std::numeric_limits<uint32_t>::max())
+    throwInputError("{}: {} bytes; glTF files of 4 GiB or more are not supported", file,
+                    bytes.size());
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return char(std::tolower(c)); });
+  const bool binary = ext == ".glb";
+  if (binary)
+    checkJsonNesting(glbJsonChunk(bytes, file), file + " (JSON chunk)");
+  else
+    checkJsonNesting(bytes, file);
 
   tinygltf::TinyGLTF gltf;
   gltf.SetImageLoader(keepImageUndecoded, nullptr);
+  SceneLimits fileLimits = limits;
+  gltf.SetFsCallbacks({&tinygltf::FileExists, &tinygltf::ExpandFilePath, &readLimitedFile,
+                       &tinygltf::WriteWholeFile, &fileLimits});
   tinygltf::Model model;
   std::string err, warn;
-  std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-  const bool ok = ext == ".glb" ? gltf.LoadBinaryFromFile(&model, &err, &warn, file)
-                                : gltf.LoadASCIIFromFile(&model, &err, &warn, file);
+  const std::string baseDir = path.parent_path().string();
+  const bool ok =
+      binary ? gltf.LoadBinaryFromMemory(&model, &err, &warn,
+                                         reinterpret_cast<const unsigned char*>(bytes.data()),
+                                         unsigned(bytes.size()), baseDir)
+             : gltf.LoadASCIIFromString(&model, &err, &warn, bytes.data(), unsigned(bytes.size()),
+                                        baseDir);
   if (!warn.empty()) spdlog::debug("{}: {}", file, warn);
   if (!ok) throwInputError("{}: {}", file, err.empty() ? std::string("not a valid glTF file") : err);
+  const std::vector<int> roots = rootNodes(model);
+  checkGeometryLimits(model, roots, file, limits);
 
   const AccessorReader reader(model, file);
   Scene scene;
@@ -163,6 +336,7 @@ Scene loadGltf(const std::filesystem::path& path) {
     const auto& n = model.nodes[i];
     Node& out = scene.nodes[i];
     out.name = n.name;
+    checkNodeTransform(n, i, file);
     if (n.translation.size() == 3) out.translation = glm::vec3(float(n.translation[0]), float(n.translation[1]), float(n.translation[2]));
     if (n.rotation.size() == 4) out.rotation = glm::vec4(float(n.rotation[0]), float(n.rotation[1]), float(n.rotation[2]), float(n.rotation[3]));
     if (n.scale.size() == 3) out.scale = glm::vec3(float(n.scale[0]), float(n.scale[1]), float(n.scale[2]));
@@ -242,17 +416,23 @@ Scene loadGltf(const std::filesystem::path& path) {
     bool dynamic = false;
   };
   std::vector<Pending> pending;
-  std::vector<int> roots;
-  if (model.defaultScene >= 0 && size_t(model.defaultScene) < model.scenes.size())
-    roots = model.scenes[size_t(model.defaultScene)].nodes;
-  else if (!model.scenes.empty())
-    roots = model.scenes[0].nodes;
-  else
-    for (size_t i = 0; i < scene.nodes.size(); ++i)
-      if (scene.nodes[i].parent < 0) roots.push_back(int(i));
 
+  // Depth-first, pre-order, children in order, on an explicit stack.
+  struct Visit {
+    int node;
+    glm::dmat4 parent;
+    bool animatedAbove;
+  };
+  std::vector<Visit> stack;
+  for (auto r = roots.rbegin(); r != roots.rend(); ++r)
+    stack.push_back({*r, glm::dmat4(1.0), false});
   std::vector<uint8_t> visited(model.nodes.size(), 0);
-  std::function<void(int, const glm::dmat4&, bool)> visit = [&](int ni, const glm::dmat4& parent, bool animatedAbove) {
+  while (!stack.empty()) {
+    const Visit top = stack.back();
+    stack.pop_back();
+    const int ni = top.node;
+    const glm::dmat4& parent = top.parent;
+    const bool animatedAbove = top.animatedAbove;
     if (ni < 0 || size_t(ni) >= model.nodes.size())
       throwInputError("{}: scene refers to node {} which does not exist", file, ni);
     if (visited[size_t(ni)]) throwInputError("{}: node {} is reached twice (cycle or shared child)", file, ni);
@@ -339,14 +519,43 @@ Scene loadGltf(const std::filesystem::path& path) {
       }
       if (!obj.triangles.empty()) pending.push_back(std::move(obj));
     }
-    for (int c : node.children) visit(c, world, animated);
-  };
-  for (int r : roots) visit(r, glm::dmat4(1.0), false);
+    for (auto c = node.children.rbegin(); c != node.children.rend(); ++c)
+      stack.push_back({*c, world, animated});
+  }
   if (pending.empty()) throwInputError("{}: no triangle geometry in the scene", file);
 
   Box3d bounds;
   for (const auto& p : pending) for (const auto& v : p.positions) bounds.extend(v);
   scene.origin = glm::floor(bounds.center());
+  // Finite POSITION floats can still overflow: node transforms are applied
+  // in double, and the result is stored as float relative to the origin. One
+  // far vertex moves the origin so that others fail too: blame the failing
+  // vertex farthest from zero.
+  {
+    const Pending* worstObject = nullptr;
+    size_t worstVertex = 0;
+    double worstMagnitude = -1.0;
+    for (const auto& p : pending)
+      for (size_t k = 0; k < p.positions.size(); ++k) {
+        const glm::dvec3 v = p.positions[k];
+        const glm::vec3 local(v - scene.origin);
+        if (std::isfinite(local.x) && std::isfinite(local.y) && std::isfinite(local.z)) continue;
+        const double magnitude = std::max({std::abs(v.x), std::abs(v.y), std::abs(v.z)});
+        if (!(magnitude <= worstMagnitude)) {  // NaN (from inf - inf) counts as farthest
+          worstObject = &p;
+          worstVertex = k;
+          worstMagnitude = magnitude;
+        }
+      }
+    if (worstObject) {
+      const glm::dvec3 v = worstObject->positions[worstVertex];
+      throwInputError(
+          "{}: object '{}' vertex {} ({}, {}, {}) is too far from the scene's local origin "
+          "({}, {}, {}) to store in single precision",
+          file, worstObject->name, worstVertex, v.x, v.y, v.z, scene.origin.x, scene.origin.y,
+          scene.origin.z);
+    }
+  }
   uint32_t faceId = 0;
   for (auto& p : pending) {
     Object obj;

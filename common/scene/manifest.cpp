@@ -1,6 +1,7 @@
 #include "common/scene/manifest.h"
 
-#include <fstream>
+#include <algorithm>
+#include <cmath>
 
 #include <nlohmann/json.hpp>
 
@@ -81,13 +82,13 @@ void appendScene(Scene& scene, Scene part) {
   finalizeScene(scene);
 }
 
-Scene loadManifest(const std::filesystem::path& path) {
+Scene loadManifest(const std::filesystem::path& path, const SceneLimits& limits) {
   const std::string file = path.string();
-  std::ifstream in(path);
-  if (!in) throwInputError("{}: cannot open manifest", file);
+  const std::string text = readSceneFile(path, limits);
+  checkJsonNesting(text, file);
   json j;
   try {
-    j = json::parse(in);
+    j = json::parse(text);
   } catch (const json::parse_error& e) {
     throwInputError("{}: not valid JSON: {}", file, e.what());
   }
@@ -164,7 +165,20 @@ Scene loadManifest(const std::filesystem::path& path) {
     std::string ext = geomPath.extension().string();
     for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
     if (ext == ".json") throwInputError("{}: manifests cannot include manifests", where);
-    Scene part = loadScene(geomPath);
+    // The part may have what the parts before it left of the triangle limit.
+    const uint64_t before = scene.triangleCount();
+    SceneLimits partLimits = limits;
+    partLimits.maxTriangles = triangleLimit(limits) - std::min(before, triangleLimit(limits));
+    Scene part;
+    try {
+      part = loadScene(geomPath, partLimits);
+    } catch (const SceneLimitError& e) {
+      throw SceneLimitError(
+          fmt::format("{}: {} (the scene's limit is {} triangles and the files before this one "
+                      "have {})",
+                      where, e.what(), triangleLimit(limits), before),
+          e.found, e.limit);
+    }
     if (scale != 1.0 || translate != glm::dvec3(0.0)) {
       // Place the part: p_file' = p_file * scale + translate, kept in double.
       const glm::dvec3 newOrigin = part.origin * scale + translate;
@@ -178,6 +192,15 @@ Scene loadManifest(const std::filesystem::path& path) {
       if (!name.empty()) o.name = name + "/" + o.name;
     }
     appendScene(scene, std::move(part));
+    // Scaling, and re-expressing every part relative to one origin, can push
+    // a position out of float range although each file was fine on its own.
+    for (const Object& o : scene.objects)
+      for (const glm::vec3& p : o.mesh.positions)
+        if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+          throwInputError(
+              "{}: placing {} puts object '{}' too far from the scene's local "
+              "origin to store in single precision",
+              where, geomPath.string(), o.name);
   }
   scene.environment = env;
   return scene;

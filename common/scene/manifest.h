@@ -24,12 +24,16 @@
 #include <filesystem>
 
 #include "common/scene/scene.h"
+#include "common/scene/scene_loader.h"
 
 namespace vistream {
 
 // Loads a manifest and every file it names. Throws InputError naming the
-// manifest and the key or entry that is wrong.
-Scene loadManifest(const std::filesystem::path& path);
+// manifest and the key or entry that is wrong. `limits` bound each file read
+// and the scene as a whole: the triangles of all parts together may not
+// exceed limits.maxTriangles (each part is loaded with what the parts before
+// it left, so it fails before building more).
+Scene loadManifest(const std::filesystem::path& path, const SceneLimits& limits = {});
 
 // Appends `part` to `scene`, offsetting face IDs by scene.faceCount and
 // re-expressing positions relative to a common local origin.

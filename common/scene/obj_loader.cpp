@@ -5,12 +5,14 @@
 // and keeps out-of-range indices. So a first pass over the text records the
 // line of every `v` and `f` statement and rejects what is wrong with a
 // file:line message; tinyobjloader then does the parsing proper (groups,
-// materials, index forms) and the two passes are cross-checked.
+// materials, index forms) and the two passes are cross-checked. The first
+// pass also counts the triangles and vertices the file will produce and stops
+// at SceneLimits before tinyobjloader allocates anything, and it rejects
+// indices that tinyobjloader's atoi could not represent.
 #include <algorithm>
 #include <charconv>
+#include <climits>
 #include <cmath>
-#include <fstream>
-#include <sstream>
 #include <unordered_map>
 
 #include <spdlog/spdlog.h>
@@ -47,11 +49,10 @@ void tokenize(std::string_view line, std::vector<std::string_view>& tokens) {
   }
 }
 
-LineScan scanLines(std::string_view text, const std::string& name) {
-  LineScan scan;
+// Calls visit(lineNo, tokens) for every non-empty line, comments removed.
+template <typename Visit>
+void forEachStatement(std::string_view text, Visit&& visit) {
   std::vector<std::string_view> tokens;
-  std::vector<long long> pendingIndices;  // positive indices, checked once all vertices are known
-  std::vector<uint32_t> pendingLines;
   uint32_t lineNo = 0;
   size_t pos = 0;
   while (pos < text.size()) {
@@ -63,13 +64,71 @@ LineScan scanLines(std::string_view text, const std::string& name) {
     const size_t hash = line.find('#');
     if (hash != std::string_view::npos) line = line.substr(0, hash);
     tokenize(line, tokens);
-    if (tokens.empty()) continue;
+    if (!tokens.empty() && !visit(lineNo, tokens)) return;
+  }
+}
+
+// What the statements of a whole file add up to; counted only to report a
+// limit, so nothing is validated.
+struct StatementCounts {
+  uint64_t vertices = 0, texcoords = 0, normals = 0, triangles = 0;
+};
+
+StatementCounts countStatements(std::string_view text) {
+  StatementCounts c;
+  forEachStatement(text, [&](uint32_t, const std::vector<std::string_view>& tokens) {
+    const std::string_view key = tokens[0];
+    if (key == "v")
+      ++c.vertices;
+    else if (key == "vt")
+      ++c.texcoords;
+    else if (key == "vn")
+      ++c.normals;
+    else if (key == "f" && tokens.size() >= 4)
+      c.triangles += tokens.size() - 3;
+    return true;
+  });
+  return c;
+}
+
+// The 1-based line of the `v` statement of vertex `index` (0-based).
+uint32_t lineOfVertex(std::string_view text, size_t index) {
+  uint32_t found = 0;
+  size_t seen = 0;
+  forEachStatement(text, [&](uint32_t lineNo, const std::vector<std::string_view>& tokens) {
+    if (tokens[0] != "v") return true;
+    if (seen++ < index) return true;
+    found = lineNo;
+    return false;
+  });
+  return found;
+}
+
+LineScan scanLines(std::string_view text, const std::string& name, const SceneLimits& limits) {
+  const uint64_t maxTriangles = triangleLimit(limits);
+  const uint64_t maxVertices = vertexLimit(limits);
+  LineScan scan;
+  uint64_t triangles = 0, texcoords = 0, normals = 0;
+  std::vector<long long> pendingIndices;  // positive indices, checked once all vertices are known
+  std::vector<uint32_t> pendingLines;
+  // Over a limit: count the whole file (without validating) to report it,
+  // naming the triangles when they are over too: the limit users set.
+  auto overLimit = [&]() {
+    const StatementCounts all = countStatements(text);
+    if (all.triangles > maxTriangles)
+      throwSceneLimit(name, all.triangles, maxTriangles, "triangles");
+    if (all.vertices > maxVertices) throwSceneLimit(name, all.vertices, maxVertices, "vertices");
+    if (all.texcoords > maxVertices)
+      throwSceneLimit(name, all.texcoords, maxVertices, "texture coordinates");
+    throwSceneLimit(name, all.normals, maxVertices, "normals");
+  };
+  forEachStatement(text, [&](uint32_t lineNo, const std::vector<std::string_view>& tokens) {
     const std::string_view key = tokens[0];
     if (key == "v") {
       if (tokens.size() < 4)
         throwInputError("{}:{}: vertex has {} coordinates, expected 3", name, lineNo,
                         tokens.size() - 1);
-      for (int k = 1; k <= 3; ++k) {
+      for (size_t k = 1; k <= 3; ++k) {
         double value = 0.0;
         std::string_view num = tokens[k];
         if (num.size() > 1 && num.front() == '+') num.remove_prefix(1);  // from_chars rejects '+'
@@ -78,7 +137,11 @@ LineScan scanLines(std::string_view text, const std::string& name) {
           throwInputError("{}:{}: vertex coordinate '{}' is not a finite number", name, lineNo,
                           tokens[k]);
       }
-      ++scan.vertexCount;
+      if (++scan.vertexCount > maxVertices) overLimit();
+    } else if (key == "vt") {
+      if (++texcoords > maxVertices) overLimit();
+    } else if (key == "vn") {
+      if (++normals > maxVertices) overLimit();
     } else if (key == "f") {
       const size_t n = tokens.size() - 1;
       if (n < 3)
@@ -86,34 +149,60 @@ LineScan scanLines(std::string_view text, const std::string& name) {
       if (n > kMaxFaceVertices)
         throwInputError("{}:{}: face has {} vertices, at most {} are supported", name, lineNo, n,
                         kMaxFaceVertices);
+      // Checked before anything of the face is stored: a file over the limit
+      // fails here, at the first face past it, before the parser runs.
+      triangles += n - 2;
+      if (triangles > maxTriangles) overLimit();
       for (size_t k = 1; k <= n; ++k) {
-        std::string_view tok = tokens[k].substr(0, tokens[k].find('/'));
+        const std::string_view token = tokens[k];
+        std::string_view tok = token.substr(0, token.find('/'));
         if (tok.size() > 1 && tok.front() == '+') tok.remove_prefix(1);
         long long idx = 0;
         const auto [ptr, ec] = std::from_chars(tok.data(), tok.data() + tok.size(), idx);
         if (ec != std::errc() || ptr != tok.data() + tok.size() || idx == 0)
-          throwInputError("{}:{}: face vertex '{}' is not a valid index", name, lineNo, tokens[k]);
+          throwInputError("{}:{}: face vertex '{}' is not a valid index", name, lineNo, token);
         if (idx < 0) {
-          if (-idx > (long long)scan.vertexCount)
+          // Compared without negating idx: -LLONG_MIN overflows.
+          if (idx < -static_cast<long long>(scan.vertexCount))
             throwInputError("{}:{}: relative face index {} refers before the first vertex", name,
                             lineNo, idx);
         } else {
           pendingIndices.push_back(idx);
           pendingLines.push_back(lineNo);
         }
+        // The texture coordinate and normal indices after the slashes go to
+        // tinyobjloader's atoi, which has no defined result outside int.
+        for (size_t slash = token.find('/'); slash != std::string_view::npos;) {
+          const size_t next = token.find('/', slash + 1);
+          std::string_view part =
+              token.substr(slash + 1, next == std::string_view::npos ? std::string_view::npos
+                                                                     : next - slash - 1);
+          slash = next;
+          if (part.size() > 1 && part.front() == '+') part.remove_prefix(1);
+          if (part.empty()) continue;
+          long long value = 0;
+          const auto r = std::from_chars(part.data(), part.data() + part.size(), value);
+          if (r.ec == std::errc::result_out_of_range ||
+              (r.ec == std::errc() && (value > INT_MAX || value < INT_MIN)))
+            throwInputError("{}:{}: face vertex '{}' has an index out of range", name, lineNo,
+                            token);
+        }
       }
       scan.faceLines.push_back(lineNo);
       ++scan.faceCount;
     }
-  }
+    return true;
+  });
   for (size_t i = 0; i < pendingIndices.size(); ++i)
     if (pendingIndices[i] > (long long)scan.vertexCount)
       throwInputError("{}:{}: face index {} is out of range ({} vertices in the file)", name,
                       pendingLines[i], pendingIndices[i], scan.vertexCount);
   if (scan.faceCount == 0) {
-    if (lineNo == 0 || text.find_first_not_of(" \t\r\n") == std::string_view::npos)
+    if (text.find_first_not_of(" \t\r\n") == std::string_view::npos)
       throwInputError("{}: file is empty", name);
-    throwInputError("{}: file has no faces ({} vertices, {} lines)", name, scan.vertexCount, lineNo);
+    size_t lines = size_t(std::count(text.begin(), text.end(), '\n'));
+    if (!text.empty() && text.back() != '\n') ++lines;
+    throwInputError("{}: file has no faces ({} vertices, {} lines)", name, scan.vertexCount, lines);
   }
   return scan;
 }
@@ -130,8 +219,11 @@ Material toMaterial(const tinyobj::material_t& m) {
 }  // namespace
 
 Scene loadObjFromMemory(std::string_view objText, const std::string& displayName,
-                        std::string_view mtlText) {
-  const LineScan scan = scanLines(objText, displayName);
+                        std::string_view mtlText, const SceneLimits& limits) {
+  if (objText.size() > limits.maxFileBytes)
+    throwInputError("{}: the file has {} bytes, more than the limit of {} bytes for a scene file",
+                    displayName, objText.size(), limits.maxFileBytes);
+  const LineScan scan = scanLines(objText, displayName, limits);
 
   tinyobj::ObjReaderConfig config;
   config.triangulate = false;  // we triangulate concave polygons ourselves
@@ -170,10 +262,34 @@ Scene loadObjFromMemory(std::string_view objText, const std::string& displayName
     bounds.extend(glm::dvec3(attrib.vertices[3 * i], attrib.vertices[3 * i + 1],
                              attrib.vertices[3 * i + 2]));
   scene.origin = bounds.empty() ? glm::dvec3(0.0) : glm::floor(bounds.center());
-  auto filePosition = [&](int idx) {
-    return glm::dvec3(attrib.vertices[3 * size_t(idx)], attrib.vertices[3 * size_t(idx) + 1],
-                      attrib.vertices[3 * size_t(idx) + 2]);
+  auto filePosition = [&](size_t idx) {
+    return glm::dvec3(attrib.vertices[3 * idx], attrib.vertices[3 * idx + 1],
+                      attrib.vertices[3 * idx + 2]);
   };
+  // Finite in double is not enough: positions are stored as float relative
+  // to the origin, and 1e308 (or a bounds centre that overflowed) is not.
+  // One far vertex moves the origin so that others fail too: blame the
+  // failing vertex farthest from zero in file coordinates.
+  size_t worst = nv;
+  double worstMagnitude = -1.0;
+  for (size_t i = 0; i < nv; ++i) {
+    const glm::dvec3 p = filePosition(i);
+    const glm::vec3 local(p - scene.origin);
+    if (std::isfinite(local.x) && std::isfinite(local.y) && std::isfinite(local.z)) continue;
+    const double magnitude = std::max({std::abs(p.x), std::abs(p.y), std::abs(p.z)});
+    if (magnitude > worstMagnitude) {
+      worst = i;
+      worstMagnitude = magnitude;
+    }
+  }
+  if (worst < nv) {
+    const glm::dvec3 p = filePosition(worst);
+    throwInputError(
+        "{}:{}: vertex {} ({}, {}, {}) is too far from the scene's local origin ({}, {}, {}) to "
+        "store in single precision",
+        displayName, lineOfVertex(objText, worst), worst + 1, p.x, p.y, p.z, scene.origin.x,
+        scene.origin.y, scene.origin.z);
+  }
 
   uint32_t faceId = 0;
   std::vector<glm::dvec3> polygon;
@@ -209,7 +325,7 @@ Scene loadObjFromMemory(std::string_view objText, const std::string& displayName
         if (ti >= 0 && size_t(ti) >= nt)
           throwInputError("{}:{}: texture coordinate index {} is out of range ({} in the file)", displayName,
                           scan.faceLines[faceId], ti + 1, nt);
-        polygon.push_back(filePosition(vi));
+        polygon.push_back(filePosition(size_t(vi)));
         const uint64_t key = uint64_t(vi) * (uint64_t(nt) + 1) + uint64_t(ti + 1);
         auto [it, inserted] = localOf.try_emplace(key, uint32_t(mesh.positions.size()));
         if (inserted) {
@@ -244,25 +360,8 @@ Scene loadObjFromMemory(std::string_view objText, const std::string& displayName
   return scene;
 }
 
-namespace {
-
-std::string readWholeFile(const std::filesystem::path& path) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) throwInputError("{}: no such file", path.string());
-  if (std::filesystem::is_directory(path, ec))
-    throwInputError("{}: is a directory, expected a file", path.string());
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throwInputError("{}: cannot open for reading", path.string());
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  if (in.bad()) throwInputError("{}: read error", path.string());
-  return std::move(ss).str();
-}
-
-}  // namespace
-
-Scene loadObj(const std::filesystem::path& path) {
-  const std::string text = readWholeFile(path);
+Scene loadObj(const std::filesystem::path& path, const SceneLimits& limits) {
+  const std::string text = readSceneFile(path, limits);
   // The material library is optional: a missing one is a warning, not an error.
   std::string mtl;
   for (size_t at = text.find("mtllib"); at != std::string::npos; at = text.find("mtllib", at + 1)) {
@@ -272,18 +371,16 @@ Scene loadObj(const std::filesystem::path& path) {
     tokenize(std::string_view(text).substr(at, end == std::string::npos ? end : end - at), tokens);
     if (tokens.size() < 2) break;
     const auto mtlPath = path.parent_path() / std::string(tokens[1]);
-    std::ifstream in(mtlPath, std::ios::binary);
-    if (in) {
-      std::ostringstream ss;
-      ss << in.rdbuf();
-      mtl = std::move(ss).str();
+    std::error_code ec;
+    if (std::filesystem::exists(mtlPath, ec)) {
+      mtl = readSceneFile(mtlPath, limits);  // bounded: it may name /dev/zero
     } else {
       spdlog::warn("{}: material library {} not found; using default materials", path.string(),
                    mtlPath.string());
     }
     break;
   }
-  Scene scene = loadObjFromMemory(text, path.string(), mtl);
+  Scene scene = loadObjFromMemory(text, path.string(), mtl, limits);
   scene.name = path.stem().string();
   scene.sources = {path};
   return scene;

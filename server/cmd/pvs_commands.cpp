@@ -56,13 +56,14 @@ json statsJson(const PvsStats& s) {
               {"faces_culled_by_box_stage", s.facesCulledByBoxStage}};
 }
 
-int cmdCell(const std::string& spec, const std::string& cellText, const std::string& method,
-            const PvsOptions& options, const FusedPvsOptions& fusedOptions, bool asJson) {
+int cmdCell(const std::string& spec, const SceneLimits& limits, const std::string& cellText,
+            const std::string& method, const PvsOptions& options,
+            const FusedPvsOptions& fusedOptions, bool asJson) {
   if (!(fusedOptions.epsilon > 0.0) || fusedOptions.resolution < 4 || fusedOptions.resolution > 2048)
     throwInputError("--epsilon must be positive and --fused-res in 4..2048");
   if (method != "paper" && method != "fused")
     throwInputError("--method: expected 'paper' or 'fused', got '{}'", method);
-  const Scene scene = openScene(spec);
+  const Scene scene = openScene(spec, limits);
   const Box3f cell = parseCell(scene, cellText);
   const EpsilonPvs pvs(scene);
   FusedPvsStats fusedStats;
@@ -98,9 +99,9 @@ int cmdCell(const std::string& spec, const std::string& cellText, const std::str
   return 0;
 }
 
-int cmdBake(const std::string& spec, const std::string& cellSizeText, const std::string& regionText,
-            unsigned threads, const std::string& shardText, bool coarseToFine, const PvsOptions& pvsOptions,
-            const std::string& out, bool asJson) {
+int cmdBake(const std::string& spec, const SceneLimits& limits, const std::string& cellSizeText,
+            const std::string& regionText, unsigned threads, const std::string& shardText,
+            bool coarseToFine, const PvsOptions& pvsOptions, const std::string& out, bool asJson) {
   BakeOptions options;
   options.pvs = pvsOptions;
   options.threads = threads;
@@ -123,7 +124,7 @@ int cmdBake(const std::string& spec, const std::string& cellSizeText, const std:
     options.shardIndex = i;
     options.shardCount = n;
   }
-  const Scene scene = openScene(spec);
+  const Scene scene = openScene(spec, limits);
   if (!regionText.empty()) options.region = parseCell(scene, regionText);
   const FlatTriangles tris = flattenScene(scene, true);
   const auto rays = makeEmbreeRayQuery(tris);
@@ -203,8 +204,8 @@ int cmdQuery(const std::string& dbPath, const std::string& pointText, const std:
   return 0;
 }
 
-int cmdWalk(const std::string& spec, const std::string& pathFile, const std::string& method, const CullingOptions& base,
-            bool asJson, bool withFaces) {
+int cmdWalk(const std::string& spec, const SceneLimits& limits, const std::string& pathFile,
+            const std::string& method, const CullingOptions& base, bool asJson, bool withFaces) {
   CullingOptions options = base;
   options.method = parseCullingMethod(method);
   options.collectFaces = withFaces;
@@ -213,7 +214,7 @@ int cmdWalk(const std::string& spec, const std::string& pathFile, const std::str
   if (!(options.fovDeg > 0.0 && options.fovDeg < 180.0)) throwInputError("--fov must be in (0, 180) degrees");
   if (options.occluders == 0) throwInputError("--occluders must be at least 1");
   const auto path = readPath(pathFile);
-  const Scene scene = openScene(spec);
+  const Scene scene = openScene(spec, limits);
   const CullingScene culling(scene);
   CullingViewer viewer(culling, options);
   json frames = json::array();
@@ -269,6 +270,10 @@ int runPvsTool(int argc, char** argv) {
   std::string logLevel;
   setUpToolApp(app, logLevel);
 
+  // Every subcommand that loads a scene file takes the triangle limit.
+  SceneLimits limits;
+  auto addSceneLimits = [&](CLI::App* sub) { addSceneLimitsOption(*sub, limits); };
+
   auto* cell = app.add_subcommand("cell", "the PVS of one view cell");
   std::string scene, cellText, method = "paper";
   bool asJson = false, noBbox = false, noIncremental = false, noRedundantOccluders = false,
@@ -286,6 +291,7 @@ int runPvsTool(int argc, char** argv) {
   FusedPvsOptions fusedOptions;
   cell->add_option("--epsilon", fusedOptions.epsilon, "fused: occluder erosion and sample spacing bound (m)");
   cell->add_option("--fused-res", fusedOptions.resolution, "fused: occlusion cube-map pixels per side");
+  addSceneLimits(cell);
 
   auto* bake = app.add_subcommand("bake", "bake the PVS of every cell over the free space into a database");
   std::string cellSize, region, shard, out;
@@ -303,6 +309,7 @@ int runPvsTool(int argc, char** argv) {
   bake->add_flag("--no-redundant-occluders", noRedundantOccluders, "keep occluded objects as occluders");
   bake->add_flag("--no-redundant-rays", noRedundantRays, "cast every corner-vertex line");
   bake->add_flag("--json", asJson, "statistics as JSON");
+  addSceneLimits(bake);
 
   auto* query = app.add_subcommand("query", "the PVS of the cell holding a point, from a baked database");
   std::string db, point, cellIndex;
@@ -346,6 +353,7 @@ int runPvsTool(int argc, char** argv) {
   walk->add_option("--fov", cullOptions.fovDeg, "horizontal field of view in degrees (4:3 frustum)");
   walk->add_flag("--json", asJson, "one JSON object: summary and frames");
   walk->add_flag("--with-faces", withFaces, "list the faces of visible leaves per frame");
+  addSceneLimits(walk);
 
   auto* walkBench = app.add_subcommand("walk-bench", "Figures 8-11 of Bittner and Havran 2001: methods against speed and p_skip");
   WalkBenchOptions walkBenchOptions;
@@ -370,14 +378,15 @@ int runPvsTool(int argc, char** argv) {
     if (*cell) {
       PvsOptions options = pvsOptionsFromFlags();
       options.largeOccluders = largeOccluders;
-      return cmdCell(scene, cellText, method, options, fusedOptions, asJson);
+      return cmdCell(scene, limits, cellText, method, options, fusedOptions, asJson);
     }
     if (*bake) {
       const PvsOptions options = pvsOptionsFromFlags();
-      return cmdBake(scene, cellSize, region, threads, shard, !noCoarse, options, out, asJson);
+      return cmdBake(scene, limits, cellSize, region, threads, shard, !noCoarse, options, out,
+                     asJson);
     }
     if (*query) return cmdQuery(db, point, cellIndex, asJson);
-    if (*walk) return cmdWalk(scene, pathFile, walkMethod, cullOptions, asJson, withFaces);
+    if (*walk) return cmdWalk(scene, limits, pathFile, walkMethod, cullOptions, asJson, withFaces);
     if (*walkBench) {
       if (!walkScenes.empty()) walkBenchOptions.scenes = splitCommaList(walkScenes);
       if (walkBenchOptions.frames == 0 || walkBenchOptions.repeats == 0)

@@ -25,8 +25,10 @@ int main(int argc, char** argv) {
   std::string logLevel, scene, pvsDb, tokenFile, policy = "visibility", portFile;
   StreamServerConfig cfg;
   StreamWorldOptions worldOptions;
+  SceneLimits sceneLimits;
   app.add_option("--log-level", logLevel, "trace, debug, info, warn, error, critical, off");
   app.add_option("--scene", scene, "SCENE")->required();
+  addSceneLimitsOption(app, sceneLimits);
   app.add_option("--pvs-db", pvsDb,
                  "baked PVS database (vistream-pvs bake); default: compute on demand");
   app.add_option("--cell-size", worldOptions.cellSize,
@@ -90,7 +92,7 @@ int main(int argc, char** argv) {
     if (cfg.maxCellRequests == 0) throwInputError("--max-cell-requests must be at least 1");
     if (cfg.maxPvsRequestsWaiting == 0) throwInputError("--max-pvs-requests must be at least 1");
     worldOptions.pvsDatabase = pvsDb;
-    StreamWorld world(openScene(scene), worldOptions);
+    StreamWorld world(openScene(scene, sceneLimits), worldOptions);
     StreamServer server(world, cfg);
     server.start();
     if (!portFile.empty()) {

@@ -11,10 +11,16 @@
 // test the faces in it.
 //
 // Resumable: every finished cell is appended to a journal (OUT.journal) with
-// its own checksum; a restarted bake with the same parameters reads the
-// journal, drops a torn last record and computes only what is missing. The
-// database itself is written atomically at the end (pvs_database.h) and the
-// journal removed.
+// its own checksum; a restarted bake with the same parameters (fingerprinted
+// in the journal's header) reads the journal's valid prefix and computes only
+// what is missing. The prefix ends at the first record that is incomplete (a
+// torn write) or fails its checksum, names a cell outside the grid or holds a
+// bad face list; that record and everything after it are dropped and
+// recomputed, never trusted, and a warning names the journal, the offset and
+// how many bytes and records were dropped. A resumed bake writes the same
+// database, byte for byte, as one run straight through (the coarse level is
+// always the whole block's PVS). The database itself is written atomically at
+// the end (pvs_database.h) and the journal removed.
 //
 // Sharding: shard i of n bakes the blocks whose index is i modulo n; shards
 // baked on separate machines are combined with mergePvsDatabases().
@@ -48,7 +54,7 @@ struct BakeReport {
   size_t gridCells = 0;        // cells in the grid
   size_t freeCells = 0;        // cells over the free space (all shards)
   size_t shardCells = 0;       // cells this shard bakes
-  size_t resumedCells = 0;     // taken from the journal
+  size_t resumedCells = 0;     // this shard's cells taken from the journal
   size_t computedCells = 0;
   double timeMs = 0.0;
   double meanCellMs = 0.0;     // per computed cell, wall time x threads / cells

@@ -5,8 +5,15 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstring>
 #include <fstream>
+#include <limits>
+
+#include <spdlog/spdlog.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_invoke.h>
+#include <tbb/parallel_reduce.h>
 
 #include "common/core/error.h"
 #include "pvs_database_generated.h"
@@ -17,17 +24,9 @@ namespace {
 constexpr char kMagic[8] = {'V', 'S', 'P', 'V', 'S', 'D', 'B', '\0'};
 constexpr size_t kHeaderBytes = 32;
 
-uint64_t fnv1a(const uint8_t* data, size_t size, uint64_t h = 1469598103934665603ull) {
-  for (size_t i = 0; i < size; ++i) {
-    h ^= data[i];
-    h *= 1099511628211ull;
-  }
-  return h;
-}
-
 template <typename T>
 uint64_t fnvValue(uint64_t h, const T& v) {
-  return fnv1a(reinterpret_cast<const uint8_t*>(&v), sizeof(T), h);
+  return fnv1a64(&v, sizeof(T), h);
 }
 
 void putU32(uint8_t* p, uint32_t v) { for (int i = 0; i < 4; ++i) p[i] = uint8_t(v >> (8 * i)); }
@@ -35,10 +34,69 @@ void putU64(uint8_t* p, uint64_t v) { for (int i = 0; i < 8; ++i) p[i] = uint8_t
 uint32_t getU32(const uint8_t* p) { uint32_t v = 0; for (int i = 0; i < 4; ++i) v |= uint32_t(p[i]) << (8 * i); return v; }
 uint64_t getU64(const uint8_t* p) { uint64_t v = 0; for (int i = 0; i < 8; ++i) v |= uint64_t(p[i]) << (8 * i); return v; }
 
+// Reads one LEB128 varint of at most 5 bytes (a 32-bit value needs no more)
+// at `pos`; false if it is cut off or longer.
+inline bool readVarint(const uint8_t* data, size_t size, size_t& pos, uint64_t& value) {
+  value = data[pos++];
+  if (!(value & 0x80)) return true;
+  value &= 0x7f;
+  for (int shift = 7; pos < size && shift <= 28; shift += 7) {
+    const uint8_t b = data[pos++];
+    value |= uint64_t(b & 0x7f) << shift;
+    if (!(b & 0x80)) return true;
+  }
+  return false;
+}
+
+// Decodes a face list, calling emit(face) for each face, without allocating.
+// Returns what is wrong (a phrase starting "face list"), or nothing if the
+// list is `expected` well-formed varints of at most 5 bytes giving strictly
+// increasing IDs below `faceLimit` (<= 2^32). The one decoder behind
+// decodeFaceList, open()'s validation and cell(), so they cannot disagree.
+template <typename Emit>
+std::optional<std::string> scanFaceList(const uint8_t* data, size_t size, uint32_t expected, uint64_t faceLimit,
+                                        Emit&& emit) {
+  faceLimit = std::min(faceLimit, uint64_t(1) << 32);  // face IDs are 32-bit
+  // Every face takes at least one byte: this also bounds the caller's reserve().
+  if (expected > size) return fmt::format("face list claims {} faces in {} bytes", expected, size);
+  size_t pos = 0;
+  uint32_t count = 0;
+  uint64_t prev = 0;
+  while (pos < size) {
+    const size_t start = pos;
+    uint64_t value = 0;
+    if (!readVarint(data, size, pos, value)) return fmt::format("face list has a malformed varint at byte {}", start);
+    if (count > 0 && value == 0)
+      return fmt::format("face list is not strictly increasing at entry {} (face {} repeated)", count, prev);
+    const uint64_t face = count == 0 ? value : prev + value;  // < 2^32 + 2^35: no overflow
+    if (face >= faceLimit)
+      return fmt::format("face list entry {} is face {}, not below the face count {}", count, face, faceLimit);
+    emit(uint32_t(face));
+    prev = face;
+    ++count;
+  }
+  if (count != expected) return fmt::format("face list holds {} faces, header says {}", count, expected);
+  return std::nullopt;
+}
+
+glm::ivec3 cellOfIndex(uint32_t linear, const glm::ivec3& dims) {
+  const uint64_t row = uint64_t(dims.x), layer = row * uint64_t(dims.y);
+  return {int(linear % row), int(linear / row % uint64_t(dims.y)), int(linear / layer)};
+}
+
 }  // namespace
 
+uint64_t fnv1a64(const void* data, size_t size, uint64_t h) {
+  const auto* p = static_cast<const uint8_t*>(data);
+  for (size_t i = 0; i < size; ++i) {
+    h ^= p[i];
+    h *= 1099511628211ull;
+  }
+  return h;
+}
+
 uint64_t sceneFingerprint(const Scene& scene) {
-  uint64_t h = fnvValue(1469598103934665603ull, scene.faceCount);
+  uint64_t h = fnvValue(kFnv1a64OffsetBasis, scene.faceCount);
   h = fnvValue(h, uint64_t(scene.objects.size()));
   for (const Object& o : scene.objects) {
     for (size_t t = 0; t < o.mesh.triangles.size(); ++t) {
@@ -82,29 +140,11 @@ std::vector<uint8_t> encodeFaceList(const std::vector<uint32_t>& faces) {
   return out;
 }
 
-std::vector<uint32_t> decodeFaceList(const uint8_t* data, size_t size, uint32_t expected) {
+std::vector<uint32_t> decodeFaceList(const uint8_t* data, size_t size, uint32_t expected, uint64_t faceLimit) {
   std::vector<uint32_t> out;
-  if (expected > size) throwInputError("face list claims {} faces in {} bytes", expected, size);
-  out.reserve(expected);
-  size_t pos = 0;
-  uint64_t prev = 0;
-  while (pos < size) {
-    uint64_t value = 0;
-    int shift = 0;
-    while (true) {
-      if (pos >= size || shift > 28) throwInputError("face list has a malformed varint at byte {}", pos);
-      const uint8_t b = data[pos++];
-      value |= uint64_t(b & 0x7f) << shift;
-      if (!(b & 0x80)) break;
-      shift += 7;
-    }
-    const uint64_t face = out.empty() ? value : prev + value;
-    if (face > 0xffffffffull || (!out.empty() && value == 0))
-      throwInputError("face list is not strictly increasing at entry {}", out.size());
-    out.push_back(uint32_t(face));
-    prev = face;
-  }
-  if (out.size() != expected) throwInputError("face list holds {} faces, header says {}", out.size(), expected);
+  if (expected <= size) out.reserve(expected);
+  if (auto fault = scanFaceList(data, size, expected, faceLimit, [&](uint32_t f) { out.push_back(f); }))
+    throw InputError(*fault);
   return out;
 }
 
@@ -130,7 +170,7 @@ void writePvsDatabase(const std::filesystem::path& path, const PvsDatabaseHeader
   std::memcpy(header, kMagic, 8);
   putU32(header + 8, kPvsDbVersion);
   putU64(header + 16, b.GetSize());
-  putU64(header + 24, fnv1a(b.GetBufferPointer(), b.GetSize()));
+  putU64(header + 24, fnv1a64(b.GetBufferPointer(), b.GetSize()));
 
   const std::filesystem::path tmp = path.string() + ".tmp";
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
@@ -200,23 +240,51 @@ PvsDatabase PvsDatabase::open(const std::filesystem::path& path) {
   if (std::memcmp(p, kMagic, 8) != 0) throwInputError("{}: not a PVS database (bad magic)", name);
   const uint32_t version = getU32(p + 8);
   if (version != kPvsDbVersion)
-    throwInputError("{}: PVS database format version {} is not supported (this build reads {})", name, version,
-                    kPvsDbVersion);
+    throwInputError("{}: PVS database format version {} is not supported (this build reads version {}{}); "
+                    "re-bake it with this build's vistream-pvs bake",
+                    name, version, kPvsDbVersion,
+                    version == 1 ? "; version 1 seeded its checksum with a wrong FNV offset basis" : "");
   const uint64_t payload = getU64(p + 16);
   if (payload != size - kHeaderBytes)
     throwInputError("{}: truncated or padded: header says {} payload bytes, file has {}", name, payload,
                     size - kHeaderBytes);
-  if (fnv1a(p + kHeaderBytes, payload) != getU64(p + 24))
-    throwInputError("{}: checksum mismatch: the database is corrupt", name);
-  flatbuffers::Verifier verifier(p + kHeaderBytes, payload);
+  // The checksum and the structure (verifier, header fields, every cell's
+  // face list) are two passes over the payload of about the same length, so
+  // they run side by side. The verifier makes reading the payload safe
+  // whatever its bytes; a checksum mismatch is reported first, as it
+  // explains any other fault.
+  bool checksumOk = false;
+  std::optional<std::string> fault;
+  tbb::parallel_invoke([&] { checksumOk = fnv1a64(p + kHeaderBytes, payload) == getU64(p + 24); },
+                       [&] {
+                         try {
+                           db.readPayload();
+                         } catch (const InputError& e) {
+                           fault = e.what();
+                         }
+                       });
+  if (!checksumOk) throwInputError("{}: checksum mismatch: the database is corrupt", name);
+  if (fault) throw InputError(*fault);
+  return db;
+}
+
+void PvsDatabase::readPayload() {
+  const std::string name = path_.string();
+  const uint8_t* payload = map_ + kHeaderBytes;
+  const size_t payloadBytes = mapSize_ - kHeaderBytes;
+  // The verifier's default cap of 10^6 tables would refuse big bakes (one
+  // table per cell); every table takes at least 4 bytes, so this cap still
+  // bounds verification by the file's size.
+  flatbuffers::Verifier verifier(payload, payloadBytes, 64,
+                                 flatbuffers::uoffset_t(std::min<uint64_t>(payloadBytes / 4 + 1, 0xffffffffu)));
   if (!pvsdb::VerifyDatabaseBuffer(verifier)) throwInputError("{}: database structure fails verification", name);
-  const auto* root = pvsdb::GetDatabase(p + kHeaderBytes);
-  db.root_ = root;
+  const auto* root = pvsdb::GetDatabase(payload);
+  root_ = root;
   auto vec3 = [&](const auto* v, const char* what) {
     if (!v || v->size() != 3) throwInputError("{}: field '{}' must hold 3 values", name, what);
     return v;
   };
-  PvsDatabaseHeader& h = db.header_;
+  PvsDatabaseHeader& h = header_;
   h.sceneName = root->scene_name() ? root->scene_name()->str() : "";
   h.sceneFingerprint = root->scene_fingerprint();
   h.sceneFaces = root->scene_faces();
@@ -233,15 +301,42 @@ PvsDatabase PvsDatabase::open(const std::filesystem::path& path) {
     if (!(h.cellSize[a] > 0.0f) || h.dims[a] <= 0 || h.dims[a] > (1 << 20))
       throwInputError("{}: invalid grid (cell size and dims must be positive)", name);
   const uint64_t cellsTotal = uint64_t(h.dims.x) * uint64_t(h.dims.y) * uint64_t(h.dims.z);
-  if (const auto* cells = root->cells()) {
-    int64_t prev = -1;
-    for (const auto* c : *cells) {
-      if (int64_t(c->index()) <= prev || c->index() >= cellsTotal)
-        throwInputError("{}: cell indices must be increasing and inside the grid", name);
-      prev = c->index();
-    }
+  const auto* cells = root->cells();
+  if (!cells) return;
+  int64_t prev = -1;
+  for (flatbuffers::uoffset_t n = 0; n < cells->size(); ++n) {
+    const uint32_t index = cells->Get(n)->index();
+    if (int64_t(index) <= prev || index >= cellsTotal)
+      throwInputError("{}: cell entry {} has index {}: cell indices must be increasing and inside the grid of {} "
+                      "cells",
+                      name, n, index, cellsTotal);
+    prev = index;
   }
-  return db;
+  // Every face list is decoded here, once, so that cell() cannot fail later
+  // on a worker thread, and a bad file is refused when the server starts,
+  // not when a client first walks into the cell. In parallel over cells; the
+  // first bad cell (in file order) is the one reported.
+  auto listFault = [&](flatbuffers::uoffset_t n) {
+    const auto* c = cells->Get(n);
+    const auto* bytes = c->faces();
+    return scanFaceList(bytes ? bytes->data() : nullptr, bytes ? bytes->size() : 0, c->face_count(), h.sceneFaces,
+                        [](uint32_t) {});
+  };
+  using Range = tbb::blocked_range<flatbuffers::uoffset_t>;
+  constexpr flatbuffers::uoffset_t kNone = std::numeric_limits<flatbuffers::uoffset_t>::max();
+  const flatbuffers::uoffset_t firstBad = tbb::parallel_reduce(
+      Range(0, cells->size(), 1024), kNone,
+      [&](const Range& r, flatbuffers::uoffset_t found) {
+        for (flatbuffers::uoffset_t n = r.begin(); n < r.end() && n < found; ++n)
+          if (listFault(n)) return n;
+        return found;
+      },
+      [](flatbuffers::uoffset_t a, flatbuffers::uoffset_t b) { return std::min(a, b); });
+  if (firstBad != kNone) {
+    const uint32_t index = cells->Get(firstBad)->index();
+    const glm::ivec3 ijk = cellOfIndex(index, h.dims);
+    throwInputError("{}: cell {} (i,j,k {},{},{}): {}", name, index, ijk.x, ijk.y, ijk.z, *listFault(firstBad));
+  }
 }
 
 size_t PvsDatabase::cellCount() const {
@@ -262,12 +357,18 @@ std::optional<std::vector<uint32_t>> PvsDatabase::cell(uint32_t linearIndex) con
   const auto* c = cells->LookupByKey(linearIndex);
   if (!c) return std::nullopt;
   const auto* bytes = c->faces();
-  std::vector<uint32_t> faces =
-      bytes ? decodeFaceList(bytes->data(), bytes->size(), c->face_count()) : std::vector<uint32_t>{};
-  for (uint32_t f : faces)
-    if (f >= header_.sceneFaces)
-      throwInputError("{}: cell {} lists face {} beyond the scene's {} faces", path_.string(), linearIndex, f,
-                      header_.sceneFaces);
+  std::vector<uint32_t> faces;
+  faces.reserve(bytes ? std::min<size_t>(c->face_count(), bytes->size()) : 0);
+  // open() decoded this list with the same function; it can only fail if the
+  // file changed under the mapping since.
+  if (auto fault = scanFaceList(bytes ? bytes->data() : nullptr, bytes ? bytes->size() : 0, c->face_count(),
+                                header_.sceneFaces, [&](uint32_t f) { faces.push_back(f); })) {
+    const glm::ivec3 ijk = cellOfIndex(linearIndex, header_.dims);
+    spdlog::error("{}: cell {} (i,j,k {},{},{}): {} (the file changed after it was opened?); treating the cell "
+                  "as not baked",
+                  path_.string(), linearIndex, ijk.x, ijk.y, ijk.z, *fault);
+    return std::nullopt;
+  }
   return faces;
 }
 

@@ -115,6 +115,46 @@ TEST(SceneTool, BadArgumentsGiveAClearErrorAndANonZeroExit) {
   fs::remove_all(scene.parent_path());
 }
 
+TEST(SceneTool, InfoOnADeeplyNestedGltfFailsWithTheReasonInsteadOfCrashing) {
+  // 20,000 nested arrays in `extras` (about 40 KB) used to overflow the stack.
+  const fs::path dir =
+      fs::temp_directory_path() / ("vistream_tool_deep_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const fs::path file = dir / "deep.gltf";
+  std::ofstream(file) << R"({"asset": {"version": "2.0"}, "extras": )" << std::string(20000, '[')
+                      << std::string(20000, ']') << "}";
+  const ToolRun r = runTool("info " + file.string());
+  EXPECT_EQ(r.status, 1) << r.err;
+  EXPECT_NE(r.err.find("vistream-scene: error:"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find(file.string()), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("nesting depth exceeds the limit of 256"), std::string::npos) << r.err;
+  fs::remove_all(dir);
+}
+
+TEST(SceneTool, MaxSceneTrianglesRefusesALargerFileAndNamesItself) {
+  const fs::path scene = writeWallScene();  // 26 triangles
+  ToolRun r = runTool("info " + scene.string() + " --max-scene-triangles 25");
+  EXPECT_EQ(r.status, 1) << r.err;
+  EXPECT_NE(r.err.find("error:"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("26 triangles, more than the limit of 25"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("--max-scene-triangles"), std::string::npos) << r.err;
+  r = runTool("info " + scene.string() + " --max-scene-triangles 26 --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out)["triangles"].get<int>(), 26);
+  r = runTool("visible --scene " + scene.string() +
+              " --cell 49999,1,-50000,50001,2,-49998 --max-scene-triangles 25");
+  EXPECT_EQ(r.status, 1) << r.err;
+  EXPECT_NE(r.err.find("--max-scene-triangles"), std::string::npos) << r.err;
+  fs::remove_all(scene.parent_path());
+}
+
+TEST(SceneTool, HelpShowsTheDefaultTriangleLimit) {
+  const ToolRun r = runTool("info --help");
+  EXPECT_EQ(r.status, 0);
+  EXPECT_NE(r.out.find("--max-scene-triangles"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("8000000"), std::string::npos) << r.out;
+}
+
 TEST(SceneTool, GeneratesAPathFileThatStartsWithTheHeader) {
   const fs::path scene = writeWallScene();
   const fs::path out = scene.parent_path() / "p.csv";

@@ -12,6 +12,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <set>
 #include <string>
@@ -199,6 +200,34 @@ class GltfDoc {
         {{{"byteLength", bin_.size()},
           {"uri", "data:application/octet-stream;base64," + base64(bin_)}}});
     return d.dump(1);
+  }
+
+  // The document as a .glb: the buffer travels in the BIN chunk.
+  std::string glb() {
+    json d = doc_;
+    d["buffers"] = json::array({{{"byteLength", bin_.size()}}});
+    std::string bin(bin_.begin(), bin_.end());
+    return glbOf(d.dump(), bin);
+  }
+
+  // A .glb of a JSON chunk and (if `bin` is non-empty) a BIN chunk, both
+  // padded to 4 bytes as the specification requires.
+  static std::string glbOf(std::string jsonText, std::string bin) {
+    while (jsonText.size() % 4 != 0) jsonText += ' ';
+    while (bin.size() % 4 != 0) bin += '\0';
+    std::string out = "glTF";
+    auto u32 = [&](uint32_t v) { out.append(reinterpret_cast<const char*>(&v), 4); };
+    u32(2);
+    u32(uint32_t(12 + 8 + jsonText.size() + (bin.empty() ? 0 : 8 + bin.size())));
+    u32(uint32_t(jsonText.size()));
+    u32(0x4E4F534Au);  // "JSON"
+    out += jsonText;
+    if (!bin.empty()) {
+      u32(uint32_t(bin.size()));
+      u32(0x004E4942u);  // "BIN\0"
+      out += bin;
+    }
+    return out;
   }
 
  private:
@@ -652,6 +681,269 @@ TEST(GltfLoader, NeverThrowsAnythingButInputErrorOnATruncatedOrFlippedFox) {
     } catch (const InputError&) {
     }
   }
+}
+
+// ---- hostile files: nesting, container lengths, limits, float range ---------------------
+
+// A glTF document (no geometry needed) whose top-level `extras` nests
+// `depth` arrays: the whole text nests depth + 1 levels.
+std::string nestedExtras(size_t depth) {
+  return R"({"asset": {"version": "2.0"}, "extras": )" + std::string(depth, '[') +
+         std::string(depth, ']') + "}";
+}
+
+TEST(GltfLoader, RejectsJsonNestedTwentyThousandLevelsDeepInsteadOfOverflowingTheStack) {
+  // 20,000 nested arrays in `extras`, about 40 KB: tinygltf converted them
+  // recursively and the process died of a stack overflow.
+  const TempDir dir;
+  const fs::path p = dir.write("deep.gltf", nestedExtras(20000));
+  const std::string msg = inputErrorOf([&] { loadGltf(p); });
+  EXPECT_THAT(msg, HasSubstr("deep.gltf"));
+  EXPECT_THAT(msg, HasSubstr("nesting depth exceeds the limit of 256"));
+}
+
+TEST(GltfLoader, RejectsADeeplyNestedJsonChunkOfAGlb) {
+  const TempDir dir;
+  const fs::path p = dir.write("deep.glb", GltfDoc::glbOf(nestedExtras(20000), ""));
+  const std::string msg = inputErrorOf([&] { loadGltf(p); });
+  EXPECT_THAT(msg, HasSubstr("deep.glb"));
+  EXPECT_THAT(msg, HasSubstr("JSON chunk"));
+  EXPECT_THAT(msg, HasSubstr("nesting depth exceeds the limit of 256"));
+}
+
+TEST(GltfLoader, AcceptsNestingUpToTheLimitAndBracketsInsideStrings) {
+  GltfDoc g;
+  const int pos = g.addPositions(kUnitTriangle);
+  g.addNode({{"name", "n"}, {"mesh", g.addMesh("m", {GltfDoc::primitive(pos)})}});
+  g.setRoots({0});
+  // Escaped backslash, escaped quote, then brackets that are all string
+  // content: a scan that lost track of the string would count 1,000 levels.
+  g.doc()["asset"]["generator"] = "\\\"" + std::string(1000, '[') + "\"" + std::string(1000, '{');
+  json nested = json::array();
+  for (int k = 1; k < 255; ++k) nested = json::array({nested});
+  g.doc()["extras"] = nested;  // 255 arrays inside the top-level object: 256 levels
+  const TempDir dir;
+  const fs::path ok = dir.write("at_limit.gltf", g.text());
+  EXPECT_EQ(loadGltf(ok).triangleCount(), 1u);
+  g.doc()["extras"] = json::array({nested});  // 257 levels
+  const fs::path over = dir.write("over_limit.gltf", g.text());
+  EXPECT_THAT(inputErrorOf([&] { loadGltf(over); }), HasSubstr("exceeds the limit of 256"));
+}
+
+TEST(GltfLoader, LoadsAGlbWithItsBufferInTheBinChunk) {
+  // The control for the container tests below: the same writer, untampered.
+  GltfDoc g;
+  const int pos = g.addPositions(kUnitTriangle);
+  g.addNode({{"name", "n"}, {"mesh", g.addMesh("m", {GltfDoc::primitive(pos)})}});
+  g.setRoots({0});
+  const TempDir dir;
+  const Scene scene = loadGltf(dir.write("good.glb", g.glb()));
+  ASSERT_EQ(scene.triangleCount(), 1u);
+  expectNear(fileTriangle(scene, scene.objects[0], 0)[1], {1, 0, 0}, 1e-6);
+}
+
+TEST(GltfLoader, RejectsABinChunkLongerThanTheFileSayingSo) {
+  // tinygltf said "At least Chunk1 Must have 4 bytes or more bytes, but got 4".
+  GltfDoc g;
+  const int pos = g.addPositions(kUnitTriangle);
+  g.addNode({{"name", "n"}, {"mesh", g.addMesh("m", {GltfDoc::primitive(pos)})}});
+  g.setRoots({0});
+  std::string bytes = g.glb();
+  uint32_t jsonLength = 0;
+  std::memcpy(&jsonLength, bytes.data() + 12, 4);
+  const size_t binHeader = 20 + jsonLength;
+  const uint32_t huge = 0x7ffffff0u;
+  std::memcpy(bytes.data() + binHeader, &huge, 4);
+  const TempDir dir;
+  const fs::path p = dir.write("longbin.glb", bytes);
+  const std::string msg = inputErrorOf([&] { loadGltf(p); });
+  EXPECT_THAT(msg, HasSubstr("longbin.glb"));
+  EXPECT_THAT(
+      msg, HasSubstr(fmt::format("BIN chunk length {} at byte {} exceeds the file size ({} bytes)",
+                                 huge, binHeader, bytes.size())));
+  // The shape of the issue's file: it ends right after the BIN chunk header.
+  std::string cut = bytes.substr(0, binHeader + 8);
+  const uint32_t cutSize = uint32_t(cut.size());
+  std::memcpy(cut.data() + 8, &cutSize, 4);
+  const fs::path q = dir.write("cutbin.glb", cut);
+  EXPECT_THAT(
+      inputErrorOf([&] { loadGltf(q); }),
+      HasSubstr(fmt::format("BIN chunk length {} at byte {} exceeds the file size ({} bytes)", huge,
+                            binHeader, cut.size())));
+}
+
+TEST(GltfLoader, RejectsAGlbWhoseHeaderOrJsonChunkClaimsMoreThanTheFileHolds) {
+  GltfDoc g;
+  const int pos = g.addPositions(kUnitTriangle);
+  g.addNode({{"name", "n"}, {"mesh", g.addMesh("m", {GltfDoc::primitive(pos)})}});
+  g.setRoots({0});
+  const std::string good = g.glb();
+  const TempDir dir;
+  std::string longer = good;
+  const uint32_t declared = uint32_t(good.size() + 100);
+  std::memcpy(longer.data() + 8, &declared, 4);
+  EXPECT_THAT(
+      inputErrorOf([&] { loadGltf(dir.write("header.glb", longer)); }),
+      HasSubstr(fmt::format("declares {} bytes, but the file has only {}", declared, good.size())));
+  std::string longJson = good;
+  const uint32_t jsonLength = 0xfffffff0u;
+  std::memcpy(longJson.data() + 12, &jsonLength, 4);
+  EXPECT_THAT(inputErrorOf([&] { loadGltf(dir.write("json.glb", longJson)); }),
+              HasSubstr(fmt::format("JSON chunk length {} exceeds the file size", jsonLength)));
+}
+
+// Mesh "square": an indexed unit square (2 triangles); mesh "strip": a
+// 5-vertex strip (3 triangles). Nodes: square, square, strip: 7 triangles.
+std::string sevenTriangles() {
+  GltfDoc g;
+  const int quad = g.addPositions({{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}});
+  const int idx = g.addIndices({0, 1, 2, 0, 2, 3}, kUnsignedShort);
+  const int square = g.addMesh("square", {GltfDoc::primitive(quad, idx)});
+  const int stripPos = g.addPositions({{0, 0, 5}, {0, 1, 5}, {1, 0, 5}, {1, 1, 5}, {2, 0, 5}});
+  const int strip = g.addMesh("strip", {GltfDoc::primitive(stripPos, -1, 5)});
+  g.addNode({{"name", "a"}, {"mesh", square}});
+  g.addNode({{"name", "b"}, {"mesh", square}, {"translation", {0, 0, 2}}});
+  g.addNode({{"name", "c"}, {"mesh", strip}});
+  g.setRoots({0, 1, 2});
+  return g.text();
+}
+
+TEST(GltfLoader, RejectsMoreTrianglesThanTheLimitCountingEveryMeshInstance) {
+  const TempDir dir;
+  const fs::path p = dir.write("seven.gltf", sevenTriangles());
+  const std::string msg = inputErrorOf([&] {
+    loadGltf(p, SceneLimits{6, kDefaultMaxSceneFileBytes});
+  });
+  EXPECT_THAT(msg, HasSubstr("seven.gltf"));
+  EXPECT_THAT(msg, HasSubstr("7 triangles, more than the limit of 6"));
+  EXPECT_THAT(msg, HasSubstr("--max-scene-triangles"));
+  EXPECT_THROW(loadGltf(p, SceneLimits{6, kDefaultMaxSceneFileBytes}), SceneLimitError);
+}
+
+TEST(GltfLoader, LoadsExactlyAtTheTriangleLimit) {
+  const TempDir dir;
+  const fs::path p = dir.write("seven.gltf", sevenTriangles());
+  const Scene scene = loadGltf(p, SceneLimits{7, kDefaultMaxSceneFileBytes});
+  EXPECT_EQ(scene.triangleCount(), 7u);
+  EXPECT_EQ(scene.objects.size(), 3u);
+}
+
+TEST(GltfLoader, CapsVerticesAtThreePerAllowedTriangle) {
+  // One indexed triangle over 100 positions: 100 vertices.
+  GltfDoc g;
+  std::vector<glm::vec3> cloud;
+  for (int i = 0; i < 100; ++i) cloud.emplace_back(float(i), float(i % 7), 0.0f);
+  const int pos = g.addPositions(cloud);
+  const int idx = g.addIndices({0, 1, 2}, kUnsignedShort);
+  g.addNode({{"name", "n"}, {"mesh", g.addMesh("m", {GltfDoc::primitive(pos, idx)})}});
+  g.setRoots({0});
+  const TempDir dir;
+  const fs::path p = dir.write("cloud.gltf", g.text());
+  EXPECT_THAT(inputErrorOf([&] {
+                loadGltf(p, SceneLimits{33, kDefaultMaxSceneFileBytes});
+              }),
+              HasSubstr("100 vertices, more than the limit of 99"));
+  EXPECT_EQ(loadGltf(p, SceneLimits{34, kDefaultMaxSceneFileBytes}).triangleCount(), 1u);
+}
+
+TEST(GltfLoader, RejectsAFileLargerThanTheFileSizeLimit) {
+  const TempDir dir;
+  const std::string text = sevenTriangles();
+  const fs::path p = dir.write("big.gltf", text);
+  const std::string msg = inputErrorOf([&] {
+    loadGltf(p, SceneLimits{kDefaultMaxSceneTriangles, text.size() - 1});
+  });
+  EXPECT_THAT(msg, HasSubstr("big.gltf"));
+  EXPECT_THAT(msg, HasSubstr(fmt::format("{} bytes, more than the limit of {} bytes", text.size(),
+                                         text.size() - 1)));
+  EXPECT_EQ(loadGltf(p, SceneLimits{kDefaultMaxSceneTriangles, text.size()}).triangleCount(), 7u);
+}
+
+TEST(GltfLoader, RejectsAnExternalBufferLargerThanTheFileSizeLimit) {
+  GltfDoc g;
+  const int pos = g.addPositions(kUnitTriangle);
+  g.addNode({{"name", "n"}, {"mesh", g.addMesh("m", {GltfDoc::primitive(pos)})}});
+  g.setRoots({0});
+  json d = json::parse(g.text());
+  d["buffers"][0]["uri"] = "big.bin";
+  const TempDir dir;
+  dir.write("big.bin", std::string(4096, '\0'));
+  const fs::path p = dir.write("external.gltf", d.dump());
+  const std::string msg = inputErrorOf([&] {
+    loadGltf(p, SceneLimits{kDefaultMaxSceneTriangles, 4000});
+  });
+  EXPECT_THAT(msg, HasSubstr("external.gltf"));
+  EXPECT_THAT(msg, HasSubstr("4096 bytes, more than the limit of 4000 bytes"));
+}
+
+TEST(GltfLoader, RejectsAnInfinitePosition) {
+  const TempDir dir;
+  GltfDoc g;
+  const float inf = std::numeric_limits<float>::infinity();
+  const int pos = g.addPositions({{0, 0, 0}, {inf, 0, 0}, {0, 1, 0}});
+  g.doc()["accessors"][size_t(pos)]["min"] = {0, 0, 0};
+  g.doc()["accessors"][size_t(pos)]["max"] = {1, 1, 0};
+  g.addNode({{"name", "n"}, {"mesh", g.addMesh("m", {GltfDoc::primitive(pos)})}});
+  g.setRoots({0});
+  const fs::path p = dir.write("inf.gltf", g.text());
+  EXPECT_THAT(inputErrorOf([&] { loadGltf(p); }), HasSubstr("inf.gltf"));
+}
+
+TEST(GltfLoader, RejectsPositionsThatANodeScalesBeyondFloatRange) {
+  // Finite floats, scaled by a finite 1e30 in double: (1e40, 0, 0) is no float.
+  const TempDir dir;
+  GltfDoc g;
+  const int pos = g.addPositions({{0, 0, 0}, {1e10f, 0, 0}, {0, 1e10f, 0}});
+  g.addNode({{"name", "huge"},
+             {"mesh", g.addMesh("m", {GltfDoc::primitive(pos)})},
+             {"scale", {1e30, 1e30, 1e30}}});
+  g.setRoots({0});
+  const fs::path p = dir.write("scaled.gltf", g.text());
+  const std::string msg = inputErrorOf([&] { loadGltf(p); });
+  EXPECT_THAT(msg, HasSubstr("scaled.gltf"));
+  EXPECT_THAT(msg, HasSubstr("object 'huge' vertex 1 ("));
+  EXPECT_THAT(msg, HasSubstr("single precision"));
+}
+
+TEST(GltfLoader, RejectsANodeTranslationBeyondFloatRange) {
+  const TempDir dir;
+  GltfDoc g;
+  const int pos = g.addPositions(kUnitTriangle);
+  g.addNode({{"name", "far"},
+             {"mesh", g.addMesh("m", {GltfDoc::primitive(pos)})},
+             {"translation", {1e39, 0, 0}}});
+  g.setRoots({0});
+  const fs::path p = dir.write("far.gltf", g.text());
+  const std::string msg = inputErrorOf([&] { loadGltf(p); });
+  EXPECT_THAT(msg, HasSubstr("far.gltf: node 0"));
+  EXPECT_THAT(msg, HasSubstr("not a finite float"));
+}
+
+TEST(GltfLoader, WalksANodeChainDeeperThanTheCallStackCouldRecurse) {
+  // 20,000 nodes, each the only child of the one before and translated by
+  // (1, 0, 0); the last holds the mesh, so its triangle moves by (20000, 0, 0).
+  // Walked recursively, this overflowed the stack.
+  constexpr int kDepth = 20000;
+  GltfDoc g;
+  const int mesh = g.addMesh("m", {GltfDoc::primitive(g.addPositions(kUnitTriangle))});
+  for (int i = 0; i < kDepth; ++i) {
+    json node = {{"translation", {1, 0, 0}}};
+    if (i + 1 < kDepth)
+      node["children"] = {i + 1};
+    else
+      node["mesh"] = mesh;
+    g.addNode(node);
+  }
+  g.setRoots({0});
+  const TempDir dir;
+  const Scene scene = loadGltf(dir.write("chain.gltf", g.text()));
+  ASSERT_EQ(scene.objects.size(), 1u);
+  EXPECT_EQ(scene.nodes.size(), size_t(kDepth));
+  EXPECT_EQ(scene.nodes.back().parent, kDepth - 2);
+  const auto t = fileTriangle(scene, scene.objects[0], 0);
+  expectNear(t[0], {kDepth, 0, 0}, 1e-6);
+  expectNear(t[1], {kDepth + 1, 0, 0}, 1e-6);
+  expectNear(t[2], {kDepth, 1, 0}, 1e-6);
 }
 
 // ---- real data: Fox.glb ------------------------------------------------------------------

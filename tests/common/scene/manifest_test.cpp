@@ -458,6 +458,49 @@ TEST(Manifest, RejectsAManifestThatIncludesAManifest) {
   }
 }
 
+TEST(Manifest, LimitsTheTrianglesOfAllPartsTogether) {
+  // a.obj and b.obj have 3 triangles each: 6 in all.
+  const TempDir dir;
+  dir.write("a.obj", kA);
+  dir.write("b.obj", kB);
+  const fs::path m = dir.write("pair.json", R"({"geometry": ["a.obj", "b.obj"]})");
+  const std::string msg = inputErrorOf([&] {
+    loadManifest(m, SceneLimits{5, kDefaultMaxSceneFileBytes});
+  });
+  EXPECT_THAT(msg, StartsWith(m.string() + ": geometry[1]: "));
+  EXPECT_THAT(msg, HasSubstr("b.obj: 3 triangles, more than the limit of 2"));
+  EXPECT_THAT(msg,
+              HasSubstr("the scene's limit is 5 triangles and the files before this one have 3"));
+  EXPECT_THAT(msg, HasSubstr("--max-scene-triangles"));
+  EXPECT_EQ(loadManifest(m, SceneLimits{6, kDefaultMaxSceneFileBytes}).triangleCount(), 6u);
+}
+
+TEST(Manifest, PassesTheLimitsOnThroughLoadScene) {
+  const TempDir dir;
+  dir.write("a.obj", kA);
+  const fs::path m = dir.write("one.json", R"({"geometry": ["a.obj"]})");
+  EXPECT_THROW(loadScene(m, SceneLimits{2, kDefaultMaxSceneFileBytes}), SceneLimitError);
+  EXPECT_EQ(loadScene(m, SceneLimits{3, kDefaultMaxSceneFileBytes}).triangleCount(), 3u);
+}
+
+TEST(Manifest, RejectsJsonNestedDeeperThanTheLimit) {
+  const TempDir dir;
+  const std::string msg =
+      manifestError(dir, R"({"geometry": ["a.obj"], "name": )" + std::string(20000, '[') +
+                             std::string(20000, ']') + "}");
+  EXPECT_THAT(msg, HasSubstr("bad.json:1: JSON nesting depth exceeds the limit of 256"));
+}
+
+TEST(Manifest, RejectsAPlacementThatPushesPositionsBeyondFloatRange) {
+  // Each file is fine on its own; scaled by 1e300 about the file origin, the
+  // triangle spans 1e300 m and no float holds its corners' offsets.
+  const TempDir dir;
+  const std::string msg =
+      manifestError(dir, R"({"geometry": [{"file": "a.obj", "name": "huge", "scale": 1e300}]})");
+  EXPECT_THAT(msg, HasSubstr("bad.json: geometry[0]: placing"));
+  EXPECT_THAT(msg, HasSubstr("single precision"));
+}
+
 TEST(Manifest, RejectsAMissingManifest) {
   const TempDir dir;
   const fs::path m = dir.path() / "absent.json";

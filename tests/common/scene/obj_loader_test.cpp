@@ -4,8 +4,10 @@
 // face order, line numbers counted by hand) and, for delfshaven.obj, from the
 // counts published in shared/data/README.md.
 #include <atomic>
+#include <cmath>
 #include <fstream>
 #include <map>
+#include <numbers>
 #include <random>
 #include <set>
 #include <string>
@@ -493,6 +495,150 @@ TEST(ObjLoader, LoadsWithDefaultMaterialsWhenTheMtllibIsMissing) {
   ASSERT_EQ(scene.triangleCount(), 1u);
   ASSERT_FALSE(scene.materials.empty());
   EXPECT_LT(scene.objects[0].mesh.materials[0], scene.materials.size());
+}
+
+// ---- hostile files: limits, index overflow, float range ----------------------------
+
+// A regular `n`-gon of radius 10 in the z = 0 plane, written once, and
+// `faces` faces that each use all of its vertices: (n - 2) * faces triangles.
+std::string manyVertexFaces(size_t faces, size_t n) {
+  std::string text;
+  for (size_t k = 0; k < n; ++k) {
+    const double a = 2.0 * std::numbers::pi * double(k) / double(n);
+    text += fmt::format("v {:.17g} {:.17g} 0\n", 10.0 * std::cos(a), 10.0 * std::sin(a));
+  }
+  std::string face = "f";
+  for (size_t k = 1; k <= n; ++k) face += " " + std::to_string(k);
+  face += "\n";
+  for (size_t f = 0; f < faces; ++f) text += face;
+  return text;
+}
+
+SceneLimits triangleLimitOf(uint64_t triangles) {
+  return {triangles, kDefaultMaxSceneFileBytes};
+}
+
+TEST(ObjLoader, RejectsMoreTrianglesThanTheLimitNamingCountLimitAndFlag) {
+  // 10 faces of 255 vertices: 10 * 253 = 2530 triangles.
+  const std::string text = manyVertexFaces(10, 255);
+  const std::string msg =
+      inputErrorOf([&] { loadObjFromMemory(text, "fan.obj", {}, triangleLimitOf(2529)); });
+  EXPECT_THAT(msg, HasSubstr("fan.obj"));
+  EXPECT_THAT(msg, HasSubstr("2530 triangles, more than the limit of 2529"));
+  EXPECT_THAT(msg, HasSubstr("--max-scene-triangles"));
+  EXPECT_THROW(loadObjFromMemory(text, "fan.obj", {}, triangleLimitOf(2529)), SceneLimitError);
+}
+
+TEST(ObjLoader, LoadsExactlyAtTheTriangleLimit) {
+  const Scene scene =
+      loadObjFromMemory(manyVertexFaces(10, 255), "fan.obj", {}, triangleLimitOf(2530));
+  EXPECT_EQ(scene.triangleCount(), 2530u);
+  EXPECT_EQ(scene.faceCount, 10u);
+}
+
+TEST(ObjLoader, StopsCheckingAtTheFaceThatCrossesTheLimit) {
+  // The file of the issue: 20,000 faces of 255 vertices (5,060,000 triangles,
+  // 1 GB and 6.7 s to load). A bad vertex after the faces is never reached:
+  // the scan stops at the face past the limit, before any parsing, and the
+  // message still reports the whole file's count.
+  const std::string text = manyVertexFaces(20000, 255) + "v nan 0 0\n";
+  const std::string msg =
+      inputErrorOf([&] { loadObjFromMemory(text, "issue.obj", {}, triangleLimitOf(1000000)); });
+  EXPECT_THAT(msg, HasSubstr("issue.obj: 5060000 triangles, more than the limit of 1000000"));
+}
+
+TEST(ObjLoader, CapsVerticesAtThreePerAllowedTriangle) {
+  std::string text;
+  for (int i = 0; i < 100; ++i) text += fmt::format("v {} 0 0\n", i);
+  text += "f 1 2 3\n";
+  EXPECT_THAT(inputErrorOf([&] { loadObjFromMemory(text, "cloud.obj", {}, triangleLimitOf(33)); }),
+              HasSubstr("cloud.obj: 100 vertices, more than the limit of 99"));
+  EXPECT_EQ(loadObjFromMemory(text, "cloud.obj", {}, triangleLimitOf(34)).triangleCount(), 1u);
+}
+
+TEST(ObjLoader, NamesTheTrianglesWhenTheVertexCapTripsFirstButBothAreOver) {
+  // The 4 `v` lines come first and pass the cap of 3 (limit 1 triangle)
+  // before the quad's 2 triangles are read: the message names the triangles.
+  const std::string msg = inputErrorOf([] {
+    loadObjFromMemory("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n", "quad.obj", {},
+                      triangleLimitOf(1));
+  });
+  EXPECT_THAT(msg, HasSubstr("quad.obj: 2 triangles, more than the limit of 1"));
+}
+
+TEST(ObjLoader, RejectsAFileLargerThanTheFileSizeLimit) {
+  const std::string text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";  // 32 bytes
+  ASSERT_EQ(text.size(), 32u);
+  const TempDir dir;
+  const fs::path p = dir.write("small.obj", text);
+  const std::string msg = inputErrorOf([&] { loadObj(p, {kDefaultMaxSceneTriangles, 31}); });
+  EXPECT_THAT(msg, HasSubstr("small.obj"));
+  EXPECT_THAT(msg, HasSubstr("32 bytes, more than the limit of 31 bytes"));
+  EXPECT_EQ(loadObj(p, {kDefaultMaxSceneTriangles, 32}).triangleCount(), 1u);
+  EXPECT_THAT(inputErrorOf([&] {
+                loadObjFromMemory(text, "mem.obj", {}, {kDefaultMaxSceneTriangles, 31});
+              }),
+              HasSubstr("mem.obj: the file has 32 bytes"));
+}
+
+TEST(ObjLoader, RefusesAMaterialLibraryThatIsNotARegularFile) {
+  // `mtllib /dev/zero` used to read forever.
+  const TempDir dir;
+  const fs::path p =
+      dir.write("zero.obj", "mtllib /dev/zero\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  EXPECT_THAT(inputErrorOf([&] { loadObj(p); }), HasSubstr("/dev/zero: is not a regular file"));
+}
+
+TEST(ObjLoader, RejectsTheMostNegativeIndexNamingItsLine) {
+  // -(-9223372036854775808) overflows long long: the scan must compare
+  // without negating.
+  const std::string msg = inputErrorOf([] {
+    loadObjFromMemory("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 -9223372036854775808\n", "llmin.obj");
+  });
+  EXPECT_THAT(msg, HasSubstr("llmin.obj:4:"));
+  EXPECT_THAT(msg,
+              HasSubstr("relative face index -9223372036854775808 refers before the first vertex"));
+}
+
+TEST(ObjLoader, RejectsTexcoordAndNormalIndicesBeyondInt) {
+  // tinyobjloader reads these with atoi, undefined outside int.
+  for (const char* vertex :
+       {"3/-9223372036854775808", "3/1/99999999999999999999", "3//2147483648", "3/-2147483649"}) {
+    SCOPED_TRACE(vertex);
+    const std::string text =
+        std::string("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\nf 1/1/1 2/1/1 ") + vertex + "\n";
+    const std::string msg = inputErrorOf([&] { loadObjFromMemory(text, "wide.obj"); });
+    EXPECT_THAT(msg, HasSubstr("wide.obj:6:"));
+    EXPECT_THAT(msg, HasSubstr("index out of range"));
+  }
+}
+
+TEST(ObjLoader, RejectsACoordinateThatOverflowsFloatNamingItsLine) {
+  // 1e308 is a finite double; relative to the origin (5e307) it is no float.
+  const std::string msg = inputErrorOf(
+      [] { loadObjFromMemory("v 0 1 0\nv 1e308 0 0\nv 0 0 0\nf 1 2 3\n", "far.obj"); });
+  EXPECT_THAT(msg, HasSubstr("far.obj:2: vertex 2"));
+  EXPECT_THAT(msg, HasSubstr("single precision"));
+}
+
+TEST(ObjLoader, RejectsAnUnusedVertexThatOverflowsFloat) {
+  // Not referenced by any face, but it still moves the origin.
+  const std::string msg = inputErrorOf([] {
+    loadObjFromMemory("v 0 0 0\nv 1 0 0\nv 0 1 0\n# far away\nv 0 0 -1e300\nf 1 2 3\n",
+                      "unused.obj");
+  });
+  EXPECT_THAT(msg, HasSubstr("unused.obj:5: vertex 4 (0, 0, -1e+300)"));
+  EXPECT_THAT(msg, HasSubstr("single precision"));
+}
+
+TEST(ObjLoader, KeepsAFloatFarFromZeroThatIsNearTheLocalOrigin) {
+  // 3e38 is close to FLT_MAX, but the local origin sits there: local
+  // coordinates are small, and the file coordinates come back exactly.
+  const Scene scene =
+      loadObjFromMemory("v 3e38 0 0\nv 3e38 1 0\nv 3e38 0 1\nf 1 2 3\n", "edge.obj");
+  ASSERT_EQ(scene.triangleCount(), 1u);
+  EXPECT_EQ(scene.fileBounds().lo.x, 3e38);
+  EXPECT_EQ(scene.fileBounds().hi.z, 1.0);
 }
 
 // ---- real data: delfshaven.obj ---------------------------------------------------

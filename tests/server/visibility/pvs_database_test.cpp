@@ -2,17 +2,22 @@
 
 #include <unistd.h>
 
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
 #include <random>
+#include <string_view>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <spdlog/spdlog.h>
 
 #include "common/core/error.h"
 #include "common/raycast/ray_query.h"
 #include "common/raycast/sampled_visibility.h"
 #include "server/visibility/pvs_bake.h"
+#include "tests/common/support/captured_log.h"
 #include "tests/common/support/box_scenes.h"
 #include "tests/common/support/temp_dir.h"
 
@@ -22,9 +27,55 @@ namespace {
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 
+using testing::CapturedLog;
 using testing::TempDir;
 
 std::string errorOf(const std::function<void()>& f) { return testing::inputErrorOf(f); }
+
+std::string readBytes(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(in)), {});
+}
+
+void writeBytes(const fs::path& p, const std::string& bytes) { std::ofstream(p, std::ios::binary) << bytes; }
+
+// FNV-1a 64 written out from its definition (Fowler, Noll and Vo: offset
+// basis 0xcbf29ce484222325 = 14695981039346656037, prime 0x100000001b3),
+// independent of the code under test.
+constexpr uint64_t kReferenceFnvBasis = 0xcbf29ce484222325ull;
+uint64_t referenceFnv1a64(std::string_view bytes, uint64_t h = kReferenceFnvBasis) {
+  for (const char c : bytes) {
+    h ^= uint8_t(c);
+    h *= 0x100000001b3ull;
+  }
+  return h;
+}
+
+uint64_t getLe64(const std::string& b, size_t at) {
+  uint64_t v = 0;
+  for (int i = 0; i < 8; ++i) v |= uint64_t(uint8_t(b[at + size_t(i)])) << (8 * i);
+  return v;
+}
+void putLe64(std::string& b, size_t at, uint64_t v) {
+  for (int i = 0; i < 8; ++i) b[at + size_t(i)] = char(uint8_t(v >> (8 * i)));
+}
+
+// Seals an edited database again: the header's checksum (bytes 24..31) over
+// the payload (bytes 32..), so only the edit itself is wrong.
+void resealChecksum(std::string& db, uint64_t basis = kReferenceFnvBasis) {
+  putLe64(db, 24, referenceFnv1a64(std::string_view(db).substr(32), basis));
+}
+
+std::string asString(const std::vector<uint8_t>& v) { return std::string(v.begin(), v.end()); }
+
+// Replaces the one occurrence of `from` in `bytes` by `to`, of the same length.
+void replaceOnce(std::string& bytes, const std::string& from, const std::string& to) {
+  ASSERT_EQ(from.size(), to.size());
+  const size_t at = bytes.find(from);
+  ASSERT_NE(at, std::string::npos);
+  ASSERT_EQ(bytes.find(from, at + 1), std::string::npos) << "the pattern must be unique in the file";
+  bytes.replace(at, from.size(), to);
+}
 
 TEST(FaceList, RoundTripsSortedIdsOfEveryMagnitude) {
   std::mt19937 rng(3);
@@ -54,6 +105,25 @@ TEST(FaceList, RejectsTruncatedRepeatedAndMiscountedLists) {
   EXPECT_THAT(errorOf([&] { decodeFaceList(two.data(), two.size(), 1); }), HasSubstr("header says 1"));
   const std::vector<uint8_t> huge = {0xff, 0xff, 0xff, 0xff, 0x7f};  // > 32 bits
   EXPECT_THAT(errorOf([&] { decodeFaceList(huge.data(), huge.size(), 1); }), HasSubstr("face list"));
+}
+
+TEST(FaceList, RejectsFacesAtOrBeyondTheFaceLimit) {
+  const auto bytes = encodeFaceList({3, 9});
+  EXPECT_EQ(decodeFaceList(bytes.data(), bytes.size(), 2, 10), (std::vector<uint32_t>{3, 9}));
+  EXPECT_THAT(errorOf([&] { decodeFaceList(bytes.data(), bytes.size(), 2, 9); }),
+              HasSubstr("entry 1 is face 9, not below the face count 9"));
+}
+
+TEST(Fnv1a64, MatchesThePublishedTestVectors) {
+  EXPECT_EQ(kFnv1a64OffsetBasis, 14695981039346656037ull);
+  EXPECT_EQ(fnv1a64("", 0), 0xcbf29ce484222325ull);
+  EXPECT_EQ(fnv1a64("a", 1), 0xaf63dc4c8601ec8cull);
+  EXPECT_EQ(fnv1a64("foobar", 6), 0x85944171f73967e8ull);
+  // In pieces, as the scene fingerprint hashes its fields.
+  EXPECT_EQ(fnv1a64("bar", 3, fnv1a64("foo", 3)), 0x85944171f73967e8ull);
+  // The reference used below agrees with the same vectors.
+  EXPECT_EQ(referenceFnv1a64(""), 0xcbf29ce484222325ull);
+  EXPECT_EQ(referenceFnv1a64("a"), 0xaf63dc4c8601ec8cull);
 }
 
 PvsDatabaseHeader smallHeader() {
@@ -105,6 +175,99 @@ TEST(PvsDatabase, RejectsCorruptTruncatedAndForeignFilesNamingTheFile) {
   EXPECT_THAT(variant("empty.db", ""), HasSubstr("only 0 bytes"));
   EXPECT_THAT(errorOf([&] { PvsDatabase::open(dir / "missing.db"); }), HasSubstr("missing.db"));
   EXPECT_THAT(errorOf([&] { PvsDatabase::open(fs::temp_directory_path()); }), HasSubstr("not a regular file"));
+}
+
+TEST(PvsDatabase, ChecksumIsFnv1a64OfThePayload) {
+  TempDir dir;
+  writePvsDatabase(dir / "a.db", smallHeader(), {{0, {1, 2, 3}}, {5, {4, 5}}});
+  const std::string bytes = readBytes(dir / "a.db");
+  ASSERT_GT(bytes.size(), 32u);
+  EXPECT_EQ(getLe64(bytes, 24), referenceFnv1a64(std::string_view(bytes).substr(32)));
+}
+
+TEST(PvsDatabase, RefusesAVersion1FileNamingTheFileAndBothVersionsAndSayingToRebake) {
+  TempDir dir;
+  writePvsDatabase(dir / "a.db", smallHeader(), {{0, {1, 2, 3}}});
+  // What version 1 wrote: the same payload, checksummed from the wrong basis.
+  std::string v1 = readBytes(dir / "a.db");
+  v1[8] = 1;
+  resealChecksum(v1, 1469598103934665603ull);
+  writeBytes(dir / "old.db", v1);
+  const std::string error = errorOf([&] { PvsDatabase::open(dir / "old.db"); });
+  EXPECT_THAT(error, HasSubstr("old.db"));
+  EXPECT_THAT(error, HasSubstr("version 1 is not supported"));
+  EXPECT_THAT(error, HasSubstr("this build reads version 2"));
+  EXPECT_THAT(error, HasSubstr("re-bake"));
+}
+
+TEST(PvsDatabase, OpensADatabaseOfMoreThanAMillionCells) {
+  // One FlatBuffers table per cell: the verifier's default cap of 10^6 tables
+  // used to refuse such a file as corrupt.
+  PvsDatabaseHeader h = smallHeader();
+  h.dims = {1024, 1, 1000};
+  std::map<uint32_t, std::vector<uint32_t>> cells;
+  for (uint32_t c = 0; c < 1024u * 1000u; ++c) cells.emplace_hint(cells.end(), c, std::vector<uint32_t>{});
+  cells[777'777] = {5, 6, 999};
+  TempDir dir;
+  writePvsDatabase(dir / "big.db", h, cells);
+  const PvsDatabase db = PvsDatabase::open(dir / "big.db");
+  EXPECT_EQ(db.cellCount(), 1'024'000u);
+  EXPECT_EQ(*db.cell(777'777), (std::vector<uint32_t>{5, 6, 999}));
+}
+
+// The report's scene: city1 has 21,280 faces, IDs 0 to 21,279.
+PvsDatabaseHeader cityHeader() {
+  PvsDatabaseHeader h = smallHeader();
+  h.sceneFaces = 21280;
+  return h;
+}
+
+// Cell 7 is i,j,k 2,0,1 of the 5 x 1 x 5 grid.
+const std::vector<uint32_t> kCell7 = {100, 200, 21279};
+
+// Writes a good database, replaces cell 7's face bytes by `edited` (same
+// length) and recomputes the checksum, so only the face list is wrong;
+// returns the message of open()'s InputError.
+std::string openErrorWithCell7Bytes(const TempDir& dir, const std::string& name, const std::string& edited) {
+  writePvsDatabase(dir / "good.db", cityHeader(), {{0, {1, 2, 3}}, {7, kCell7}, {24, {0, 21279}}});
+  std::string bytes = readBytes(dir / "good.db");
+  replaceOnce(bytes, asString(encodeFaceList(kCell7)), edited);
+  resealChecksum(bytes);
+  writeBytes(dir / name, bytes);
+  return errorOf([&] { PvsDatabase::open(dir / name); });
+}
+
+TEST(PvsDatabase, OpensTheUneditedCityDatabaseItsCorruptVariantsStartFrom) {
+  TempDir dir;
+  EXPECT_EQ(openErrorWithCell7Bytes(dir, "same.db", asString(encodeFaceList(kCell7))), "<no InputError thrown>");
+  EXPECT_EQ(*PvsDatabase::open(dir / "same.db").cell(7), kCell7);
+}
+
+TEST(PvsDatabase, RefusesAtOpenACellListThatIsNotStrictlyIncreasingNamingTheFileAndCell) {
+  TempDir dir;
+  // 100, 100, 21179: a zero delta, in as many bytes as the good list.
+  const std::string error = openErrorWithCell7Bytes(dir, "repeated.db", asString(encodeFaceList({100, 100, 21179})));
+  EXPECT_THAT(error, HasSubstr("repeated.db"));
+  EXPECT_THAT(error, HasSubstr("cell 7 (i,j,k 2,0,1)"));
+  EXPECT_THAT(error, HasSubstr("not strictly increasing at entry 1"));
+}
+
+TEST(PvsDatabase, RefusesAtOpenACellListingAFaceIdEqualToTheFaceCountNamingTheFileAndCell) {
+  TempDir dir;
+  const std::string error = openErrorWithCell7Bytes(dir, "beyond.db", asString(encodeFaceList({100, 200, 21280})));
+  EXPECT_THAT(error, HasSubstr("beyond.db"));
+  EXPECT_THAT(error, HasSubstr("cell 7 (i,j,k 2,0,1)"));
+  EXPECT_THAT(error, HasSubstr("entry 2 is face 21280, not below the face count 21280"));
+}
+
+TEST(PvsDatabase, RefusesAtOpenACellListEndingInsideAVarintNamingTheFileAndCell) {
+  std::string cut = asString(encodeFaceList(kCell7));
+  cut.back() = char(0x81);  // a continuation bit on the last byte
+  TempDir dir;
+  const std::string error = openErrorWithCell7Bytes(dir, "cut.db", cut);
+  EXPECT_THAT(error, HasSubstr("cut.db"));
+  EXPECT_THAT(error, HasSubstr("cell 7 (i,j,k 2,0,1)"));
+  EXPECT_THAT(error, HasSubstr("malformed varint at byte 2"));
 }
 
 // A town of 3 x 3 buildings with streets, for bakes.
@@ -215,6 +378,100 @@ TEST(PvsBake, ResumesFromAJournalWithATornTailAndGivesTheSameDatabase) {
   std::ifstream a(dir / "fresh.db", std::ios::binary), b(dir / "resumed.db", std::ios::binary);
   const std::string ba((std::istreambuf_iterator<char>(a)), {}), bb((std::istreambuf_iterator<char>(b)), {});
   EXPECT_EQ(ba, bb);
+}
+
+// One record of a bake journal (pvs_bake.cpp): [index u32][count u32]
+// [bytes u32][face list][FNV-1a 64 of what precedes it], after a 16-byte header.
+struct JournalRecordAt {
+  size_t offset = 0;
+  uint32_t index = 0, count = 0, bytes = 0;
+  size_t size() const { return 12 + bytes + 8; }
+};
+
+std::vector<JournalRecordAt> journalRecords(const std::string& j) {
+  std::vector<JournalRecordAt> out;
+  size_t pos = 16;
+  while (pos + 12 <= j.size()) {
+    JournalRecordAt r;
+    r.offset = pos;
+    std::memcpy(&r.index, j.data() + pos, 4);
+    std::memcpy(&r.count, j.data() + pos + 4, 4);
+    std::memcpy(&r.bytes, j.data() + pos + 8, 4);
+    if (pos + r.size() > j.size()) break;
+    out.push_back(r);
+    pos += r.size();
+  }
+  EXPECT_EQ(pos, j.size()) << "the journal should hold whole records";
+  return out;
+}
+
+// Runs a bake of the town that dies after `cells` cells, leaving its journal.
+std::string dyingBakeJournal(const TempDir& dir, const std::string& out, size_t cells) {
+  BakeOptions dying = townBake();
+  dying.threads = 1;
+  size_t calls = 0;
+  dying.progress = [&](size_t, size_t) {
+    if (++calls == cells + 1) throw std::runtime_error("killed");  // the first call reports 0 cells
+  };
+  EXPECT_THROW(bakePvs(town().scene, *town().pvs, town().freeSpace, dying, dir / out), std::runtime_error);
+  return readBytes(dir / (out + ".journal"));
+}
+
+TEST(PvsBake, ResumesPastABitFlipInTheJournalFromItsValidPrefixWarnsAndGivesTheSameDatabase) {
+  TempDir dir;
+  bakePvs(town().scene, *town().pvs, town().freeSpace, townBake(), dir / "fresh.db");
+  std::string journal = dyingBakeJournal(dir, "resumed.db", 11);
+  const std::vector<JournalRecordAt> records = journalRecords(journal);
+  ASSERT_EQ(records.size(), 11u);
+  // One bit in the middle of the middle record's face list (its checksum,
+  // should the list be empty).
+  const JournalRecordAt& bad = records[5];
+  journal[bad.offset + 12 + bad.bytes / 2] ^= 0x04;
+  writeBytes(dir / "resumed.db.journal", journal);
+
+  CapturedLog log;
+  const BakeReport report = bakePvs(town().scene, *town().pvs, town().freeSpace, townBake(), dir / "resumed.db");
+  EXPECT_EQ(report.resumedCells, 5u);
+  EXPECT_EQ(report.computedCells, report.shardCells - 5);
+  EXPECT_EQ(readBytes(dir / "resumed.db"), readBytes(dir / "fresh.db"));
+  EXPECT_FALSE(fs::exists(dir / "resumed.db.journal"));
+  const std::string warnings = log.warnings();
+  EXPECT_THAT(warnings, HasSubstr((dir / "resumed.db.journal").string()));
+  EXPECT_THAT(warnings, HasSubstr(fmt::format("corrupt record at byte offset {} (checksum mismatch) after 5 good "
+                                              "records; dropping the {} bytes from there: that record and the 5 "
+                                              "records after it.",
+                                              bad.offset, journal.size() - bad.offset)));
+}
+
+TEST(PvsBake, RecomputesAJournalRecordWhoseChecksumPassesButThatNamesAFaceBeyondTheScene) {
+  TempDir dir;
+  bakePvs(town().scene, *town().pvs, town().freeSpace, townBake(), dir / "fresh.db");
+  const std::string journal = dyingBakeJournal(dir, "resumed.db", 6);
+  const std::vector<JournalRecordAt> records = journalRecords(journal);
+  ASSERT_EQ(records.size(), 6u);
+  // Record 2 gets the scene's face count (one past the last face ID) added to
+  // its list and a correct checksum, as a buggy or crafted writer could leave.
+  const JournalRecordAt& r = records[2];
+  std::vector<uint32_t> faces = decodeFaceList(reinterpret_cast<const uint8_t*>(journal.data() + r.offset + 12),
+                                               r.bytes, r.count);
+  faces.push_back(town().scene.faceCount);
+  const std::string list = asString(encodeFaceList(faces));
+  std::string record(12, '\0');
+  const uint32_t head[3] = {r.index, uint32_t(faces.size()), uint32_t(list.size())};
+  std::memcpy(record.data(), head, 12);
+  record += list;
+  const uint64_t sum = referenceFnv1a64(record);
+  record.append(reinterpret_cast<const char*>(&sum), 8);
+  writeBytes(dir / "resumed.db.journal",
+             journal.substr(0, r.offset) + record + journal.substr(r.offset + r.size()));
+
+  CapturedLog log;
+  const BakeReport report = bakePvs(town().scene, *town().pvs, town().freeSpace, townBake(), dir / "resumed.db");
+  EXPECT_EQ(report.resumedCells, 2u);
+  EXPECT_EQ(readBytes(dir / "resumed.db"), readBytes(dir / "fresh.db"));
+  EXPECT_THAT(log.warnings(), HasSubstr(fmt::format("is face {}, not below the face count {}", town().scene.faceCount,
+                                                    town().scene.faceCount)));
+  EXPECT_THAT(log.warnings(), HasSubstr("that record and the 3 records after it."));
 }
 
 TEST(PvsBake, IgnoresAJournalFromOtherParameters) {
