@@ -1,18 +1,18 @@
 #include "client/app/walkthrough.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cstdlib>
 #include <map>
 #include <stdexcept>
 
-#include <fmt/format.h>
-
 #include "common/core/error.h"
 
 namespace vistream {
 
-std::vector<Camera> camerasFromPath(const std::vector<PathSample>& path, const glm::dvec3& origin, int width,
-                                    int height, float vfovDeg) {
+std::vector<Camera> camerasFromPath(const std::vector<PathSample>& path, const glm::dvec3& origin,
+                                    int width, int height, float vfovDeg) {
   std::vector<Camera> out;
   out.reserve(path.size());
   for (const PathSample& s : path) {
@@ -47,14 +47,16 @@ glm::ivec2 parseImageSize(const std::string& text, const char* option) {
 }
 
 ImageDifference compareImages(const ImageRgb8& a, const ImageRgb8& b) {
-  if (a.width != b.width || a.height != b.height) throw std::logic_error("compareImages: sizes differ");
+  if (a.width != b.width || a.height != b.height)
+    throw std::logic_error("compareImages: sizes differ");
   ImageDifference d;
   const size_t n = size_t(a.width) * size_t(a.height);
   size_t differing = 0;
   double sum = 0.0;
   for (size_t p = 0; p < n; ++p) {
     int e = 0;
-    for (int c = 0; c < 3; ++c) e += std::abs(int(a.pixels[3 * p + size_t(c)]) - int(b.pixels[3 * p + size_t(c)]));
+    for (int c = 0; c < 3; ++c)
+      e += std::abs(int(a.pixels[3 * p + size_t(c)]) - int(b.pixels[3 * p + size_t(c)]));
     differing += e > 0;
     sum += double(e) / (3.0 * 255.0);
   }
@@ -99,9 +101,9 @@ Means means(const std::vector<FrameRecord>& frames) {
   m.rayMiss = double(p.rayMiss);
   m.background = double(p.background);
   const double n = frames.empty() ? 1.0 : double(frames.size());
-  for (double* v : {&m.polygon, &m.horizon, &m.cache, &m.rayHit, &m.rayMiss, &m.background, &m.ms.nearSelect,
-                    &m.ms.nearDraw, &m.ms.opacity, &m.ms.horizon, &m.ms.cache, &m.ms.raycast, &m.ms.compose,
-                    &m.ms.total})
+  for (double* v : {&m.polygon, &m.horizon, &m.cache, &m.rayHit, &m.rayMiss, &m.background,
+                    &m.ms.nearSelect, &m.ms.nearDraw, &m.ms.opacity, &m.ms.horizon, &m.ms.cache,
+                    &m.ms.raycast, &m.ms.compose, &m.ms.total})
     *v /= n;
   if (m.compared) {
     m.differing /= double(m.compared);
@@ -112,8 +114,8 @@ Means means(const std::vector<FrameRecord>& frames) {
 
 }  // namespace
 
-nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const PipelineOptions& o, int width,
-                               int height) {
+nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const PipelineOptions& o,
+                               int width, int height) {
   const Means m = means(frames);
   nlohmann::json perFrame = nlohmann::json::array();
   std::map<std::string, std::map<std::string, size_t>> why;  // stage -> reason -> frames
@@ -138,7 +140,9 @@ nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const Pip
   for (const auto& [stage, reasons] : why) {
     nlohmann::json r = nlohmann::json::object();
     for (const auto& [text, count] : reasons) r[text.empty() ? "-" : text] = count;
-    stages[stage] = {{"frames_ran", stage == "far_field" ? farRan : stage == "horizon_tracing" ? horizonRan : cacheRan},
+    stages[stage] = {{"frames_ran", stage == "far_field"         ? farRan
+                                    : stage == "horizon_tracing" ? horizonRan
+                                                                 : cacheRan},
                      {"reasons", r}};
   }
   nlohmann::json out = {
@@ -183,22 +187,28 @@ std::string walkthroughTable(const std::vector<FrameRecord>& frames, const Pipel
   const Means m = means(frames);
   const double total = m.polygon + m.horizon + m.cache + m.rayHit + m.rayMiss + m.background;
   auto pct = [&](double v) { return total > 0 ? 100.0 * v / total : 0.0; };
-  std::string s = fmt::format("mode {}, {} frames, mean frame {:.2f} ms\n\n", renderModeName(o.mode), frames.size(),
-                              m.ms.total);
+  std::string s = fmt::format("mode {}, {} frames, mean frame {:.2f} ms\n\n",
+                              renderModeName(o.mode), frames.size(), m.ms.total);
   s += fmt::format("{:<28} {:>12} {:>8}\n", "pixels (mean a frame)", "count", "share");
-  const std::pair<const char*, double> rows[] = {{"covered by polygons", m.polygon}, {"culled by horizon", m.horizon},
-                                                 {"taken from the cache", m.cache},  {"ray cast and hit", m.rayHit},
-                                                 {"ray cast and missed", m.rayMiss}, {"background (no far field)", m.background}};
-  for (const auto& [name, v] : rows) s += fmt::format("{:<28} {:>12.0f} {:>7.2f}%\n", name, v, pct(v));
+  const std::pair<const char*, double> rows[] = {
+      {"covered by polygons", m.polygon}, {"culled by horizon", m.horizon},
+      {"taken from the cache", m.cache},  {"ray cast and hit", m.rayHit},
+      {"ray cast and missed", m.rayMiss}, {"background (no far field)", m.background}};
+  for (const auto& [name, v] : rows)
+    s += fmt::format("{:<28} {:>12.0f} {:>7.2f}%\n", name, v, pct(v));
   s += fmt::format("\n{:<28} {:>12}\n", "stage (mean)", "ms");
-  const std::pair<const char*, double> stages[] = {
-      {"near-field selection", m.ms.nearSelect}, {"near-field drawing", m.ms.nearDraw}, {"opacity buffer", m.ms.opacity},
-      {"horizon tracing", m.ms.horizon},         {"cache planning", m.ms.cache},        {"ray casting", m.ms.raycast},
-      {"composition", m.ms.compose},             {"frame", m.ms.total}};
+  const std::pair<const char*, double> stages[] = {{"near-field selection", m.ms.nearSelect},
+                                                   {"near-field drawing", m.ms.nearDraw},
+                                                   {"opacity buffer", m.ms.opacity},
+                                                   {"horizon tracing", m.ms.horizon},
+                                                   {"cache planning", m.ms.cache},
+                                                   {"ray casting", m.ms.raycast},
+                                                   {"composition", m.ms.compose},
+                                                   {"frame", m.ms.total}};
   for (const auto& [name, v] : stages) s += fmt::format("{:<28} {:>12.3f}\n", name, v);
   if (m.compared)
-    s += fmt::format("\nagainst raycast-all: {:.3f}% of pixels differ, mean colour error {:.5f}\n", 100.0 * m.differing,
-                     m.colourError);
+    s += fmt::format("\nagainst raycast-all: {:.3f}% of pixels differ, mean colour error {:.5f}\n",
+                     100.0 * m.differing, m.colourError);
   // Which stages ran, and why (the most common reason).
   std::map<std::string, std::map<std::string, size_t>> why;
   for (const FrameRecord& f : frames) {
@@ -208,7 +218,8 @@ std::string walkthroughTable(const std::vector<FrameRecord>& frames, const Pipel
   }
   s += "\n";
   for (const auto& [stage, reasons] : why)
-    for (const auto& [text, count] : reasons) s += fmt::format("{:<16} {:>6} frames  {}\n", stage, count, text);
+    for (const auto& [text, count] : reasons)
+      s += fmt::format("{:<16} {:>6} frames  {}\n", stage, count, text);
   return s;
 }
 

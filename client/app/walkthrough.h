@@ -3,10 +3,9 @@
 // `vistream-client --headless` and `vistream-client-bench` print.
 #pragma once
 
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "client/farfield/pipeline.h"
 #include "client/render/camera.h"
@@ -18,8 +17,8 @@ namespace vistream {
 
 // One camera per path sample, positions converted from file coordinates
 // with `origin` (the scene's local origin).
-std::vector<Camera> camerasFromPath(const std::vector<PathSample>& path, const glm::dvec3& origin, int width,
-                                    int height, float vfovDeg);
+std::vector<Camera> camerasFromPath(const std::vector<PathSample>& path, const glm::dvec3& origin,
+                                    int width, int height, float vfovDeg);
 
 // Parses "WxH" (e.g. 640x480); throws InputError naming `option`.
 glm::ivec2 parseImageSize(const std::string& text, const char* option = "--size");
@@ -46,9 +45,10 @@ struct FrameRecord {
 // The headless JSON contract: frames, mean_frame_ms, pixels (means of
 // polygon, horizon, cache, ray_hit, ray_miss), per_frame records, plus
 // extensions (mode, size, stage summaries, error against the reference).
-nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const PipelineOptions& options, int width,
-                               int height);
+nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames,
+                               const PipelineOptions& options, int width, int height);
 // The same for people: an aligned table of pixel classes and stage times.
-std::string walkthroughTable(const std::vector<FrameRecord>& frames, const PipelineOptions& options);
+std::string walkthroughTable(const std::vector<FrameRecord>& frames,
+                             const PipelineOptions& options);
 
 }  // namespace vistream

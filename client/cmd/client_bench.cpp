@@ -10,17 +10,17 @@
 // times over the whole path; frame times are medians over the repeats of the
 // mean frame time of a run. Error: share of pixels differing from the
 // reference and mean colour error, averaged over frames.
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
-#include <CLI/CLI.hpp>
-#include <fmt/format.h>
-#include <nlohmann/json.hpp>
-#include <spdlog/spdlog.h>
 
 #include "client/app/walkthrough.h"
 #include "client/farfield/pipeline.h"
@@ -47,7 +47,9 @@ struct BenchArgs {
 
 double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+  return v.empty()      ? 0.0
+         : v.size() % 2 ? v[v.size() / 2]
+                        : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
 }
 
 struct Config {
@@ -57,7 +59,7 @@ struct Config {
 
 struct Result {
   Config config;
-  double frameMs = 0.0;           // median over repeats of the mean frame time
+  double frameMs = 0.0;            // median over repeats of the mean frame time
   std::vector<double> perFrameMs;  // from the median run
   double differing = 0.0, colourError = 0.0;
   PixelCounts meanPixels;
@@ -92,8 +94,8 @@ Result runConfig(const RenderGeometry& g, const std::vector<Camera>& cams, const
       r.colourError = err / n;
       r.perFrame = pixels;
       for (const PixelCounts& p : pixels) r.meanPixels += p;
-      for (size_t* v : {&r.meanPixels.polygon, &r.meanPixels.horizon, &r.meanPixels.cache, &r.meanPixels.rayHit,
-                        &r.meanPixels.rayMiss, &r.meanPixels.background})
+      for (size_t* v : {&r.meanPixels.polygon, &r.meanPixels.horizon, &r.meanPixels.cache,
+                        &r.meanPixels.rayHit, &r.meanPixels.rayMiss, &r.meanPixels.background})
         *v = size_t(double(*v) / n + 0.5);
     }
     double sum = 0.0;
@@ -130,8 +132,11 @@ json resultJson(const Result& r, double raycastMs, double geometryMs) {
 json table41(const std::vector<PixelCounts>& frames, size_t pixelsPerFrame) {
   json t = json::object();
   const std::pair<const char*, size_t PixelCounts::*> classes[] = {
-      {"ray_hit", &PixelCounts::rayHit}, {"ray_miss", &PixelCounts::rayMiss}, {"cache", &PixelCounts::cache},
-      {"horizon", &PixelCounts::horizon}, {"polygon", &PixelCounts::polygon}};
+      {"ray_hit", &PixelCounts::rayHit},
+      {"ray_miss", &PixelCounts::rayMiss},
+      {"cache", &PixelCounts::cache},
+      {"horizon", &PixelCounts::horizon},
+      {"polygon", &PixelCounts::polygon}};
   for (const auto& [name, member] : classes) {
     double lo = 1e300, hi = 0, sum = 0;
     for (const PixelCounts& p : frames) {
@@ -141,14 +146,17 @@ json table41(const std::vector<PixelCounts>& frames, size_t pixelsPerFrame) {
       sum += v;
     }
     const double n = double(std::max<size_t>(1, frames.size())), total = double(pixelsPerFrame);
-    t[name] = {{"min_pct", 100.0 * lo / total}, {"avg_pct", 100.0 * sum / n / total},
-               {"max_pct", 100.0 * hi / total}, {"avg_count", sum / n}};
+    t[name] = {{"min_pct", 100.0 * lo / total},
+               {"avg_pct", 100.0 * sum / n / total},
+               {"max_pct", 100.0 * hi / total},
+               {"avg_count", sum / n}};
   }
   return t;
 }
 
-void writePlots(const std::string& dir, const std::string& scene, const std::vector<Result>& results,
-                const Result& raycast, const Result& geometry, const Result& nearOnly) {
+void writePlots(const std::string& dir, const std::string& scene,
+                const std::vector<Result>& results, const Result& raycast, const Result& geometry,
+                const Result& nearOnly) {
   std::filesystem::create_directories(dir);
   const auto base = std::filesystem::path(dir) / ("client_" + scene);
   // Figure 4.8: per-frame times of the baselines and the pipeline.
@@ -159,8 +167,8 @@ void writePlots(const std::string& dir, const std::string& scene, const std::vec
     for (const Result& r : results)
       if (r.config.knob == "default") def = &r;
     for (size_t i = 0; def && i < def->perFrameMs.size(); ++i)
-      f << i << " " << geometry.perFrameMs[i] << " " << def->perFrameMs[i] << " " << nearOnly.perFrameMs[i] << " "
-        << raycast.perFrameMs[i] << "\n";
+      f << i << " " << geometry.perFrameMs[i] << " " << def->perFrameMs[i] << " "
+        << nearOnly.perFrameMs[i] << " " << raycast.perFrameMs[i] << "\n";
   }
   // Figure 4.9: per-frame times for each near-field distance.
   std::vector<const Result*> dRuns;
@@ -180,7 +188,8 @@ void writePlots(const std::string& dir, const std::string& scene, const std::vec
   // Accuracy against time, one block per knob.
   std::vector<std::string> knobs;
   for (const Result& r : results)
-    if (r.config.knob != "default" && std::find(knobs.begin(), knobs.end(), r.config.knob) == knobs.end())
+    if (r.config.knob != "default" &&
+        std::find(knobs.begin(), knobs.end(), r.config.knob) == knobs.end())
       knobs.push_back(r.config.knob);
   {
     std::ofstream f(base.string() + "_accuracy.dat");
@@ -189,21 +198,26 @@ void writePlots(const std::string& dir, const std::string& scene, const std::vec
     f << "\n";
     for (const std::string& k : knobs) {
       for (const Result& r : results)
-        if (r.config.knob == k) f << r.frameMs << " " << 100.0 * r.differing << " " << r.config.value << "\n";
+        if (r.config.knob == k)
+          f << r.frameMs << " " << 100.0 * r.differing << " " << r.config.value << "\n";
       f << "\n\n";
     }
   }
   std::ofstream g(base.string() + ".gp");
   g << "set terminal pngcairo size 1200,900 noenhanced\nset output '" << base.string() << ".png'\n"
-    << "set multiplot layout 2,2 title '" << scene << ": Wimmer 2001, Figures 4.8 and 4.9, accuracy against time'\n"
+    << "set multiplot layout 2,2 title '" << scene
+    << ": Wimmer 2001, Figures 4.8 and 4.9, accuracy against time'\n"
     << "set xlabel 'frame'\nset ylabel 'frame time (ms)'\nset logscale y\nset key top left\n"
-    << "plot '" << base.string() << "_frames.dat' using 1:2 with lines title 'geometry-all', '' using 1:3 with lines "
-    << "title 'pipeline', '' using 1:4 with lines title 'near field only', '' using 1:5 with lines title 'raycast-all'\n"
+    << "plot '" << base.string()
+    << "_frames.dat' using 1:2 with lines title 'geometry-all', '' using 1:3 with lines "
+    << "title 'pipeline', '' using 1:4 with lines title 'near field only', '' using 1:5 with lines "
+       "title 'raycast-all'\n"
     << "plot ";
   for (size_t i = 0; i < dRuns.size(); ++i)
-    g << (i ? ", " : "") << "'" << base.string() << "_distance.dat' using 1:" << i + 2 << " with lines title 'd = "
-      << dRuns[i]->config.value << " m'";
-  g << "\nunset logscale y\nset xlabel 'frame time (ms)'\nset ylabel 'pixels differing from raycast-all (%)'\n"
+    g << (i ? ", " : "") << "'" << base.string() << "_distance.dat' using 1:" << i + 2
+      << " with lines title 'd = " << dRuns[i]->config.value << " m'";
+  g << "\nunset logscale y\nset xlabel 'frame time (ms)'\nset ylabel 'pixels differing from "
+       "raycast-all (%)'\n"
     << "plot ";
   for (size_t i = 0; i < knobs.size(); ++i)
     g << (i ? ", " : "") << "'" << base.string() << "_accuracy.dat' index " << i
@@ -211,7 +225,8 @@ void writePlots(const std::string& dir, const std::string& scene, const std::vec
   g << "\nunset multiplot\n";
   g.close();
   const std::string cmd = "gnuplot '" + base.string() + ".gp' 2>/dev/null";
-  if (std::system(cmd.c_str()) != 0) spdlog::warn("gnuplot not available: wrote the .dat files only");
+  if (std::system(cmd.c_str()) != 0)
+    spdlog::warn("gnuplot not available: wrote the .dat files only");
 }
 
 int runBench(const BenchArgs& a) {
@@ -255,26 +270,31 @@ int runBench(const BenchArgs& a) {
         configs.push_back(c);
       }
     };
-    const std::vector<float> distances = a.quick ? std::vector<float>{50, 150} : std::vector<float>{25, 50, 100, 150, 250, 400};
+    const std::vector<float> distances =
+        a.quick ? std::vector<float>{50, 150} : std::vector<float>{25, 50, 100, 150, 250, 400};
     vary("near_distance", distances, [](PipelineOptions& o, float v) { o.nearDistance = v; });
-    vary("pixel_budget", a.quick ? std::vector<size_t>{100, 20000} : std::vector<size_t>{0, 500, 2000, 8000, 50000},
+    vary("pixel_budget",
+         a.quick ? std::vector<size_t>{100, 20000} : std::vector<size_t>{0, 500, 2000, 8000, 50000},
          [](PipelineOptions& o, size_t v) { o.pixelBudget = v; });
     vary("polygon_budget", std::vector<std::string>{"auto (500000)"},
          [](PipelineOptions& o, const std::string&) { o.polygonBudget = 500'000; });
-    vary("cache", std::vector<std::string>{"off"}, [](PipelineOptions& o, const std::string&) { o.cache = false; });
+    vary("cache", std::vector<std::string>{"off"},
+         [](PipelineOptions& o, const std::string&) { o.cache = false; });
     vary("horizon_cell_m", a.quick ? std::vector<float>{8} : std::vector<float>{2, 4, 8, 16, 32},
          [](PipelineOptions& o, float v) { o.horizonCellSize = v; });
     vary("horizon_subsample", a.quick ? std::vector<int>{1} : std::vector<int>{1, 2, 4, 8},
          [](PipelineOptions& o, int v) { o.horizonSubsampleMoving = v; });
-    vary("horizon", std::vector<std::string>{"off"}, [](PipelineOptions& o, const std::string&) { o.horizonAllowed = false; });
+    vary("horizon", std::vector<std::string>{"off"},
+         [](PipelineOptions& o, const std::string&) { o.horizonAllowed = false; });
 
     Config gc{"baseline", "geometry-all", base};
     gc.options.mode = RenderMode::GeometryAll;
     Config nc{"baseline", "near-field only", base};
     nc.options.farFieldAllowed = false;
 
-    ProgressBar bar(fmt::format("{}: {} configurations x {} runs", spec, configs.size() + 3, a.repeats),
-                    configs.size() + 3);
+    ProgressBar bar(
+        fmt::format("{}: {} configurations x {} runs", spec, configs.size() + 3, a.repeats),
+        configs.size() + 3);
     const Result raycast = runConfig(g, cams, rc, &reference, a.repeats);
     bar.advance();
     const Result geometry = runConfig(g, cams, gc, &reference, a.repeats);
@@ -288,31 +308,35 @@ int runBench(const BenchArgs& a) {
     }
     bar.finish();
 
-    json sceneOut = {{"scene", spec},
-                     {"frames", cams.size()},
-                     {"size", {size.x, size.y}},
-                     {"triangles", g.size()},
-                     {"repeats", a.repeats},
-                     {"baselines",
-                      {resultJson(raycast, raycast.frameMs, geometry.frameMs),
-                       resultJson(geometry, raycast.frameMs, geometry.frameMs),
-                       resultJson(nearOnly, raycast.frameMs, geometry.frameMs)}},
-                     {"table_4_1", table41(results.front().perFrame, size_t(size.x) * size_t(size.y))}};
+    json sceneOut = {
+        {"scene", spec},
+        {"frames", cams.size()},
+        {"size", {size.x, size.y}},
+        {"triangles", g.size()},
+        {"repeats", a.repeats},
+        {"baselines",
+         {resultJson(raycast, raycast.frameMs, geometry.frameMs),
+          resultJson(geometry, raycast.frameMs, geometry.frameMs),
+          resultJson(nearOnly, raycast.frameMs, geometry.frameMs)}},
+        {"table_4_1", table41(results.front().perFrame, size_t(size.x) * size_t(size.y))}};
     json rows = json::array();
-    for (const Result& r : results) rows.push_back(resultJson(r, raycast.frameMs, geometry.frameMs));
+    for (const Result& r : results)
+      rows.push_back(resultJson(r, raycast.frameMs, geometry.frameMs));
     sceneOut["configurations"] = rows;
     out.push_back(sceneOut);
     if (!a.plotDir.empty()) writePlots(a.plotDir, spec, results, raycast, geometry, nearOnly);
 
     if (!a.json) {
-      std::printf("\n%s: %zu triangles, %zu frames at %dx%d, medians of %d runs\n\n", spec.c_str(), g.size(),
-                  cams.size(), size.x, size.y, a.repeats);
-      std::printf("%-18s %-16s %10s %9s %9s %10s %11s %8s %8s %8s %8s\n", "knob", "value", "frame ms", "vs ray",
-                  "vs geom", "differ %", "colour err", "polygon", "horizon", "cache", "rays");
+      std::printf("\n%s: %zu triangles, %zu frames at %dx%d, medians of %d runs\n\n", spec.c_str(),
+                  g.size(), cams.size(), size.x, size.y, a.repeats);
+      std::printf("%-18s %-16s %10s %9s %9s %10s %11s %8s %8s %8s %8s\n", "knob", "value",
+                  "frame ms", "vs ray", "vs geom", "differ %", "colour err", "polygon", "horizon",
+                  "cache", "rays");
       auto row = [&](const Result& r) {
-        std::printf("%-18s %-16s %10.2f %8.1fx %8.1fx %10.3f %11.5f %8zu %8zu %8zu %8zu\n", r.config.knob.c_str(),
-                    r.config.value.c_str(), r.frameMs, raycast.frameMs / r.frameMs, geometry.frameMs / r.frameMs,
-                    100.0 * r.differing, r.colourError, r.meanPixels.polygon, r.meanPixels.horizon, r.meanPixels.cache,
+        std::printf("%-18s %-16s %10.2f %8.1fx %8.1fx %10.3f %11.5f %8zu %8zu %8zu %8zu\n",
+                    r.config.knob.c_str(), r.config.value.c_str(), r.frameMs,
+                    raycast.frameMs / r.frameMs, geometry.frameMs / r.frameMs, 100.0 * r.differing,
+                    r.colourError, r.meanPixels.polygon, r.meanPixels.horizon, r.meanPixels.cache,
                     r.meanPixels.rayHit + r.meanPixels.rayMiss);
       };
       row(raycast);
@@ -320,17 +344,17 @@ int runBench(const BenchArgs& a) {
       row(nearOnly);
       for (const Result& r : results) row(r);
       const json t = sceneOut["table_4_1"];
-      std::printf("\nTable 4.1 (default pipeline), of %d pixels:\n%-26s %8s %8s %8s %10s\n", size.x * size.y, "",
-                  "min %", "avg %", "max %", "avg #");
+      std::printf("\nTable 4.1 (default pipeline), of %d pixels:\n%-26s %8s %8s %8s %10s\n",
+                  size.x * size.y, "", "min %", "avg %", "max %", "avg #");
       for (const auto& [key, name] :
            std::vector<std::pair<std::string, std::string>>{{"ray_hit", "ray cast and hit"},
                                                             {"ray_miss", "ray cast and missed"},
                                                             {"cache", "taken from the cache"},
                                                             {"horizon", "culled by horizon"},
                                                             {"polygon", "covered by polygons"}})
-        std::printf("%-26s %8.2f %8.2f %8.2f %10.0f\n", name.c_str(), t[key]["min_pct"].get<double>(),
-                    t[key]["avg_pct"].get<double>(), t[key]["max_pct"].get<double>(),
-                    t[key]["avg_count"].get<double>());
+        std::printf("%-26s %8.2f %8.2f %8.2f %10.0f\n", name.c_str(),
+                    t[key]["min_pct"].get<double>(), t[key]["avg_pct"].get<double>(),
+                    t[key]["max_pct"].get<double>(), t[key]["avg_count"].get<double>());
     }
   }
   if (a.json) std::printf("%s\n", out.dump(2).c_str());
@@ -343,16 +367,22 @@ int runBench(const BenchArgs& a) {
 int main(int argc, char** argv) {
   using namespace vistream;
   BenchArgs a;
-  CLI::App app{"vistream-client-bench: frame time against image error for the far-field pipeline "
-               "(Wimmer 2001, Figures 4.8-4.9, Table 4.1) against raycast-all and geometry-all"};
-  app.add_option("--scenes", a.scenes, "comma-separated scenes (files or built-in names)")->capture_default_str();
-  app.add_option("--frames", a.frames, "frames of the generated walkthrough")->capture_default_str();
+  CLI::App app{
+      "vistream-client-bench: frame time against image error for the far-field pipeline "
+      "(Wimmer 2001, Figures 4.8-4.9, Table 4.1) against raycast-all and geometry-all"};
+  app.add_option("--scenes", a.scenes, "comma-separated scenes (files or built-in names)")
+      ->capture_default_str();
+  app.add_option("--frames", a.frames, "frames of the generated walkthrough")
+      ->capture_default_str();
   app.add_option("--size", a.size, "image size WIDTHxHEIGHT")->capture_default_str();
-  app.add_option("--repeats", a.repeats, "runs per configuration (the median is reported)")->capture_default_str();
+  app.add_option("--repeats", a.repeats, "runs per configuration (the median is reported)")
+      ->capture_default_str();
   app.add_option("--speed", a.speed, "relative walking speed")->capture_default_str();
   app.add_option("--plot-dir", a.plotDir, "write .dat files and PNG plots (gnuplot) here");
   app.add_flag("--quick", a.quick, "fewer values per knob (for tests)");
   app.add_flag("--json", a.json, "print JSON instead of tables");
-  app.add_option("--log-level", a.logLevel, "trace, debug, info, warn, error, critical, off")->capture_default_str();
-  return runFlatToolApp("vistream-client-bench", app, argc, argv, a.logLevel, [&] { return runBench(a); });
+  app.add_option("--log-level", a.logLevel, "trace, debug, info, warn, error, critical, off")
+      ->capture_default_str();
+  return runFlatToolApp("vistream-client-bench", app, argc, argv, a.logLevel,
+                        [&] { return runBench(a); });
 }

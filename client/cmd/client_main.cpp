@@ -3,16 +3,16 @@
 // panoramic image cache, ray casting), from a local scene (--scene) or from
 // what a vistream-server streams (--host/--port); in a window (OpenGL) or
 // headless (software near field, PNG frames, statistics).
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
 #include <optional>
 #include <string>
-
-#include <CLI/CLI.hpp>
-#include <fmt/format.h>
-#include <spdlog/spdlog.h>
 
 #include "client/app/walkthrough.h"
 #include "client/farfield/pipeline.h"
@@ -32,7 +32,8 @@ namespace vistream {
 namespace {
 
 struct Args {
-  std::string scene, host, pathFile, size = "640x480", outDir, mode = "pipeline", logLevel = "warn", token;
+  std::string scene, host, pathFile, size = "640x480", outDir, mode = "pipeline", logLevel = "warn",
+                                     token;
   SceneLimits sceneLimits;
   uint16_t port = 7070;
   bool headless = false, json = false, noCache = false, compare = false;
@@ -56,12 +57,15 @@ RenderMode parseMode(const std::string& m) {
   throwInputError("--mode {}: expected pipeline, raycast-all or geometry-all", m);
 }
 
-std::string frameName(size_t i) { return fmt::format("frame_{:05d}.png", i); }
+std::string frameName(size_t i) {
+  return fmt::format("frame_{:05d}.png", i);
+}
 
 // The path to walk: a file, or "auto" (generated through the scene's free space).
 std::vector<PathSample> loadPath(const Args& a, const Scene* scene, size_t frames) {
   if (a.pathFile != "auto") return readPath(a.pathFile);
-  if (!scene) throwInputError("--path auto needs --scene (the path is generated through its free space)");
+  if (!scene)
+    throwInputError("--path auto needs --scene (the path is generated through its free space)");
   PathOptions po;
   po.frames = frames ? frames : 300;
   po.speed = a.pathSpeed;
@@ -71,7 +75,8 @@ std::vector<PathSample> loadPath(const Args& a, const Scene* scene, size_t frame
 PipelineOptions pipelineOptions(const Args& a, const Scene* scene, RenderMode mode) {
   PipelineOptions o;
   o.mode = mode;
-  o.nearDistance = a.nearDistance > 0.0f ? a.nearDistance : (scene ? scene->environment.nearFieldRadius : 150.0f);
+  o.nearDistance = a.nearDistance > 0.0f ? a.nearDistance
+                                         : (scene ? scene->environment.nearFieldRadius : 150.0f);
   o.pixelBudget = a.pixelBudget;
   o.polygonBudget = a.polygonBudget;
   o.cache = !a.noCache;
@@ -86,12 +91,14 @@ PipelineOptions pipelineOptions(const Args& a, const Scene* scene, RenderMode mo
   return o;
 }
 
-void printSummary(const Args& a, const std::vector<FrameRecord>& records, const PipelineOptions& o, glm::ivec2 size) {
+void printSummary(const Args& a, const std::vector<FrameRecord>& records, const PipelineOptions& o,
+                  glm::ivec2 size) {
   if (a.json) {
     std::printf("%s\n", walkthroughJson(records, o, size.x, size.y).dump(2).c_str());
   } else {
     std::printf("%s", walkthroughTable(records, o).c_str());
-    if (!a.outDir.empty()) std::printf("\nframes written to %s/frame_00000.png ...\n", a.outDir.c_str());
+    if (!a.outDir.empty())
+      std::printf("\nframes written to %s/frame_00000.png ...\n", a.outDir.c_str());
   }
 }
 
@@ -136,19 +143,22 @@ struct LiveGeometry {
 };
 
 // Headless: software near field, PNG frames, statistics.
-int runHeadless(const Args& a, LiveGeometry& live, const std::vector<Camera>& cameras, glm::ivec2 size,
-                StreamClient* net) {
+int runHeadless(const Args& a, LiveGeometry& live, const std::vector<Camera>& cameras,
+                glm::ivec2 size, StreamClient* net) {
   std::vector<FrameRecord> records;
   ImageRgb8 image, refImage;
-  ProgressBar bar(fmt::format("rendering {} frames ({})", cameras.size(), renderModeName(live.options.mode)),
-                  cameras.size());
+  ProgressBar bar(
+      fmt::format("rendering {} frames ({})", cameras.size(), renderModeName(live.options.mode)),
+      cameras.size());
   for (size_t i = 0; i < cameras.size(); ++i) {
     if (net) {
       // Each frame waits for the server to complete the view cell it stands in,
       // so a headless walk renders what a patient user would see.
-      const glm::vec3 velocity = i > 0 ? (cameras[i].eye - cameras[i - 1].eye) * 30.0f : glm::vec3(0.0f);
+      const glm::vec3 velocity =
+          i > 0 ? (cameras[i].eye - cameras[i - 1].eye) * 30.0f : glm::vec3(0.0f);
       net->sendPose(cameras[i].eye, cameras[i].yawDeg, cameras[i].pitchDeg, velocity);
-      if (!net->waitForCell(a.waitS) && !net->error().empty()) throwInputError("connection lost: {}", net->error());
+      if (!net->waitForCell(a.waitS) && !net->error().empty())
+        throwInputError("connection lost: {}", net->error());
       live.refresh(*net, /*force=*/true);
     }
     FrameRecord r;
@@ -169,8 +179,8 @@ int runHeadless(const Args& a, LiveGeometry& live, const std::vector<Camera>& ca
 }
 
 // Windowed: OpenGL near field; along a path (frames written if --out) or interactive.
-int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, glm::ivec2 size, Camera start,
-              StreamClient* net) {
+int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, glm::ivec2 size,
+              Camera start, StreamClient* net) {
   const PipelineOptions& o = live.options;
   GlWindowOptions wo;
   wo.width = size.x;
@@ -188,7 +198,8 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
     for (size_t i = 0; i < cameras.size() && !window.shouldClose(); ++i) {
       if (net) {
         net->sendPose(cameras[i].eye, cameras[i].yawDeg, cameras[i].pitchDeg);
-        if (!net->waitForCell(a.waitS) && !net->error().empty()) throwInputError("connection lost: {}", net->error());
+        if (!net->waitForCell(a.waitS) && !net->error().empty())
+          throwInputError("connection lost: {}", net->error());
         live.refresh(*net, /*force=*/true);
         if (live.geometry.get() != uploaded) {
           gl.upload(*live.geometry);
@@ -199,7 +210,8 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
       r.frame = i;
       r.report = live.renderer->renderFarField(cameras[i], farImage, near);
       gl.draw(cameras[i], farImage, near, live.renderer->polygonDistance());
-      if (!a.outDir.empty()) writePng(gl.readBack(size.x, size.y), std::filesystem::path(a.outDir) / frameName(i));
+      if (!a.outDir.empty())
+        writePng(gl.readBack(size.x, size.y), std::filesystem::path(a.outDir) / frameName(i));
       window.swapBuffers();
       Camera ignored = cameras[i];
       window.navigate(ignored, 0.0, 0.0f);
@@ -232,13 +244,14 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
     const FrameReport rep = live.renderer->renderFarField(cam, farImage, near);
     const PixelCounts& p = rep.pixels;
     std::vector<HudLine> hud = {
-        {fmt::format("frame {:.1f} ms (pipeline {:.1f} ms)  near {} triangles  d = {:.0f} m", frameMs, rep.ms.total,
-                     rep.nearTriangles, o.nearDistance)},
-        {fmt::format("pixels: polygon {}  horizon {}  cache {}  ray hit {}  ray miss {}", p.polygon, p.horizon,
-                     p.cache, p.rayHit, p.rayMiss)},
-        {fmt::format("faces held {}  received {:.1f} MB  far field {}  horizon {}  cache {}", live.faces,
-                     net ? double(net->bytesReceived()) / 1e6 : 0.0,
-                     rep.farFieldRan ? "on" : "off", rep.horizonRan ? "on" : "off", rep.cacheRan ? "on" : "off")},
+        {fmt::format("frame {:.1f} ms (pipeline {:.1f} ms)  near {} triangles  d = {:.0f} m",
+                     frameMs, rep.ms.total, rep.nearTriangles, o.nearDistance)},
+        {fmt::format("pixels: polygon {}  horizon {}  cache {}  ray hit {}  ray miss {}", p.polygon,
+                     p.horizon, p.cache, p.rayHit, p.rayMiss)},
+        {fmt::format("faces held {}  received {:.1f} MB  far field {}  horizon {}  cache {}",
+                     live.faces, net ? double(net->bytesReceived()) / 1e6 : 0.0,
+                     rep.farFieldRan ? "on" : "off", rep.horizonRan ? "on" : "off",
+                     rep.cacheRan ? "on" : "off")},
     };
     gl.draw(cam, farImage, near, live.renderer->polygonDistance(), hud);
     window.swapBuffers();
@@ -248,14 +261,21 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
 
 int run(const Args& a) {
   const bool local = !a.scene.empty(), connected = !a.host.empty();
-  if (local == connected) throwInputError("give either --scene (local) or --host (connected), not {}", local ? "both" : "neither");
-  if (a.headless && a.pathFile.empty()) throwInputError("--headless needs --path (a path file, or auto)");
+  if (local == connected)
+    throwInputError("give either --scene (local) or --host (connected), not {}",
+                    local ? "both" : "neither");
+  if (a.headless && a.pathFile.empty())
+    throwInputError("--headless needs --path (a path file, or auto)");
   const glm::ivec2 size = parseImageSize(a.size);
   const RenderMode mode = parseMode(a.mode);
-  if (a.horizonSubsample < 1) throwInputError("--horizon-subsample {}: must be at least 1", a.horizonSubsample);
-  if (!(a.horizonCell > 0.0f)) throwInputError("--horizon-cell {}: must be positive", a.horizonCell);
-  if (!(a.maxStalePixels >= 0.0f)) throwInputError("--max-stale-px {}: must not be negative", a.maxStalePixels);
-  if (!(a.vfov > 1.0f && a.vfov < 170.0f)) throwInputError("--fov {}: must lie in (1, 170) degrees", a.vfov);
+  if (a.horizonSubsample < 1)
+    throwInputError("--horizon-subsample {}: must be at least 1", a.horizonSubsample);
+  if (!(a.horizonCell > 0.0f))
+    throwInputError("--horizon-cell {}: must be positive", a.horizonCell);
+  if (!(a.maxStalePixels >= 0.0f))
+    throwInputError("--max-stale-px {}: must not be negative", a.maxStalePixels);
+  if (!(a.vfov > 1.0f && a.vfov < 170.0f))
+    throwInputError("--fov {}: must lie in (1, 170) degrees", a.vfov);
   if (!a.outDir.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(a.outDir, ec);
@@ -295,7 +315,9 @@ int run(const Args& a) {
     if (!cameras.empty()) first = cameras.front();
     net->sendPose(first.eye, first.yawDeg, first.pitchDeg);
     if (!net->waitForCell(a.waitS))
-      spdlog::warn("the server did not complete the first view cell within {:.0f} s; rendering what arrived", a.waitS);
+      spdlog::warn(
+          "the server did not complete the first view cell within {:.0f} s; rendering what arrived",
+          a.waitS);
     geometry = net->snapshot();
     if (!(a.nearDistance > 0.0f)) o.nearDistance = std::min(150.0f, 0.5f * net->radius());
     spdlog::info("holding {} triangles from {}:{}", geometry.size(), a.host, a.port);
@@ -311,8 +333,10 @@ int run(const Args& a) {
   start.width = size.x;
   start.height = size.y;
   start.vfovDeg = a.vfov;
-  if (!cameras.empty()) start = cameras.front();
-  else if (!live.geometry->bounds.empty()) start.eye = live.geometry->bounds.center();
+  if (!cameras.empty())
+    start = cameras.front();
+  else if (!live.geometry->bounds.empty())
+    start.eye = live.geometry->bounds.center();
   return runWindow(a, live, cameras, size, start, net.get());
 }
 
@@ -323,38 +347,55 @@ int main(int argc, char** argv) {
   using namespace vistream;
   Args a;
   CLI::App app{
-      "vistream-client: renders a walkthrough; near field as polygons, far field by horizon tracing, a panoramic "
+      "vistream-client: renders a walkthrough; near field as polygons, far field by horizon "
+      "tracing, a panoramic "
       "image cache and ray casting (Wimmer 2001, chapter 4)"};
-  app.add_option("--scene", a.scene, "local mode: a scene file or built-in name (city1, bigcity, terrain, ...)");
+  app.add_option("--scene", a.scene,
+                 "local mode: a scene file or built-in name (city1, bigcity, terrain, ...)");
   addSceneLimitsOption(app, a.sceneLimits);
   app.add_option("--host", a.host, "connected mode: the vistream-server to stream from");
   app.add_option("--port", a.port, "the server's port")->capture_default_str();
   app.add_option("--token", a.token, "the server's shared secret, if it asks for one");
-  app.add_flag("--headless", a.headless, "no window: software near field, PNG frames and statistics");
+  app.add_flag("--headless", a.headless,
+               "no window: software near field, PNG frames and statistics");
   app.add_option("--path", a.pathFile, "path file (CSV t,x,y,z,yaw_deg,pitch_deg), or auto");
   app.add_option("--frames", a.frames, "frames to render (default: every row of the path)");
   app.add_option("--size", a.size, "image size WIDTHxHEIGHT")->capture_default_str();
   app.add_option("--fov", a.vfov, "vertical field of view, degrees")->capture_default_str();
   app.add_option("--out", a.outDir, "write DIR/frame_00000.png, ...");
-  app.add_flag("--json", a.json, "print one JSON object (frames, mean_frame_ms, pixels, per_frame, ...)");
+  app.add_flag("--json", a.json,
+               "print one JSON object (frames, mean_frame_ms, pixels, per_frame, ...)");
   app.add_option("--mode", a.mode, "pipeline | raycast-all | geometry-all")->capture_default_str();
-  app.add_option("--near-distance", a.nearDistance, "near-field distance d, metres (default: the scene's, or the server's)");
+  app.add_option("--near-distance", a.nearDistance,
+                 "near-field distance d, metres (default: the scene's, or the server's)");
   app.add_option("--stream-radius", a.streamRadius,
-                 "connected: radius the server streams within, metres (default: the server's); the far field is what "
+                 "connected: radius the server streams within, metres (default: the server's); the "
+                 "far field is what "
                  "arrives beyond --near-distance");
-  app.add_option("--pixel-budget", a.pixelBudget, "rays a frame for refreshing cached pixels")->capture_default_str();
+  app.add_option("--pixel-budget", a.pixelBudget, "rays a frame for refreshing cached pixels")
+      ->capture_default_str();
   app.add_option("--polygon-budget", a.polygonBudget,
-                 "scenes with at most this many triangles are drawn whole, without a far field (0: always split at d)")
+                 "scenes with at most this many triangles are drawn whole, without a far field (0: "
+                 "always split at d)")
       ->capture_default_str();
-  app.add_flag("--no-cache", a.noCache, "switch the panoramic image cache off (trace every far-field pixel)");
-  app.add_option("--max-stale-px", a.maxStalePixels,
-                 "cached pixels expire when far-field geometry at d may have moved this many pixels")
+  app.add_flag("--no-cache", a.noCache,
+               "switch the panoramic image cache off (trace every far-field pixel)");
+  app.add_option(
+         "--max-stale-px", a.maxStalePixels,
+         "cached pixels expire when far-field geometry at d may have moved this many pixels")
       ->capture_default_str();
-  app.add_option("--horizon-cell", a.horizonCell, "height-field cell size for horizon tracing, metres")->capture_default_str();
-  app.add_option("--horizon-subsample", a.horizonSubsample, "trace every k-th column while moving")->capture_default_str();
-  app.add_option("--path-speed", a.pathSpeed, "relative walking speed of --path auto")->capture_default_str();
-  app.add_option("--wait", a.waitS, "connected: seconds to wait for the first view cell")->capture_default_str();
-  app.add_flag("--compare", a.compare, "also render raycast-all and report the image error of every frame");
-  app.add_option("--log-level", a.logLevel, "trace, debug, info, warn, error, critical, off")->capture_default_str();
+  app.add_option("--horizon-cell", a.horizonCell,
+                 "height-field cell size for horizon tracing, metres")
+      ->capture_default_str();
+  app.add_option("--horizon-subsample", a.horizonSubsample, "trace every k-th column while moving")
+      ->capture_default_str();
+  app.add_option("--path-speed", a.pathSpeed, "relative walking speed of --path auto")
+      ->capture_default_str();
+  app.add_option("--wait", a.waitS, "connected: seconds to wait for the first view cell")
+      ->capture_default_str();
+  app.add_flag("--compare", a.compare,
+               "also render raycast-all and report the image error of every frame");
+  app.add_option("--log-level", a.logLevel, "trace, debug, info, warn, error, critical, off")
+      ->capture_default_str();
   return runFlatToolApp("vistream-client", app, argc, argv, a.logLevel, [&] { return run(a); });
 }

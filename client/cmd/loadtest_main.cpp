@@ -20,8 +20,10 @@
 using namespace vistream;
 
 int main(int argc, char** argv) {
-  CLI::App app{"vistream-loadtest: simulated clients walking through a scene served by vistream-server, over real "
-               "TCP, without rendering. Prints bytes per client, CellReady latency and visibility misses."};
+  CLI::App app{
+      "vistream-loadtest: simulated clients walking through a scene served by vistream-server, "
+      "over real "
+      "TCP, without rendering. Prints bytes per client, CellReady latency and visibility misses."};
   std::string logLevel, pathFile, pathsMode, sceneSpec, tokenFile;
   bool asJson = false;
   LoadTestOptions o;
@@ -29,15 +31,19 @@ int main(int argc, char** argv) {
   app.add_option("--host", o.host, "server address (default 127.0.0.1)");
   app.add_option("--port", o.port, "server port (default 7070)");
   app.add_option("--clients", o.clients, "simulated clients (default 10)");
-  app.add_option("--path", pathFile, "path CSV (t,x,y,z,yaw_deg,pitch_deg); clients start at different points of it");
-  app.add_option("--paths", pathsMode, "auto: a different generated path per client (needs --scene)");
+  app.add_option("--path", pathFile,
+                 "path CSV (t,x,y,z,yaw_deg,pitch_deg); clients start at different points of it");
+  app.add_option("--paths", pathsMode,
+                 "auto: a different generated path per client (needs --scene)");
   app.add_option("--speed", o.speed, "relative walking speed (default 1.0)");
   app.add_option("--duration", o.durationS, "seconds each client walks (default 10)");
   app.add_option("--fps", o.fps, "poses per second per client (default 10)");
-  app.add_option("--scene", sceneSpec, "the scene, locally: enables visibility-miss checks and --paths auto");
+  app.add_option("--scene", sceneSpec,
+                 "the scene, locally: enables visibility-miss checks and --paths auto");
   SceneLimits sceneLimits;
   addSceneLimitsOption(app, sceneLimits);
-  app.add_option("--check-every", o.checkEvery, "frames between visibility checks (default 10; 0: none)");
+  app.add_option("--check-every", o.checkEvery,
+                 "frames between visibility checks (default 10; 0: none)");
   app.add_option("--radius", o.radius, "near-field radius to ask for in metres (0: the server's)");
   app.add_option("--memory-budget", o.memoryBudget, "client memory budget in bytes (0: unlimited)");
   app.add_option("--token-file", tokenFile, "auth token file (first line)");
@@ -56,8 +62,10 @@ int main(int argc, char** argv) {
   return runToolApp("vistream-loadtest", app, argc, argv, logLevel, [&]() -> int {
     o.avatars = !noAvatars;
     if (graceOption->count() > 0) o.graceS = grace;
-    if (pathFile.empty() == pathsMode.empty()) throwInputError("give exactly one of --path P.csv and --paths auto");
-    if (!pathsMode.empty() && pathsMode != "auto") throwInputError("--paths: expected 'auto', got '{}'", pathsMode);
+    if (pathFile.empty() == pathsMode.empty())
+      throwInputError("give exactly one of --path P.csv and --paths auto");
+    if (!pathsMode.empty() && pathsMode != "auto")
+      throwInputError("--paths: expected 'auto', got '{}'", pathsMode);
     if (!tokenFile.empty()) o.token = readTokenFile(tokenFile);
     Scene scene;
     if (!sceneSpec.empty()) {
@@ -78,35 +86,42 @@ int main(int argc, char** argv) {
         o.paths.push_back(generatePath(scene, fs, po));
       }
     }
-    spdlog::info("{} clients walking for {:.0f} s at speed {:.2f} against {}:{}", o.clients, o.durationS, o.speed, o.host, o.port);
+    spdlog::info("{} clients walking for {:.0f} s at speed {:.2f} against {}:{}", o.clients,
+                 o.durationS, o.speed, o.host, o.port);
     const LoadTestReport r = runLoadTest(o);
     const auto& j = r.json;
     if (asJson) {
       std::cout << j.dump() << "\n";
     } else {
       auto pct = [](const nlohmann::json& p) {
-        return p["count"].get<size_t>() == 0 ? std::string("-")
-                                             : fmt::format("{:.1f} / {:.1f} / {:.1f}", p["p50"].get<double>(),
-                                                           p["p95"].get<double>(), p["p99"].get<double>());
+        return p["count"].get<size_t>() == 0
+                   ? std::string("-")
+                   : fmt::format("{:.1f} / {:.1f} / {:.1f}", p["p50"].get<double>(),
+                                 p["p95"].get<double>(), p["p99"].get<double>());
       };
       fmt::print("{:<34} {}\n", "clients", j["clients"].get<size_t>());
       fmt::print("{:<34} {:.1f}\n", "duration (s)", j["duration_s"].get<double>());
-      fmt::print("{:<34} {:.0f}\n", "bytes per client per second", j["bytes_per_client_per_s"].get<double>());
+      fmt::print("{:<34} {:.0f}\n", "bytes per client per second",
+                 j["bytes_per_client_per_s"].get<double>());
       fmt::print("{:<34} {} of {}\n", "clients loaded", j["clients_loaded"].get<size_t>(),
                  j["clients"].get<size_t>());
       fmt::print("{:<34} {}\n", "initial load ms (p50 / p95 / p99)", pct(j["initial_load_ms"]));
-      fmt::print("{:<34} {}\n", "CellReady latency ms (p50/p95/p99)", pct(j["cell_ready_latency_ms"]));
+      fmt::print("{:<34} {}\n", "CellReady latency ms (p50/p95/p99)",
+                 pct(j["cell_ready_latency_ms"]));
       fmt::print("{:<34} {}\n", "cell entries", j["cell_entries"].get<uint64_t>());
-      fmt::print("{:<34} {} in {} checks\n", "visibility misses", j["visibility_misses"].get<uint64_t>(),
-                 j["frames_checked"].get<uint64_t>());
+      fmt::print("{:<34} {} in {} checks\n", "visibility misses",
+                 j["visibility_misses"].get<uint64_t>(), j["frames_checked"].get<uint64_t>());
       fmt::print("{:<34} {}{}\n", "errors", j["errors"].get<uint64_t>(),
-                 j["first_error"].get<std::string>().empty() ? "" : " (first: " + j["first_error"].get<std::string>() + ")");
+                 j["first_error"].get<std::string>().empty()
+                     ? ""
+                     : " (first: " + j["first_error"].get<std::string>() + ")");
       for (const auto& [reason, n] : j["errors_by_reason"].items())
         fmt::print("{:<34} {}\n", "  " + reason, n.get<uint64_t>());
       if (!j["cut_off_clients"].empty())
         fmt::print("{:<34} {}\n", "clients cut off at the deadline", j["cut_off_clients"].dump());
       if (!j["server_cpu_ms_per_s_per_client"].is_null())
-        fmt::print("{:<34} {:.2f}\n", "server CPU ms/s per client", j["server_cpu_ms_per_s_per_client"].get<double>());
+        fmt::print("{:<34} {:.2f}\n", "server CPU ms/s per client",
+                   j["server_cpu_ms_per_s_per_client"].get<double>());
     }
     if (r.failure.empty()) return 0;
     std::fflush(stdout);

@@ -22,11 +22,14 @@ FieldGrid::FieldGrid(const RenderGeometry& g, float cellSize) {
   dims_ = glm::max(glm::ivec2(glm::ceil(ext / cell_)), glm::ivec2(1));
   const size_t cells = size_t(dims_.x) * size_t(dims_.y);
   auto cellRange = [&](const Box3f& box, glm::ivec2& a, glm::ivec2& b) {
-    a = glm::clamp(glm::ivec2(glm::floor((glm::vec2(box.lo.x, box.lo.z) - lo_) / cell_)), glm::ivec2(0), dims_ - 1);
-    b = glm::clamp(glm::ivec2(glm::floor((glm::vec2(box.hi.x, box.hi.z) - lo_) / cell_)), glm::ivec2(0), dims_ - 1);
+    a = glm::clamp(glm::ivec2(glm::floor((glm::vec2(box.lo.x, box.lo.z) - lo_) / cell_)),
+                   glm::ivec2(0), dims_ - 1);
+    b = glm::clamp(glm::ivec2(glm::floor((glm::vec2(box.hi.x, box.hi.z) - lo_) / cell_)),
+                   glm::ivec2(0), dims_ - 1);
   };
   std::vector<uint32_t> count(cells + 1, 0);
-  cellY_.assign(cells, glm::vec2(std::numeric_limits<float>::max(), std::numeric_limits<float>::lowest()));
+  cellY_.assign(cells,
+                glm::vec2(std::numeric_limits<float>::max(), std::numeric_limits<float>::lowest()));
   for (size_t t = 0; t < g.size(); ++t) {
     glm::ivec2 a, b;
     const Box3f box = g.triangles.triangleBounds(t);
@@ -46,7 +49,8 @@ FieldGrid::FieldGrid(const RenderGeometry& g, float cellSize) {
     glm::ivec2 a, b;
     cellRange(g.triangles.triangleBounds(t), a, b);
     for (int z = a.y; z <= b.y; ++z)
-      for (int x = a.x; x <= b.x; ++x) items_[fill[size_t(z) * size_t(dims_.x) + size_t(x)]++] = uint32_t(t);
+      for (int x = a.x; x <= b.x; ++x)
+        items_[fill[size_t(z) * size_t(dims_.x) + size_t(x)]++] = uint32_t(t);
   }
 }
 
@@ -73,8 +77,8 @@ struct Frustum {
 
 }  // namespace
 
-void FieldGrid::nearField(const Camera& camera, float d, std::vector<uint32_t>& out, std::vector<uint32_t>& stamp,
-                          uint32_t& stampValue) const {
+void FieldGrid::nearField(const Camera& camera, float d, std::vector<uint32_t>& out,
+                          std::vector<uint32_t>& stamp, uint32_t& stampValue) const {
   out.clear();
   if (dims_.x == 0) return;
   if (stamp.size() != triangles_) {

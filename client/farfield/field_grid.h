@@ -13,10 +13,9 @@
 #pragma once
 
 #include <cstdint>
+#include <glm/glm.hpp>
 #include <span>
 #include <vector>
-
-#include <glm/glm.hpp>
 
 #include "client/render/camera.h"
 #include "client/render/render_geometry.h"
@@ -35,8 +34,8 @@ class FieldGrid {
   // Triangles of the near field of `camera` within horizontal distance d,
   // each once, in cell order, skipping cells wholly outside the view
   // frustum. With d = infinity: every triangle in the frustum (full rendering).
-  void nearField(const Camera& camera, float d, std::vector<uint32_t>& out, std::vector<uint32_t>& stamp,
-                 uint32_t& stampValue) const;
+  void nearField(const Camera& camera, float d, std::vector<uint32_t>& out,
+                 std::vector<uint32_t>& stamp, uint32_t& stampValue) const;
   // False only if all geometry lies within horizontal distance d of the
   // viewer. Conservative: measured to the far corners of the grid cells that
   // hold geometry, so it may say true when the geometry itself ends within d.
@@ -46,7 +45,8 @@ class FieldGrid {
   glm::vec2 lo_{0.0f};
   float cell_ = 1.0f;
   glm::ivec2 dims_{0, 0};
-  std::vector<uint32_t> cellStart_;  // CSR: triangles of cell c are items_[cellStart_[c] .. cellStart_[c+1])
+  std::vector<uint32_t>
+      cellStart_;  // CSR: triangles of cell c are items_[cellStart_[c] .. cellStart_[c+1])
   std::vector<uint32_t> items_;
   std::vector<glm::vec2> cellY_;  // per cell: min and max Y of its triangles
   size_t triangles_ = 0;

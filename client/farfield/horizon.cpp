@@ -1,10 +1,10 @@
 #include "client/farfield/horizon.h"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
-
-#include <tbb/parallel_for.h>
 
 namespace vistream {
 namespace {
@@ -12,7 +12,9 @@ namespace {
 constexpr float kLowest = -std::numeric_limits<float>::infinity();
 constexpr int kMaxCells = 2048;
 
-float azimuthOf(const glm::vec3& d) { return std::atan2(-d.x, -d.z); }
+float azimuthOf(const glm::vec3& d) {
+  return std::atan2(-d.x, -d.z);
+}
 
 float wrapAngle(float a) {
   constexpr float kPi = 3.14159265358979f;
@@ -40,10 +42,12 @@ HorizonMap::HorizonMap(const RenderGeometry& g, float cellSize) {
   maxHeight_ = kLowest;
   for (size_t t = 0; t < g.size(); ++t) {
     const Box3f box = g.triangles.triangleBounds(t);
-    const glm::ivec2 a = glm::clamp(glm::ivec2(glm::floor((glm::vec2(box.lo.x, box.lo.z) - lo_) / cell_)),
-                                    glm::ivec2(0), dims_ - 1);
-    const glm::ivec2 b = glm::clamp(glm::ivec2(glm::floor((glm::vec2(box.hi.x, box.hi.z) - lo_) / cell_)),
-                                    glm::ivec2(0), dims_ - 1);
+    const glm::ivec2 a =
+        glm::clamp(glm::ivec2(glm::floor((glm::vec2(box.lo.x, box.lo.z) - lo_) / cell_)),
+                   glm::ivec2(0), dims_ - 1);
+    const glm::ivec2 b =
+        glm::clamp(glm::ivec2(glm::floor((glm::vec2(box.hi.x, box.hi.z) - lo_) / cell_)),
+                   glm::ivec2(0), dims_ - 1);
     for (int z = a.y; z <= b.y; ++z)
       for (int x = a.x; x <= b.x; ++x) {
         float& h = base[size_t(z) * size_t(dims_.x) + size_t(x)];
@@ -80,8 +84,8 @@ HorizonMap::HorizonMap(const RenderGeometry& g, float cellSize) {
   }
 }
 
-float HorizonMap::traceWedge(const glm::vec3& eye, float azimuth, float halfAngle, float nearDistance,
-                             size_t& cells) const {
+float HorizonMap::traceWedge(const glm::vec3& eye, float azimuth, float halfAngle,
+                             float nearDistance, size_t& cells) const {
   const glm::vec2 e(eye.x, eye.z);
   const glm::vec2 dir(-std::sin(azimuth), -std::cos(azimuth));
   const float spread = std::tan(std::min(halfAngle, 1.5f));
@@ -109,8 +113,10 @@ float HorizonMap::traceWedge(const glm::vec3& eye, float azimuth, float halfAngl
   for (int a = 0; a < 2; ++a) {
     step[a] = dir[a] >= 0.0f ? 1 : -1;
     const float boundary = lo_[a] + float(c[a] + (step[a] > 0 ? 1 : 0)) * cell_;
-    tMax[a] = std::abs(dir[a]) < 1e-12f ? std::numeric_limits<float>::infinity() : (boundary - e[a]) / dir[a];
-    tDelta[a] = std::abs(dir[a]) < 1e-12f ? std::numeric_limits<float>::infinity() : cell_ / std::abs(dir[a]);
+    tMax[a] = std::abs(dir[a]) < 1e-12f ? std::numeric_limits<float>::infinity()
+                                        : (boundary - e[a]) / dir[a];
+    tDelta[a] = std::abs(dir[a]) < 1e-12f ? std::numeric_limits<float>::infinity()
+                                          : cell_ / std::abs(dir[a]);
   }
   const float eyeY = eye.y;
   float best = kLowest;
@@ -121,7 +127,8 @@ float HorizonMap::traceWedge(const glm::vec3& eye, float azimuth, float halfAngl
     const float reachNow = reachMax * 1.4143f;
     const float rise = maxHeight_ - eyeY;
     const float lowerDist = std::max(nearDistance, tEnter - reachNow);
-    const float bound = rise >= 0.0f ? (lowerDist > 0.0f ? rise / lowerDist : std::numeric_limits<float>::infinity())
+    const float bound = rise >= 0.0f ? (lowerDist > 0.0f ? rise / lowerDist
+                                                         : std::numeric_limits<float>::infinity())
                                      : rise / (t1 + reachNow);
     if (bound <= best) break;
     ++cells;
@@ -134,7 +141,8 @@ float HorizonMap::traceWedge(const glm::vec3& eye, float azimuth, float halfAngl
     if (inReach) {
       const float h = height(level, cc.x, cc.y);
       if (h > kLowest) {
-        const glm::vec2 dlo = lo_ + glm::vec2(c - r) * cell_, dhi = lo_ + glm::vec2(c + r + 1) * cell_;
+        const glm::vec2 dlo = lo_ + glm::vec2(c - r) * cell_,
+                        dhi = lo_ + glm::vec2(c + r + 1) * cell_;
         // Above the eye, the nearest point of the (dilated) cell climbs most
         // steeply; below it, the farthest point lies closest to the horizon.
         float slope;
@@ -170,7 +178,8 @@ std::vector<float> HorizonMap::trace(const Camera& camera, float nearDistance, i
   std::vector<size_t> cellCount(size_t(groups), 0);
   tbb::parallel_for(0, groups, [&](int gi) {
     const int x0 = gi * k, x1 = std::min(camera.width, x0 + k);  // columns [x0, x1)
-    const glm::vec3 centreDir = camera.rayDirection(0.5f * float(x0 + x1), 0.5f * float(camera.height));
+    const glm::vec3 centreDir =
+        camera.rayDirection(0.5f * float(x0 + x1), 0.5f * float(camera.height));
     const float centre = azimuthOf(centreDir);
     float lo = 0.0f, hi = 0.0f;
     for (float px : {float(x0), float(x1)})
@@ -184,8 +193,9 @@ std::vector<float> HorizonMap::trace(const Camera& camera, float nearDistance, i
     // A column that fans over more than about 140 degrees of azimuth (the
     // camera looks close to the zenith or nadir) cannot be traced as one
     // wedge: nothing in it is called sky.
-    const float s = half > 1.2f ? std::numeric_limits<float>::infinity()
-                                : traceWedge(camera.eye, mid, half, nearDistance, cellCount[size_t(gi)]);
+    const float s = half > 1.2f
+                        ? std::numeric_limits<float>::infinity()
+                        : traceWedge(camera.eye, mid, half, nearDistance, cellCount[size_t(gi)]);
     for (int x = x0; x < x1; ++x) slopes[size_t(x)] = s;
   });
   if (stats) {

@@ -23,9 +23,8 @@
 #pragma once
 
 #include <cstdint>
-#include <vector>
-
 #include <glm/glm.hpp>
+#include <vector>
 
 #include "client/render/camera.h"
 #include "client/render/render_geometry.h"
@@ -49,20 +48,25 @@ class HorizonMap {
 
   // Per pixel column, the steepest far-field slope (-infinity if the column
   // sees no far-field geometry). `subsample` >= 1 traces every k-th column.
-  std::vector<float> trace(const Camera& camera, float nearDistance, int subsample, HorizonStats* stats = nullptr) const;
+  std::vector<float> trace(const Camera& camera, float nearDistance, int subsample,
+                           HorizonStats* stats = nullptr) const;
 
   // The slope of the view ray through a pixel centre: dy / |d_xz| (infinity straight up).
   static float raySlope(const glm::vec3& dir);
 
  private:
-  float height(int level, int x, int z) const { return levels_[size_t(level)][size_t(z) * size_t(dims_.x) + size_t(x)]; }
-  float traceWedge(const glm::vec3& eye, float azimuth, float halfAngle, float nearDistance, size_t& cells) const;
+  float height(int level, int x, int z) const {
+    return levels_[size_t(level)][size_t(z) * size_t(dims_.x) + size_t(x)];
+  }
+  float traceWedge(const glm::vec3& eye, float azimuth, float halfAngle, float nearDistance,
+                   size_t& cells) const;
 
   glm::vec2 lo_{0.0f};
   float cell_ = 1.0f;
   glm::ivec2 dims_{0, 0};
   float maxHeight_ = 0.0f;
-  std::vector<std::vector<float>> levels_;  // level k: max over a (2r_k+1)^2 neighbourhood, r_k = 2^k - 1
+  std::vector<std::vector<float>>
+      levels_;  // level k: max over a (2r_k+1)^2 neighbourhood, r_k = 2^k - 1
   std::vector<int> radius_;
 };
 

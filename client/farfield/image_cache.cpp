@@ -10,9 +10,10 @@ namespace vistream {
 namespace {
 constexpr float kTwoPi = 6.28318530718f;
 constexpr size_t kMaxTexels = size_t(1) << 26;  // 64 Mi texels, 512 MiB
-}
+}  // namespace
 
-PanoramicCache::PanoramicCache(float pixelAngle, const PanoramicCacheOptions& options) : options_(options) {
+PanoramicCache::PanoramicCache(float pixelAngle, const PanoramicCacheOptions& options)
+    : options_(options) {
   float texelAngle = pixelAngle / std::max(options.texelsPerPixel, 0.05f);
   maxSlope_ = std::clamp(options.maxSlope, 0.01f, 100.0f);
   // At most kMaxTexels: a tiny field of view on a huge image would otherwise
@@ -63,8 +64,9 @@ void PanoramicCache::release(uint32_t r) {
   if (r != 0 && r != current_ && records_[r].refs == 0) free_.push_back(r);
 }
 
-CachePlanStats PanoramicCache::plan(const glm::vec3& eye, std::span<const int64_t> texels, size_t budget,
-                                    float maxStale, std::vector<uint8_t>& trace, bool viewTurned) {
+CachePlanStats PanoramicCache::plan(const glm::vec3& eye, std::span<const int64_t> texels,
+                                    size_t budget, float maxStale, std::vector<uint8_t>& trace,
+                                    bool viewTurned) {
   if (current_ == 0 || glm::length(records_[current_].position - eye) > options_.recordSpacing) {
     const uint32_t old = current_;
     current_ = openRecord(eye);
@@ -91,7 +93,9 @@ CachePlanStats PanoramicCache::plan(const glm::vec3& eye, std::span<const int64_
   for (uint32_t id : touched_)
     if (records_[id].distance <= maxStale && id != current_) ranked.push_back(id);
   std::sort(ranked.begin(), ranked.end(), [&](uint32_t a, uint32_t b) {
-    return records_[a].distance != records_[b].distance ? records_[a].distance > records_[b].distance : a < b;
+    return records_[a].distance != records_[b].distance
+               ? records_[a].distance > records_[b].distance
+               : a < b;
   });
   size_t left = budget > must ? budget - must : 0;
   // Per record: 0 = reuse, 1 = retrace all, n > 1 = retrace every n-th.
@@ -151,7 +155,8 @@ bool PanoramicCache::onEdge(int64_t texel) const {
   const glm::u8vec3 c = colours_[size_t(texel)];
   const int64_t left = int64_t(v) * columns_ + (u + columns_ - 1) % columns_;
   const int64_t right = int64_t(v) * columns_ + (u + 1) % columns_;
-  for (int64_t n : {left, right, v > 0 ? texel - columns_ : texel, v + 1 < rows_ ? texel + columns_ : texel})
+  for (int64_t n :
+       {left, right, v > 0 ? texel - columns_ : texel, v + 1 < rows_ ? texel + columns_ : texel})
     if (texelRecord_[size_t(n)] != 0 && colours_[size_t(n)] != c) return true;
   return false;
 }

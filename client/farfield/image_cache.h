@@ -30,10 +30,9 @@
 #pragma once
 
 #include <cstdint>
+#include <glm/glm.hpp>
 #include <span>
 #include <vector>
-
-#include <glm/glm.hpp>
 
 namespace vistream {
 
@@ -46,12 +45,12 @@ struct PanoramicCacheOptions {
 };
 
 struct CachePlanStats {
-  size_t candidates = 0;  // pixels that asked
-  size_t mustTrace = 0;   // never traced, outside the cached band, or too stale
-  size_t budgeted = 0;    // retraced by the budget (oldest records first)
-  size_t edges = 0;       // retraced because the texel lies on a colour edge
-  size_t reused = 0;      // taken from the cache
-  bool degraded = false;  // some stale-but-valid pixels were left for later frames
+  size_t candidates = 0;           // pixels that asked
+  size_t mustTrace = 0;            // never traced, outside the cached band, or too stale
+  size_t budgeted = 0;             // retraced by the budget (oldest records first)
+  size_t edges = 0;                // retraced because the texel lies on a colour edge
+  size_t reused = 0;               // taken from the cache
+  bool degraded = false;           // some stale-but-valid pixels were left for later frames
   float thresholdDistance = 0.0f;  // records farther than this were retraced
 };
 
@@ -72,8 +71,8 @@ class PanoramicCache {
   // `viewTurned`: the view direction changed since the last frame, so pixels
   // map to texels off their own direction (edge texels are then retraced;
   // without turning, only edge texels traced from elsewhere are).
-  CachePlanStats plan(const glm::vec3& eye, std::span<const int64_t> texels, size_t budget, float maxStale,
-                      std::vector<uint8_t>& trace, bool viewTurned = true);
+  CachePlanStats plan(const glm::vec3& eye, std::span<const int64_t> texels, size_t budget,
+                      float maxStale, std::vector<uint8_t>& trace, bool viewTurned = true);
   glm::u8vec3 colour(int64_t texel) const { return colours_[size_t(texel)]; }
   // Stores a traced colour under the current record (opened by plan()).
   void store(int64_t texel, glm::u8vec3 colour);

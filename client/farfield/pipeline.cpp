@@ -1,10 +1,10 @@
 #include "client/farfield/pipeline.h"
 
-#include <algorithm>
-#include <cmath>
-
 #include <fmt/format.h>
 #include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
 
 #include "common/core/timer.h"
 
@@ -20,7 +20,8 @@ void castRays(const RayQuery& query, const std::vector<Ray>& rays, std::vector<H
   const size_t chunks = (rays.size() + kRayChunk - 1) / kRayChunk;
   tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
     const size_t begin = c * kRayChunk, count = std::min(kRayChunk, rays.size() - begin);
-    query.firstHits(std::span<const Ray>(rays.data() + begin, count), std::span<Hit>(hits.data() + begin, count));
+    query.firstHits(std::span<const Ray>(rays.data() + begin, count),
+                    std::span<Hit>(hits.data() + begin, count));
   });
 }
 
@@ -28,9 +29,12 @@ void castRays(const RayQuery& query, const std::vector<Ray>& rays, std::vector<H
 
 const char* renderModeName(RenderMode m) {
   switch (m) {
-    case RenderMode::Pipeline: return "pipeline";
-    case RenderMode::RaycastAll: return "raycast-all";
-    case RenderMode::GeometryAll: return "geometry-all";
+    case RenderMode::Pipeline:
+      return "pipeline";
+    case RenderMode::RaycastAll:
+      return "raycast-all";
+    case RenderMode::GeometryAll:
+      return "geometry-all";
   }
   return "?";
 }
@@ -88,24 +92,30 @@ void FrameRenderer::reset() {
 }
 
 float FrameRenderer::polygonDistance() const {
-  return options_.mode == RenderMode::Pipeline && !wholeScene_ ? options_.nearDistance
-                                                               : std::numeric_limits<float>::infinity();
+  return options_.mode == RenderMode::Pipeline && !wholeScene_
+             ? options_.nearDistance
+             : std::numeric_limits<float>::infinity();
 }
 
-FrameReport FrameRenderer::render(const Camera& camera, ImageRgb8& out) { return run(camera, out, nullptr); }
+FrameReport FrameRenderer::render(const Camera& camera, ImageRgb8& out) {
+  return run(camera, out, nullptr);
+}
 
-FrameReport FrameRenderer::renderFarField(const Camera& camera, ImageRgb8& farImage, std::vector<uint32_t>& near) {
+FrameReport FrameRenderer::renderFarField(const Camera& camera, ImageRgb8& farImage,
+                                          std::vector<uint32_t>& near) {
   return run(camera, farImage, &near);
 }
 
-FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector<uint32_t>* glNear) {
+FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out,
+                               std::vector<uint32_t>* glNear) {
   Stopwatch total;
   FrameReport rep;
   const int W = camera.width, H = camera.height;
   const size_t pixels = size_t(W) * size_t(H);
   const RenderMode mode = options_.mode;
   const float d = options_.nearDistance;
-  const bool turned = !havePrevious_ || camera.yawDeg != previousYaw_ || camera.pitchDeg != previousPitch_;
+  const bool turned =
+      !havePrevious_ || camera.yawDeg != previousYaw_ || camera.pitchDeg != previousPitch_;
   rep.moving = havePrevious_ && (glm::length(camera.eye - previousEye_) > 1e-3f || turned);
   havePrevious_ = true;
   previousEye_ = camera.eye;
@@ -119,8 +129,10 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector
   if (mode == RenderMode::RaycastAll)
     near_.clear();
   else
-    grid_.nearField(camera, mode == RenderMode::GeometryAll || wholeScene ? std::numeric_limits<float>::infinity() : d,
-                    near_, stamp_, stampValue_);
+    grid_.nearField(
+        camera,
+        mode == RenderMode::GeometryAll || wholeScene ? std::numeric_limits<float>::infinity() : d,
+        near_, stamp_, stampValue_);
   rep.nearTriangles = near_.size();
   rep.ms.nearSelect = clock.ms();
 
@@ -136,7 +148,9 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector
     clock = Stopwatch();
     covered_.resize(pixels);
     for (size_t p = 0; p < pixels; ++p)
-      covered_[p] = ids_.ids[p] == kNoTriangle ? kUncovered : ids_.ids[p] == kBeyondDistance ? kBeyond : kCovered;
+      covered_[p] = ids_.ids[p] == kNoTriangle       ? kUncovered
+                    : ids_.ids[p] == kBeyondDistance ? kBeyond
+                                                     : kCovered;
     rep.ms.opacity = clock.ms();
   }
 
@@ -147,8 +161,9 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector
     rep.farFieldRan = true;
     rep.farFieldWhy = "raycast-all casts a ray through every pixel";
   } else if (wholeScene) {
-    rep.farFieldWhy = fmt::format("the whole scene ({} triangles) fits the polygon budget of {}: drawn as polygons",
-                                  geometry_.size(), options_.polygonBudget);
+    rep.farFieldWhy = fmt::format(
+        "the whole scene ({} triangles) fits the polygon budget of {}: drawn as polygons",
+        geometry_.size(), options_.polygonBudget);
   } else if (!options_.farFieldAllowed) {
     rep.farFieldWhy = "the scene has no geometry beyond d";
   } else if (!grid_.anythingBeyond(camera.eye, d)) {
@@ -168,7 +183,8 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector
     rep.horizonWhy = "the scene has no open sky";
   } else if (std::abs(camera.pitchDeg) + 0.5f * camera.vfovDeg >= 89.0f) {
     rep.horizonWhy = "the view reaches the zenith or nadir, where columns are not vertical";
-  } else if (rays_->occluded(Ray{camera.eye, {0.0f, 1.0f, 0.0f}, 0.0f, std::numeric_limits<float>::infinity()})) {
+  } else if (rays_->occluded(Ray{
+                 camera.eye, {0.0f, 1.0f, 0.0f}, 0.0f, std::numeric_limits<float>::infinity()})) {
     rep.horizonWhy = "a ceiling above the viewer: no sky in reach";
   } else {
     const int k = rep.moving ? std::max(1, options_.horizonSubsampleMoving) : 1;
@@ -200,7 +216,8 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector
       const glm::vec3 dir = pixelRays.at(float(x) + 0.5f, float(y) + 0.5f);
       // Only pixels no polygon reaches can be sky: the horizon bounds the far
       // field, and a pixel with a polygon beyond d sees at least that.
-      if (rep.horizonRan && covered_[p] == kUncovered && HorizonMap::raySlope(dir) > slopes[size_t(x)]) {
+      if (rep.horizonRan && covered_[p] == kUncovered &&
+          HorizonMap::raySlope(dir) > slopes[size_t(x)]) {
         ++rep.pixels.horizon;
         out.set(x, y, sky);
         continue;
@@ -234,9 +251,10 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector
     const float maxStale = options_.maxStalePixels * camera.pixelAngle() * d;
     rep.cachePlan = cache_->plan(camera.eye, texels, options_.pixelBudget, maxStale, trace, turned);
     rep.cacheRan = true;
-    rep.cacheWhy = rep.cachePlan.degraded
-                       ? "far-field pixels to fill; the ray budget ran out, older pixels wait for later frames"
-                       : "far-field pixels to fill; every pixel outside the error bound retraced";
+    rep.cacheWhy =
+        rep.cachePlan.degraded
+            ? "far-field pixels to fill; the ray budget ran out, older pixels wait for later frames"
+            : "far-field pixels to fill; every pixel outside the error bound retraced";
   } else {
     trace.assign(candidates.size(), 1);
   }
@@ -250,7 +268,8 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector
     if (trace[i]) {
       // dirs[i] has a unit component along the view axis, so t is the view
       // depth: starting at zNear clips rays exactly where polygons are clipped.
-      rays.push_back(Ray{camera.eye, dirs[i], camera.zNear, std::numeric_limits<float>::infinity()});
+      rays.push_back(
+          Ray{camera.eye, dirs[i], camera.zNear, std::numeric_limits<float>::infinity()});
       rayOf.push_back(uint32_t(i));
     }
   std::vector<Hit> hits;

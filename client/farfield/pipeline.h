@@ -28,10 +28,9 @@
 
 #include <cstdint>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "client/farfield/field_grid.h"
 #include "client/farfield/horizon.h"
@@ -49,18 +48,23 @@ const char* renderModeName(RenderMode m);
 
 struct PipelineOptions {
   RenderMode mode = RenderMode::Pipeline;
-  float nearDistance = 150.0f;    // d, metres
-  size_t pixelBudget = 2'000;     // rays a frame for cache refreshes (the must-trace pixels come on top)
-  size_t polygonBudget = 500'000; // a scene with at most this many triangles is drawn whole as polygons,
-                                  // with no far field (0: always split at d)
-  bool cache = true;              // panoramic image cache on/off
-  float maxStalePixels = 2.0f;    // a cached texel expires when the viewer moved so far that far-field
-                                  // geometry at distance d may have shifted by this many pixels
-  float horizonCellSize = 8.0f;   // metres, the height field's resolution
-  int horizonSubsampleMoving = 4; // trace every k-th column while the viewer moves
-  bool horizonAllowed = true;     // the scene has open sky (SceneEffects::horizonTracing)
-  bool farFieldAllowed = true;    // the scene has geometry beyond d (SceneEffects::farFieldRayCasting)
-  float gridCellSize = 0.0f;      // near-field grid cell, metres (0: automatic)
+  float nearDistance = 150.0f;  // d, metres
+  // Rays a frame for cache refreshes (the must-trace pixels come on top).
+  size_t pixelBudget = 2'000;
+  // A scene with at most this many triangles is drawn whole as polygons,
+  // with no far field (0: always split at d).
+  size_t polygonBudget = 500'000;
+  // Panoramic image cache on/off.
+  bool cache = true;
+  // A cached texel expires when the viewer moved so far that far-field
+  // geometry at distance d may have shifted by this many pixels.
+  float maxStalePixels = 2.0f;
+  float horizonCellSize = 8.0f;    // metres, the height field's resolution
+  int horizonSubsampleMoving = 4;  // trace every k-th column while the viewer moves
+  bool horizonAllowed = true;      // the scene has open sky (SceneEffects::horizonTracing)
+  // The scene has geometry beyond d (SceneEffects::farFieldRayCasting).
+  bool farFieldAllowed = true;
+  float gridCellSize = 0.0f;  // near-field grid cell, metres (0: automatic)
   PanoramicCacheOptions cacheOptions;
 };
 
@@ -85,7 +89,8 @@ struct PixelCounts {
 };
 
 struct StageTimes {
-  double nearSelect = 0, nearDraw = 0, opacity = 0, horizon = 0, cache = 0, raycast = 0, compose = 0, total = 0;
+  double nearSelect = 0, nearDraw = 0, opacity = 0, horizon = 0, cache = 0, raycast = 0,
+         compose = 0, total = 0;
 
   StageTimes& operator+=(const StageTimes& o) {
     nearSelect += o.nearSelect;
@@ -123,7 +128,8 @@ class FrameRenderer {
   FrameReport render(const Camera& camera, ImageRgb8& out);
   // For an OpenGL near field: the triangles to draw (`near`) and the
   // far-field image (valid wherever the opacity buffer is uncovered).
-  FrameReport renderFarField(const Camera& camera, ImageRgb8& farImage, std::vector<uint32_t>& near);
+  FrameReport renderFarField(const Camera& camera, ImageRgb8& farImage,
+                             std::vector<uint32_t>& near);
   // How far from the eye polygons are drawn: d in pipeline mode, unlimited
   // in geometry-all. An OpenGL near field discards fragments beyond it.
   float polygonDistance() const;

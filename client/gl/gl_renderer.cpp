@@ -3,11 +3,11 @@
 // libepoxy loads the GL entry points. stb_easy_font keeps its implementation
 // in the header, all of it static: this file is its only user, so the HUD
 // font lives in this translation unit.
-#include <cmath>
 #include <epoxy/gl.h>
 #include <stb/stb_easy_font.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstring>
 #include <stdexcept>
@@ -338,8 +338,9 @@ void GlRenderer::upload(const RenderGeometry& geometry) {
   impl_->triangleCount = n;
 }
 
-void GlRenderer::draw(const Camera& camera, const ImageRgb8& farField, std::span<const uint32_t> near,
-                      float nearDistance, std::span<const HudLine> hud) {
+void GlRenderer::draw(const Camera& camera, const ImageRgb8& farField,
+                      std::span<const uint32_t> near, float nearDistance,
+                      std::span<const HudLine> hud) {
   // Every byte drawn is a byte computed on the CPU: no dithering, no sRGB
   // conversion, no multisampling; triangles are two-sided.
   glDisable(GL_DITHER);

@@ -50,7 +50,8 @@ class GlRenderer {
   // the uploaded geometry) with a depth test, then the HUD lines (top left,
   // white on a dark box) if any.
   void draw(const Camera& camera, const ImageRgb8& farField, std::span<const uint32_t> near,
-            float nearDistance = std::numeric_limits<float>::infinity(), std::span<const HudLine> hud = {});
+            float nearDistance = std::numeric_limits<float>::infinity(),
+            std::span<const HudLine> hud = {});
   // Reads the current framebuffer back (row 0 at the top). For output files
   // and tests only; the pipeline itself never reads back.
   ImageRgb8 readBack(int width, int height) const;

@@ -1,16 +1,16 @@
 #include "client/loadtest/load_test.h"
 
-#include <boost/asio.hpp>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <boost/asio.hpp>
 #include <chrono>
 #include <cmath>
 #include <deque>
 #include <map>
-#include <thread>
 #include <memory>
 #include <set>
+#include <thread>
 
 #include "common/core/error.h"
 #include "common/raycast/ray_query.h"
@@ -26,13 +26,22 @@ using namespace wire;
 
 namespace {
 
-double msSince(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); }
+double msSince(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
 
 nlohmann::json percentiles(std::vector<double> v) {
-  if (v.empty()) return {{"p50", nullptr}, {"p95", nullptr}, {"p99", nullptr}, {"max", nullptr}, {"count", 0}};
+  if (v.empty())
+    return {{"p50", nullptr}, {"p95", nullptr}, {"p99", nullptr}, {"max", nullptr}, {"count", 0}};
   std::sort(v.begin(), v.end());
-  auto at = [&](double q) { return v[std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5))]; };
-  return {{"p50", at(0.5)}, {"p95", at(0.95)}, {"p99", at(0.99)}, {"max", v.back()}, {"count", v.size()}};
+  auto at = [&](double q) {
+    return v[std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5))];
+  };
+  return {{"p50", at(0.5)},
+          {"p95", at(0.95)},
+          {"p99", at(0.99)},
+          {"max", v.back()},
+          {"count", v.size()}};
 }
 
 struct Shared {
@@ -51,7 +60,8 @@ struct PathPoint {
 // end the walker turns round and walks back (and so on), so a long test never
 // teleports.
 PathPoint pointAt(const std::vector<PathSample>& path, double t) {
-  if (path.size() == 1) return {path[0].position, glm::dvec3(0.0), path[0].yawDeg, path[0].pitchDeg};
+  if (path.size() == 1)
+    return {path[0].position, glm::dvec3(0.0), path[0].yawDeg, path[0].pitchDeg};
   const double t0 = path.front().t, span = path.back().t - t0;
   double local = t0;
   bool back = false;
@@ -60,7 +70,8 @@ PathPoint pointAt(const std::vector<PathSample>& path, double t) {
     back = m > span;
     local = t0 + (back ? 2.0 * span - m : m);
   }
-  size_t k = size_t(std::upper_bound(path.begin(), path.end(), local, [](double v, const PathSample& s) { return v < s.t; }) -
+  size_t k = size_t(std::upper_bound(path.begin(), path.end(), local,
+                                     [](double v, const PathSample& s) { return v < s.t; }) -
                     path.begin());
   k = std::clamp<size_t>(k, 1, path.size() - 1);
   const PathSample &a = path[k - 1], &b = path[k];
@@ -68,18 +79,25 @@ PathPoint pointAt(const std::vector<PathSample>& path, double t) {
   const double u = dt > 0.0 ? std::clamp((local - a.t) / dt, 0.0, 1.0) : 0.0;
   const double dyaw = std::remainder(b.yawDeg - a.yawDeg, 360.0);
   const glm::dvec3 v = dt > 0.0 ? (b.position - a.position) / dt : glm::dvec3(0.0);
-  return {glm::mix(a.position, b.position, u), back ? -v : v, a.yawDeg + u * dyaw + (back ? 180.0 : 0.0),
-          glm::mix(a.pitchDeg, b.pitchDeg, u)};
+  return {glm::mix(a.position, b.position, u), back ? -v : v,
+          a.yawDeg + u * dyaw + (back ? 180.0 : 0.0), glm::mix(a.pitchDeg, b.pitchDeg, u)};
 }
 
 class SimClient : public std::enable_shared_from_this<SimClient> {
  public:
   SimClient(asio::io_context& io, Shared& shared, size_t index)
-      : shared_(shared), opt_(shared.options), index_(index), strand_(asio::make_strand(io)), socket_(strand_),
-        timer_(strand_), decoder_(64u << 20) {
+      : shared_(shared),
+        opt_(shared.options),
+        index_(index),
+        strand_(asio::make_strand(io)),
+        socket_(strand_),
+        timer_(strand_),
+        decoder_(64u << 20) {
     path_ = &opt_.paths[opt_.paths.size() == 1 ? 0 : index % opt_.paths.size()];
     const double span = path_->back().t - path_->front().t;
-    offset_ = opt_.paths.size() == 1 && opt_.clients > 0 ? span * double(index) / double(opt_.clients) : 0.0;
+    offset_ = opt_.paths.size() == 1 && opt_.clients > 0
+                  ? span * double(index) / double(opt_.clients)
+                  : 0.0;
   }
 
   void start() {
@@ -97,24 +115,25 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
             fmt::format("no Welcome within {:g} s of connecting", self->opt_.connectTimeoutS),
             "handshake");
       });
-      self->socket_.async_connect(self->shared_.endpoint, [self](const boost::system::error_code& ec) {
-        if (self->done_) return;
-        if (ec) return self->finish("connect: " + ec.message(), "connect");
-        self->connected_ = true;
-        boost::system::error_code ignored;
-        self->socket_.set_option(tcp::no_delay(true), ignored);
-        HelloT hello;
-        hello.protocol_version = kProtocolVersion;
-        hello.auth_token = self->opt_.token;
-        hello.client_name = "vistream-loadtest";
-        hello.capabilities = std::make_unique<CapabilitiesT>();
-        hello.capabilities->near_field_radius_m = self->opt_.radius;
-        hello.capabilities->memory_budget_bytes = self->opt_.memoryBudget;
-        hello.capabilities->wants_avatars = self->opt_.avatars;
-        self->helloSent_ = Clock::now();
-        self->send(encodeMessage(std::move(hello)));
-        self->read();
-      });
+      self->socket_.async_connect(
+          self->shared_.endpoint, [self](const boost::system::error_code& ec) {
+            if (self->done_) return;
+            if (ec) return self->finish("connect: " + ec.message(), "connect");
+            self->connected_ = true;
+            boost::system::error_code ignored;
+            self->socket_.set_option(tcp::no_delay(true), ignored);
+            HelloT hello;
+            hello.protocol_version = kProtocolVersion;
+            hello.auth_token = self->opt_.token;
+            hello.client_name = "vistream-loadtest";
+            hello.capabilities = std::make_unique<CapabilitiesT>();
+            hello.capabilities->near_field_radius_m = self->opt_.radius;
+            hello.capabilities->memory_budget_bytes = self->opt_.memoryBudget;
+            hello.capabilities->wants_avatars = self->opt_.avatars;
+            self->helloSent_ = Clock::now();
+            self->send(encodeMessage(std::move(hello)));
+            self->read();
+          });
     });
   }
 
@@ -153,15 +172,18 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
   }
   void writeNext() {
     if (outbox_.empty() || done_) return;
-    asio::async_write(socket_, asio::buffer(*outbox_.front()), [self = shared_from_this()](const boost::system::error_code& ec, size_t) {
-      if (self->done_) return;
-      if (ec) return self->finish("write: " + ec.message(), "write");
-      self->outbox_.pop_front();
-      self->writeNext();
-    });
+    asio::async_write(socket_, asio::buffer(*outbox_.front()),
+                      [self = shared_from_this()](const boost::system::error_code& ec, size_t) {
+                        if (self->done_) return;
+                        if (ec) return self->finish("write: " + ec.message(), "write");
+                        self->outbox_.pop_front();
+                        self->writeNext();
+                      });
   }
   void read() {
-    socket_.async_read_some(asio::buffer(buffer_), [self = shared_from_this()](const boost::system::error_code& ec, size_t n) {
+    socket_.async_read_some(asio::buffer(buffer_), [self = shared_from_this()](
+                                                       const boost::system::error_code& ec,
+                                                       size_t n) {
       if (self->done_) return;
       if (ec)
         return self->finish("connection closed by the server: " + ec.message(),
@@ -186,8 +208,8 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
         // A second Welcome would restart the walk (and so its end): refused.
         if (welcomed_) return finish("a second Welcome", "protocol");
         const Welcome& w = *e.payload_as_Welcome();
-        if (!w.grid() || !w.grid()->cell_size() || !w.grid()->origin() || !w.grid()->dims() || !w.local_origin() ||
-            w.face_count() > (64u << 20))
+        if (!w.grid() || !w.grid()->cell_size() || !w.grid()->origin() || !w.grid()->dims() ||
+            !w.local_origin() || w.face_count() > (64u << 20))
           return finish("Welcome without a usable grid", "handshake");
         welcomed_ = true;
         origin_ = fromWire(*w.local_origin());
@@ -218,7 +240,9 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
             if ((f >> 6) < held_.size()) held_[f >> 6] &= ~(uint64_t(1) << (f & 63));
         // Cells away from here may have lost faces; the server announces them again.
         for (auto it = ready_.begin(); it != ready_.end();)
-          it = glm::all(glm::lessThanEqual(glm::abs(*it - cell_), glm::ivec3(1))) ? std::next(it) : ready_.erase(it);
+          it = glm::all(glm::lessThanEqual(glm::abs(*it - cell_), glm::ivec3(1)))
+                   ? std::next(it)
+                   : ready_.erase(it);
         return;
       }
       case Payload::CellReady: {
@@ -235,7 +259,8 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
       }
       case Payload::Stats: {
         const Stats& s = *e.payload_as_Stats();
-        if (s.sessions() > 0) cpuPerClient.push_back(s.server_cpu_ms_per_s() / double(s.sessions()));
+        if (s.sessions() > 0)
+          cpuPerClient.push_back(s.server_cpu_ms_per_s() / double(s.sessions()));
         return;
       }
       case Payload::Error: {
@@ -246,7 +271,8 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
       }
       case Payload::Bye:
         return finish("server said bye", walkEnded_ ? "" : "closed_by_server");
-      default: return;  // Avatar, PvsReply: not measured
+      default:
+        return;  // Avatar, PvsReply: not measured
     }
   }
 
@@ -257,7 +283,8 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
     if (elapsed >= opt_.durationS) {
       walkEnded_ = true;
       walkedS = elapsed;
-      for (const auto& [c, t] : pending_) latencies.push_back(msSince(t, now));  // still waiting: counted as such
+      for (const auto& [c, t] : pending_)
+        latencies.push_back(msSince(t, now));  // still waiting: counted as such
       pending_.clear();
       send(encodeBye("load test finished"));
       // Let the Bye go out, then close.
@@ -276,22 +303,29 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
     pose.client_time_s = elapsed;
     send(encodeMessage(std::move(pose)));
 
-    const glm::ivec3 cell = glm::clamp(glm::ivec3(glm::floor((glm::vec3(local) - gridOrigin_) / cellSize_)), glm::ivec3(0),
-                                       glm::max(dims_ - 1, glm::ivec3(0)));
+    const glm::ivec3 cell =
+        glm::clamp(glm::ivec3(glm::floor((glm::vec3(local) - gridOrigin_) / cellSize_)),
+                   glm::ivec3(0), glm::max(dims_ - 1, glm::ivec3(0)));
     if (!hasCell_ || cell != cell_) {
       cell_ = cell;
       const bool first = !hasCell_;
       hasCell_ = true;
-      if (first && ready_.count(cell) && initialLoadMs < 0.0) initialLoadMs = msSince(helloSent_, now);
+      if (first && ready_.count(cell) && initialLoadMs < 0.0)
+        initialLoadMs = msSince(helloSent_, now);
       if (!first && initialLoadMs >= 0.0) {
         ++cellEntries;
-        if (ready_.count(cell)) latencies.push_back(0.0);
-        else pending_.emplace(cell, now);
+        if (ready_.count(cell))
+          latencies.push_back(0.0);
+        else
+          pending_.emplace(cell, now);
       }
     }
     ++frame_;
-    if (shared_.rays && opt_.checkEvery > 0 && initialLoadMs >= 0.0 && frame_ % opt_.checkEvery == 0) check(local, p.yaw, p.pitch);
-    timer_.expires_after(std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / opt_.fps)));
+    if (shared_.rays && opt_.checkEvery > 0 && initialLoadMs >= 0.0 &&
+        frame_ % opt_.checkEvery == 0)
+      check(local, p.yaw, p.pitch);
+    timer_.expires_after(
+        std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / opt_.fps)));
     timer_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
       if (!ec) self->tick();
     });
@@ -309,23 +343,28 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
       for (int x = 0; x < opt_.checkRaysX; ++x) {
         const glm::dvec3 d = f + r * (th * ((x + 0.5) / (0.5 * opt_.checkRaysX) - 1.0)) +
                              u * (tv * ((y + 0.5) / (0.5 * opt_.checkRaysY) - 1.0));
-        const Hit h = shared_.rays->firstHit(Ray{glm::vec3(eye), glm::vec3(glm::normalize(d)), 0.0f, radius_});
+        const Hit h = shared_.rays->firstHit(
+            Ray{glm::vec3(eye), glm::vec3(glm::normalize(d)), 0.0f, radius_});
         if (!h.valid()) continue;
         const uint32_t face = shared_.triangles.faceIds[h.triangle];
-        if ((face >> 6) >= held_.size() || !((held_[face >> 6] >> (face & 63)) & 1u)) missing.insert(face);
+        if ((face >> 6) >= held_.size() || !((held_[face >> 6] >> (face & 63)) & 1u))
+          missing.insert(face);
       }
     misses += missing.size();
     if (!ready_.count(cell_)) missesWhilePending += missing.size();
     for (uint32_t face : missing)
-      spdlog::debug("client {}: miss face {} from {:.3f},{:.3f},{:.3f} (file) in cell {},{},{} [{:.3f},{:.3f},{:.3f} .. "
-                    "{:.3f},{:.3f},{:.3f}] ({})",
-                    index_, face, eye.x + origin_.x, eye.y + origin_.y, eye.z + origin_.z, cell_.x, cell_.y, cell_.z,
-                    gridOrigin_.x + cellSize_.x * float(cell_.x) + origin_.x, gridOrigin_.y + cellSize_.y * float(cell_.y) + origin_.y,
-                    gridOrigin_.z + cellSize_.z * float(cell_.z) + origin_.z,
-                    gridOrigin_.x + cellSize_.x * float(cell_.x + 1) + origin_.x,
-                    gridOrigin_.y + cellSize_.y * float(cell_.y + 1) + origin_.y,
-                    gridOrigin_.z + cellSize_.z * float(cell_.z + 1) + origin_.z,
-                    ready_.count(cell_) ? "cell ready" : "cell not ready yet");
+      spdlog::debug(
+          "client {}: miss face {} from {:.3f},{:.3f},{:.3f} (file) in cell {},{},{} "
+          "[{:.3f},{:.3f},{:.3f} .. "
+          "{:.3f},{:.3f},{:.3f}] ({})",
+          index_, face, eye.x + origin_.x, eye.y + origin_.y, eye.z + origin_.z, cell_.x, cell_.y,
+          cell_.z, gridOrigin_.x + cellSize_.x * float(cell_.x) + origin_.x,
+          gridOrigin_.y + cellSize_.y * float(cell_.y) + origin_.y,
+          gridOrigin_.z + cellSize_.z * float(cell_.z) + origin_.z,
+          gridOrigin_.x + cellSize_.x * float(cell_.x + 1) + origin_.x,
+          gridOrigin_.y + cellSize_.y * float(cell_.y + 1) + origin_.y,
+          gridOrigin_.z + cellSize_.z * float(cell_.z + 1) + origin_.z,
+          ready_.count(cell_) ? "cell ready" : "cell not ready yet");
   }
 
   // Ends the client, once. `reason` empty: a clean end; otherwise the kind
@@ -338,7 +377,8 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
       firstError = why;
       spdlog::debug("client {}: {}", index_, why);
     }
-    if (walkedS == 0.0 && walkStarted_ != Clock::time_point{}) walkedS = std::chrono::duration<double>(Clock::now() - walkStarted_).count();
+    if (walkedS == 0.0 && walkStarted_ != Clock::time_point{})
+      walkedS = std::chrono::duration<double>(Clock::now() - walkStarted_).count();
     boost::system::error_code ignored;
     socket_.close(ignored);
     timer_.cancel();
@@ -376,7 +416,8 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
 
 LoadTestReport runLoadTest(const LoadTestOptions& options) {
   if (options.clients == 0) throwInputError("--clients must be at least 1");
-  if (options.paths.empty() || std::any_of(options.paths.begin(), options.paths.end(), [](const auto& p) { return p.empty(); }))
+  if (options.paths.empty() || std::any_of(options.paths.begin(), options.paths.end(),
+                                           [](const auto& p) { return p.empty(); }))
     throwInputError("no path to walk");
   if (!(options.durationS > 0.0) || !(options.fps > 0.0) || !(options.speed >= 0.0) ||
       !std::isfinite(options.durationS) || !std::isfinite(options.speed))
@@ -397,7 +438,8 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
     tcp::resolver resolver(io);
     boost::system::error_code ec;
     auto results = resolver.resolve(options.host, std::to_string(options.port), ec);
-    if (ec || results.empty()) throwInputError("--host {}: cannot resolve it: {}", options.host, ec.message());
+    if (ec || results.empty())
+      throwInputError("--host {}: cannot resolve it: {}", options.host, ec.message());
     shared.endpoint = *results.begin();
   }
   const auto started = Clock::now();

@@ -41,12 +41,12 @@ struct LoadTestOptions {
   std::vector<std::vector<PathSample>> paths;  // one (all clients share it) or one per client
   double speed = 1.0;
   double durationS = 10.0;
-  double fps = 10.0;              // poses per second per client
-  size_t checkEvery = 10;         // frames between visibility checks (0: never)
+  double fps = 10.0;       // poses per second per client
+  size_t checkEvery = 10;  // frames between visibility checks (0: never)
   int checkRaysX = 32, checkRaysY = 24;
-  float radius = 0.0f;            // near-field radius asked for (0: the server's)
+  float radius = 0.0f;  // near-field radius asked for (0: the server's)
   uint64_t memoryBudget = 0;
-  bool avatars = true;            // ask for avatar updates
+  bool avatars = true;  // ask for avatar updates
   std::string token;
   unsigned threads = 1;
   // Seconds from the start of a client's TCP connect to the server's Welcome;
@@ -56,7 +56,7 @@ struct LoadTestOptions {
   // connectTimeoutS + kDefaultGraceBeyondConnectS, which a server that
   // answers within the connect timeout never reaches.
   std::optional<double> graceS;
-  const Scene* scene = nullptr;   // local copy for visibility checks; null: no checks
+  const Scene* scene = nullptr;  // local copy for visibility checks; null: no checks
 };
 
 // What the default grace allows beyond the connect timeout: the final Bye

@@ -1,6 +1,9 @@
 #include "client/net/stream_client.h"
 
-#include <utility>  // before Boost.Asio, whose awaitable.hpp uses std::exchange
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <boost/asio.hpp>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
@@ -9,10 +12,7 @@
 #include <mutex>
 #include <set>
 #include <thread>
-
-#include <boost/asio.hpp>
-#include <fmt/format.h>
-#include <spdlog/spdlog.h>
+#include <utility>  // before Boost.Asio, whose awaitable.hpp uses std::exchange
 
 #include "common/core/error.h"
 #include "protocol/geometry/geometry_codec.h"
@@ -94,28 +94,31 @@ struct StreamClient::Impl {
                       });
   }
   void read() {
-    socket.async_read_some(asio::buffer(buffer), [self = this](const boost::system::error_code& ec, size_t n) {
-      if (ec) return self->finish("connection closed: " + ec.message());
-      {
-        std::lock_guard lock(self->mutex);
-        self->bytes += n;
-      }
-      if (!self->decoder.feed(std::span<const uint8_t>(self->buffer.data(), n)))
-        return self->finish("bad frame from the server: " + self->decoder.error());
-      while (auto frame = self->decoder.next())
-        if (!self->onFrame(*envelopeOf(*frame))) return;
-      if (self->decoder.failed()) return self->finish("bad frame from the server: " + self->decoder.error());
-      self->read();
-    });
+    socket.async_read_some(
+        asio::buffer(buffer), [self = this](const boost::system::error_code& ec, size_t n) {
+          if (ec) return self->finish("connection closed: " + ec.message());
+          {
+            std::lock_guard lock(self->mutex);
+            self->bytes += n;
+          }
+          if (!self->decoder.feed(std::span<const uint8_t>(self->buffer.data(), n)))
+            return self->finish("bad frame from the server: " + self->decoder.error());
+          while (auto frame = self->decoder.next())
+            if (!self->onFrame(*envelopeOf(*frame))) return;
+          if (self->decoder.failed())
+            return self->finish("bad frame from the server: " + self->decoder.error());
+          self->read();
+        });
   }
   // False when the session ended.
   bool onFrame(const Envelope& e) {
     switch (e.payload_type()) {
       case Payload::Welcome: {
         const Welcome& w = *e.payload_as_Welcome();
-        if (!w.grid() || !isFinite(w.grid()->cell_size()) || !isFinite(w.grid()->origin()) || !w.grid()->dims() ||
-            !isFinite(w.local_origin()) || !(w.grid()->cell_size()->x() > 0.0f) ||
-            !(w.grid()->cell_size()->y() > 0.0f) || !(w.grid()->cell_size()->z() > 0.0f) ||
+        if (!w.grid() || !isFinite(w.grid()->cell_size()) || !isFinite(w.grid()->origin()) ||
+            !w.grid()->dims() || !isFinite(w.local_origin()) ||
+            !(w.grid()->cell_size()->x() > 0.0f) || !(w.grid()->cell_size()->y() > 0.0f) ||
+            !(w.grid()->cell_size()->z() > 0.0f) ||
             !(std::isfinite(w.near_field_radius_m()) && w.near_field_radius_m() >= 0.0f)) {
           finish("the server's Welcome has no usable grid");
           return false;
@@ -135,11 +138,13 @@ struct StreamClient::Impl {
         gridOrigin = fromWire(*w.grid()->origin());
         cellSize = fromWire(*w.grid()->cell_size());
         dims = fromWire(*w.grid()->dims());
-        if (isFinite(w.environment_colour())) sky = glm::clamp(fromWire(*w.environment_colour()), 0.0f, 1.0f);
+        if (isFinite(w.environment_colour()))
+          sky = glm::clamp(fromWire(*w.environment_colour()), 0.0f, 1.0f);
         if (w.materials())
           for (const MaterialInfo* m : *w.materials())
-            materials.push_back(m && isFinite(m->diffuse()) ? glm::clamp(fromWire(*m->diffuse()), 0.0f, 1.0f)
-                                                           : glm::vec3(0.8f));
+            materials.push_back(m && isFinite(m->diffuse())
+                                    ? glm::clamp(fromWire(*m->diffuse()), 0.0f, 1.0f)
+                                    : glm::vec3(0.8f));
         welcomed = true;
         changed.notify_all();
         return true;
@@ -166,7 +171,8 @@ struct StreamClient::Impl {
             h.material = g.materials[f];
             h.corners.clear();
             for (uint16_t t = 0; t < g.triangleCounts[f]; ++t, index += 3)
-              for (int k = 0; k < 3; ++k) h.corners.push_back(g.positions[g.indices[index + size_t(k)]]);
+              for (int k = 0; k < 3; ++k)
+                h.corners.push_back(g.positions[g.indices[index + size_t(k)]]);
             trianglesHeld += h.corners.size() / 3;
           }
           tooMuch = trianglesHeld > maxTriangles;
@@ -201,13 +207,15 @@ struct StreamClient::Impl {
       }
       case Payload::Error: {
         const Error& err = *e.payload_as_Error();
-        finish(fmt::format("the server refused: {}: {}", EnumNameErrorCode(err.code()), err.text() ? err.text()->str() : ""));
+        finish(fmt::format("the server refused: {}: {}", EnumNameErrorCode(err.code()),
+                           err.text() ? err.text()->str() : ""));
         return false;
       }
       case Payload::Bye:
         finish("the server said bye");
         return false;
-      default: return true;
+      default:
+        return true;
     }
   }
 };
@@ -226,19 +234,21 @@ StreamClient::StreamClient(const StreamClientOptions& o) : impl_(std::make_share
   // Connect with a deadline: an unreachable host must not hang the client.
   boost::system::error_code connectError = asio::error::timed_out;
   bool connected = false;
-  asio::async_connect(s.socket, endpoints, [&](const boost::system::error_code& ec, const tcp::endpoint&) {
-    connectError = ec;
-    connected = !ec;
-  });
+  asio::async_connect(s.socket, endpoints,
+                      [&](const boost::system::error_code& ec, const tcp::endpoint&) {
+                        connectError = ec;
+                        connected = !ec;
+                      });
   s.io.run_for(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
       std::chrono::duration<double>(o.timeoutS)));
   if (!connected) {
     boost::system::error_code ignored;
     s.socket.close(ignored);
-    throwInputError("cannot connect to {}: {}", where,
-                    connectError == asio::error::timed_out || connectError == asio::error::operation_aborted
-                        ? fmt::format("no answer within {:.0f} s", o.timeoutS)
-                        : connectError.message());
+    throwInputError(
+        "cannot connect to {}: {}", where,
+        connectError == asio::error::timed_out || connectError == asio::error::operation_aborted
+            ? fmt::format("no answer within {:.0f} s", o.timeoutS)
+            : connectError.message());
   }
   s.io.restart();
   boost::system::error_code ignored;
@@ -255,10 +265,11 @@ StreamClient::StreamClient(const StreamClientOptions& o) : impl_(std::make_share
   // The io thread never owns the Impl: the StreamClient joins it first.
   s.thread = std::thread([&io = s.io] { io.run(); });
   std::unique_lock lock(s.mutex);
-  const bool answered =
-      s.changed.wait_for(lock, std::chrono::duration<double>(o.timeoutS), [&] { return s.welcomed || s.ended; });
+  const bool answered = s.changed.wait_for(lock, std::chrono::duration<double>(o.timeoutS),
+                                           [&] { return s.welcomed || s.ended; });
   if (!answered || !s.welcomed) {
-    const std::string why = answered ? s.endReason : fmt::format("no Welcome within {:.0f} s", o.timeoutS);
+    const std::string why =
+        answered ? s.endReason : fmt::format("no Welcome within {:.0f} s", o.timeoutS);
     lock.unlock();
     s.io.stop();  // the io thread must not touch the socket while finish() closes it
     s.thread.join();
@@ -288,11 +299,13 @@ float StreamClient::radius() const {
   return impl_->radius;
 }
 
-void StreamClient::sendPose(const glm::vec3& eye, float yawDeg, float pitchDeg, const glm::vec3& velocity) {
+void StreamClient::sendPose(const glm::vec3& eye, float yawDeg, float pitchDeg,
+                            const glm::vec3& velocity) {
   {
     std::lock_guard lock(impl_->mutex);
-    impl_->poseCell = glm::clamp(glm::ivec3(glm::floor((eye - impl_->gridOrigin) / impl_->cellSize)), glm::ivec3(0),
-                                 glm::max(impl_->dims - 1, glm::ivec3(0)));
+    impl_->poseCell =
+        glm::clamp(glm::ivec3(glm::floor((eye - impl_->gridOrigin) / impl_->cellSize)),
+                   glm::ivec3(0), glm::max(impl_->dims - 1, glm::ivec3(0)));
   }
   PoseT pose;
   pose.position = std::make_unique<Vec3d>(toWire(glm::dvec3(eye)));
@@ -304,9 +317,9 @@ void StreamClient::sendPose(const glm::vec3& eye, float yawDeg, float pitchDeg, 
 
 bool StreamClient::waitForCell(double timeoutS) {
   std::unique_lock lock(impl_->mutex);
-  return impl_->changed.wait_for(lock, std::chrono::duration<double>(timeoutS),
-                                 [&] { return impl_->ended || impl_->ready.count(impl_->poseCell) > 0; }) &&
-         !impl_->ended;
+  return impl_->changed.wait_for(lock, std::chrono::duration<double>(timeoutS), [&] {
+    return impl_->ended || impl_->ready.count(impl_->poseCell) > 0;
+  }) && !impl_->ended;
 }
 
 RenderGeometry StreamClient::snapshot() const {
@@ -318,7 +331,8 @@ RenderGeometry StreamClient::snapshot() const {
       for (int k = 0; k < 3; ++k) g.triangles.positions.push_back(f.corners[i + size_t(k)]);
       g.triangles.faceIds.push_back(id);
       g.triangles.objectIds.push_back(0);
-      g.triangles.degenerate.push_back(isDegenerateTriangle(f.corners[i], f.corners[i + 1], f.corners[i + 2]) ? 1 : 0);
+      g.triangles.degenerate.push_back(
+          isDegenerateTriangle(f.corners[i], f.corners[i + 1], f.corners[i + 2]) ? 1 : 0);
       material.push_back(f.material);
     }
   g.sky = encodeColour(impl_->sky);

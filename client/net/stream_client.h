@@ -10,10 +10,9 @@
 #pragma once
 
 #include <cstdint>
+#include <glm/glm.hpp>
 #include <memory>
 #include <string>
-
-#include <glm/glm.hpp>
 
 #include "client/render/render_geometry.h"
 
@@ -23,9 +22,10 @@ struct StreamClientOptions {
   std::string host = "127.0.0.1";
   uint16_t port = 7070;
   std::string token;
-  float radius = 0.0f;  // near-field radius to ask for (0: the server's)
+  float radius = 0.0f;     // near-field radius to ask for (0: the server's)
   double timeoutS = 10.0;  // for connecting and for the Welcome
-  size_t maxTriangles = 50'000'000;  // the session ends if the server sends more (no unbounded memory)
+  size_t maxTriangles =
+      50'000'000;  // the session ends if the server sends more (no unbounded memory)
 };
 
 class StreamClient {
@@ -40,15 +40,16 @@ class StreamClient {
   glm::dvec3 origin() const;  // file coordinates of the local frame
   float radius() const;       // the near-field radius the server streams within
   // Sends the viewer's pose (local frame).
-  void sendPose(const glm::vec3& eye, float yawDeg, float pitchDeg, const glm::vec3& velocity = glm::vec3(0.0f));
+  void sendPose(const glm::vec3& eye, float yawDeg, float pitchDeg,
+                const glm::vec3& velocity = glm::vec3(0.0f));
   // Waits until the server reports the view cell of the last pose complete.
   bool waitForCell(double timeoutS);
   // The triangles held now, coloured with the server's materials.
   RenderGeometry snapshot() const;
-  uint64_t version() const;         // changes whenever geometry arrives or is evicted
+  uint64_t version() const;  // changes whenever geometry arrives or is evicted
   uint64_t bytesReceived() const;
   size_t facesHeld() const;
-  std::string error() const;        // why the session ended, empty while it runs
+  std::string error() const;  // why the session ended, empty while it runs
 
  private:
   struct Impl;

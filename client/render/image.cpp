@@ -33,9 +33,11 @@ void ImageRgb8::set(int x, int y, glm::u8vec3 c) {
 }
 
 void writePng(const ImageRgb8& image, const std::filesystem::path& path) {
-  if (image.width <= 0 || image.height <= 0) throwInputError("{}: cannot write an empty image", path.string());
+  if (image.width <= 0 || image.height <= 0)
+    throwInputError("{}: cannot write an empty image", path.string());
   const std::filesystem::path tmp = path.string() + ".tmp";
-  if (!stbi_write_png(tmp.string().c_str(), image.width, image.height, 3, image.pixels.data(), image.width * 3))
+  if (!stbi_write_png(tmp.string().c_str(), image.width, image.height, 3, image.pixels.data(),
+                      image.width * 3))
     throwInputError("{}: cannot write PNG", tmp.string());
   std::error_code ec;
   std::filesystem::rename(tmp, path, ec);

@@ -4,7 +4,9 @@
 
 namespace vistream {
 
-glm::vec3 sunDirection() { return glm::normalize(glm::vec3(0.35f, 0.85f, 0.4f)); }
+glm::vec3 sunDirection() {
+  return glm::normalize(glm::vec3(0.35f, 0.85f, 0.4f));
+}
 
 glm::u8vec3 encodeColour(const glm::vec3& linear) {
   glm::u8vec3 out;
@@ -15,7 +17,8 @@ glm::u8vec3 encodeColour(const glm::vec3& linear) {
   return out;
 }
 
-glm::u8vec3 shadeTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c, const glm::vec3& diffuse) {
+glm::u8vec3 shadeTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
+                          const glm::vec3& diffuse) {
   const glm::vec3 n = glm::cross(b - a, c - a);
   const float len = glm::length(n);
   const float lambert = len > 0.0f ? std::abs(glm::dot(n / len, sunDirection())) : 0.0f;

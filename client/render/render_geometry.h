@@ -9,9 +9,8 @@
 #pragma once
 
 #include <cstdint>
-#include <vector>
-
 #include <glm/glm.hpp>
+#include <vector>
 
 #include "common/core/box.h"
 #include "common/scene/scene.h"
@@ -21,12 +20,13 @@ namespace vistream {
 // The sun of the prelit model (unit, local frame).
 glm::vec3 sunDirection();
 // The prelit colour of a triangle with the given corners and diffuse colour.
-glm::u8vec3 shadeTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c, const glm::vec3& diffuse);
+glm::u8vec3 shadeTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
+                          const glm::vec3& diffuse);
 // An 8-bit sRGB-ish encoding of a linear colour in [0, 1] (gamma 2.2, rounded).
 glm::u8vec3 encodeColour(const glm::vec3& linear);
 
 struct RenderGeometry {
-  FlatTriangles triangles;         // local frame
+  FlatTriangles triangles;           // local frame
   std::vector<glm::u8vec3> colours;  // per triangle
   glm::u8vec3 sky{140, 180, 230};    // background for pixels that see nothing
   Box3f bounds;
@@ -43,7 +43,8 @@ void recolour(RenderGeometry& g, DiffuseOf&& diffuse) {
   g.colours.resize(g.triangles.size());
   g.bounds = Box3f{};
   for (size_t t = 0; t < g.triangles.size(); ++t) {
-    const glm::vec3 a = g.triangles.vertex(t, 0), b = g.triangles.vertex(t, 1), c = g.triangles.vertex(t, 2);
+    const glm::vec3 a = g.triangles.vertex(t, 0), b = g.triangles.vertex(t, 1),
+                    c = g.triangles.vertex(t, 2);
     g.colours[t] = shadeTriangle(a, b, c, diffuse(t));
     g.bounds.extend(a);
     g.bounds.extend(b);

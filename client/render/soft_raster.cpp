@@ -1,18 +1,18 @@
 #include "client/render/soft_raster.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 namespace vistream {
 namespace {
 
-constexpr int64_t kSub = 256;      // sub-pixel steps per pixel
-constexpr float kGuard = 8.0f;     // guard band, in multiples of w (|x|, |y| <= kGuard * w)
-constexpr int kBandRows = 16;      // rows per parallel band
+constexpr int64_t kSub = 256;   // sub-pixel steps per pixel
+constexpr float kGuard = 8.0f;  // guard band, in multiples of w (|x|, |y| <= kGuard * w)
+constexpr int kBandRows = 16;   // rows per parallel band
 constexpr size_t kSetUpChunk = 4096;
 
 using Clip = glm::vec4;
@@ -34,7 +34,9 @@ int clipPolygon(const Clip* in, int n, Clip* out, Dist dist) {
   return m;
 }
 
-bool isTopLeft(int64_t dx, int64_t dy) { return dy < 0 || (dy == 0 && dx > 0); }
+bool isTopLeft(int64_t dx, int64_t dy) {
+  return dy < 0 || (dy == 0 && dx > 0);
+}
 
 }  // namespace
 
@@ -63,17 +65,17 @@ void SoftwareRasterizer::setUp(const Camera& camera, const FlatTriangles& triang
       for (int k = 0; k < 3; ++k) a[size_t(k)] = vp * glm::vec4(triangles.vertex(t, k) - eye, 1.0f);
       // Trivial rejection against each plane, then clipping where needed.
       bool reject = false, needClip = false;
-      const auto planes = std::array<glm::vec4, 5>{glm::vec4(0, 0, 1, 1), glm::vec4(1, 0, 0, kGuard),
-                                                   glm::vec4(-1, 0, 0, kGuard), glm::vec4(0, 1, 0, kGuard),
-                                                   glm::vec4(0, -1, 0, kGuard)};
+      const auto planes = std::array<glm::vec4, 5>{
+          glm::vec4(0, 0, 1, 1), glm::vec4(1, 0, 0, kGuard), glm::vec4(-1, 0, 0, kGuard),
+          glm::vec4(0, 1, 0, kGuard), glm::vec4(0, -1, 0, kGuard)};
       for (const glm::vec4& p : planes) {
         int outside = 0;
         for (int k = 0; k < 3; ++k) outside += glm::dot(p, a[size_t(k)]) < 0.0f;
         if (outside == 3) reject = true;
         if (outside > 0) needClip = true;
       }
-      // Also reject triangles wholly outside the visible frustum sides (guard-band accepted ones are
-      // clipped only against the guard band, which keeps integer coordinates small).
+      // Also reject triangles wholly outside the visible frustum sides (guard-band accepted ones
+      // are clipped only against the guard band, which keeps integer coordinates small).
       const auto visible = std::array<glm::vec4, 4>{glm::vec4(1, 0, 0, 1), glm::vec4(-1, 0, 0, 1),
                                                     glm::vec4(0, 1, 0, 1), glm::vec4(0, -1, 0, 1)};
       for (const glm::vec4& p : visible) {
@@ -96,7 +98,10 @@ void SoftwareRasterizer::setUp(const Camera& camera, const FlatTriangles& triang
       bool bad = false;
       for (int k = 0; k < n; ++k) {
         const Clip& v = a[size_t(k)];
-        if (!(v.w > 0.0f)) { bad = true; break; }
+        if (!(v.w > 0.0f)) {
+          bad = true;
+          break;
+        }
         const float x = (v.x / v.w * 0.5f + 0.5f) * W, y = (0.5f - v.y / v.w * 0.5f) * H;
         sx[size_t(k)] = int64_t(std::llround(double(x) * kSub));
         sy[size_t(k)] = int64_t(std::llround(double(y) * kSub));
@@ -111,7 +116,8 @@ void SoftwareRasterizer::setUp(const Camera& camera, const FlatTriangles& triang
           s.y[j] = sy[size_t(idx[j])];
           s.invW[j] = sw[size_t(idx[j])];
         }
-        const int64_t area = (s.x[1] - s.x[0]) * (s.y[2] - s.y[0]) - (s.x[2] - s.x[0]) * (s.y[1] - s.y[0]);
+        const int64_t area =
+            (s.x[1] - s.x[0]) * (s.y[2] - s.y[0]) - (s.x[2] - s.x[0]) * (s.y[1] - s.y[0]);
         if (area == 0) continue;
         if (area < 0) {
           std::swap(s.x[1], s.x[2]);
@@ -120,9 +126,13 @@ void SoftwareRasterizer::setUp(const Camera& camera, const FlatTriangles& triang
         }
         s.id = t;
         // Pixels whose centre (x + 0.5) may lie inside.
-        const int64_t lx = std::min({s.x[0], s.x[1], s.x[2]}), hx = std::max({s.x[0], s.x[1], s.x[2]});
-        const int64_t ly = std::min({s.y[0], s.y[1], s.y[2]}), hy = std::max({s.y[0], s.y[1], s.y[2]});
-        auto firstPixel = [](int64_t lo) { return int(std::floor(double(lo - kSub / 2) / double(kSub))); };
+        const int64_t lx = std::min({s.x[0], s.x[1], s.x[2]}),
+                      hx = std::max({s.x[0], s.x[1], s.x[2]});
+        const int64_t ly = std::min({s.y[0], s.y[1], s.y[2]}),
+                      hy = std::max({s.y[0], s.y[1], s.y[2]});
+        auto firstPixel = [](int64_t lo) {
+          return int(std::floor(double(lo - kSub / 2) / double(kSub)));
+        };
         s.minX = std::max(0, firstPixel(lx));
         // Half a pixel of margin on the far sides, for coverage with an outset.
         s.maxX = std::min(camera.width - 1, int(std::floor(double(hx) / double(kSub))));
@@ -161,7 +171,8 @@ inline Edges edgesOf(const int64_t* X, const int64_t* Y, const std::array<int64_
 }
 
 template <class Fn>
-void scanTriangle(const int64_t* X, const int64_t* Y, int minX, int maxX, int y0, int y1, const Edges& g, Fn&& fn) {
+void scanTriangle(const int64_t* X, const int64_t* Y, int minX, int maxX, int y0, int y1,
+                  const Edges& g, Fn&& fn) {
   const int64_t px0 = int64_t(minX) * kSub + kSub / 2;
   for (int y = y0; y <= y1; ++y) {
     const int64_t py = int64_t(y) * kSub + kSub / 2;
@@ -175,8 +186,10 @@ void scanTriangle(const int64_t* X, const int64_t* Y, int minX, int maxX, int y0
         if (e[k] < 0) xa = maxX + 1;
       } else if (step > 0) {
         // x - minX <= e / step
-        if (e[k] < 0) xa = maxX + 1;
-        else xb = int(std::min<int64_t>(xb, int64_t(minX) + e[k] / step));
+        if (e[k] < 0)
+          xa = maxX + 1;
+        else
+          xb = int(std::min<int64_t>(xb, int64_t(minX) + e[k] / step));
       } else {
         // x - minX >= -e / -step  (ceil)
         if (e[k] < 0) {
@@ -216,7 +229,8 @@ void SoftwareRasterizer::fill(const Camera& camera, float insetPx, IdBuffer& out
   const int W = camera.width;
   forBands(camera.height, bins, [&](uint32_t i, int y0, int y1) {
     const ScreenTriangle& s = screen_[i];
-    const double area = double((s.x[1] - s.x[0]) * (s.y[2] - s.y[0]) - (s.x[2] - s.x[0]) * (s.y[1] - s.y[0]));
+    const double area =
+        double((s.x[1] - s.x[0]) * (s.y[2] - s.y[0]) - (s.x[2] - s.x[0]) * (s.y[1] - s.y[0]));
     std::array<int64_t, 3> extra{};
     if (insetPx != 0.0f)
       for (int k = 0; k < 3; ++k) {
@@ -227,14 +241,17 @@ void SoftwareRasterizer::fill(const Camera& camera, float insetPx, IdBuffer& out
         extra[size_t(k)] = int64_t(insetPx > 0.0f ? std::ceil(e) : std::floor(e));
       }
     const Edges g = edgesOf(s.x, s.y, extra);
-    const int minX = std::max(0, s.minX - margin), maxX = std::min(camera.width - 1, s.maxX + margin);
+    const int minX = std::max(0, s.minX - margin),
+              maxX = std::min(camera.width - 1, s.maxX + margin);
     const int ya2 = std::max(y0, s.minY - margin), yb2 = std::min(y1, s.maxY + margin);
     // 1/w is linear in the edge functions: (E1 q0 + E2 q1 + E0 q2) / area
     // (E0 is the edge 0->1, opposite vertex 2, and so on).
     const double dqdx =
-        -(double(g.dy[1]) * s.invW[0] + double(g.dy[2]) * s.invW[1] + double(g.dy[0]) * s.invW[2]) * kSub / area;
+        -(double(g.dy[1]) * s.invW[0] + double(g.dy[2]) * s.invW[1] + double(g.dy[0]) * s.invW[2]) *
+        kSub / area;
     scanTriangle(s.x, s.y, minX, maxX, ya2, yb2, g, [&](int y, int xa, int xb, const int64_t* e) {
-      double q = (double(e[1]) * s.invW[0] + double(e[2]) * s.invW[1] + double(e[0]) * s.invW[2]) / area;
+      double q =
+          (double(e[1]) * s.invW[0] + double(e[2]) * s.invW[1] + double(e[0]) * s.invW[2]) / area;
       const size_t row = size_t(y) * size_t(W);
       float* depth = out.inverseDepth.data() + row;
       uint32_t* ids = out.ids.data() + row;
@@ -260,14 +277,16 @@ void SoftwareRasterizer::dropBeyond(const Camera& camera, float maxDistance, IdB
       if (out.ids[p] == kNoTriangle) continue;
       // rayDirection has a unit component along the view axis, so its
       // length times the view depth is the distance along the ray.
-      const float dist = glm::length(rays.at(float(x) + 0.5f, float(y) + 0.5f)) / out.inverseDepth[p];
+      const float dist =
+          glm::length(rays.at(float(x) + 0.5f, float(y) + 0.5f)) / out.inverseDepth[p];
       if (dist > maxDistance) out.ids[p] = kBeyondDistance;
     }
   });
 }
 
 RasterStats SoftwareRasterizer::draw(const Camera& camera, const FlatTriangles& triangles,
-                                     std::span<const uint32_t> which, IdBuffer& out, float maxDistance) {
+                                     std::span<const uint32_t> which, IdBuffer& out,
+                                     float maxDistance) {
   setUp(camera, triangles, which);
   fill(camera, 0.0f, out);
   dropBeyond(camera, maxDistance, out);
@@ -275,15 +294,16 @@ RasterStats SoftwareRasterizer::draw(const Camera& camera, const FlatTriangles& 
 }
 
 RasterStats SoftwareRasterizer::coverage(const Camera& camera, const FlatTriangles& triangles,
-                                         std::span<const uint32_t> which, float insetPx, std::vector<uint8_t>& covered,
-                                         float maxDistance) {
+                                         std::span<const uint32_t> which, float insetPx,
+                                         std::vector<uint8_t>& covered, float maxDistance) {
   setUp(camera, triangles, which);
   fill(camera, insetPx, scratch_);
   dropBeyond(camera, maxDistance * (1.0f - 1e-4f), scratch_);
   covered.resize(scratch_.ids.size());
-  for (size_t p = 0; p < covered.size(); ++p) covered[p] = scratch_.ids[p] == kNoTriangle ? kUncovered
-                                                          : scratch_.ids[p] == kBeyondDistance ? kBeyond
-                                                                                               : kCovered;
+  for (size_t p = 0; p < covered.size(); ++p)
+    covered[p] = scratch_.ids[p] == kNoTriangle       ? kUncovered
+                 : scratch_.ids[p] == kBeyondDistance ? kBeyond
+                                                      : kCovered;
   // Pixels some grown triangle reaches are not certainly empty.
   if (insetPx > 0.0f) {
     fill(camera, -insetPx, scratch_);

@@ -42,21 +42,23 @@ inline constexpr uint32_t kBeyondDistance = 0xfffffffeu;
 enum Coverage : uint8_t {
   kUncovered = 0,  // no polygon at all (not even beyond the maximum distance)
   kCovered = 1,    // a polygon within the maximum distance
-  kBeyond = 2,     // polygons, but the nearest lies beyond the maximum distance (or it is undecided)
+  kBeyond = 2,  // polygons, but the nearest lies beyond the maximum distance (or it is undecided)
 };
 
 struct IdBuffer {
   int width = 0, height = 0;
-  std::vector<uint32_t> ids;  // per pixel, row 0 at the top: triangle index, kNoTriangle or kBeyondDistance
-  std::vector<float> inverseDepth;  // per pixel, 1 / view depth (1/metres along the view axis); 0 where nothing was drawn
+  std::vector<uint32_t>
+      ids;  // per pixel, row 0 at the top: triangle index, kNoTriangle or kBeyondDistance
+  std::vector<float> inverseDepth;  // per pixel, 1 / view depth (1/metres along the view axis); 0
+                                    // where nothing was drawn
 
   void reset(int w, int h);
   uint32_t at(int x, int y) const { return ids[size_t(y) * size_t(width) + size_t(x)]; }
 };
 
 struct RasterStats {
-  size_t trianglesIn = 0;      // triangles handed in
-  size_t trianglesSetUp = 0;   // after clipping and culling (a clipped triangle may count twice)
+  size_t trianglesIn = 0;     // triangles handed in
+  size_t trianglesSetUp = 0;  // after clipping and culling (a clipped triangle may count twice)
 };
 
 class SoftwareRasterizer {
@@ -65,8 +67,9 @@ class SoftwareRasterizer {
   // after clearing it to the camera's size. Pixels whose nearest fragment lies
   // farther than maxDistance from the eye (along the pixel's ray) get
   // kBeyondDistance.
-  RasterStats draw(const Camera& camera, const FlatTriangles& triangles, std::span<const uint32_t> which,
-                   IdBuffer& out, float maxDistance = std::numeric_limits<float>::infinity());
+  RasterStats draw(const Camera& camera, const FlatTriangles& triangles,
+                   std::span<const uint32_t> which, IdBuffer& out,
+                   float maxDistance = std::numeric_limits<float>::infinity());
   // The opacity buffer for an OpenGL near field, one Coverage a pixel:
   // kCovered where the pixel centre lies at least insetPx inside a triangle
   // whose fragment there is at most maxDistance * (1 - 1e-4) from the eye (a
@@ -74,14 +77,15 @@ class SoftwareRasterizer {
   // where no triangle grown by insetPx reaches the centre (a subset of what
   // OpenGL leaves empty; the growth is mitred, cut at 8 insetPx at corners
   // sharper than 15 degrees); kBeyond for the rest.
-  RasterStats coverage(const Camera& camera, const FlatTriangles& triangles, std::span<const uint32_t> which,
-                       float insetPx, std::vector<uint8_t>& covered,
+  RasterStats coverage(const Camera& camera, const FlatTriangles& triangles,
+                       std::span<const uint32_t> which, float insetPx,
+                       std::vector<uint8_t>& covered,
                        float maxDistance = std::numeric_limits<float>::infinity());
 
  private:
   struct ScreenTriangle {
     int64_t x[3], y[3];  // 1/256 pixel, y down
-    float invW[3];  // 1 / view depth
+    float invW[3];       // 1 / view depth
     uint32_t id;
     int minX, maxX, minY, maxY;  // pixel bounds, clamped to the image
   };

@@ -1,13 +1,13 @@
 #include "common/cmd/scene_commands.h"
 
-#include <cstdio>
-#include <iostream>
-
-#include <CLI/CLI.hpp>
 #include <fmt/format.h>
 #include <fmt/ranges.h>
-#include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <iostream>
+#include <nlohmann/json.hpp>
 
 #include "common/cmd/cli.h"
 #include "common/core/error.h"
@@ -36,8 +36,10 @@ void printRow(const std::string& key, const std::string& value) {
 int cmdGenerate(const std::string& type, const std::string& preset, uint64_t seed,
                 const std::string& out, bool asJson) {
   std::string chosen = type;
-  if (type == "city") chosen = preset.empty() ? "city1" : preset;
-  else if (!preset.empty()) throwInputError("--preset applies to 'city' only, not '{}'", type);
+  if (type == "city")
+    chosen = preset.empty() ? "city1" : preset;
+  else if (!preset.empty())
+    throwInputError("--preset applies to 'city' only, not '{}'", type);
   Stopwatch clock;
   const PolygonScene polygons = generate(chosen, seed);
   const double genMs = clock.ms();
@@ -47,9 +49,15 @@ int cmdGenerate(const std::string& type, const std::string& preset, uint64_t see
   const Scene scene = toScene(polygons);
   const Box3d b = scene.fileBounds();
   if (asJson) {
-    std::cout << json{{"type", chosen}, {"seed", seed}, {"out", out}, {"objects", scene.objects.size()},
-                      {"faces", scene.faceCount}, {"triangles", scene.triangleCount()},
-                      {"bounds", boxJson(b)}, {"generate_ms", genMs}, {"write_ms", writeMs}}
+    std::cout << json{{"type", chosen},
+                      {"seed", seed},
+                      {"out", out},
+                      {"objects", scene.objects.size()},
+                      {"faces", scene.faceCount},
+                      {"triangles", scene.triangleCount()},
+                      {"bounds", boxJson(b)},
+                      {"generate_ms", genMs},
+                      {"write_ms", writeMs}}
                      .dump(2)
               << "\n";
   } else {
@@ -57,7 +65,8 @@ int cmdGenerate(const std::string& type, const std::string& preset, uint64_t see
     printRow("objects", fmt::format("{}", scene.objects.size()));
     printRow("faces", fmt::format("{}", scene.faceCount));
     printRow("triangles", fmt::format("{}", scene.triangleCount()));
-    printRow("size (m)", fmt::format("{:.1f} x {:.1f} x {:.1f}", b.extent().x, b.extent().y, b.extent().z));
+    printRow("size (m)",
+             fmt::format("{:.1f} x {:.1f} x {:.1f}", b.extent().x, b.extent().y, b.extent().z));
     printRow("generate / write (ms)", fmt::format("{:.1f} / {:.1f}", genMs, writeMs));
   }
   return 0;
@@ -84,12 +93,14 @@ int cmdInfo(const std::string& spec, const SceneLimits& limits, bool asJson) {
   const SceneEffects effects = decideEffects(scene, *world.rays, fs);
   const Box3d b = scene.fileBounds();
   size_t dynamicTris = 0;
-  for (const Object& o : scene.objects) if (o.dynamic) dynamicTris += o.mesh.triangleCount();
+  for (const Object& o : scene.objects)
+    if (o.dynamic) dynamicTris += o.mesh.triangleCount();
 
   if (asJson) {
     json objects = json::array();
     for (const Object& o : scene.objects)
-      objects.push_back({{"name", o.name}, {"triangles", o.mesh.triangleCount()}, {"dynamic", o.dynamic}});
+      objects.push_back(
+          {{"name", o.name}, {"triangles", o.mesh.triangleCount()}, {"dynamic", o.dynamic}});
     json decisions = json::array();
     for (const auto& d : effects.decisions)
       decisions.push_back({{"effect", d.effect}, {"enabled", d.enabled}, {"reason", d.reason}});
@@ -104,8 +115,10 @@ int cmdInfo(const std::string& spec, const SceneLimits& limits, bool asJson) {
                       {"materials", scene.materials.size()},
                       {"skins", scene.skins.size()},
                       {"animations", scene.animations.size()},
-                      {"free_space", {{"cell_size", fs.cellSize()}, {"walkable_columns", fs.walkableCount()},
-                                      {"open_sky_fraction", effects.openSkyFraction}}},
+                      {"free_space",
+                       {{"cell_size", fs.cellSize()},
+                        {"walkable_columns", fs.walkableCount()},
+                        {"open_sky_fraction", effects.openSkyFraction}}},
                       {"effects", decisions},
                       {"object_list", objects},
                       {"load_ms", loadMs}}
@@ -114,14 +127,17 @@ int cmdInfo(const std::string& spec, const SceneLimits& limits, bool asJson) {
     return 0;
   }
   fmt::print("scene {}\n", scene.name);
-  printRow("objects", fmt::format("{} ({} dynamic, {} triangles)", scene.objects.size(), scene.dynamicObjectCount(), dynamicTris));
+  printRow("objects", fmt::format("{} ({} dynamic, {} triangles)", scene.objects.size(),
+                                  scene.dynamicObjectCount(), dynamicTris));
   printRow("faces", fmt::format("{}", scene.faceCount));
   printRow("triangles", fmt::format("{}", scene.triangleCount()));
   printRow("degenerate triangles", fmt::format("{}", scene.diagnostics.degenerateTriangles));
   printRow("bounds min", fmt::format("{:.3f}, {:.3f}, {:.3f}", b.lo.x, b.lo.y, b.lo.z));
   printRow("bounds max", fmt::format("{:.3f}, {:.3f}, {:.3f}", b.hi.x, b.hi.y, b.hi.z));
-  printRow("size (m)", fmt::format("{:.1f} x {:.1f} x {:.1f}", b.extent().x, b.extent().y, b.extent().z));
-  printRow("materials / skins / anims", fmt::format("{} / {} / {}", scene.materials.size(), scene.skins.size(), scene.animations.size()));
+  printRow("size (m)",
+           fmt::format("{:.1f} x {:.1f} x {:.1f}", b.extent().x, b.extent().y, b.extent().z));
+  printRow("materials / skins / anims", fmt::format("{} / {} / {}", scene.materials.size(),
+                                                    scene.skins.size(), scene.animations.size()));
   printRow("free space", fmt::format("{} columns of {:.2f} m", fs.walkableCount(), fs.cellSize()));
   printRow("load time (ms)", fmt::format("{:.1f}", loadMs));
   fmt::print("effects the scene calls for:\n");
@@ -144,8 +160,8 @@ int cmdPath(const std::string& spec, const SceneLimits& limits, double speed, si
   options.fps = fps;
   const auto samples = generatePath(scene, fs, options);
   writePath(samples, out);
-  spdlog::info("wrote {} frames ({:.1f} s at {:.2f} m/s) to {}", samples.size(),
-               samples.back().t, kWalkingSpeed * speed, out);
+  spdlog::info("wrote {} frames ({:.1f} s at {:.2f} m/s) to {}", samples.size(), samples.back().t,
+               kWalkingSpeed * speed, out);
   return 0;
 }
 
@@ -153,7 +169,8 @@ int cmdVisible(const std::string& spec, const SceneLimits& limits, const std::st
                size_t points, int res, uint64_t seed, bool asJson) {
   const auto v = parseNumberList(cellText, 6, "--cell");
   if (v[0] > v[3] || v[1] > v[4] || v[2] > v[5])
-    throwInputError("--cell: expected x0,y0,z0,x1,y1,z1 with x0<=x1, y0<=y1, z0<=z1, got '{}'", cellText);
+    throwInputError("--cell: expected x0,y0,z0,x1,y1,z1 with x0<=x1, y0<=y1, z0<=z1, got '{}'",
+                    cellText);
   if (points == 0) throwInputError("--points must be at least 1");
   if (res < 1 || res > 4096) throwInputError("--res must be in 1..4096, got {}", res);
   const Scene scene = openScene(spec, limits);
@@ -166,14 +183,21 @@ int cmdVisible(const std::string& spec, const SceneLimits& limits, const std::st
   const SampledVisibility vis = sampleVisibleFaces(*world.rays, world.triangles, cell, options);
   if (asJson) {
     std::cout << json{{"faces", vis.faces},
-                      {"stats", {{"viewpoints", vis.viewpoints}, {"inside_solid", vis.insideSolid},
-                                 {"rays", vis.rays}, {"hits", vis.hits}, {"visible_faces", vis.faces.size()},
-                                 {"total_faces", scene.faceCount}, {"time_ms", vis.timeMs}}}}
+                      {"stats",
+                       {{"viewpoints", vis.viewpoints},
+                        {"inside_solid", vis.insideSolid},
+                        {"rays", vis.rays},
+                        {"hits", vis.hits},
+                        {"visible_faces", vis.faces.size()},
+                        {"total_faces", scene.faceCount},
+                        {"time_ms", vis.timeMs}}}}
                      .dump()
               << "\n";
   } else {
-    fmt::print("{} of {} faces visible from {} viewpoints ({} inside solid skipped), {} rays in {:.1f} ms\n",
-               vis.faces.size(), scene.faceCount, vis.viewpoints, vis.insideSolid, vis.rays, vis.timeMs);
+    fmt::print(
+        "{} of {} faces visible from {} viewpoints ({} inside solid skipped), {} rays in {:.1f} "
+        "ms\n",
+        vis.faces.size(), scene.faceCount, vis.viewpoints, vis.insideSolid, vis.rays, vis.timeMs);
     fmt::print("{}\n", fmt::join(vis.faces, " "));
   }
   return 0;
@@ -182,9 +206,10 @@ int cmdVisible(const std::string& spec, const SceneLimits& limits, const std::st
 }  // namespace
 
 int runSceneTool(int argc, char** argv) {
-  CLI::App app{"vistream-scene: generate, inspect and sample scenes.\n"
-               "A SCENE is a file (.obj, .gltf, .glb, .json manifest) or a built-in name "
-               "(city1, city2, bigcity, interior, terrain; 'city1@SEED' picks a seed)."};
+  CLI::App app{
+      "vistream-scene: generate, inspect and sample scenes.\n"
+      "A SCENE is a file (.obj, .gltf, .glb, .json manifest) or a built-in name "
+      "(city1, city2, bigcity, interior, terrain; 'city1@SEED' picks a seed)."};
   std::string logLevel;
   setUpToolApp(app, logLevel);
 
@@ -192,7 +217,8 @@ int runSceneTool(int argc, char** argv) {
   std::string genType, preset, out;
   uint64_t seed = 1;
   bool asJson = false;
-  gen->add_option("type", genType, "city, city1, city2, bigcity, interior, interior2, terrain")->required();
+  gen->add_option("type", genType, "city, city1, city2, bigcity, interior, interior2, terrain")
+      ->required();
   gen->add_option("--preset", preset, "for 'city': city1 (dense) or city2 (sparse)");
   gen->add_option("--seed", seed, "random seed (same seed, same scene)");
   gen->add_option("--out,-o", out, "output OBJ file")->required();
@@ -202,7 +228,8 @@ int runSceneTool(int argc, char** argv) {
   SceneLimits limits;
   auto addSceneLimits = [&](CLI::App* sub) { addSceneLimitsOption(*sub, limits); };
 
-  auto* info = app.add_subcommand("info", "objects, faces, bounds and the effects a scene calls for");
+  auto* info =
+      app.add_subcommand("info", "objects, faces, bounds and the effects a scene calls for");
   std::string scene;
   info->add_option("scene", scene, "SCENE")->required();
   info->add_flag("--json", asJson, "one JSON object on stdout");
@@ -219,13 +246,15 @@ int runSceneTool(int argc, char** argv) {
   path->add_option("--out,-o", out, "output CSV (t,x,y,z,yaw_deg,pitch_deg)")->required();
   addSceneLimits(path);
 
-  auto* visible = app.add_subcommand("visible", "sampled ground truth: faces seen from a view cell");
+  auto* visible =
+      app.add_subcommand("visible", "sampled ground truth: faces seen from a view cell");
   std::string cell;
   size_t points = 32;
   int res = 128;
   visible->add_option("--scene", scene, "SCENE")->required();
   visible->add_option("--cell", cell, "x0,y0,z0,x1,y1,z1 in file coordinates")->required();
-  visible->add_option("--points", points, "viewpoints (8 corners, 6 face centres, centre, then random)");
+  visible->add_option("--points", points,
+                      "viewpoints (8 corners, 6 face centres, centre, then random)");
   visible->add_option("--res", res, "rays per cube-map face side");
   visible->add_option("--seed", seed, "seed for the random viewpoints");
   visible->add_flag("--json", asJson, "one JSON object on stdout: faces, stats");

@@ -2,9 +2,8 @@
 #pragma once
 
 #include <algorithm>
-#include <limits>
-
 #include <glm/glm.hpp>
+#include <limits>
 
 namespace vistream {
 
@@ -18,8 +17,14 @@ struct BasicBox3 {
   BasicBox3(const Vec& a, const Vec& b) : lo(glm::min(a, b)), hi(glm::max(a, b)) {}
 
   bool empty() const { return lo.x > hi.x || lo.y > hi.y || lo.z > hi.z; }
-  void extend(const Vec& p) { lo = glm::min(lo, p); hi = glm::max(hi, p); }
-  void extend(const BasicBox3& b) { lo = glm::min(lo, b.lo); hi = glm::max(hi, b.hi); }
+  void extend(const Vec& p) {
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
+  }
+  void extend(const BasicBox3& b) {
+    lo = glm::min(lo, b.lo);
+    hi = glm::max(hi, b.hi);
+  }
   Vec extent() const { return empty() ? Vec(0) : hi - lo; }
   Vec center() const { return (lo + hi) * T(0.5); }
   T surfaceArea() const {
@@ -34,8 +39,8 @@ struct BasicBox3 {
     return p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z;
   }
   bool overlaps(const BasicBox3& b) const {
-    return lo.x <= b.hi.x && b.lo.x <= hi.x && lo.y <= b.hi.y && b.lo.y <= hi.y &&
-           lo.z <= b.hi.z && b.lo.z <= hi.z;
+    return lo.x <= b.hi.x && b.lo.x <= hi.x && lo.y <= b.hi.y && b.lo.y <= hi.y && lo.z <= b.hi.z &&
+           b.lo.z <= hi.z;
   }
   BasicBox3 intersection(const BasicBox3& b) const {
     BasicBox3 r;

@@ -31,17 +31,17 @@ std::string describePair(const char* na, const A& a, const char* nb, const B& b)
 
 }  // namespace vistream::detail
 
-#define VS_CHECK(cond)                                                      \
-  do {                                                                      \
+#define VS_CHECK(cond)                                                           \
+  do {                                                                           \
     if (!(cond)) ::vistream::detail::checkFailed(__FILE__, __LINE__, #cond, ""); \
   } while (0)
 
-#define VS_CHECK_OP_(a, b, op)                                                     \
-  do {                                                                             \
-    const auto& vs_a_ = (a);                                                       \
-    const auto& vs_b_ = (b);                                                       \
-    if (!(vs_a_ op vs_b_))                                                         \
-      ::vistream::detail::checkFailed(__FILE__, __LINE__, #a " " #op " " #b,       \
+#define VS_CHECK_OP_(a, b, op)                                                                 \
+  do {                                                                                         \
+    const auto& vs_a_ = (a);                                                                   \
+    const auto& vs_b_ = (b);                                                                   \
+    if (!(vs_a_ op vs_b_))                                                                     \
+      ::vistream::detail::checkFailed(__FILE__, __LINE__, #a " " #op " " #b,                   \
                                       ::vistream::detail::describePair(#a, vs_a_, #b, vs_b_)); \
   } while (0)
 

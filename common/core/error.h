@@ -8,10 +8,10 @@
 // file or half-updated shared state behind.
 #pragma once
 
+#include <fmt/format.h>
+
 #include <stdexcept>
 #include <string>
-
-#include <fmt/format.h>
 
 namespace vistream {
 

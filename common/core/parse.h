@@ -13,12 +13,14 @@
 namespace vistream {
 
 // Parses `count` comma-separated finite numbers, e.g. "0,0,0,1,2,1".
-inline std::vector<double> parseNumberList(std::string_view text, size_t count, std::string_view option) {
+inline std::vector<double> parseNumberList(std::string_view text, size_t count,
+                                           std::string_view option) {
   std::vector<double> out;
   size_t pos = 0;
   while (pos <= text.size()) {
     const size_t comma = text.find(',', pos);
-    std::string_view tok = text.substr(pos, comma == std::string_view::npos ? std::string_view::npos : comma - pos);
+    std::string_view tok =
+        text.substr(pos, comma == std::string_view::npos ? std::string_view::npos : comma - pos);
     while (!tok.empty() && tok.front() == ' ') tok.remove_prefix(1);
     while (!tok.empty() && tok.back() == ' ') tok.remove_suffix(1);
     double v = 0.0;
@@ -30,7 +32,8 @@ inline std::vector<double> parseNumberList(std::string_view text, size_t count, 
     pos = comma + 1;
   }
   if (out.size() != count)
-    throwInputError("{}: expected {} comma-separated numbers, got {} in '{}'", option, count, out.size(), text);
+    throwInputError("{}: expected {} comma-separated numbers, got {} in '{}'", option, count,
+                    out.size(), text);
   return out;
 }
 

@@ -13,7 +13,9 @@ ProgressBar::ProgressBar(std::string label, uint64_t total)
       start_(std::chrono::steady_clock::now()),
       lastDraw_(start_) {}
 
-ProgressBar::~ProgressBar() { finish(); }
+ProgressBar::~ProgressBar() {
+  finish();
+}
 
 void ProgressBar::advance(uint64_t n) {
   done_.fetch_add(n, std::memory_order_relaxed);

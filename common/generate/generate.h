@@ -22,10 +22,9 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <glm/glm.hpp>
 #include <string>
 #include <vector>
-
-#include <glm/glm.hpp>
 
 #include "common/scene/scene.h"
 
@@ -33,9 +32,10 @@ namespace vistream {
 
 struct PolygonObject {
   std::string name;
-  std::vector<glm::dvec3> vertices;             // file coordinates, metres
-  std::vector<std::vector<uint32_t>> faces;     // each a loop of vertex indices (CCW seen from outside)
-  uint32_t material = 0;                        // index into PolygonScene::materials
+  std::vector<glm::dvec3> vertices;  // file coordinates, metres
+  std::vector<std::vector<uint32_t>>
+      faces;              // each a loop of vertex indices (CCW seen from outside)
+  uint32_t material = 0;  // index into PolygonScene::materials
   bool dynamic = false;
 };
 

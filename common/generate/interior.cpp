@@ -138,7 +138,9 @@ class FloorBuilder {
   void wallBox(const glm::dvec3& lo, const glm::dvec3& hi) {
     if (hi.x - lo.x < 1e-6 || hi.z - lo.z < 1e-6) return;  // a door flush with a wall end
     const int axis = hi.x - lo.x >= hi.z - lo.z ? 0 : 2;
-    const int pieces = wallPatch_ > 0.0 ? std::max(1, int(std::ceil((hi[axis] - lo[axis]) / wallPatch_ - 1e-9))) : 1;
+    const int pieces = wallPatch_ > 0.0
+                           ? std::max(1, int(std::ceil((hi[axis] - lo[axis]) / wallPatch_ - 1e-9)))
+                           : 1;
     for (int k = 0; k < pieces; ++k) {
       glm::dvec3 a = lo, b = hi;
       // Shared ends come from the same expression: no cracks between patches.

@@ -1,5 +1,7 @@
 #include "common/generate/path.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <charconv>
 #include <cmath>
@@ -9,8 +11,6 @@
 #include <random>
 #include <sstream>
 
-#include <fmt/format.h>
-
 #include "common/core/error.h"
 #include "common/raycast/ray_query.h"
 
@@ -19,7 +19,9 @@ namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
 
-double uniform01(std::mt19937_64& rng) { return double(rng() >> 11) * 0x1.0p-53; }
+double uniform01(std::mt19937_64& rng) {
+  return double(rng() >> 11) * 0x1.0p-53;
+}
 
 // Shortest 8-connected grid path (BFS with diagonal steps only where both
 // side columns are walkable, so paths never cut a corner).
@@ -82,7 +84,9 @@ std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& fs,
     throwInputError("speed must be a positive number, got {}", options.speed);
   const std::vector<glm::ivec2> columns = fs.walkableColumns();
   std::mt19937_64 rng(options.seed);
-  auto randomColumn = [&] { return columns[size_t(uniform01(rng) * double(columns.size())) % columns.size()]; };
+  auto randomColumn = [&] {
+    return columns[size_t(uniform01(rng) * double(columns.size())) % columns.size()];
+  };
 
   const double step = kWalkingSpeed * options.speed / options.fps;  // metres per frame
   std::vector<PathSample> out;
@@ -101,7 +105,8 @@ std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& fs,
       const glm::ivec2 from = fs.columnOf(glm::vec2(pos));
       std::vector<glm::ivec2> grid = gridPath(fs, fs.walkable(from.x, from.y) ? from : at, goal);
       if (grid.size() < 2) {
-        if (++failures > 1000) throwInputError("scene '{}': no room to walk in its free space", scene.name);
+        if (++failures > 1000)
+          throwInputError("scene '{}': no room to walk in its free space", scene.name);
         continue;
       }
       waypoints.clear();
@@ -145,7 +150,9 @@ std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& fs,
     }
     const auto floor = fs.floorAt(glm::vec2(pos));
     const glm::ivec2 c = fs.columnOf(glm::vec2(pos));
-    const double y = floor ? *floor : fs.floorHeight(std::clamp(c.x, 0, fs.columnsX() - 1), std::clamp(c.y, 0, fs.columnsZ() - 1));
+    const double y = floor ? *floor
+                           : fs.floorHeight(std::clamp(c.x, 0, fs.columnsX() - 1),
+                                            std::clamp(c.y, 0, fs.columnsZ() - 1));
     PathSample s;
     s.t = double(out.size()) / options.fps;
     s.position = scene.toFile(glm::vec3(float(pos.x), float(y + options.eyeHeight), float(pos.y)));
@@ -169,7 +176,8 @@ std::vector<PathSample> readPath(const std::filesystem::path& path) {
     if (line.find_first_not_of(" \t") == std::string::npos) continue;
     if (!header) {
       std::string compact;
-      for (char ch : line) if (ch != ' ' && ch != '\t') compact += ch;
+      for (char ch : line)
+        if (ch != ' ' && ch != '\t') compact += ch;
       if (compact != "t,x,y,z,yaw_deg,pitch_deg")
         throwInputError("{}:{}: expected the header 't,x,y,z,yaw_deg,pitch_deg', got '{}'",
                         path.string(), lineNo, line);
@@ -180,7 +188,8 @@ std::vector<PathSample> readPath(const std::filesystem::path& path) {
     size_t field = 0, pos = 0;
     while (field < 6) {
       size_t comma = line.find(',', pos);
-      std::string_view tok = std::string_view(line).substr(pos, comma == std::string::npos ? std::string::npos : comma - pos);
+      std::string_view tok = std::string_view(line).substr(
+          pos, comma == std::string::npos ? std::string::npos : comma - pos);
       while (!tok.empty() && (tok.front() == ' ' || tok.front() == '\t')) tok.remove_prefix(1);
       while (!tok.empty() && (tok.back() == ' ' || tok.back() == '\t')) tok.remove_suffix(1);
       const auto [ptr, ec] = std::from_chars(tok.data(), tok.data() + tok.size(), v[field]);
@@ -190,15 +199,17 @@ std::vector<PathSample> readPath(const std::filesystem::path& path) {
       ++field;
       if (comma == std::string::npos) break;
       pos = comma + 1;
-      if (field == 6)
-        throwInputError("{}:{}: more than 6 fields", path.string(), lineNo);
+      if (field == 6) throwInputError("{}:{}: more than 6 fields", path.string(), lineNo);
     }
     if (field != 6)
-      throwInputError("{}:{}: {} fields, expected 6 (t,x,y,z,yaw_deg,pitch_deg)", path.string(), lineNo, field);
+      throwInputError("{}:{}: {} fields, expected 6 (t,x,y,z,yaw_deg,pitch_deg)", path.string(),
+                      lineNo, field);
     if (!out.empty() && v[0] < out.back().t)
-      throwInputError("{}:{}: t goes backwards ({} after {})", path.string(), lineNo, v[0], out.back().t);
+      throwInputError("{}:{}: t goes backwards ({} after {})", path.string(), lineNo, v[0],
+                      out.back().t);
     if (std::abs(v[5]) > 90.0)
-      throwInputError("{}:{}: pitch {} is outside [-90, 90] (the viewer is upright)", path.string(), lineNo, v[5]);
+      throwInputError("{}:{}: pitch {} is outside [-90, 90] (the viewer is upright)", path.string(),
+                      lineNo, v[5]);
     out.push_back(PathSample{v[0], {v[1], v[2], v[3]}, v[4], v[5]});
   }
   if (!header) throwInputError("{}: empty path file (no header)", path.string());

@@ -10,9 +10,8 @@
 
 #include <cstdint>
 #include <filesystem>
-#include <vector>
-
 #include <glm/glm.hpp>
+#include <vector>
 
 #include "common/scene/scene.h"
 #include "common/spatial/free_space.h"
@@ -30,10 +29,10 @@ struct PathSample {
 glm::dvec3 viewDirection(double yawDeg, double pitchDeg);
 
 struct PathOptions {
-  double speed = 1.0;          // relative: 1.0 = walking, 1.4 m/s
+  double speed = 1.0;  // relative: 1.0 = walking, 1.4 m/s
   size_t frames = 300;
   double fps = 30.0;
-  double eyeHeight = 1.7;      // metres above the floor under the viewer
+  double eyeHeight = 1.7;         // metres above the floor under the viewer
   double maxTurnDegPerS = 120.0;  // how fast the gaze follows the walking direction
   uint64_t seed = 1;
 };

@@ -27,7 +27,8 @@ size_t PolygonScene::faceCount() const {
 }
 
 const std::vector<std::string>& sceneTypes() {
-  static const std::vector<std::string> types{"city1", "city2", "bigcity", "interior", "interior2", "terrain"};
+  static const std::vector<std::string> types{"city1",    "city2",     "bigcity",
+                                              "interior", "interior2", "terrain"};
   return types;
 }
 

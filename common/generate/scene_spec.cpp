@@ -1,10 +1,10 @@
 #include "common/generate/scene_spec.h"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <charconv>
 #include <filesystem>
-
-#include <spdlog/spdlog.h>
 
 #include "common/core/error.h"
 #include "common/generate/generate.h"

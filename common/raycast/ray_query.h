@@ -21,13 +21,12 @@
 #pragma once
 
 #include <cstdint>
+#include <glm/glm.hpp>
 #include <limits>
 #include <memory>
 #include <optional>
 #include <span>
 #include <vector>
-
-#include <glm/glm.hpp>
 
 #include "common/scene/scene.h"
 

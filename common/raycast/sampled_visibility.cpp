@@ -1,10 +1,10 @@
 #include "common/raycast/sampled_visibility.h"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <mutex>
 #include <random>
-
-#include <tbb/parallel_for.h>
 
 #include "common/core/timer.h"
 
@@ -35,7 +35,8 @@ bool insideSolid(const RayQuery& rays, const glm::vec3& p) {
   // and crossing walls can outvote the two side rays), or when back faces win
   // the majority (a box resting on the ground, whose bottom face ties with
   // the ground under the downward ray).
-  static const glm::vec3 dirs[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  static const glm::vec3 dirs[6] = {{1, 0, 0},  {-1, 0, 0}, {0, 1, 0},
+                                    {0, -1, 0}, {0, 0, 1},  {0, 0, -1}};
   int back = 0, front = 0;
   bool backFace[6] = {};
   for (int i = 0; i < 6; ++i) {

@@ -21,8 +21,8 @@
 namespace vistream {
 
 struct SampledVisibilityOptions {
-  size_t points = 32;      // viewpoints, including the 15 fixed ones
-  int resolution = 128;    // rays per cube-map face side
+  size_t points = 32;    // viewpoints, including the 15 fixed ones
+  int resolution = 128;  // rays per cube-map face side
   uint64_t seed = 1;
 };
 
@@ -44,6 +44,7 @@ std::vector<glm::vec3> cellViewpoints(const Box3f& cell, size_t points, uint64_t
 bool insideSolid(const RayQuery& rays, const glm::vec3& point);
 
 SampledVisibility sampleVisibleFaces(const RayQuery& rays, const FlatTriangles& triangles,
-                                     const Box3f& cell, const SampledVisibilityOptions& options = {});
+                                     const Box3f& cell,
+                                     const SampledVisibilityOptions& options = {});
 
 }  // namespace vistream

@@ -9,9 +9,8 @@
 #pragma once
 
 #include <cmath>
-#include <optional>
-
 #include <glm/glm.hpp>
+#include <optional>
 
 namespace vistream {
 

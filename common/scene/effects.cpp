@@ -1,8 +1,8 @@
 #include "common/scene/effects.h"
 
-#include <cmath>
-
 #include <fmt/format.h>
+
+#include <cmath>
 
 namespace vistream {
 namespace {
@@ -25,9 +25,11 @@ SceneEffects decideEffects(const Scene& scene, const RayQuery& rays, const FreeS
   e.decisions.push_back(
       {"far_field_ray_casting", e.farFieldRayCasting,
        e.farFieldRayCasting
-           ? fmt::format("scene spans {:.0f} m, beyond the near-field radius d = {:.0f} m", diagonal, radius)
-           : fmt::format("all geometry lies within d = {:.0f} m of any viewpoint (scene diagonal {:.0f} m)",
-                         radius, diagonal)});
+           ? fmt::format("scene spans {:.0f} m, beyond the near-field radius d = {:.0f} m",
+                         diagonal, radius)
+           : fmt::format(
+                 "all geometry lies within d = {:.0f} m of any viewpoint (scene diagonal {:.0f} m)",
+                 radius, diagonal)});
 
   // Open sky: sample the free space and cast rays straight up.
   size_t escaped = 0, sampled = 0;
@@ -73,10 +75,11 @@ SceneEffects decideEffects(const Scene& scene, const RayQuery& rays, const FreeS
                                          : std::string("no dynamic objects")});
 
   e.environmentLight = !scene.environment.hdrImage.empty();
-  e.decisions.push_back({"environment_light", e.environmentLight,
-                         e.environmentLight
-                             ? fmt::format("HDR environment {}", scene.environment.hdrImage.filename().string())
-                             : std::string("no HDR environment given: constant sky colour")});
+  e.decisions.push_back(
+      {"environment_light", e.environmentLight,
+       e.environmentLight
+           ? fmt::format("HDR environment {}", scene.environment.hdrImage.filename().string())
+           : std::string("no HDR environment given: constant sky colour")});
   return e;
 }
 

@@ -16,7 +16,8 @@
 namespace vistream {
 
 struct EffectDecision {
-  std::string effect;  // "far_field_ray_casting", "horizon_tracing", "impostors", "self_shadowing", "environment_light"
+  std::string effect;  // "far_field_ray_casting", "horizon_tracing", "impostors", "self_shadowing",
+                       // "environment_light"
   bool enabled = false;
   std::string reason;
 };

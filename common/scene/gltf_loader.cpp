@@ -12,18 +12,18 @@
 // triangles and vertices every mesh instance will produce are counted from
 // accessor counts against SceneLimits. The node hierarchy is walked with an
 // explicit stack: a chain of 20,000 nodes must not overflow the call stack.
+#include <spdlog/spdlog.h>
+#include <tiny_gltf.h>
+
 #include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstring>
-#include <limits>
-#include <string_view>
-
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <glm/gtc/type_ptr.hpp>
-#include <spdlog/spdlog.h>
-#include <tiny_gltf.h>
+#include <limits>
+#include <string_view>
 
 #include "common/core/error.h"
 #include "common/scene/scene_loader.h"
@@ -101,7 +101,8 @@ bool keepImageUndecoded(tinygltf::Image*, const int, std::string*, std::string*,
 
 class AccessorReader {
  public:
-  AccessorReader(const tinygltf::Model& model, std::string file) : model_(model), file_(std::move(file)) {}
+  AccessorReader(const tinygltf::Model& model, std::string file)
+      : model_(model), file_(std::move(file)) {}
 
   // Reads `components` values per element as doubles, whatever the stored type.
   std::vector<double> read(int accessorIndex, int components, const std::string& what) const {
@@ -123,15 +124,17 @@ class AccessorReader {
     size_t limit = 0;
     for (const auto& buf : model_.buffers) limit += buf.data.size();
     if (acc.count > limit || acc.count > (size_t(1) << 32))
-      throwInputError("{}: {}: accessor {} claims {} elements, more than the file's buffers can hold",
-                      file_, what, accessorIndex, acc.count);
+      throwInputError(
+          "{}: {}: accessor {} claims {} elements, more than the file's buffers can hold", file_,
+          what, accessorIndex, acc.count);
     const size_t elemSize = size_t(compSize) * size_t(components);
     if (acc.bufferView < 0) {
       // All zeros, per the specification; bounded like stored data would be.
       if (acc.count * elemSize > limit)
-        throwInputError("{}: {}: accessor {} claims {} elements, more than the file's buffers can "
-                        "hold",
-                        file_, what, accessorIndex, acc.count);
+        throwInputError(
+            "{}: {}: accessor {} claims {} elements, more than the file's buffers can "
+            "hold",
+            file_, what, accessorIndex, acc.count);
       return std::vector<double>(acc.count * size_t(components), 0.0);
     }
     if (size_t(acc.bufferView) >= model_.bufferViews.size())
@@ -157,15 +160,52 @@ class AccessorReader {
         const unsigned char* q = p + size_t(c) * size_t(compSize);
         double v = 0.0;
         switch (acc.componentType) {
-          case TINYGLTF_COMPONENT_TYPE_FLOAT: { float f; std::memcpy(&f, q, 4); v = f; break; }
-          case TINYGLTF_COMPONENT_TYPE_DOUBLE: { double d; std::memcpy(&d, q, 8); v = d; break; }
-          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: v = acc.normalized ? *q / 255.0 : *q; break;
-          case TINYGLTF_COMPONENT_TYPE_BYTE: { const auto b = int8_t(*q); v = acc.normalized ? std::max(b / 127.0, -1.0) : b; break; }
-          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: { uint16_t s; std::memcpy(&s, q, 2); v = acc.normalized ? s / 65535.0 : s; break; }
-          case TINYGLTF_COMPONENT_TYPE_SHORT: { int16_t s; std::memcpy(&s, q, 2); v = acc.normalized ? std::max(s / 32767.0, -1.0) : s; break; }
-          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: { uint32_t u; std::memcpy(&u, q, 4); v = u; break; }
-          case TINYGLTF_COMPONENT_TYPE_INT: { int32_t s; std::memcpy(&s, q, 4); v = s; break; }
-          default: break;
+          case TINYGLTF_COMPONENT_TYPE_FLOAT: {
+            float f;
+            std::memcpy(&f, q, 4);
+            v = f;
+            break;
+          }
+          case TINYGLTF_COMPONENT_TYPE_DOUBLE: {
+            double d;
+            std::memcpy(&d, q, 8);
+            v = d;
+            break;
+          }
+          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+            v = acc.normalized ? *q / 255.0 : *q;
+            break;
+          case TINYGLTF_COMPONENT_TYPE_BYTE: {
+            const auto b = int8_t(*q);
+            v = acc.normalized ? std::max(b / 127.0, -1.0) : b;
+            break;
+          }
+          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+            uint16_t s;
+            std::memcpy(&s, q, 2);
+            v = acc.normalized ? s / 65535.0 : s;
+            break;
+          }
+          case TINYGLTF_COMPONENT_TYPE_SHORT: {
+            int16_t s;
+            std::memcpy(&s, q, 2);
+            v = acc.normalized ? std::max(s / 32767.0, -1.0) : s;
+            break;
+          }
+          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: {
+            uint32_t u;
+            std::memcpy(&u, q, 4);
+            v = u;
+            break;
+          }
+          case TINYGLTF_COMPONENT_TYPE_INT: {
+            int32_t s;
+            std::memcpy(&s, q, 4);
+            v = s;
+            break;
+          }
+          default:
+            break;
         }
         if (!std::isfinite(v))
           throwInputError("{}: {}: accessor {} element {} is not a finite number", file_, what,
@@ -185,10 +225,11 @@ glm::dmat4 localMatrix(const tinygltf::Node& node) {
   if (node.matrix.size() == 16) return glm::make_mat4(node.matrix.data());
   glm::dmat4 m(1.0);
   if (node.translation.size() == 3)
-    m = glm::translate(m, glm::dvec3(node.translation[0], node.translation[1], node.translation[2]));
+    m = glm::translate(m,
+                       glm::dvec3(node.translation[0], node.translation[1], node.translation[2]));
   if (node.rotation.size() == 4)
-    m = m * glm::mat4_cast(glm::dquat(node.rotation[3], node.rotation[0], node.rotation[1],
-                                      node.rotation[2]));
+    m = m * glm::mat4_cast(
+                glm::dquat(node.rotation[3], node.rotation[0], node.rotation[1], node.rotation[2]));
   if (node.scale.size() == 3)
     m = glm::scale(m, glm::dvec3(node.scale[0], node.scale[1], node.scale[2]));
   return m;
@@ -302,7 +343,8 @@ Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits) {
              : gltf.LoadASCIIFromString(&model, &err, &warn, bytes.data(), unsigned(bytes.size()),
                                         baseDir);
   if (!warn.empty()) spdlog::debug("{}: {}", file, warn);
-  if (!ok) throwInputError("{}: {}", file, err.empty() ? std::string("not a valid glTF file") : err);
+  if (!ok)
+    throwInputError("{}: {}", file, err.empty() ? std::string("not a valid glTF file") : err);
   const std::vector<int> roots = rootNodes(model);
   checkGeometryLimits(model, roots, file, limits);
 
@@ -315,14 +357,17 @@ Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits) {
     Material mat;
     mat.name = m.name;
     const auto& f = m.pbrMetallicRoughness.baseColorFactor;
-    if (f.size() == 4) mat.baseColor = glm::vec4(float(f[0]), float(f[1]), float(f[2]), float(f[3]));
+    if (f.size() == 4)
+      mat.baseColor = glm::vec4(float(f[0]), float(f[1]), float(f[2]), float(f[3]));
     mat.diffuse = glm::vec3(mat.baseColor);
     const int tex = m.pbrMetallicRoughness.baseColorTexture.index;
     if (tex >= 0 && size_t(tex) < model.textures.size()) {
       const int src = model.textures[size_t(tex)].source;
       if (src >= 0 && size_t(src) < model.images.size()) {
         const auto& img = model.images[size_t(src)];
-        mat.baseColorTexture = !img.uri.empty() ? img.uri : (!img.name.empty() ? img.name : fmt::format("image_{}", src));
+        mat.baseColorTexture = !img.uri.empty()
+                                   ? img.uri
+                                   : (!img.name.empty() ? img.name : fmt::format("image_{}", src));
       }
     }
     scene.materials.push_back(mat);
@@ -337,9 +382,14 @@ Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits) {
     Node& out = scene.nodes[i];
     out.name = n.name;
     checkNodeTransform(n, i, file);
-    if (n.translation.size() == 3) out.translation = glm::vec3(float(n.translation[0]), float(n.translation[1]), float(n.translation[2]));
-    if (n.rotation.size() == 4) out.rotation = glm::vec4(float(n.rotation[0]), float(n.rotation[1]), float(n.rotation[2]), float(n.rotation[3]));
-    if (n.scale.size() == 3) out.scale = glm::vec3(float(n.scale[0]), float(n.scale[1]), float(n.scale[2]));
+    if (n.translation.size() == 3)
+      out.translation =
+          glm::vec3(float(n.translation[0]), float(n.translation[1]), float(n.translation[2]));
+    if (n.rotation.size() == 4)
+      out.rotation = glm::vec4(float(n.rotation[0]), float(n.rotation[1]), float(n.rotation[2]),
+                               float(n.rotation[3]));
+    if (n.scale.size() == 3)
+      out.scale = glm::vec3(float(n.scale[0]), float(n.scale[1]), float(n.scale[2]));
     for (int c : n.children) {
       if (c < 0 || size_t(c) >= model.nodes.size())
         throwInputError("{}: node {} has child {} which does not exist", file, i, c);
@@ -359,7 +409,8 @@ Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits) {
       skin.joints.push_back(j);
     }
     if (sk.inverseBindMatrices >= 0) {
-      const auto m = reader.read(sk.inverseBindMatrices, 16, fmt::format("skin {} inverse bind matrices", s));
+      const auto m =
+          reader.read(sk.inverseBindMatrices, 16, fmt::format("skin {} inverse bind matrices", s));
       for (size_t k = 0; k + 16 <= m.size(); k += 16) {
         glm::mat4 mat;
         for (int e = 0; e < 16; ++e) glm::value_ptr(mat)[e] = float(m[k + size_t(e)]);
@@ -377,18 +428,26 @@ Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits) {
     for (size_t c = 0; c < an.channels.size(); ++c) {
       const auto& ch = an.channels[c];
       if (ch.sampler < 0 || size_t(ch.sampler) >= an.samplers.size())
-        throwInputError("{}: animation {} channel {} uses sampler {} which does not exist", file, a, c, ch.sampler);
+        throwInputError("{}: animation {} channel {} uses sampler {} which does not exist", file, a,
+                        c, ch.sampler);
       if (ch.target_node < 0 || size_t(ch.target_node) >= model.nodes.size()) continue;
       AnimationChannel out;
       out.node = ch.target_node;
       int comps = 3;
-      if (ch.target_path == "translation") out.path = AnimationChannel::Path::Translation;
-      else if (ch.target_path == "rotation") { out.path = AnimationChannel::Path::Rotation; comps = 4; }
-      else if (ch.target_path == "scale") out.path = AnimationChannel::Path::Scale;
-      else continue;  // morph weights are not used
+      if (ch.target_path == "translation")
+        out.path = AnimationChannel::Path::Translation;
+      else if (ch.target_path == "rotation") {
+        out.path = AnimationChannel::Path::Rotation;
+        comps = 4;
+      } else if (ch.target_path == "scale")
+        out.path = AnimationChannel::Path::Scale;
+      else
+        continue;  // morph weights are not used
       const auto& sampler = an.samplers[size_t(ch.sampler)];
-      if (sampler.interpolation == "STEP") out.interpolation = AnimationChannel::Interpolation::Step;
-      else if (sampler.interpolation == "CUBICSPLINE") out.interpolation = AnimationChannel::Interpolation::CubicSpline;
+      if (sampler.interpolation == "STEP")
+        out.interpolation = AnimationChannel::Interpolation::Step;
+      else if (sampler.interpolation == "CUBICSPLINE")
+        out.interpolation = AnimationChannel::Interpolation::CubicSpline;
       const std::string what = fmt::format("animation '{}' channel {}", anim.name, c);
       for (double t : reader.read(sampler.input, 1, what + " times")) out.times.push_back(float(t));
       const auto values = reader.read(sampler.output, comps, what + " values");
@@ -435,7 +494,8 @@ Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits) {
     const bool animatedAbove = top.animatedAbove;
     if (ni < 0 || size_t(ni) >= model.nodes.size())
       throwInputError("{}: scene refers to node {} which does not exist", file, ni);
-    if (visited[size_t(ni)]) throwInputError("{}: node {} is reached twice (cycle or shared child)", file, ni);
+    if (visited[size_t(ni)])
+      throwInputError("{}: node {} is reached twice (cycle or shared child)", file, ni);
     visited[size_t(ni)] = 1;
     const auto& node = model.nodes[size_t(ni)];
     const glm::dmat4 world = parent * localMatrix(node);
@@ -445,7 +505,8 @@ Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits) {
         throwInputError("{}: node {} uses mesh {} which does not exist", file, ni, node.mesh);
       const auto& mesh = model.meshes[size_t(node.mesh)];
       Pending obj;
-      obj.name = !node.name.empty() ? node.name : (!mesh.name.empty() ? mesh.name : fmt::format("node_{}", ni));
+      obj.name = !node.name.empty() ? node.name
+                                    : (!mesh.name.empty() ? mesh.name : fmt::format("node_{}", ni));
       obj.skin = node.skin >= 0 && size_t(node.skin) < model.skins.size() ? node.skin : -1;
       obj.dynamic = obj.skin >= 0 || animated;
       // Skinned vertices live in the skin's bind space: the mesh node's own
@@ -454,23 +515,27 @@ Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits) {
       for (size_t p = 0; p < mesh.primitives.size(); ++p) {
         const auto& prim = mesh.primitives[p];
         const std::string what = fmt::format("mesh '{}' primitive {}", mesh.name, p);
-        if (prim.mode != kTriangles && prim.mode != kTriangleStrip && prim.mode != kTriangleFan && prim.mode != -1) {
+        if (prim.mode != kTriangles && prim.mode != kTriangleStrip && prim.mode != kTriangleFan &&
+            prim.mode != -1) {
           spdlog::warn("{}: {} has mode {} (not triangles); skipped", file, what, prim.mode);
           continue;
         }
         const auto posIt = prim.attributes.find("POSITION");
-        if (posIt == prim.attributes.end()) throwInputError("{}: {} has no POSITION attribute", file, what);
+        if (posIt == prim.attributes.end())
+          throwInputError("{}: {} has no POSITION attribute", file, what);
         const auto pos = reader.read(posIt->second, 3, what + " POSITION");
         const size_t nv = pos.size() / 3;
         const uint32_t base = uint32_t(obj.positions.size());
         for (size_t v = 0; v < nv; ++v)
-          obj.positions.push_back(glm::dvec3(xf * glm::dvec4(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2], 1.0)));
+          obj.positions.push_back(
+              glm::dvec3(xf * glm::dvec4(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2], 1.0)));
         auto attr = [&](const char* key, int comps) -> std::vector<double> {
           const auto it = prim.attributes.find(key);
           if (it == prim.attributes.end()) return {};
           auto values = reader.read(it->second, comps, what + " " + key);
           if (values.size() != nv * size_t(comps))
-            throwInputError("{}: {} {} has {} elements, POSITION has {}", file, what, key, values.size() / size_t(comps), nv);
+            throwInputError("{}: {} {} has {} elements, POSITION has {}", file, what, key,
+                            values.size() / size_t(comps), nv);
           return values;
         };
         const auto uv = attr("TEXCOORD_0", 2);
@@ -481,39 +546,52 @@ Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits) {
         if (!uv.empty() || !obj.texcoords.empty()) {
           obj.texcoords.resize(base, glm::vec2(0.0f));
           for (size_t v = 0; v < nv; ++v)
-            obj.texcoords.push_back(uv.empty() ? glm::vec2(0.0f) : glm::vec2(float(uv[2 * v]), float(uv[2 * v + 1])));
+            obj.texcoords.push_back(uv.empty() ? glm::vec2(0.0f)
+                                               : glm::vec2(float(uv[2 * v]), float(uv[2 * v + 1])));
         }
         if (!joints.empty() || !weights.empty() || !obj.joints.empty()) {
           obj.joints.resize(base, glm::u16vec4(0));
           obj.weights.resize(base, glm::vec4(0.0f));
           for (size_t v = 0; v < nv; ++v) {
-            obj.joints.push_back(joints.empty() ? glm::u16vec4(0) : glm::u16vec4(uint16_t(joints[4 * v]), uint16_t(joints[4 * v + 1]), uint16_t(joints[4 * v + 2]), uint16_t(joints[4 * v + 3])));
-            obj.weights.push_back(weights.empty() ? glm::vec4(0.0f) : glm::vec4(float(weights[4 * v]), float(weights[4 * v + 1]), float(weights[4 * v + 2]), float(weights[4 * v + 3])));
+            obj.joints.push_back(
+                joints.empty()
+                    ? glm::u16vec4(0)
+                    : glm::u16vec4(uint16_t(joints[4 * v]), uint16_t(joints[4 * v + 1]),
+                                   uint16_t(joints[4 * v + 2]), uint16_t(joints[4 * v + 3])));
+            obj.weights.push_back(
+                weights.empty() ? glm::vec4(0.0f)
+                                : glm::vec4(float(weights[4 * v]), float(weights[4 * v + 1]),
+                                            float(weights[4 * v + 2]), float(weights[4 * v + 3])));
           }
         }
         std::vector<uint32_t> idx;
         if (prim.indices >= 0) {
           for (double d : reader.read(prim.indices, 1, what + " indices")) {
             if (d >= double(nv))
-              throwInputError("{}: {}: index {} is out of range ({} vertices)", file, what, uint64_t(d), nv);
+              throwInputError("{}: {}: index {} is out of range ({} vertices)", file, what,
+                              uint64_t(d), nv);
             idx.push_back(uint32_t(d));
           }
         } else {
           for (size_t v = 0; v < nv; ++v) idx.push_back(uint32_t(v));
         }
-        const uint32_t mat = prim.material >= 0 && size_t(prim.material) < defaultMaterial ? uint32_t(prim.material) : defaultMaterial;
+        const uint32_t mat = prim.material >= 0 && size_t(prim.material) < defaultMaterial
+                                 ? uint32_t(prim.material)
+                                 : defaultMaterial;
         auto emit = [&](uint32_t a, uint32_t b, uint32_t c) {
           obj.triangles.emplace_back(base + a, base + b, base + c);
           obj.materials.push_back(mat);
         };
         if (prim.mode == kTriangleStrip) {
           for (size_t k = 0; k + 2 < idx.size(); ++k)
-            k % 2 == 0 ? emit(idx[k], idx[k + 1], idx[k + 2]) : emit(idx[k + 1], idx[k], idx[k + 2]);
+            k % 2 == 0 ? emit(idx[k], idx[k + 1], idx[k + 2])
+                       : emit(idx[k + 1], idx[k], idx[k + 2]);
         } else if (prim.mode == kTriangleFan) {
           for (size_t k = 1; k + 1 < idx.size(); ++k) emit(idx[0], idx[k], idx[k + 1]);
         } else {
           if (idx.size() % 3 != 0)
-            spdlog::warn("{}: {}: {} indices is not a multiple of 3; the last {} are ignored", file, what, idx.size(), idx.size() % 3);
+            spdlog::warn("{}: {}: {} indices is not a multiple of 3; the last {} are ignored", file,
+                         what, idx.size(), idx.size() % 3);
           for (size_t k = 0; k + 2 < idx.size(); k += 3) emit(idx[k], idx[k + 1], idx[k + 2]);
         }
       }
@@ -525,7 +603,8 @@ Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits) {
   if (pending.empty()) throwInputError("{}: no triangle geometry in the scene", file);
 
   Box3d bounds;
-  for (const auto& p : pending) for (const auto& v : p.positions) bounds.extend(v);
+  for (const auto& p : pending)
+    for (const auto& v : p.positions) bounds.extend(v);
   scene.origin = glm::floor(bounds.center());
   // Finite POSITION floats can still overflow: node transforms are applied
   // in double, and the result is stored as float relative to the origin. One

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-
 #include <nlohmann/json.hpp>
 
 #include "common/core/error.h"
@@ -22,7 +21,8 @@ glm::dvec3 readVec3(const json& j, const std::string& where) {
   return v;
 }
 
-void rejectUnknownKeys(const json& j, std::initializer_list<const char*> known, const std::string& where) {
+void rejectUnknownKeys(const json& j, std::initializer_list<const char*> known,
+                       const std::string& where) {
   for (const auto& [key, value] : j.items()) {
     bool ok = false;
     for (const char* k : known) ok = ok || key == k;
@@ -96,7 +96,8 @@ Scene loadManifest(const std::filesystem::path& path, const SceneLimits& limits)
   rejectUnknownKeys(j, {"name", "geometry", "environment", "near_field_radius"}, file);
 
   Scene scene;
-  if (j.contains("name") && !j["name"].is_string()) throwInputError("{}: 'name' must be a string", file);
+  if (j.contains("name") && !j["name"].is_string())
+    throwInputError("{}: 'name' must be a string", file);
   scene.name = j.contains("name") ? j["name"].get<std::string>() : path.stem().string();
   const std::filesystem::path dir = path.parent_path();
 
@@ -120,12 +121,17 @@ Scene loadManifest(const std::filesystem::path& path, const SceneLimits& limits)
     }
     if (e.contains("sky")) {
       const std::string sky = e["sky"].is_string() ? e["sky"].get<std::string>() : "";
-      if (sky == "auto") scene.environment.sky = SkyMode::Auto;
-      else if (sky == "open") scene.environment.sky = SkyMode::Open;
-      else if (sky == "none") scene.environment.sky = SkyMode::None;
-      else throwInputError("{}.sky: expected \"auto\", \"open\" or \"none\"", where);
+      if (sky == "auto")
+        scene.environment.sky = SkyMode::Auto;
+      else if (sky == "open")
+        scene.environment.sky = SkyMode::Open;
+      else if (sky == "none")
+        scene.environment.sky = SkyMode::None;
+      else
+        throwInputError("{}.sky: expected \"auto\", \"open\" or \"none\"", where);
     }
-    if (e.contains("sky_color")) scene.environment.skyColor = glm::vec3(readVec3(e["sky_color"], where + ".sky_color"));
+    if (e.contains("sky_color"))
+      scene.environment.skyColor = glm::vec3(readVec3(e["sky_color"], where + ".sky_color"));
   }
 
   if (!j.contains("geometry") || !j["geometry"].is_array() || j["geometry"].empty())
@@ -142,7 +148,8 @@ Scene loadManifest(const std::filesystem::path& path, const SceneLimits& limits)
       relative = g.get<std::string>();
     } else if (g.is_object()) {
       rejectUnknownKeys(g, {"file", "dynamic", "name", "translate", "scale"}, where);
-      if (!g.contains("file") || !g["file"].is_string()) throwInputError("{}: needs a 'file' path", where);
+      if (!g.contains("file") || !g["file"].is_string())
+        throwInputError("{}: needs a 'file' path", where);
       relative = g["file"].get<std::string>();
       if (g.contains("dynamic")) {
         if (!g["dynamic"].is_boolean()) throwInputError("{}.dynamic: must be true or false", where);

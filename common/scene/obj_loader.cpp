@@ -9,14 +9,14 @@
 // pass also counts the triangles and vertices the file will produce and stops
 // at SceneLimits before tinyobjloader allocates anything, and it rejects
 // indices that tinyobjloader's atoi could not represent.
+#include <spdlog/spdlog.h>
+#include <tiny_obj_loader.h>
+
 #include <algorithm>
 #include <charconv>
 #include <climits>
 #include <cmath>
 #include <unordered_map>
-
-#include <spdlog/spdlog.h>
-#include <tiny_obj_loader.h>
 
 #include "common/core/error.h"
 #include "common/scene/scene_loader.h"
@@ -28,7 +28,9 @@ namespace {
 // tinyobjloader stores the vertex count of a face in an unsigned char.
 constexpr size_t kMaxFaceVertices = 255;
 
-bool isSpace(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
+bool isSpace(char c) {
+  return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f';
+}
 
 struct LineScan {
   size_t vertexCount = 0;
@@ -234,7 +236,8 @@ Scene loadObjFromMemory(std::string_view objText, const std::string& displayName
   std::string text(objText);
   for (size_t at = text.find('#'); at != std::string::npos; at = text.find('#', at)) {
     const size_t end = text.find('\n', at);
-    std::fill(text.begin() + std::ptrdiff_t(at), end == std::string::npos ? text.end() : text.begin() + std::ptrdiff_t(end), ' ');
+    std::fill(text.begin() + std::ptrdiff_t(at),
+              end == std::string::npos ? text.end() : text.begin() + std::ptrdiff_t(end), ' ');
     at = end == std::string::npos ? text.size() : end;
   }
   if (!reader.ParseFromString(text, std::string(mtlText), config))
@@ -259,8 +262,8 @@ Scene loadObjFromMemory(std::string_view objText, const std::string& displayName
   Box3d bounds;
   const size_t nv = attrib.vertices.size() / 3;
   for (size_t i = 0; i < nv; ++i)
-    bounds.extend(glm::dvec3(attrib.vertices[3 * i], attrib.vertices[3 * i + 1],
-                             attrib.vertices[3 * i + 2]));
+    bounds.extend(
+        glm::dvec3(attrib.vertices[3 * i], attrib.vertices[3 * i + 1], attrib.vertices[3 * i + 2]));
   scene.origin = bounds.empty() ? glm::dvec3(0.0) : glm::floor(bounds.center());
   auto filePosition = [&](size_t idx) {
     return glm::dvec3(attrib.vertices[3 * idx], attrib.vertices[3 * idx + 1],
@@ -323,17 +326,18 @@ Scene loadObjFromMemory(std::string_view objText, const std::string& displayName
           throwInputError("{}:{}: face index out of range", displayName, scan.faceLines[faceId]);
         int ti = withTexcoords ? shape.mesh.indices[offset + k].texcoord_index : -1;
         if (ti >= 0 && size_t(ti) >= nt)
-          throwInputError("{}:{}: texture coordinate index {} is out of range ({} in the file)", displayName,
-                          scan.faceLines[faceId], ti + 1, nt);
+          throwInputError("{}:{}: texture coordinate index {} is out of range ({} in the file)",
+                          displayName, scan.faceLines[faceId], ti + 1, nt);
         polygon.push_back(filePosition(size_t(vi)));
         const uint64_t key = uint64_t(vi) * (uint64_t(nt) + 1) + uint64_t(ti + 1);
         auto [it, inserted] = localOf.try_emplace(key, uint32_t(mesh.positions.size()));
         if (inserted) {
           mesh.positions.push_back(glm::vec3(polygon.back() - scene.origin));
           if (withTexcoords)
-            mesh.texcoords.push_back(ti >= 0 ? glm::vec2(float(attrib.texcoords[2 * size_t(ti)]),
-                                                         float(attrib.texcoords[2 * size_t(ti) + 1]))
-                                             : glm::vec2(0.0f));
+            mesh.texcoords.push_back(ti >= 0
+                                         ? glm::vec2(float(attrib.texcoords[2 * size_t(ti)]),
+                                                     float(attrib.texcoords[2 * size_t(ti) + 1]))
+                                         : glm::vec2(0.0f));
         }
         polygonLocal.push_back(it->second);
       }
@@ -353,10 +357,11 @@ Scene loadObjFromMemory(std::string_view objText, const std::string& displayName
   scene.faceCount = faceId;
   finalizeScene(scene);
   if (scene.diagnostics.degenerateTriangles > 0)
-    spdlog::warn("{}: {} degenerate triangles ({} with repeated vertices, {} of zero area) kept "
-                 "as visible geometry, never used as occluders",
-                 displayName, scene.diagnostics.degenerateTriangles,
-                 scene.diagnostics.repeatedVertexTriangles, scene.diagnostics.zeroAreaTriangles);
+    spdlog::warn(
+        "{}: {} degenerate triangles ({} with repeated vertices, {} of zero area) kept "
+        "as visible geometry, never used as occluders",
+        displayName, scene.diagnostics.degenerateTriangles,
+        scene.diagnostics.repeatedVertexTriangles, scene.diagnostics.zeroAreaTriangles);
   return scene;
 }
 

@@ -24,8 +24,8 @@ Box3d Scene::fileBounds() const {
 }
 
 size_t Scene::dynamicObjectCount() const {
-  return size_t(std::count_if(objects.begin(), objects.end(),
-                              [](const Object& o) { return o.dynamic; }));
+  return size_t(
+      std::count_if(objects.begin(), objects.end(), [](const Object& o) { return o.dynamic; }));
 }
 
 Box3f FlatTriangles::triangleBounds(size_t tri) const {
@@ -67,8 +67,9 @@ FlatTriangles flattenScene(const Scene& scene, bool staticOnly) {
       flat.faceIds.push_back(o.mesh.faceIds[t]);
       flat.objectIds.push_back(uint32_t(oi));
       flat.degenerate.push_back(
-          (tri.x == tri.y || tri.y == tri.z || tri.x == tri.z || isDegenerateTriangle(a, b, c)) ? 1
-                                                                                                 : 0);
+          (tri.x == tri.y || tri.y == tri.z || tri.x == tri.z || isDegenerateTriangle(a, b, c))
+              ? 1
+              : 0);
     }
   }
   return flat;

@@ -19,11 +19,10 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <glm/glm.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <glm/glm.hpp>
 
 #include "common/core/box.h"
 
@@ -31,9 +30,9 @@ namespace vistream {
 
 struct Material {
   std::string name;
-  glm::vec3 diffuse{0.8f, 0.8f, 0.8f};         // linear RGB, what every renderer shades with
+  glm::vec3 diffuse{0.8f, 0.8f, 0.8f};          // linear RGB, what every renderer shades with
   glm::vec4 baseColor{0.8f, 0.8f, 0.8f, 1.0f};  // glTF baseColorFactor (RGBA)
-  std::string baseColorTexture;               // file path or glTF image name; empty if none
+  std::string baseColorTexture;                 // file path or glTF image name; empty if none
 
   static Material named(std::string name) {
     Material m;
@@ -50,11 +49,11 @@ struct Material {
 };
 
 struct TriangleMesh {
-  std::vector<glm::vec3> positions;    // local frame (relative to Scene::origin), metres
-  std::vector<glm::uvec3> triangles;   // indices into positions
-  std::vector<uint32_t> faceIds;       // per triangle: global source face ID
-  std::vector<uint32_t> materials;     // per triangle: index into Scene::materials
-  std::vector<glm::vec2> texcoords;    // per vertex, empty if the source had none
+  std::vector<glm::vec3> positions;   // local frame (relative to Scene::origin), metres
+  std::vector<glm::uvec3> triangles;  // indices into positions
+  std::vector<uint32_t> faceIds;      // per triangle: global source face ID
+  std::vector<uint32_t> materials;    // per triangle: index into Scene::materials
+  std::vector<glm::vec2> texcoords;   // per vertex, empty if the source had none
   // Skinning (glTF): per vertex four joint indices and weights; empty if not skinned.
   std::vector<glm::u16vec4> joints;
   std::vector<glm::vec4> weights;
@@ -89,8 +88,11 @@ struct Node {
 struct AnimationChannel {
   int32_t node = -1;
   enum class Path : uint8_t { Translation, Rotation, Scale } path = Path::Translation;
-  enum class Interpolation : uint8_t { Linear, Step, CubicSpline } interpolation =
-      Interpolation::Linear;
+  enum class Interpolation : uint8_t {
+    Linear,
+    Step,
+    CubicSpline
+  } interpolation = Interpolation::Linear;
   std::vector<float> times;
   std::vector<glm::vec4> values;  // xyz for translation/scale, xyzw for rotation
 };
@@ -126,7 +128,7 @@ struct Scene {
   std::vector<std::filesystem::path> sources;  // files the scene was read from, in face-ID order
   glm::dvec3 origin{0.0};                      // local origin, file coordinates
   std::vector<Object> objects;
-  std::vector<Material> materials;             // never empty after loading
+  std::vector<Material> materials;  // never empty after loading
   std::vector<Node> nodes;
   std::vector<Skin> skins;
   std::vector<Animation> animations;
@@ -147,10 +149,10 @@ struct Scene {
 // queries. Triangle i of the table is (positions[3i], positions[3i+1],
 // positions[3i+2]) in the local frame.
 struct FlatTriangles {
-  std::vector<glm::vec3> positions;   // 3 per triangle
-  std::vector<uint32_t> faceIds;      // per triangle
-  std::vector<uint32_t> objectIds;    // per triangle
-  std::vector<uint8_t> degenerate;    // per triangle: 1 if zero area or repeated vertices
+  std::vector<glm::vec3> positions;  // 3 per triangle
+  std::vector<uint32_t> faceIds;     // per triangle
+  std::vector<uint32_t> objectIds;   // per triangle
+  std::vector<uint8_t> degenerate;   // per triangle: 1 if zero area or repeated vertices
 
   size_t size() const { return faceIds.size(); }
   glm::vec3 vertex(size_t tri, int k) const { return positions[3 * tri + size_t(k)]; }

@@ -35,8 +35,8 @@ void triangulatePolygon(std::span<const glm::dvec3> polygon, std::vector<glm::uv
   }();
   for (size_t i = 0; i < n; ++i) {
     const glm::dvec3 a = polygon[i] - centre, b = polygon[(i + 1) % n] - centre;
-    normal += glm::dvec3((a.y - b.y) * (a.z + b.z), (a.z - b.z) * (a.x + b.x),
-                         (a.x - b.x) * (a.y + b.y));
+    normal +=
+        glm::dvec3((a.y - b.y) * (a.z + b.z), (a.z - b.z) * (a.x + b.x), (a.x - b.x) * (a.y + b.y));
   }
   // Project onto the plane of the two axes orthogonal to the dominant normal
   // axis, flipping one axis so the polygon is counter-clockwise.
@@ -45,7 +45,8 @@ void triangulatePolygon(std::span<const glm::dvec3> polygon, std::vector<glm::uv
   const int ax = (drop + 1) % 3, ay = (drop + 2) % 3;
   const double flip = normal[drop] < 0.0 ? -1.0 : 1.0;
   std::vector<glm::dvec2> p2(n);
-  for (size_t i = 0; i < n; ++i) p2[i] = {polygon[i][ax] - centre[ax], flip * (polygon[i][ay] - centre[ay])};
+  for (size_t i = 0; i < n; ++i)
+    p2[i] = {polygon[i][ax] - centre[ax], flip * (polygon[i][ay] - centre[ay])};
 
   std::vector<uint32_t> remaining(n);
   for (size_t i = 0; i < n; ++i) remaining[i] = uint32_t(i);
@@ -55,7 +56,8 @@ void triangulatePolygon(std::span<const glm::dvec3> polygon, std::vector<glm::uv
   size_t i = 0;
   while (remaining.size() > 3 && guard < 2 * remaining.size() + 2) {
     const size_t m = remaining.size();
-    const uint32_t ia = remaining[(i + m - 1) % m], ib = remaining[i % m], ic = remaining[(i + 1) % m];
+    const uint32_t ia = remaining[(i + m - 1) % m], ib = remaining[i % m],
+                   ic = remaining[(i + 1) % m];
     const glm::dvec2 a = p2[ia], b = p2[ib], c = p2[ic];
     bool ear = orient2d(a, b, c) > 0.0;
     for (size_t k = 0; ear && k < m; ++k) {

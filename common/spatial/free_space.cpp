@@ -1,13 +1,13 @@
 #include "common/spatial/free_space.h"
 
-#include "common/raycast/sampled_visibility.h"
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
 #include <deque>
 #include <limits>
 
-#include <tbb/parallel_for.h>
+#include "common/raycast/sampled_visibility.h"
 
 namespace vistream {
 
@@ -74,7 +74,10 @@ FreeSpace FreeSpace::build(const RayQuery& rays, const Box3f& bounds,
             const bool aUp = hits[a].normal.y > 0.0f;
             if (ya > y || (ya == y && !aUp)) ceiling = std::min(ceiling, ya);
           }
-          if (ceiling - y >= options.headroom) { best = y; break; }
+          if (ceiling - y >= options.headroom) {
+            best = y;
+            break;
+          }
         }
         // A floor inside a closed solid (the ground under a building whose
         // bottom face the vertical ray does not report apart from the ground)
@@ -101,7 +104,8 @@ FreeSpace FreeSpace::build(const RayQuery& rays, const Box3f& bounds,
             const int ii = i + di, kk = k + dk;
             if (ii < 0 || kk < 0 || ii >= fs.nx_ || kk >= fs.nz_) continue;
             if (!candidate[fs.index(ii, kk)] ||
-                std::abs(fs.floor_[fs.index(ii, kk)] - h) > fs.maxStep_ * float(std::max(std::abs(di), std::abs(dk)))) {
+                std::abs(fs.floor_[fs.index(ii, kk)] - h) >
+                    fs.maxStep_ * float(std::max(std::abs(di), std::abs(dk)))) {
               eroded[fs.index(i, k)] = 0;
               break;
             }

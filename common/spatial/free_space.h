@@ -18,10 +18,9 @@
 #pragma once
 
 #include <cstdint>
+#include <glm/glm.hpp>
 #include <optional>
 #include <vector>
-
-#include <glm/glm.hpp>
 
 #include "common/core/box.h"
 #include "common/raycast/ray_query.h"
@@ -29,11 +28,12 @@
 namespace vistream {
 
 struct FreeSpaceOptions {
-  float minCellSize = 0.1f;        // metres
-  size_t maxColumns = 1'000'000;   // grid resolution cap: cell = max(minCellSize, sqrt(area/maxColumns))
-  float headroom = 2.0f;           // metres free above the floor
-  float viewerRadius = 0.3f;       // metres kept from obstacles
-  float upwardNormalY = 0.5f;      // |n.y| / |n| above which a surface counts as floor
+  float minCellSize = 0.1f;  // metres
+  size_t maxColumns =
+      1'000'000;              // grid resolution cap: cell = max(minCellSize, sqrt(area/maxColumns))
+  float headroom = 2.0f;      // metres free above the floor
+  float viewerRadius = 0.3f;  // metres kept from obstacles
+  float upwardNormalY = 0.5f;  // |n.y| / |n| above which a surface counts as floor
 };
 
 class FreeSpace {

@@ -16,7 +16,8 @@ using QuantizedVertex = std::array<uint16_t, 4>;  // x, y, z, 0: 8 bytes
 
 GeometryT encodeGeometry(std::span<const FaceTriangles> faces) {
   GeometryT g;
-  glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-std::numeric_limits<double>::infinity());
+  glm::dvec3 lo(std::numeric_limits<double>::infinity()),
+      hi(-std::numeric_limits<double>::infinity());
   size_t corners = 0;
   for (const FaceTriangles& f : faces) {
     for (const glm::vec3& c : f.corners) {
@@ -46,23 +47,28 @@ GeometryT encodeGeometry(std::span<const FaceTriangles> faces) {
   }
   // Shared corners become one vertex; then the codecs.
   std::vector<uint32_t> remap(unindexed.size());
-  const size_t vertexCount = unindexed.empty() ? 0
-      : meshopt_generateVertexRemap(remap.data(), nullptr, unindexed.size(), unindexed.data(), unindexed.size(),
-                                    sizeof(QuantizedVertex));
+  const size_t vertexCount =
+      unindexed.empty()
+          ? 0
+          : meshopt_generateVertexRemap(remap.data(), nullptr, unindexed.size(), unindexed.data(),
+                                        unindexed.size(), sizeof(QuantizedVertex));
   std::vector<QuantizedVertex> vertices(vertexCount);
   std::vector<uint32_t> indices(unindexed.size());
   if (!unindexed.empty()) {
-    meshopt_remapVertexBuffer(vertices.data(), unindexed.data(), unindexed.size(), sizeof(QuantizedVertex), remap.data());
+    meshopt_remapVertexBuffer(vertices.data(), unindexed.data(), unindexed.size(),
+                              sizeof(QuantizedVertex), remap.data());
     meshopt_remapIndexBuffer(indices.data(), nullptr, unindexed.size(), remap.data());
   }
   g.vertex_count = uint32_t(vertexCount);
   g.index_count = uint32_t(indices.size());
   if (vertexCount > 0) {
     g.vertices.resize(meshopt_encodeVertexBufferBound(vertexCount, sizeof(QuantizedVertex)));
-    g.vertices.resize(meshopt_encodeVertexBuffer(g.vertices.data(), g.vertices.size(), vertices.data(), vertexCount,
+    g.vertices.resize(meshopt_encodeVertexBuffer(g.vertices.data(), g.vertices.size(),
+                                                 vertices.data(), vertexCount,
                                                  sizeof(QuantizedVertex)));
     g.indices.resize(meshopt_encodeIndexBufferBound(indices.size(), vertexCount));
-    g.indices.resize(meshopt_encodeIndexBuffer(g.indices.data(), g.indices.size(), indices.data(), indices.size()));
+    g.indices.resize(meshopt_encodeIndexBuffer(g.indices.data(), g.indices.size(), indices.data(),
+                                               indices.size()));
   }
   g.codec = GeometryCodec::Meshopt;
   return g;
@@ -84,7 +90,8 @@ bool decodeGeometry(const Geometry& g, DecodedGeometry& out, std::string& error)
   for (size_t i = 0; i < nf; ++i) triangles += g.face_triangle_counts()->Get(uint32_t(i));
   if (g.vertex_count() > kMaxGeometryVertices || g.index_count() > kMaxGeometryIndices ||
       triangles * 3 != g.index_count()) {
-    error = fmt::format("geometry: {} vertices, {} indices for {} triangles", g.vertex_count(), g.index_count(), triangles);
+    error = fmt::format("geometry: {} vertices, {} indices for {} triangles", g.vertex_count(),
+                        g.index_count(), triangles);
     return false;
   }
   if (!isFinite(g.quant_origin()) || !isFinite(g.quant_step())) {
@@ -95,13 +102,15 @@ bool decodeGeometry(const Geometry& g, DecodedGeometry& out, std::string& error)
   const auto* vb = g.vertices();
   const auto* ib = g.indices();
   if (g.vertex_count() > 0 &&
-      (!vb || meshopt_decodeVertexBuffer(vertices.data(), vertices.size(), sizeof(QuantizedVertex), vb->data(), vb->size()) != 0)) {
+      (!vb || meshopt_decodeVertexBuffer(vertices.data(), vertices.size(), sizeof(QuantizedVertex),
+                                         vb->data(), vb->size()) != 0)) {
     error = "geometry: vertex data does not decode";
     return false;
   }
   out.indices.resize(g.index_count());
   if (g.index_count() > 0 &&
-      (!ib || meshopt_decodeIndexBuffer(out.indices.data(), out.indices.size(), ib->data(), ib->size()) != 0)) {
+      (!ib || meshopt_decodeIndexBuffer(out.indices.data(), out.indices.size(), ib->data(),
+                                        ib->size()) != 0)) {
     error = "geometry: index data does not decode";
     return false;
   }

@@ -10,10 +10,9 @@
 
 #include <cmath>
 #include <cstdint>
+#include <glm/glm.hpp>
 #include <string>
 #include <vector>
-
-#include <glm/glm.hpp>
 
 #include "protocol/wire/framing.h"
 
@@ -29,15 +28,31 @@ std::vector<uint8_t> encodeMessage(NativeTable message) {
   return encodeFrame(b);
 }
 
-inline Vec3d toWire(const glm::dvec3& v) { return Vec3d(v.x, v.y, v.z); }
-inline Vec3f toWire(const glm::vec3& v) { return Vec3f(v.x, v.y, v.z); }
-inline CellIndex toWire(const glm::ivec3& c) { return CellIndex(c.x, c.y, c.z); }
-inline glm::dvec3 fromWire(const Vec3d& v) { return {v.x(), v.y(), v.z()}; }
-inline glm::vec3 fromWire(const Vec3f& v) { return {v.x(), v.y(), v.z()}; }
-inline glm::ivec3 fromWire(const CellIndex& c) { return {c.i(), c.j(), c.k()}; }
+inline Vec3d toWire(const glm::dvec3& v) {
+  return Vec3d(v.x, v.y, v.z);
+}
+inline Vec3f toWire(const glm::vec3& v) {
+  return Vec3f(v.x, v.y, v.z);
+}
+inline CellIndex toWire(const glm::ivec3& c) {
+  return CellIndex(c.x, c.y, c.z);
+}
+inline glm::dvec3 fromWire(const Vec3d& v) {
+  return {v.x(), v.y(), v.z()};
+}
+inline glm::vec3 fromWire(const Vec3f& v) {
+  return {v.x(), v.y(), v.z()};
+}
+inline glm::ivec3 fromWire(const CellIndex& c) {
+  return {c.i(), c.j(), c.k()};
+}
 
-inline bool isFinite(const Vec3d* v) { return v && std::isfinite(v->x()) && std::isfinite(v->y()) && std::isfinite(v->z()); }
-inline bool isFinite(const Vec3f* v) { return v && std::isfinite(v->x()) && std::isfinite(v->y()) && std::isfinite(v->z()); }
+inline bool isFinite(const Vec3d* v) {
+  return v && std::isfinite(v->x()) && std::isfinite(v->y()) && std::isfinite(v->z());
+}
+inline bool isFinite(const Vec3f* v) {
+  return v && std::isfinite(v->x()) && std::isfinite(v->y()) && std::isfinite(v->z());
+}
 
 // The payload's name, for logs and errors ("Hello", "Pose", ...).
 const char* payloadName(Payload p);

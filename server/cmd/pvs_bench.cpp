@@ -4,16 +4,16 @@
 // on the same cells; times are medians over cells.
 #include "server/cmd/pvs_bench.h"
 
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
-#include <random>
-
-#include <fmt/format.h>
 #include <nlohmann/json.hpp>
-#include <spdlog/spdlog.h>
+#include <random>
 
 #include "common/core/progress.h"
 #include "common/core/timer.h"
@@ -82,7 +82,8 @@ std::vector<Box3f> streetCells(const World& w, float size, size_t count, uint64_
     const auto c = columns[rng() % columns.size()];
     const glm::vec2 xz = w.freeSpace.columnCentre(c.x, c.y);
     const float y = w.freeSpace.floorHeight(c.x, c.y) + 0.2f;
-    cells.emplace_back(glm::vec3(xz.x - size / 2, y, xz.y - size / 2), glm::vec3(xz.x + size / 2, y + height, xz.y + size / 2));
+    cells.emplace_back(glm::vec3(xz.x - size / 2, y, xz.y - size / 2),
+                       glm::vec3(xz.x + size / 2, y + height, xz.y + size / 2));
   }
   return cells;
 }
@@ -94,7 +95,8 @@ struct Config {
 
 std::vector<Config> table2Configs() {
   PvsOptions naive;
-  naive.boxStage = naive.incremental = naive.dropOccludedOccluders = naive.removeRedundantLines = false;
+  naive.boxStage = naive.incremental = naive.dropOccludedOccluders = naive.removeRedundantLines =
+      false;
   PvsOptions box = naive;
   box.boxStage = true;
   PvsOptions occl = box;
@@ -102,8 +104,11 @@ std::vector<Config> table2Configs() {
   PvsOptions rays = box;
   rays.removeRedundantLines = true;
   PvsOptions full;
-  return {{"no optimization", naive}, {"bounding box", box}, {"redundant occluders", occl},
-          {"redundant rays", rays}, {"fully optimized", full}};
+  return {{"no optimization", naive},
+          {"bounding box", box},
+          {"redundant occluders", occl},
+          {"redundant rays", rays},
+          {"fully optimized", full}};
 }
 
 }  // namespace
@@ -128,8 +133,10 @@ int runPvsBench(const PvsBenchOptions& options) {
       std::vector<uint32_t> reference;
       for (size_t c = configs.size(); c-- > 0;) {  // fully optimized first: it is the reference
         const PvsResult r = w.pvs->compute(cell, configs[c].options);
-        if (c == configs.size() - 1) reference = r.faces;
-        else if (r.faces != reference) ++mismatches[c];
+        if (c == configs.size() - 1)
+          reference = r.faces;
+        else if (r.faces != reference)
+          ++mismatches[c];
         stats[c].push_back(r.stats);
         bar.advance();
       }
@@ -144,10 +151,15 @@ int runPvsBench(const PvsBenchOptions& options) {
       occludedBoxes.push_back(double(s.objectBoxesOccluded));
       firstOcc.push_back(double(s.objectBoxesOccludedByFirst));
     }
-    json t1 = {{"scene", spec}, {"cell_size_m", cellSize}, {"cells", cells.size()},
-               {"total_polygons", w.scene.faceCount}, {"occluded_polygons", mean(occludedFaces)},
-               {"total_boxes", full.empty() ? 0 : full[0].objectBoxes}, {"buildings", buildings},
-               {"occluded_boxes", mean(occludedBoxes)}, {"first_occluders", mean(firstOcc)}};
+    json t1 = {{"scene", spec},
+               {"cell_size_m", cellSize},
+               {"cells", cells.size()},
+               {"total_polygons", w.scene.faceCount},
+               {"occluded_polygons", mean(occludedFaces)},
+               {"total_boxes", full.empty() ? 0 : full[0].objectBoxes},
+               {"buildings", buildings},
+               {"occluded_boxes", mean(occludedBoxes)},
+               {"first_occluders", mean(firstOcc)}};
     json t2 = json::array();
     for (size_t c = 0; c < configs.size(); ++c) {
       auto pick = [&](auto f) {
@@ -155,41 +167,54 @@ int runPvsBench(const PvsBenchOptions& options) {
         for (const auto& s : stats[c]) v.push_back(double(f(s)));
         return v;
       };
-      t2.push_back({{"config", configs[c].name},
-                    {"total_ms", median(pick([](const PvsStats& s) { return s.timeMs; }))},
-                    {"box_stage_ms", median(pick([](const PvsStats& s) { return s.boxStageMs; }))},
-                    {"face_stage_ms", median(pick([](const PvsStats& s) { return s.faceStageMs; }))},
-                    {"line_box_tests", mean(pick([](const PvsStats& s) { return s.lineBoxTests; }))},
-                    {"line_polygon_tests", mean(pick([](const PvsStats& s) { return s.linePolygonTests; }))},
-                    {"lines_cast", mean(pick([](const PvsStats& s) { return s.linesCast; }))},
-                    {"pvs_differs_from_fully_optimized", mismatches[c]}});
+      t2.push_back(
+          {{"config", configs[c].name},
+           {"total_ms", median(pick([](const PvsStats& s) { return s.timeMs; }))},
+           {"box_stage_ms", median(pick([](const PvsStats& s) { return s.boxStageMs; }))},
+           {"face_stage_ms", median(pick([](const PvsStats& s) { return s.faceStageMs; }))},
+           {"line_box_tests", mean(pick([](const PvsStats& s) { return s.lineBoxTests; }))},
+           {"line_polygon_tests", mean(pick([](const PvsStats& s) { return s.linePolygonTests; }))},
+           {"lines_cast", mean(pick([](const PvsStats& s) { return s.linesCast; }))},
+           {"pvs_differs_from_fully_optimized", mismatches[c]}});
     }
     out["table1"].push_back(t1);
     out["table2"].push_back({{"scene", spec}, {"configs", t2}});
     if (human) {
-      fmt::print("\nTable 1 ({}, {} street cells of {:.1f} m, paper: city1 21280/20062/2128/1954/1427, "
-                 "city2 21280/18713/2128/1755/1225)\n", spec, cells.size(), cellSize);
+      fmt::print(
+          "\nTable 1 ({}, {} street cells of {:.1f} m, paper: city1 21280/20062/2128/1954/1427, "
+          "city2 21280/18713/2128/1755/1225)\n",
+          spec, cells.size(), cellSize);
       fmt::print("  {:<28} {:>10}\n", "total polygons", w.scene.faceCount);
       fmt::print("  {:<28} {:>10.0f}\n", "occluded polygons", mean(occludedFaces));
-      fmt::print("  {:<28} {:>10}\n", "total bounding boxes", full.empty() ? 0 : full[0].objectBoxes);
+      fmt::print("  {:<28} {:>10}\n", "total bounding boxes",
+                 full.empty() ? 0 : full[0].objectBoxes);
       fmt::print("  {:<28} {:>10.0f}\n", "occluded boxes", mean(occludedBoxes));
       fmt::print("  {:<28} {:>10.0f}\n", "first occluders", mean(firstOcc));
-      fmt::print("\nTable 2 ({}, medians over {} cells; paper, R4400: 30170 / 8900 / 8850 / 7040 / 7030 ms)\n", spec,
-                 cells.size());
+      fmt::print(
+          "\nTable 2 ({}, medians over {} cells; paper, R4400: 30170 / 8900 / 8850 / 7040 / 7030 "
+          "ms)\n",
+          spec, cells.size());
       fmt::print("  {:<22}", "");
       for (const auto& c : configs) fmt::print(" {:>14}", c.name);
       fmt::print("\n");
-      const char* rows[] = {"total_ms", "box_stage_ms", "face_stage_ms", "line_box_tests", "line_polygon_tests",
-                            "lines_cast", "pvs_differs_from_fully_optimized"};
-      const char* labels[] = {"total time (ms)", "box stage (ms)", "polygon stage (ms)", "line/box tests",
-                              "line/polygon tests", "lines cast", "PVS differs (cells)"};
+      const char* rows[] = {"total_ms",
+                            "box_stage_ms",
+                            "face_stage_ms",
+                            "line_box_tests",
+                            "line_polygon_tests",
+                            "lines_cast",
+                            "pvs_differs_from_fully_optimized"};
+      const char* labels[] = {"total time (ms)",    "box stage (ms)",     "polygon stage (ms)",
+                              "line/box tests",     "line/polygon tests", "lines cast",
+                              "PVS differs (cells)"};
       for (size_t r = 0; r < std::size(rows); ++r) {
         fmt::print("  {:<22}", labels[r]);
         for (const auto& c : t2) fmt::print(" {:>14.3f}", c[rows[r]].get<double>());
         fmt::print("\n");
       }
-      fmt::print("  speed-up fully optimized over no optimization: {:.1f}x (paper: 4.3x)\n",
-                 t2[0]["total_ms"].get<double>() / std::max(1e-9, t2.back()["total_ms"].get<double>()));
+      fmt::print(
+          "  speed-up fully optimized over no optimization: {:.1f}x (paper: 4.3x)\n",
+          t2[0]["total_ms"].get<double>() / std::max(1e-9, t2.back()["total_ms"].get<double>()));
     }
   }
 
@@ -201,12 +226,15 @@ int runPvsBench(const PvsBenchOptions& options) {
     const std::vector<float> sizes = indoor ? std::vector<float>{0.5f, 1.0f, 2.0f, 4.0f}
                                             : std::vector<float>{2.0f, 4.0f, 8.0f, 16.0f};
     if (human)
-      fmt::print("\nAccuracy against time ({}, {} cells per size, the same cells for every method; ground truth {} points x {}^2 rays per cube face)\n"
-                 "  {:>8} {:<16} {:>10} {:>10} {:>14} {:>10} {:>8}\n",
-                 spec, options.accuracyCells, options.groundTruthPoints,
-                 options.groundTruthRes, "cell (m)", "method", "PVS faces", "seen", "overestimation", "ms/cell", "missing");
+      fmt::print(
+          "\nAccuracy against time ({}, {} cells per size, the same cells for every method; ground "
+          "truth {} points x {}^2 rays per cube face)\n"
+          "  {:>8} {:<16} {:>10} {:>10} {:>14} {:>10} {:>8}\n",
+          spec, options.accuracyCells, options.groundTruthPoints, options.groundTruthRes,
+          "cell (m)", "method", "PVS faces", "seen", "overestimation", "ms/cell", "missing");
     for (float size : sizes) {
-      const auto cells = streetCells(w, size, options.accuracyCells, options.seed + uint64_t(size * 10));
+      const auto cells =
+          streetCells(w, size, options.accuracyCells, options.seed + uint64_t(size * 10));
       struct Method {
         std::string name;
         std::unique_ptr<FusedPvs> fused;  // null: the paper's method
@@ -219,12 +247,14 @@ int runPvsBench(const PvsBenchOptions& options) {
       // so indoors the fused method runs with 0.04 m, and (its sample count
       // growing with the cell's area over epsilon squared) on cells up to 1 m.
       std::vector<double> epsilons = options.fusedEpsilons;
-      if (indoor && !epsilons.empty()) epsilons = size <= 1.0f ? std::vector<double>{0.04} : std::vector<double>{};
+      if (indoor && !epsilons.empty())
+        epsilons = size <= 1.0f ? std::vector<double>{0.04} : std::vector<double>{};
       for (double eps : epsilons) {
         FusedPvsOptions fo;
         fo.epsilon = eps;
         fo.resolution = options.fusedResolution;
-        methods.push_back({fmt::format("fused eps={}", eps), std::make_unique<FusedPvs>(*w.pvs, fo), {}, {}, 0});
+        methods.push_back(
+            {fmt::format("fused eps={}", eps), std::make_unique<FusedPvs>(*w.pvs, fo), {}, {}, 0});
       }
       std::vector<double> seen;
       for (size_t ci = 0; ci < cells.size(); ++ci) {
@@ -236,7 +266,8 @@ int runPvsBench(const PvsBenchOptions& options) {
         seen.push_back(double(truth.faces.size()));
         for (Method& m : methods) {
           const PvsResult r = m.fused ? m.fused->compute(cell) : w.pvs->compute(cell);
-          for (uint32_t f : truth.faces) m.missing += !std::binary_search(r.faces.begin(), r.faces.end(), f);
+          for (uint32_t f : truth.faces)
+            m.missing += !std::binary_search(r.faces.begin(), r.faces.end(), f);
           m.pvsSize.push_back(double(r.faces.size()));
           m.ms.push_back(r.stats.timeMs);
         }
@@ -244,14 +275,21 @@ int runPvsBench(const PvsBenchOptions& options) {
       for (const Method& m : methods) {
         const double seenMean = mean(seen);
         const double over = mean(m.pvsSize) / std::max(1.0, seenMean);
-        const json row = {{"scene", spec}, {"method", m.name}, {"cell_size_m", size}, {"cells", m.pvsSize.size()},
-                          {"pvs_faces", mean(m.pvsSize)}, {"seen_faces", seenMean}, {"overestimation", over},
-                          {"ms_per_cell", median(m.ms)}, {"missing_faces", m.missing}};
+        const json row = {{"scene", spec},
+                          {"method", m.name},
+                          {"cell_size_m", size},
+                          {"cells", m.pvsSize.size()},
+                          {"pvs_faces", mean(m.pvsSize)},
+                          {"seen_faces", seenMean},
+                          {"overestimation", over},
+                          {"ms_per_cell", median(m.ms)},
+                          {"missing_faces", m.missing}};
         out["accuracy"].push_back(row);
-        if (!m.fused) lines.push_back(fmt::format("{} paper {} {} {}", spec, size, over, median(m.ms)));
+        if (!m.fused)
+          lines.push_back(fmt::format("{} paper {} {} {}", spec, size, over, median(m.ms)));
         if (human)
-          fmt::print("  {:>8.1f} {:<16} {:>10.0f} {:>10.0f} {:>14.2f} {:>10.2f} {:>8}\n", size, m.name, mean(m.pvsSize),
-                     seenMean, over, median(m.ms), m.missing);
+          fmt::print("  {:>8.1f} {:<16} {:>10.0f} {:>10.0f} {:>14.2f} {:>10.2f} {:>8}\n", size,
+                     m.name, mean(m.pvsSize), seenMean, over, median(m.ms), m.missing);
       }
     }
   }
@@ -264,24 +302,29 @@ int runPvsBench(const PvsBenchOptions& options) {
     f.close();
     const auto gp = std::filesystem::path(options.plotDir) / "accuracy.gp";
     std::ofstream g(gp);
-    g << "set terminal pngcairo size 900,420\nset output '" << (std::filesystem::path(options.plotDir) / "accuracy.png").string()
-      << "'\nset multiplot layout 1,2\nset logscale x 2\nset xlabel 'cell size (m)'\nset ylabel 'PVS / seen faces'\n"
+    g << "set terminal pngcairo size 900,420\nset output '"
+      << (std::filesystem::path(options.plotDir) / "accuracy.png").string()
+      << "'\nset multiplot layout 1,2\nset logscale x 2\nset xlabel 'cell size (m)'\nset ylabel "
+         "'PVS / seen faces'\n"
       << "set key top left\nplot ";
     bool first = true;
     for (const auto& s : options.scenes) {
-      g << (first ? "" : ", ") << "'" << dat.string() << "' using ($1 eq '" << s << "' ? $3 : 1/0):4 with linespoints title '" << s << "'";
+      g << (first ? "" : ", ") << "'" << dat.string() << "' using ($1 eq '" << s
+        << "' ? $3 : 1/0):4 with linespoints title '" << s << "'";
       first = false;
     }
     g << "\nset ylabel 'ms per cell'\nset logscale y\nplot ";
     first = true;
     for (const auto& s : options.scenes) {
-      g << (first ? "" : ", ") << "'" << dat.string() << "' using ($1 eq '" << s << "' ? $3 : 1/0):5 with linespoints title '" << s << "'";
+      g << (first ? "" : ", ") << "'" << dat.string() << "' using ($1 eq '" << s
+        << "' ? $3 : 1/0):5 with linespoints title '" << s << "'";
       first = false;
     }
     g << "\nunset multiplot\n";
     g.close();
     const std::string cmd = "gnuplot '" + gp.string() + "' 2>/dev/null";
-    if (std::system(cmd.c_str()) != 0) spdlog::warn("gnuplot not available: wrote {} only", dat.string());
+    if (std::system(cmd.c_str()) != 0)
+      spdlog::warn("gnuplot not available: wrote {} only", dat.string());
   }
   if (!human) std::cout << out.dump(2) << "\n";
   return 0;

@@ -11,15 +11,15 @@ namespace vistream {
 
 struct PvsBenchOptions {
   std::vector<std::string> scenes{"city1", "city2", "interior", "bigcity"};
-  size_t cells = 24;             // street cells per scene for Tables 1 and 2
-  size_t accuracyCells = 6;      // cells per (scene, cell size) for the accuracy table
-  int groundTruthRes = 128;      // rays per cube face side for the ground truth
+  size_t cells = 24;         // street cells per scene for Tables 1 and 2
+  size_t accuracyCells = 6;  // cells per (scene, cell size) for the accuracy table
+  int groundTruthRes = 128;  // rays per cube face side for the ground truth
   size_t groundTruthPoints = 24;
   uint64_t seed = 1;
   bool json = false;
   std::vector<double> fusedEpsilons{1.0, 0.5};  // fused method settings compared (cities, terrain)
   int fusedResolution = 96;
-  std::string plotDir;           // if set, writes accuracy.dat and accuracy.png there
+  std::string plotDir;  // if set, writes accuracy.dat and accuracy.png there
 };
 
 int runPvsBench(const PvsBenchOptions& options);

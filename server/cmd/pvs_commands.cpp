@@ -1,21 +1,22 @@
 #include "server/cmd/pvs_commands.h"
 
-#include <cstdio>
-#include <charconv>
-#include <cmath>
-#include <iostream>
-#include <mutex>
-
-#include <CLI/CLI.hpp>
 #include <fmt/format.h>
 #include <fmt/ranges.h>
+
+#include <CLI/CLI.hpp>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <mutex>
 #include <nlohmann/json.hpp>
 
 #include "common/cmd/cli.h"
 #include "common/core/error.h"
 #include "common/core/parse.h"
-#include "common/generate/scene_spec.h"
 #include "common/core/progress.h"
+#include "common/generate/path.h"
+#include "common/generate/scene_spec.h"
 #include "common/raycast/ray_query.h"
 #include "common/spatial/free_space.h"
 #include "server/cmd/pvs_bench.h"
@@ -23,7 +24,6 @@
 #include "server/visibility/epsilon_pvs.h"
 #include "server/visibility/fused_pvs.h"
 #include "server/visibility/hierarchical_culling.h"
-#include "common/generate/path.h"
 #include "server/visibility/pvs_bake.h"
 #include "server/visibility/pvs_database.h"
 
@@ -35,7 +35,8 @@ using nlohmann::json;
 Box3f parseCell(const Scene& scene, const std::string& text) {
   const auto v = parseNumberList(text, 6, "--cell");
   if (v[0] > v[3] || v[1] > v[4] || v[2] > v[5])
-    throwInputError("--cell: expected x0,y0,z0,x1,y1,z1 with x0<=x1, y0<=y1, z0<=z1, got '{}'", text);
+    throwInputError("--cell: expected x0,y0,z0,x1,y1,z1 with x0<=x1, y0<=y1, z0<=z1, got '{}'",
+                    text);
   return Box3f(scene.toLocal({v[0], v[1], v[2]}), scene.toLocal({v[3], v[4], v[5]}));
 }
 
@@ -59,7 +60,8 @@ json statsJson(const PvsStats& s) {
 int cmdCell(const std::string& spec, const SceneLimits& limits, const std::string& cellText,
             const std::string& method, const PvsOptions& options,
             const FusedPvsOptions& fusedOptions, bool asJson) {
-  if (!(fusedOptions.epsilon > 0.0) || fusedOptions.resolution < 4 || fusedOptions.resolution > 2048)
+  if (!(fusedOptions.epsilon > 0.0) || fusedOptions.resolution < 4 ||
+      fusedOptions.resolution > 2048)
     throwInputError("--epsilon must be positive and --fused-res in 4..2048");
   if (method != "paper" && method != "fused")
     throwInputError("--method: expected 'paper' or 'fused', got '{}'", method);
@@ -67,35 +69,44 @@ int cmdCell(const std::string& spec, const SceneLimits& limits, const std::strin
   const Box3f cell = parseCell(scene, cellText);
   const EpsilonPvs pvs(scene);
   FusedPvsStats fusedStats;
-  const PvsResult r = method == "fused" ? FusedPvs(pvs, fusedOptions).compute(cell, options, &fusedStats)
-                                        : pvs.compute(cell, options);
+  const PvsResult r = method == "fused"
+                          ? FusedPvs(pvs, fusedOptions).compute(cell, options, &fusedStats)
+                          : pvs.compute(cell, options);
   if (asJson) {
     json objects = json::array();
     for (uint32_t o : r.objects) objects.push_back(scene.objects[o].name);
     json stats = statsJson(r.stats);
     stats["method"] = method;
     if (method == "fused")
-      stats["fused"] = {{"epsilon", fusedOptions.epsilon}, {"resolution", fusedOptions.resolution},
-                        {"samples", fusedStats.samples}, {"eroded_occluders", fusedStats.erodedOccluders},
-                        {"candidate_faces", fusedStats.candidateFaces}, {"fused_culled", fusedStats.fusedCulled}};
+      stats["fused"] = {{"epsilon", fusedOptions.epsilon},
+                        {"resolution", fusedOptions.resolution},
+                        {"samples", fusedStats.samples},
+                        {"eroded_occluders", fusedStats.erodedOccluders},
+                        {"candidate_faces", fusedStats.candidateFaces},
+                        {"fused_culled", fusedStats.fusedCulled}};
     std::cout << json{{"faces", r.faces}, {"objects", objects}, {"stats", stats}}.dump() << "\n";
     return 0;
   }
   const PvsStats& s = r.stats;
-  fmt::print("PVS of cell {}: {} of {} faces ({:.1f}% culled), {} objects\n", cellText, r.faces.size(),
-             scene.faceCount, 100.0 * double(s.facesOccluded) / double(std::max<size_t>(1, s.faces)), r.objects.size());
+  fmt::print("PVS of cell {}: {} of {} faces ({:.1f}% culled), {} objects\n", cellText,
+             r.faces.size(), scene.faceCount,
+             100.0 * double(s.facesOccluded) / double(std::max<size_t>(1, s.faces)),
+             r.objects.size());
   fmt::print("  {:<34} {:>12.3f}\n", "time (ms)", s.timeMs);
   fmt::print("  {:<34} {:>12.3f}\n", "  box stage (ms)", s.boxStageMs);
   fmt::print("  {:<34} {:>12.3f}\n", "  face stage (ms)", s.faceStageMs);
-  fmt::print("  {:<34} {:>12}\n", "occluders (available / used)", fmt::format("{} / {}", s.occluders, s.occludersUsed));
+  fmt::print("  {:<34} {:>12}\n", "occluders (available / used)",
+             fmt::format("{} / {}", s.occluders, s.occludersUsed));
   fmt::print("  {:<34} {:>12}\n", "lines cast", s.linesCast);
   fmt::print("  {:<34} {:>12}\n", "line/box tests", s.lineBoxTests);
   fmt::print("  {:<34} {:>12}\n", "line/polygon tests", s.linePolygonTests);
-  fmt::print("  {:<34} {:>12}\n", "boxes (occluded / total)", fmt::format("{} / {}", s.boxesOccluded, s.boxes));
+  fmt::print("  {:<34} {:>12}\n", "boxes (occluded / total)",
+             fmt::format("{} / {}", s.boxesOccluded, s.boxes));
   fmt::print("  {:<34} {:>12}\n", "faces culled by box stage", s.facesCulledByBoxStage);
   if (method == "fused")
     fmt::print("  {:<34} {:>12}\n", "culled by fused occluders",
-               fmt::format("{} ({} samples, eps {} m)", fusedStats.fusedCulled, fusedStats.samples, fusedOptions.epsilon));
+               fmt::format("{} ({} samples, eps {} m)", fusedStats.fusedCulled, fusedStats.samples,
+                           fusedOptions.epsilon));
   return 0;
 }
 
@@ -109,17 +120,23 @@ int cmdBake(const std::string& spec, const SceneLimits& limits, const std::strin
   {
     const size_t commas = size_t(std::count(cellSizeText.begin(), cellSizeText.end(), ','));
     const auto v = parseNumberList(cellSizeText, commas == 0 ? 1 : 3, "--cell-size");
-    options.cellSize = commas == 0 ? glm::vec3(float(v[0])) : glm::vec3(float(v[0]), float(v[1]), float(v[2]));
+    options.cellSize =
+        commas == 0 ? glm::vec3(float(v[0])) : glm::vec3(float(v[0]), float(v[1]), float(v[2]));
     if (!(options.cellSize.x > 0 && options.cellSize.y > 0 && options.cellSize.z > 0))
       throwInputError("--cell-size: every component must be positive, got '{}'", cellSizeText);
   }
   if (!shardText.empty()) {
     const size_t slash = shardText.find('/');
     unsigned i = 0, n = 0;
-    const auto r1 = std::from_chars(shardText.data(), shardText.data() + (slash == std::string::npos ? shardText.size() : slash), i);
-    const auto r2 = slash == std::string::npos ? std::from_chars_result{nullptr, std::errc::invalid_argument}
-                                               : std::from_chars(shardText.data() + slash + 1, shardText.data() + shardText.size(), n);
-    if (r1.ec != std::errc() || r2.ec != std::errc() || r2.ptr != shardText.data() + shardText.size() || n == 0 || i >= n)
+    const auto r1 = std::from_chars(
+        shardText.data(),
+        shardText.data() + (slash == std::string::npos ? shardText.size() : slash), i);
+    const auto r2 =
+        slash == std::string::npos
+            ? std::from_chars_result{nullptr, std::errc::invalid_argument}
+            : std::from_chars(shardText.data() + slash + 1, shardText.data() + shardText.size(), n);
+    if (r1.ec != std::errc() || r2.ec != std::errc() ||
+        r2.ptr != shardText.data() + shardText.size() || n == 0 || i >= n)
       throwInputError("--shard: expected i/n with 0 <= i < n, got '{}'", shardText);
     options.shardIndex = i;
     options.shardCount = n;
@@ -144,10 +161,16 @@ int cmdBake(const std::string& spec, const SceneLimits& limits, const std::strin
   const BakeReport r = bakePvs(scene, pvs, fs, options, out);
   if (bar) bar->finish();
   if (asJson) {
-    std::cout << json{{"out", out}, {"grid_cells", r.gridCells}, {"free_space_cells", r.freeCells},
-                      {"shard_cells", r.shardCells}, {"resumed_cells", r.resumedCells},
-                      {"computed_cells", r.computedCells}, {"time_ms", r.timeMs},
-                      {"mean_cell_ms", r.meanCellMs}, {"mean_pvs_faces", r.shardCells ? double(r.totalFaces) / double(r.shardCells) : 0.0}}
+    std::cout << json{{"out", out},
+                      {"grid_cells", r.gridCells},
+                      {"free_space_cells", r.freeCells},
+                      {"shard_cells", r.shardCells},
+                      {"resumed_cells", r.resumedCells},
+                      {"computed_cells", r.computedCells},
+                      {"time_ms", r.timeMs},
+                      {"mean_cell_ms", r.meanCellMs},
+                      {"mean_pvs_faces",
+                       r.shardCells ? double(r.totalFaces) / double(r.shardCells) : 0.0}}
                      .dump(2)
               << "\n";
   } else {
@@ -159,13 +182,16 @@ int cmdBake(const std::string& spec, const SceneLimits& limits, const std::strin
     fmt::print("  {:<28} {:>12}\n", "computed", r.computedCells);
     fmt::print("  {:<28} {:>12.1f}\n", "time (s)", r.timeMs / 1000.0);
     fmt::print("  {:<28} {:>12.2f}\n", "mean time per cell (ms)", r.meanCellMs);
-    fmt::print("  {:<28} {:>12.1f}\n", "mean PVS size (faces)", r.shardCells ? double(r.totalFaces) / double(r.shardCells) : 0.0);
+    fmt::print("  {:<28} {:>12.1f}\n", "mean PVS size (faces)",
+               r.shardCells ? double(r.totalFaces) / double(r.shardCells) : 0.0);
   }
   return 0;
 }
 
-int cmdQuery(const std::string& dbPath, const std::string& pointText, const std::string& cellText, bool asJson) {
-  if (pointText.empty() == cellText.empty()) throwInputError("give exactly one of --point x,y,z or --cell i,j,k");
+int cmdQuery(const std::string& dbPath, const std::string& pointText, const std::string& cellText,
+             bool asJson) {
+  if (pointText.empty() == cellText.empty())
+    throwInputError("give exactly one of --point x,y,z or --cell i,j,k");
   const PvsDatabase db = PvsDatabase::open(dbPath);
   const ViewCellGrid grid = db.header().grid();
   glm::ivec3 ijk;
@@ -178,27 +204,34 @@ int cmdQuery(const std::string& dbPath, const std::string& pointText, const std:
   } else {
     const auto v = parseNumberList(cellText, 3, "--cell");
     for (int a = 0; a < 3; ++a) {
-      if (v[size_t(a)] != std::floor(v[size_t(a)])) throwInputError("--cell: '{}' must be three integers", cellText);
+      if (v[size_t(a)] != std::floor(v[size_t(a)]))
+        throwInputError("--cell: '{}' must be three integers", cellText);
       ijk[a] = int(v[size_t(a)]);
     }
     if (!grid.contains(ijk))
-      throwInputError("--cell {} is outside the grid ({} x {} x {} cells)", cellText, grid.dims().x, grid.dims().y, grid.dims().z);
+      throwInputError("--cell {} is outside the grid ({} x {} x {} cells)", cellText, grid.dims().x,
+                      grid.dims().y, grid.dims().z);
   }
   const uint32_t index = uint32_t(grid.linearIndex(ijk));
   const auto faces = db.cell(index);
   if (!faces)
-    throwInputError("cell {},{},{} is not in {} (outside the free space, or baked by another shard)", ijk.x, ijk.y,
-                    ijk.z, dbPath);
+    throwInputError(
+        "cell {},{},{} is not in {} (outside the free space, or baked by another shard)", ijk.x,
+        ijk.y, ijk.z, dbPath);
   const Box3f box = grid.cellBox(ijk);
-  const glm::dvec3 lo = db.header().origin + glm::dvec3(box.lo), hi = db.header().origin + glm::dvec3(box.hi);
+  const glm::dvec3 lo = db.header().origin + glm::dvec3(box.lo),
+                   hi = db.header().origin + glm::dvec3(box.hi);
   if (asJson) {
-    std::cout << json{{"cell", {ijk.x, ijk.y, ijk.z}}, {"box", {lo.x, lo.y, lo.z, hi.x, hi.y, hi.z}},
-                      {"faces", *faces}, {"scene", db.header().sceneName}, {"method", db.header().method}}
+    std::cout << json{{"cell", {ijk.x, ijk.y, ijk.z}},
+                      {"box", {lo.x, lo.y, lo.z, hi.x, hi.y, hi.z}},
+                      {"faces", *faces},
+                      {"scene", db.header().sceneName},
+                      {"method", db.header().method}}
                      .dump()
               << "\n";
   } else {
-    fmt::print("cell {},{},{} [{:.3f},{:.3f},{:.3f} .. {:.3f},{:.3f},{:.3f}]: {} faces\n", ijk.x, ijk.y, ijk.z, lo.x,
-               lo.y, lo.z, hi.x, hi.y, hi.z, faces->size());
+    fmt::print("cell {},{},{} [{:.3f},{:.3f},{:.3f} .. {:.3f},{:.3f},{:.3f}]: {} faces\n", ijk.x,
+               ijk.y, ijk.z, lo.x, lo.y, lo.z, hi.x, hi.y, hi.z, faces->size());
     fmt::print("{}\n", fmt::join(*faces, " "));
   }
   return 0;
@@ -209,9 +242,11 @@ int cmdWalk(const std::string& spec, const SceneLimits& limits, const std::strin
   CullingOptions options = base;
   options.method = parseCullingMethod(method);
   options.collectFaces = withFaces;
-  if (!(options.pSkip >= 0.0 && options.pSkip <= 1.0)) throwInputError("--p-skip must be in [0, 1]");
+  if (!(options.pSkip >= 0.0 && options.pSkip <= 1.0))
+    throwInputError("--p-skip must be in [0, 1]");
   if (!(options.pVp >= 0.0 && options.pVp <= 1.0)) throwInputError("--p-vp must be in [0, 1]");
-  if (!(options.fovDeg > 0.0 && options.fovDeg < 180.0)) throwInputError("--fov must be in (0, 180) degrees");
+  if (!(options.fovDeg > 0.0 && options.fovDeg < 180.0))
+    throwInputError("--fov must be in (0, 180) degrees");
   if (options.occluders == 0) throwInputError("--occluders must be at least 1");
   const auto path = readPath(pathFile);
   const Scene scene = openScene(spec, limits);
@@ -229,34 +264,52 @@ int cmdWalk(const std::string& spec, const SceneLimits& limits, const std::strin
     cullMs += r.cullingMs;
     frameMs += fms;
     faces += double(r.visibleFaces);
-    json f = {{"frame", i}, {"node_tests", r.nodeTests}, {"propagated", r.propagated},
-              {"propagation_tries", r.propagationTries}, {"skipped", r.skipped},
-              {"culling_ms", r.cullingMs}, {"frame_ms", fms}, {"visible_leaves", r.visibleLeaves},
+    json f = {{"frame", i},
+              {"node_tests", r.nodeTests},
+              {"propagated", r.propagated},
+              {"propagation_tries", r.propagationTries},
+              {"skipped", r.skipped},
+              {"culling_ms", r.cullingMs},
+              {"frame_ms", fms},
+              {"visible_leaves", r.visibleLeaves},
               {"visible_faces", r.visibleFaces}};
     if (withFaces) f["faces"] = r.faces;
     frames.push_back(std::move(f));
     if (!asJson)
-      fmt::print("frame {:>5}  node tests {:>6}  propagated {:>4}  skipped {:>4}  culling {:>8.3f} ms  frame {:>8.3f} ms  "
-                 "leaves {:>5}  faces {:>7}\n",
-                 i, r.nodeTests, r.propagated, r.skipped, r.cullingMs, fms, r.visibleLeaves, r.visibleFaces);
+      fmt::print(
+          "frame {:>5}  node tests {:>6}  propagated {:>4}  skipped {:>4}  culling {:>8.3f} ms  "
+          "frame {:>8.3f} ms  "
+          "leaves {:>5}  faces {:>7}\n",
+          i, r.nodeTests, r.propagated, r.skipped, r.cullingMs, fms, r.visibleLeaves,
+          r.visibleFaces);
   }
   const double n = double(std::max<size_t>(1, path.size()));
-  const json summary = {{"method", method}, {"frames", path.size()}, {"kd_nodes", culling.tree().nodes().size()},
-                        {"occluders", options.occluders}, {"node_tests_mean", tests / n},
-                        {"propagated_mean", propagated / n}, {"skipped_mean", skipped / n},
-                        {"culling_ms_mean", cullMs / n}, {"frame_ms_mean", frameMs / n},
-                        {"visible_faces_mean", faces / n}, {"draw_ms_per_face", culling.drawMsPerFace()},
+  const json summary = {{"method", method},
+                        {"frames", path.size()},
+                        {"kd_nodes", culling.tree().nodes().size()},
+                        {"occluders", options.occluders},
+                        {"node_tests_mean", tests / n},
+                        {"propagated_mean", propagated / n},
+                        {"skipped_mean", skipped / n},
+                        {"culling_ms_mean", cullMs / n},
+                        {"frame_ms_mean", frameMs / n},
+                        {"visible_faces_mean", faces / n},
+                        {"draw_ms_per_face", culling.drawMsPerFace()},
                         {"cost_model", "frame_ms = culling_ms + visible_faces * draw_ms_per_face"}};
   if (asJson) {
     std::cout << json{{"summary", summary}, {"frames", frames}}.dump() << "\n";
   } else {
-    fmt::print("method {}: {} frames, {} kD-tree nodes, {} occluders per view\n", method, path.size(),
-               culling.tree().nodes().size(), options.occluders);
-    fmt::print("  mean node tests {:.1f}, propagated {:.1f}, skipped {:.1f}, culling {:.3f} ms, frame {:.3f} ms, "
-               "visible faces {:.0f}\n",
-               tests / n, propagated / n, skipped / n, cullMs / n, frameMs / n, faces / n);
-    fmt::print("  cost model: frame = culling + visible faces x {:.2e} ms (mean cost of a face in a software z-buffer rasterizer at 640x480)\n",
-               culling.drawMsPerFace());
+    fmt::print("method {}: {} frames, {} kD-tree nodes, {} occluders per view\n", method,
+               path.size(), culling.tree().nodes().size(), options.occluders);
+    fmt::print(
+        "  mean node tests {:.1f}, propagated {:.1f}, skipped {:.1f}, culling {:.3f} ms, frame "
+        "{:.3f} ms, "
+        "visible faces {:.0f}\n",
+        tests / n, propagated / n, skipped / n, cullMs / n, frameMs / n, faces / n);
+    fmt::print(
+        "  cost model: frame = culling + visible faces x {:.2e} ms (mean cost of a face in a "
+        "software z-buffer rasterizer at 640x480)\n",
+        culling.drawMsPerFace());
   }
   return 0;
 }
@@ -264,9 +317,10 @@ int cmdWalk(const std::string& spec, const SceneLimits& limits, const std::strin
 }  // namespace
 
 int runPvsTool(int argc, char** argv) {
-  CLI::App app{"vistream-pvs: conservative potentially visible sets of view cells "
-               "(Cohen-Or and Zadicario 1998).\nA SCENE is a file (.obj, .gltf, .glb, .json manifest) "
-               "or a built-in name (city1, city2, bigcity, interior, terrain)."};
+  CLI::App app{
+      "vistream-pvs: conservative potentially visible sets of view cells "
+      "(Cohen-Or and Zadicario 1998).\nA SCENE is a file (.obj, .gltf, .glb, .json manifest) "
+      "or a built-in name (city1, city2, bigcity, interior, terrain)."};
   std::string logLevel;
   setUpToolApp(app, logLevel);
 
@@ -284,16 +338,21 @@ int runPvsTool(int argc, char** argv) {
   cell->add_option("--method", method, "paper (single convex occluders) or fused");
   cell->add_flag("--no-bbox", noBbox, "skip the bounding-box stage");
   cell->add_flag("--no-incremental", noIncremental, "every line traverses the space on its own");
-  cell->add_flag("--no-redundant-occluders", noRedundantOccluders, "keep occluded objects as occluders");
+  cell->add_flag("--no-redundant-occluders", noRedundantOccluders,
+                 "keep occluded objects as occluders");
   cell->add_flag("--no-redundant-rays", noRedundantRays, "cast every corner-vertex line");
-  cell->add_option("--large-occluders", largeOccluders, "use only the K largest occluders by solid angle (0: all)");
+  cell->add_option("--large-occluders", largeOccluders,
+                   "use only the K largest occluders by solid angle (0: all)");
   cell->add_flag("--json", asJson, "one JSON object on stdout: faces, objects, stats");
   FusedPvsOptions fusedOptions;
-  cell->add_option("--epsilon", fusedOptions.epsilon, "fused: occluder erosion and sample spacing bound (m)");
-  cell->add_option("--fused-res", fusedOptions.resolution, "fused: occlusion cube-map pixels per side");
+  cell->add_option("--epsilon", fusedOptions.epsilon,
+                   "fused: occluder erosion and sample spacing bound (m)");
+  cell->add_option("--fused-res", fusedOptions.resolution,
+                   "fused: occlusion cube-map pixels per side");
   addSceneLimits(cell);
 
-  auto* bake = app.add_subcommand("bake", "bake the PVS of every cell over the free space into a database");
+  auto* bake =
+      app.add_subcommand("bake", "bake the PVS of every cell over the free space into a database");
   std::string cellSize, region, shard, out;
   unsigned threads = 0;
   bool noCoarse = false;
@@ -306,12 +365,14 @@ int runPvsTool(int argc, char** argv) {
   bake->add_flag("--no-coarse-to-fine", noCoarse, "bake every cell from scratch");
   bake->add_flag("--no-bbox", noBbox, "skip the bounding-box stage");
   bake->add_flag("--no-incremental", noIncremental, "every line traverses the space on its own");
-  bake->add_flag("--no-redundant-occluders", noRedundantOccluders, "keep occluded objects as occluders");
+  bake->add_flag("--no-redundant-occluders", noRedundantOccluders,
+                 "keep occluded objects as occluders");
   bake->add_flag("--no-redundant-rays", noRedundantRays, "cast every corner-vertex line");
   bake->add_flag("--json", asJson, "statistics as JSON");
   addSceneLimits(bake);
 
-  auto* query = app.add_subcommand("query", "the PVS of the cell holding a point, from a baked database");
+  auto* query =
+      app.add_subcommand("query", "the PVS of the cell holding a point, from a baked database");
   std::string db, point, cellIndex;
   query->add_option("--db", db, "baked database")->required();
   query->add_option("--point", point, "x,y,z in file coordinates");
@@ -323,46 +384,62 @@ int runPvsTool(int argc, char** argv) {
   merge->add_option("inputs", inputs, "shard databases")->required();
   merge->add_option("--out,-o", out, "merged database")->required();
 
-  auto* bench = app.add_subcommand("bench", "Tables 1 and 2 of the paper, and PVS accuracy against time");
+  auto* bench =
+      app.add_subcommand("bench", "Tables 1 and 2 of the paper, and PVS accuracy against time");
   PvsBenchOptions benchOptions;
   std::string benchScenes;
-  bench->add_option("--scenes", benchScenes, "comma-separated SCENEs (default city1,city2,interior,bigcity)");
+  bench->add_option("--scenes", benchScenes,
+                    "comma-separated SCENEs (default city1,city2,interior,bigcity)");
   bench->add_option("--cells", benchOptions.cells, "street cells per city for Tables 1 and 2");
-  bench->add_option("--accuracy-cells", benchOptions.accuracyCells, "cells per scene and cell size for the accuracy table");
-  bench->add_option("--gt-res", benchOptions.groundTruthRes, "ground-truth rays per cube face side");
-  bench->add_option("--gt-points", benchOptions.groundTruthPoints, "ground-truth viewpoints per cell");
+  bench->add_option("--accuracy-cells", benchOptions.accuracyCells,
+                    "cells per scene and cell size for the accuracy table");
+  bench->add_option("--gt-res", benchOptions.groundTruthRes,
+                    "ground-truth rays per cube face side");
+  bench->add_option("--gt-points", benchOptions.groundTruthPoints,
+                    "ground-truth viewpoints per cell");
   bench->add_option("--seed", benchOptions.seed, "seed for cell placement");
-  bench->add_option("--fused-eps", benchOptions.fusedEpsilons, "fused epsilons to compare (metres)")->delimiter(',');
+  bench->add_option("--fused-eps", benchOptions.fusedEpsilons, "fused epsilons to compare (metres)")
+      ->delimiter(',');
   bool noFused = false;
   bench->add_flag("--no-fused", noFused, "measure the paper's method only");
   bench->add_option("--plot", benchOptions.plotDir, "directory for accuracy.dat/.png (gnuplot)");
   bench->add_flag("--json", benchOptions.json, "one JSON object on stdout");
 
-  auto* walk = app.add_subcommand("walk", "replay a path with hierarchical visibility culling (Bittner and Havran 2001)");
+  auto* walk = app.add_subcommand(
+      "walk", "replay a path with hierarchical visibility culling (Bittner and Havran 2001)");
   std::string pathFile, walkMethod = "A";
   CullingOptions cullOptions;
   bool withFaces = false;
   walk->add_option("--scene", scene, "SCENE")->required();
   walk->add_option("--path", pathFile, "path CSV (t,x,y,z,yaw_deg,pitch_deg)")->required();
-  walk->add_option("--method", walkMethod, "A (classical), B (hierarchy updating), C (B + visibility propagation), "
-                                          "D (C + conservative updating), adaptive (D with learnt probabilities)");
+  walk->add_option("--method", walkMethod,
+                   "A (classical), B (hierarchy updating), C (B + visibility propagation), "
+                   "D (C + conservative updating), adaptive (D with learnt probabilities)");
   walk->add_option("--occluders", cullOptions.occluders, "occluders per viewpoint (default 16)");
-  walk->add_option("--p-skip", cullOptions.pSkip, "method D: probability of skipping a visible node's test");
-  walk->add_option("--p-vp", cullOptions.pVp, "methods C and D: probability of trying visibility propagation");
+  walk->add_option("--p-skip", cullOptions.pSkip,
+                   "method D: probability of skipping a visible node's test");
+  walk->add_option("--p-vp", cullOptions.pVp,
+                   "methods C and D: probability of trying visibility propagation");
   walk->add_option("--seed", cullOptions.seed, "random seed for D");
-  walk->add_option("--fov", cullOptions.fovDeg, "horizontal field of view in degrees (4:3 frustum)");
+  walk->add_option("--fov", cullOptions.fovDeg,
+                   "horizontal field of view in degrees (4:3 frustum)");
   walk->add_flag("--json", asJson, "one JSON object: summary and frames");
   walk->add_flag("--with-faces", withFaces, "list the faces of visible leaves per frame");
   addSceneLimits(walk);
 
-  auto* walkBench = app.add_subcommand("walk-bench", "Figures 8-11 of Bittner and Havran 2001: methods against speed and p_skip");
+  auto* walkBench = app.add_subcommand(
+      "walk-bench", "Figures 8-11 of Bittner and Havran 2001: methods against speed and p_skip");
   WalkBenchOptions walkBenchOptions;
   std::string walkScenes;
-  walkBench->add_option("--scenes", walkScenes, "comma-separated SCENEs (default interior,interior2)");
+  walkBench->add_option("--scenes", walkScenes,
+                        "comma-separated SCENEs (default interior,interior2)");
   walkBench->add_option("--frames", walkBenchOptions.frames, "frames per path");
-  walkBench->add_option("--occluders", walkBenchOptions.occluders, "occluders per viewpoint (default: 32 for interior2, else 16)");
-  walkBench->add_option("--repeats", walkBenchOptions.repeats, "runs per configuration; times are medians");
-  walkBench->add_option("--plot-dir", walkBenchOptions.plotDir, "write .dat files and a PNG of Figures 8-11 per scene here");
+  walkBench->add_option("--occluders", walkBenchOptions.occluders,
+                        "occluders per viewpoint (default: 32 for interior2, else 16)");
+  walkBench->add_option("--repeats", walkBenchOptions.repeats,
+                        "runs per configuration; times are medians");
+  walkBench->add_option("--plot-dir", walkBenchOptions.plotDir,
+                        "write .dat files and a PNG of Figures 8-11 per scene here");
   walkBench->add_flag("--json", walkBenchOptions.json, "one JSON array on stdout");
 
   // The acceleration switches shared by cell and bake.

@@ -14,11 +14,11 @@ namespace vistream {
 
 struct WalkBenchOptions {
   std::vector<std::string> scenes{"interior", "interior2"};
-  size_t frames = 300;     // frames per path
-  size_t occluders = 0;    // 0: the paper's, 32 for interior2 and 16 otherwise
-  size_t repeats = 3;      // timings are medians over this many runs
+  size_t frames = 300;   // frames per path
+  size_t occluders = 0;  // 0: the paper's, 32 for interior2 and 16 otherwise
+  size_t repeats = 3;    // timings are medians over this many runs
   bool json = false;
-  std::string plotDir;     // if set, writes walk_<scene>.dat and walk_<scene>.png there
+  std::string plotDir;  // if set, writes walk_<scene>.dat and walk_<scene>.png there
 };
 
 int runWalkBench(const WalkBenchOptions& options);

@@ -19,8 +19,8 @@
 #include <algorithm>
 #include <array>
 #include <map>
-#include <span>
 #include <numeric>
+#include <span>
 
 #include "common/core/check.h"
 #include "common/core/timer.h"
@@ -55,7 +55,8 @@ namespace {
 
 // Cell corner for pattern s: bit i set takes the upper bound on axis i.
 glm::dvec3 cellCorner(const Box3f& cell, int s) {
-  return {(s & 1) ? cell.hi.x : cell.lo.x, (s & 2) ? cell.hi.y : cell.lo.y, (s & 4) ? cell.hi.z : cell.lo.z};
+  return {(s & 1) ? cell.hi.x : cell.lo.x, (s & 2) ? cell.hi.y : cell.lo.y,
+          (s & 4) ? cell.hi.z : cell.lo.z};
 }
 
 // Is there a nonzero n with a.n >= 0 for every a in `constraints`? Decided by
@@ -198,10 +199,10 @@ struct PvsQuery {
   const PvsOptions& options;
   Box3f cell;
   std::array<glm::dvec3, 8> corners{};
-  std::vector<uint32_t> stamp;        // per occluder: last line that tested it
+  std::vector<uint32_t> stamp;  // per occluder: last line that tested it
   uint32_t lineId = 0;
-  std::vector<uint8_t> allowed;       // per occluder
-  std::vector<uint8_t> used;          // per occluder: culled something
+  std::vector<uint8_t> allowed;  // per occluder
+  std::vector<uint8_t> used;     // per occluder: culled something
   std::vector<uint32_t> candidates, survivors, found;
   static constexpr uint32_t kNone = 0xffffffffu;
   std::array<uint32_t, 4> recent{kNone, kNone, kNone, kNone};  // most recently successful occluders
@@ -211,7 +212,8 @@ struct PvsQuery {
     used[c] = 1;
     if (recent[0] == c) return;
     const auto it = std::find(recent.begin(), recent.end(), c);
-    std::rotate(recent.begin(), it == recent.end() ? recent.end() - 1 : it, it == recent.end() ? recent.end() : it + 1);
+    std::rotate(recent.begin(), it == recent.end() ? recent.end() - 1 : it,
+                it == recent.end() ? recent.end() : it + 1);
     recent[0] = c;
   }
 
@@ -231,8 +233,8 @@ struct PvsQuery {
         const glm::dvec3 d = oc.centre - centre;
         score[i] = {oc.area / (glm::dot(d, d) + 1e-6), i};
       }
-      std::nth_element(score.begin(), score.begin() + std::ptrdiff_t(options.largeOccluders), score.end(),
-                       [](const auto& a, const auto& b) { return a.first > b.first; });
+      std::nth_element(score.begin(), score.begin() + std::ptrdiff_t(options.largeOccluders),
+                       score.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
       allowed.assign(n, 0);
       for (size_t i = 0; i < options.largeOccluders; ++i) allowed[score[i].second] = 1;
     }
@@ -240,7 +242,8 @@ struct PvsQuery {
   }
 
   // Every allowed occluder blocking the segment a-b, found through the kD-tree.
-  void collect(const glm::dvec3& a, const glm::dvec3& b, uint64_t& tests, std::vector<uint32_t>& out) {
+  void collect(const glm::dvec3& a, const glm::dvec3& b, uint64_t& tests,
+               std::vector<uint32_t>& out) {
     out.clear();
     ++lineId;
     ++stats.linesCast;
@@ -259,8 +262,8 @@ struct PvsQuery {
 
   // True if one occluder blocks every listed line. `firstOnly` reports
   // whether the first candidate was the one.
-  bool hidden(std::span<const glm::dvec3> points, std::span<const std::pair<uint8_t, uint8_t>> lines,
-              uint64_t& tests, bool* byFirst) {
+  bool hidden(std::span<const glm::dvec3> points,
+              std::span<const std::pair<uint8_t, uint8_t>> lines, uint64_t& tests, bool* byFirst) {
     if (lines.empty()) return false;
     const auto& occ = pvs.occluders_.occluders;
     auto lineEnds = [&](const std::pair<uint8_t, uint8_t>& l) {
@@ -405,7 +408,8 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
       if (options.candidateFaces) {
         // Coarse to fine: a group with no face in the coarse PVS is hidden already.
         bool any = false;
-        for (uint32_t fi = g.firstFace; fi < g.firstFace + g.faceCount && !any; ++fi) any = isCandidate(e.faces[fi].id);
+        for (uint32_t fi = g.firstFace; fi < g.firstFace + g.faceCount && !any; ++fi)
+          any = isCandidate(e.faces[fi].id);
         if (!any) {
           stats.facesOccluded += g.faceCount;
           continue;
@@ -417,7 +421,8 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
         stats.objectBoxes += e.groups.size() == 1;
         bool byFirst = false;
         const bool boxHidden = q.hidden(
-            g.boxCorners, options.removeRedundantLines ? std::span(boxPairs) : std::span(allPairs).first(64),
+            g.boxCorners,
+            options.removeRedundantLines ? std::span(boxPairs) : std::span(allPairs).first(64),
             stats.lineBoxTests, &byFirst);
         boxMs += sw.ms();
         if (boxHidden) {
@@ -443,7 +448,8 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
         const std::span<const std::pair<uint8_t, uint8_t>> lines =
             reduced ? std::span(f.keptLines)
                     : std::span(allPairs).first(8 * std::min<size_t>(f.vertices.size(), 255));
-        if (f.vertices.size() <= 255 && q.hidden(f.vertices, lines, stats.linePolygonTests, nullptr)) {
+        if (f.vertices.size() <= 255 &&
+            q.hidden(f.vertices, lines, stats.linePolygonTests, nullptr)) {
           ++stats.facesOccluded;
         } else {
           result.faces.push_back(f.id);

@@ -48,11 +48,11 @@
 namespace vistream {
 
 struct PvsOptions {
-  bool boxStage = true;            // --no-bbox turns it off
-  bool incremental = true;         // --no-incremental
+  bool boxStage = true;               // --no-bbox turns it off
+  bool incremental = true;            // --no-incremental
   bool dropOccludedOccluders = true;  // --no-redundant-occluders
   bool removeRedundantLines = true;   // --no-redundant-rays
-  size_t largeOccluders = 0;       // 0: every occluder; K: the K largest by solid angle
+  size_t largeOccluders = 0;          // 0: every occluder; K: the K largest by solid angle
   // Coarse-to-fine: when non-null, only these faces (sorted) can be in the PVS.
   const std::vector<uint32_t>* candidateFaces = nullptr;
 };
@@ -61,27 +61,27 @@ struct PvsStats {
   double timeMs = 0.0;
   double boxStageMs = 0.0;
   double faceStageMs = 0.0;
-  size_t occluders = 0;            // occluders available to this cell
-  size_t occludersUsed = 0;        // distinct occluders that culled something
-  uint64_t linesCast = 0;          // lines of sight cast (traversed or tested)
-  uint64_t lineBoxTests = 0;       // line/occluder tests in the bounding-box stage
-  uint64_t linePolygonTests = 0;   // line/occluder tests in the face stage
-  size_t boxes = 0;                // occludee groups tested in the box stage
+  size_t occluders = 0;           // occluders available to this cell
+  size_t occludersUsed = 0;       // distinct occluders that culled something
+  uint64_t linesCast = 0;         // lines of sight cast (traversed or tested)
+  uint64_t lineBoxTests = 0;      // line/occluder tests in the bounding-box stage
+  uint64_t linePolygonTests = 0;  // line/occluder tests in the face stage
+  size_t boxes = 0;               // occludee groups tested in the box stage
   size_t boxesOccluded = 0;
-  size_t boxesOccludedByFirst = 0; // hidden by the first candidate tried
+  size_t boxesOccludedByFirst = 0;  // hidden by the first candidate tried
   // The same for objects whose bounding box is one occludee (not split into
   // groups): the "bounding boxes" of the paper's Table 1.
   size_t objectBoxes = 0;
   size_t objectBoxesOccluded = 0;
   size_t objectBoxesOccludedByFirst = 0;
-  size_t faces = 0;                // faces considered
-  size_t facesOccluded = 0;        // culled in total (box stage included)
+  size_t faces = 0;          // faces considered
+  size_t facesOccluded = 0;  // culled in total (box stage included)
   size_t facesCulledByBoxStage = 0;
 };
 
 struct PvsResult {
-  std::vector<uint32_t> faces;     // sorted face IDs of the PVS
-  std::vector<uint32_t> objects;   // sorted indices of objects with a face in the PVS
+  std::vector<uint32_t> faces;    // sorted face IDs of the PVS
+  std::vector<uint32_t> objects;  // sorted indices of objects with a face in the PVS
   PvsStats stats;
 };
 

@@ -27,8 +27,10 @@ double rayEntry(const std::vector<glm::dvec4>& planes, const glm::dvec3& p, cons
       continue;
     }
     const double t = num / den;
-    if (den > 0.0) t1 = std::min(t1, t);
-    else t0 = std::max(t0, t);
+    if (den > 0.0)
+      t1 = std::min(t1, t);
+    else
+      t0 = std::max(t0, t);
     if (!(t0 < t1)) return kInf;
   }
   return t0 < t1 ? t0 : kInf;
@@ -45,8 +47,9 @@ std::vector<glm::dvec3> polytopeVertices(const std::vector<glm::dvec4>& planes) 
         const glm::dvec3 a(planes[i]), b(planes[j]), c(planes[k]);
         const double det = glm::dot(a, glm::cross(b, c));
         if (std::abs(det) < 1e-12) continue;
-        const glm::dvec3 x =
-            (planes[i].w * glm::cross(b, c) + planes[j].w * glm::cross(c, a) + planes[k].w * glm::cross(a, b)) / det;
+        const glm::dvec3 x = (planes[i].w * glm::cross(b, c) + planes[j].w * glm::cross(c, a) +
+                              planes[k].w * glm::cross(a, b)) /
+                             det;
         bool inside = true;
         for (const glm::dvec4& p : planes)
           if (glm::dot(glm::dvec3(p), x) > p.w + 1e-9 * (1.0 + glm::length(x))) inside = false;
@@ -62,7 +65,9 @@ struct CubeFace {
   int a, b, c;
   double sign;
 };
-CubeFace cubeFace(int f) { return {f / 2, (f / 2 + 1) % 3, (f / 2 + 2) % 3, (f & 1) ? -1.0 : 1.0}; }
+CubeFace cubeFace(int f) {
+  return {f / 2, (f / 2 + 1) % 3, (f / 2 + 2) % 3, (f & 1) ? -1.0 : 1.0};
+}
 
 glm::dvec3 cornerDirection(const CubeFace& cf, int res, int i, int j) {
   glm::dvec3 d;
@@ -75,8 +80,8 @@ glm::dvec3 cornerDirection(const CubeFace& cf, int res, int i, int j) {
 // Pixel range on a cube face that the cone of `points` seen from p can touch;
 // false if the cone misses the face. Conservative: whole face when the cone
 // reaches behind the face's plane.
-bool footprint(const std::vector<glm::dvec3>& points, const glm::dvec3& p, const CubeFace& cf, int res,
-               glm::ivec4& range, const std::vector<glm::dvec4>* clipPlanes = nullptr) {
+bool footprint(const std::vector<glm::dvec3>& points, const glm::dvec3& p, const CubeFace& cf,
+               int res, glm::ivec4& range, const std::vector<glm::dvec4>* clipPlanes = nullptr) {
   double umin = kInf, umax = -kInf, vmin = kInf, vmax = -kInf;
   bool anyFront = false, anyBehind = false;
   for (const glm::dvec3& x : points) {
@@ -109,14 +114,17 @@ bool footprint(const std::vector<glm::dvec3>& points, const glm::dvec3& p, const
     return true;
   }
   if (umax < -1.0 || umin > 1.0 || vmax < -1.0 || vmin > 1.0) return false;
-  auto toPixel = [res](double t) { return std::clamp(int(std::floor((t + 1.0) * 0.5 * double(res))), 0, res - 1); };
+  auto toPixel = [res](double t) {
+    return std::clamp(int(std::floor((t + 1.0) * 0.5 * double(res))), 0, res - 1);
+  };
   range = {toPixel(umin), toPixel(umax), toPixel(vmin), toPixel(vmax)};
   return true;
 }
 
 // Projected convex outline of points that all lie in front of a cube face
 // (counter-clockwise), or empty if one does not.
-std::vector<glm::dvec2> projectedHull(const std::vector<glm::dvec3>& points, const glm::dvec3& p, const CubeFace& cf) {
+std::vector<glm::dvec2> projectedHull(const std::vector<glm::dvec3>& points, const glm::dvec3& p,
+                                      const CubeFace& cf) {
   std::vector<glm::dvec2> q;
   for (const glm::dvec3& x : points) {
     const glm::dvec3 d = x - p;
@@ -124,7 +132,9 @@ std::vector<glm::dvec2> projectedHull(const std::vector<glm::dvec3>& points, con
     if (w <= 0.0) return {};
     q.emplace_back(d[cf.b] / w, d[cf.c] / w);
   }
-  std::sort(q.begin(), q.end(), [](const glm::dvec2& a, const glm::dvec2& b) { return a.x < b.x || (a.x == b.x && a.y < b.y); });
+  std::sort(q.begin(), q.end(), [](const glm::dvec2& a, const glm::dvec2& b) {
+    return a.x < b.x || (a.x == b.x && a.y < b.y);
+  });
   q.erase(std::unique(q.begin(), q.end()), q.end());
   if (q.size() < 3) return q;
   auto cross = [](const glm::dvec2& o, const glm::dvec2& a, const glm::dvec2& b) {
@@ -147,15 +157,17 @@ std::vector<glm::dvec2> projectedHull(const std::vector<glm::dvec3>& points, con
 // Can the pixel square [u0,u1] x [v0,v1] overlap the convex outline? False
 // only when an outline edge separates them with room to spare (a margin that
 // dwarfs rounding), so a "no" is certain.
-bool pixelMayOverlap(const std::vector<glm::dvec2>& hull, double u0, double u1, double v0, double v1) {
+bool pixelMayOverlap(const std::vector<glm::dvec2>& hull, double u0, double u1, double v0,
+                     double v1) {
   if (hull.size() < 3) return true;
   const double margin = 1e-9;
   for (size_t i = 0; i < hull.size(); ++i) {
     const glm::dvec2 a = hull[i], b = hull[(i + 1) % hull.size()];
     const glm::dvec2 n(b.y - a.y, a.x - b.x);  // outward for a counter-clockwise outline
     const double limit = glm::dot(n, a) + margin * glm::length(n);
-    const double nearest = std::min({glm::dot(n, glm::dvec2(u0, v0)), glm::dot(n, glm::dvec2(u1, v0)),
-                                     glm::dot(n, glm::dvec2(u0, v1)), glm::dot(n, glm::dvec2(u1, v1))});
+    const double nearest =
+        std::min({glm::dot(n, glm::dvec2(u0, v0)), glm::dot(n, glm::dvec2(u1, v0)),
+                  glm::dot(n, glm::dvec2(u0, v1)), glm::dot(n, glm::dvec2(u1, v1))});
     if (nearest > limit) return false;
   }
   return true;
@@ -175,17 +187,20 @@ double distanceToBox(const glm::dvec3& p, const std::vector<glm::dvec3>& pts) {
 
 }  // namespace
 
-FusedPvs::FusedPvs(const EpsilonPvs& base, const FusedPvsOptions& options) : base_(base), options_(options) {
+FusedPvs::FusedPvs(const EpsilonPvs& base, const FusedPvsOptions& options)
+    : base_(base), options_(options) {
   for (const ConvexOccluder& o : base.occluders().occluders) {
     if (o.kind != ConvexOccluder::Kind::Solid) continue;
     ErodedSolid e;
-    for (const glm::dvec4& p : o.planes) e.planes.emplace_back(glm::dvec3(p), p.w - options.epsilon);
+    for (const glm::dvec4& p : o.planes)
+      e.planes.emplace_back(glm::dvec3(p), p.w - options.epsilon);
     e.vertices = polytopeVertices(e.planes);
     if (e.vertices.size() >= 4) solids_.push_back(std::move(e));  // thinner than 2 epsilon: gone
   }
 }
 
-PvsResult FusedPvs::compute(const Box3f& cell, const PvsOptions& baseOptions, FusedPvsStats* fusedStats) const {
+PvsResult FusedPvs::compute(const Box3f& cell, const PvsOptions& baseOptions,
+                            FusedPvsStats* fusedStats) const {
   Stopwatch clock;
   PvsResult result = base_.compute(cell, baseOptions);
   FusedPvsStats st;
@@ -222,12 +237,14 @@ PvsResult FusedPvs::compute(const Box3f& cell, const PvsOptions& baseOptions, Fu
     for (int i = 0; i < res; ++i) {
       double m = 0.0;
       for (int dj = 0; dj < 2; ++dj)
-        for (int di = 0; di < 2; ++di) m = std::max(m, glm::length(cornerDirection(cubeFace(0), res, i + di, j + dj)));
+        for (int di = 0; di < 2; ++di)
+          m = std::max(m, glm::length(cornerDirection(cubeFace(0), res, i + di, j + dj)));
       pixelReach[size_t(j) * size_t(res) + size_t(i)] = m;
     }
   std::vector<uint8_t> visible(result.faces.size(), 0);
   std::vector<const std::vector<glm::dvec3>*> faceVerts(result.faces.size());
-  for (size_t i = 0; i < result.faces.size(); ++i) faceVerts[i] = base_.faceVertices(result.faces[i]);
+  for (size_t i = 0; i < result.faces.size(); ++i)
+    faceVerts[i] = base_.faceVertices(result.faces[i]);
   size_t remaining = result.faces.size();
 
   for (const glm::dvec3& p : samples) {
@@ -256,8 +273,9 @@ PvsResult FusedPvs::compute(const Box3f& cell, const PvsOptions& baseOptions, Fu
         for (int j = r.z; j <= r.w; ++j)
           for (int i = r.x; i <= r.y; ++i) {
             const size_t c0 = size_t(j - r.z) * size_t(w) + size_t(i - r.x);
-            const double t = std::max({cornerEntry[c0], cornerEntry[c0 + 1], cornerEntry[c0 + size_t(w)],
-                                       cornerEntry[c0 + size_t(w) + 1]});
+            const double t =
+                std::max({cornerEntry[c0], cornerEntry[c0 + 1], cornerEntry[c0 + size_t(w)],
+                          cornerEntry[c0 + size_t(w) + 1]});
             if (t == kInf) continue;
             double& d = face[size_t(j) * size_t(res) + size_t(i)];
             d = std::min(d, t * pixelReach[size_t(j) * size_t(res) + size_t(i)]);
@@ -283,8 +301,8 @@ PvsResult FusedPvs::compute(const Box3f& cell, const PvsOptions& baseOptions, Fu
           for (int j = r.z; j <= r.w && !seen; ++j)
             for (int i = r.x; i <= r.y; ++i) {
               if (face[size_t(j) * size_t(res) + size_t(i)] < near) continue;
-              if (!hull.empty() && !pixelMayOverlap(hull, -1.0 + px * i, -1.0 + px * (i + 1), -1.0 + px * j,
-                                                    -1.0 + px * (j + 1)))
+              if (!hull.empty() && !pixelMayOverlap(hull, -1.0 + px * i, -1.0 + px * (i + 1),
+                                                    -1.0 + px * j, -1.0 + px * (j + 1)))
                 continue;
               seen = true;
               break;

@@ -33,15 +33,15 @@
 namespace vistream {
 
 struct FusedPvsOptions {
-  double epsilon = 0.5;   // metres of erosion = maximum distance from a cell point to a sample
-  int resolution = 96;    // cube-map pixels per face side
+  double epsilon = 0.5;  // metres of erosion = maximum distance from a cell point to a sample
+  int resolution = 96;   // cube-map pixels per face side
 };
 
 struct FusedPvsStats {
   size_t samples = 0;
   size_t erodedOccluders = 0;
-  size_t candidateFaces = 0;   // faces of the single-occluder PVS tested
-  size_t fusedCulled = 0;      // of those, hidden by fused occluders
+  size_t candidateFaces = 0;  // faces of the single-occluder PVS tested
+  size_t fusedCulled = 0;     // of those, hidden by fused occluders
   double timeMs = 0.0;
 };
 
@@ -50,7 +50,8 @@ class FusedPvs {
   FusedPvs(const EpsilonPvs& base, const FusedPvsOptions& options = {});
 
   // The PVS of `cell` (local frame); stats.timeMs includes the base PVS.
-  PvsResult compute(const Box3f& cell, const PvsOptions& baseOptions = {}, FusedPvsStats* fused = nullptr) const;
+  PvsResult compute(const Box3f& cell, const PvsOptions& baseOptions = {},
+                    FusedPvsStats* fused = nullptr) const;
 
   const FusedPvsOptions& options() const { return options_; }
 

@@ -6,10 +6,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <glm/gtc/matrix_transform.hpp>
 #include <map>
 #include <numeric>
-
-#include <glm/gtc/matrix_transform.hpp>
 
 #include "common/core/error.h"
 #include "common/core/timer.h"
@@ -28,11 +27,16 @@ CullingMethod parseCullingMethod(const std::string& name) {
 
 const char* cullingMethodName(CullingMethod m) {
   switch (m) {
-    case CullingMethod::Classical: return "A";
-    case CullingMethod::HierarchyUpdating: return "B";
-    case CullingMethod::Propagation: return "C";
-    case CullingMethod::Conservative: return "D";
-    case CullingMethod::Adaptive: return "adaptive";
+    case CullingMethod::Classical:
+      return "A";
+    case CullingMethod::HierarchyUpdating:
+      return "B";
+    case CullingMethod::Propagation:
+      return "C";
+    case CullingMethod::Conservative:
+      return "D";
+    case CullingMethod::Adaptive:
+      return "adaptive";
   }
   return "?";
 }
@@ -42,16 +46,19 @@ namespace {
 // Convex planar outline of a face, shrunk slightly towards its centre if float
 // noise bends it (so that it can never be larger than the geometry); empty if
 // the face is not planar and convex.
-std::vector<glm::dvec3> convexFaceOutline(const std::vector<glm::dvec3>& verts, double triangleArea) {
+std::vector<glm::dvec3> convexFaceOutline(const std::vector<glm::dvec3>& verts,
+                                          double triangleArea) {
   if (verts.size() < 3) return {};
   glm::dvec3 c(0.0);
   for (const auto& v : verts) c += v;
   c /= double(verts.size());
   glm::dvec3 n(0.0);
-  for (size_t i = 0; i < verts.size(); ++i) n += glm::cross(verts[i] - c, verts[(i + 1) % verts.size()] - c);
+  for (size_t i = 0; i < verts.size(); ++i)
+    n += glm::cross(verts[i] - c, verts[(i + 1) % verts.size()] - c);
   if (!(glm::length(n) > 0.0)) return {};
   n = glm::normalize(n);
-  const glm::dvec3 u = glm::normalize(std::abs(n.x) < 0.9 ? glm::cross(n, glm::dvec3(1, 0, 0)) : glm::cross(n, glm::dvec3(0, 1, 0)));
+  const glm::dvec3 u = glm::normalize(std::abs(n.x) < 0.9 ? glm::cross(n, glm::dvec3(1, 0, 0))
+                                                          : glm::cross(n, glm::dvec3(0, 1, 0)));
   const glm::dvec3 w = glm::cross(n, u);
   double mag = 0.0, bend = 0.0;
   for (const auto& v : verts) {
@@ -65,14 +72,16 @@ std::vector<glm::dvec3> convexFaceOutline(const std::vector<glm::dvec3>& verts, 
   std::iota(order.begin(), order.end(), 0);
   std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
     const glm::dvec3 da = verts[a] - c, db = verts[b] - c;
-    return std::atan2(glm::dot(da, w), glm::dot(da, u)) < std::atan2(glm::dot(db, w), glm::dot(db, u));
+    return std::atan2(glm::dot(da, w), glm::dot(da, u)) <
+           std::atan2(glm::dot(db, w), glm::dot(db, u));
   });
   double area = 0.0;
   for (size_t i = 0; i < order.size(); ++i) {
     const glm::dvec3 a = verts[order[i]] - c, b = verts[order[(i + 1) % order.size()]] - c;
     area += 0.5 * glm::dot(glm::cross(a, b), n);
     const glm::dvec3 nxt = verts[order[(i + 2) % order.size()]] - c;
-    if (glm::dot(glm::cross(b - a, nxt - b), n) < -1e-9 * (1.0 + mag * mag)) return {};  // reflex corner
+    if (glm::dot(glm::cross(b - a, nxt - b), n) < -1e-9 * (1.0 + mag * mag))
+      return {};  // reflex corner
   }
   if (std::abs(area - triangleArea) > 1e-6 * (1.0 + area)) return {};  // holes or overlaps
   // A face planar to within double rounding (axis-aligned walls, say) is
@@ -103,10 +112,13 @@ struct Frustum {
     for (const glm::dvec3& n : normals) {
       int outside = 0;
       for (int k = 0; k < 8; ++k) {
-        const glm::dvec3 c((k & 1) ? b.hi.x : b.lo.x, (k & 2) ? b.hi.y : b.lo.y, (k & 4) ? b.hi.z : b.lo.z);
+        const glm::dvec3 c((k & 1) ? b.hi.x : b.lo.x, (k & 2) ? b.hi.y : b.lo.y,
+                           (k & 4) ? b.hi.z : b.lo.z);
         const double s = glm::dot(c - eye, n);
-        if (s < -1e-6 * (1.0 + glm::length(c - eye))) ++outside;
-        else if (s < 0.0) allInside = false;
+        if (s < -1e-6 * (1.0 + glm::length(c - eye)))
+          ++outside;
+        else if (s < 0.0)
+          allInside = false;
       }
       if (outside == 8) return 0;
       if (outside > 0) allInside = false;
@@ -129,15 +141,17 @@ double measureDrawMsPerFace(const Scene& scene) {
   constexpr size_t kMaxTriangles = 50'000;
   std::vector<float> depth(size_t(kW) * kH);
   const glm::vec3 centre = scene.bounds().empty() ? glm::vec3(0.0f) : scene.bounds().center();
-  const glm::mat4 projection = glm::perspective(glm::radians(45.0f), float(kW) / float(kH), 0.1f, 1e5f);
+  const glm::mat4 projection =
+      glm::perspective(glm::radians(45.0f), float(kW) / float(kH), 0.1f, 1e5f);
   size_t triangles = 0;
   std::vector<uint32_t> faceIds;
   Stopwatch clock;
   for (int view = 0; view < 4; ++view) {
     std::fill(depth.begin(), depth.end(), 1.0f);
     const float yaw = float(view) * 1.5707964f;
-    const glm::mat4 m = projection * glm::lookAt(centre, centre + glm::vec3(-std::sin(yaw), 0.0f, -std::cos(yaw)),
-                                                 glm::vec3(0.0f, 1.0f, 0.0f));
+    const glm::mat4 m =
+        projection * glm::lookAt(centre, centre + glm::vec3(-std::sin(yaw), 0.0f, -std::cos(yaw)),
+                                 glm::vec3(0.0f, 1.0f, 0.0f));
     size_t drawn = 0;
     for (const Object& o : scene.objects) {
       for (size_t t = 0; t < o.mesh.triangles.size() && drawn < kMaxTriangles; ++t, ++drawn) {
@@ -147,10 +161,12 @@ double measureDrawMsPerFace(const Scene& scene) {
         for (int k = 0; k < 3; ++k) {
           const glm::vec4 c = m * glm::vec4(o.mesh.positions[o.mesh.triangles[t][k]], 1.0f);
           if (c.w < 0.1f) behind = true;
-          sp[k] = glm::vec3((c.x / c.w * 0.5f + 0.5f) * kW, (c.y / c.w * 0.5f + 0.5f) * kH, c.z / c.w);
+          sp[k] =
+              glm::vec3((c.x / c.w * 0.5f + 0.5f) * kW, (c.y / c.w * 0.5f + 0.5f) * kH, c.z / c.w);
         }
         if (behind) continue;
-        const float area = (sp[1].x - sp[0].x) * (sp[2].y - sp[0].y) - (sp[2].x - sp[0].x) * (sp[1].y - sp[0].y);
+        const float area =
+            (sp[1].x - sp[0].x) * (sp[2].y - sp[0].y) - (sp[2].x - sp[0].x) * (sp[1].y - sp[0].y);
         if (!(std::abs(area) > 1e-12f)) continue;
         const int x0 = std::max(0, int(std::floor(std::min({sp[0].x, sp[1].x, sp[2].x}))));
         const int x1 = std::min(kW - 1, int(std::ceil(std::max({sp[0].x, sp[1].x, sp[2].x}))));
@@ -160,8 +176,10 @@ double measureDrawMsPerFace(const Scene& scene) {
         for (int y = y0; y <= y1; ++y)
           for (int x = x0; x <= x1; ++x) {
             const float px = float(x) + 0.5f, py = float(y) + 0.5f;
-            const float w0 = ((sp[2].x - sp[1].x) * (py - sp[1].y) - (sp[2].y - sp[1].y) * (px - sp[1].x)) * inv;
-            const float w1 = ((sp[0].x - sp[2].x) * (py - sp[2].y) - (sp[0].y - sp[2].y) * (px - sp[2].x)) * inv;
+            const float w0 =
+                ((sp[2].x - sp[1].x) * (py - sp[1].y) - (sp[2].y - sp[1].y) * (px - sp[1].x)) * inv;
+            const float w1 =
+                ((sp[0].x - sp[2].x) * (py - sp[2].y) - (sp[0].y - sp[2].y) * (px - sp[2].x)) * inv;
             const float w2 = 1.0f - w0 - w1;
             if (w0 < 0.0f || w1 < 0.0f || w2 < 0.0f) continue;
             const float z = w0 * sp[0].z + w1 * sp[1].z + w2 * sp[2].z;
@@ -178,7 +196,8 @@ double measureDrawMsPerFace(const Scene& scene) {
   const size_t faces = size_t(std::unique(faceIds.begin(), faceIds.end()) - faceIds.begin());
   // Per face: the time per triangle times the triangles per face.
   if (triangles == 0 || faces == 0) return 0.0;
-  return ms / double(triangles) * double(triangles / 4) / double(faces) + (depth[0] < -1e30f ? 1e-12 : 0.0);
+  return ms / double(triangles) * double(triangles / 4) / double(faces) +
+         (depth[0] < -1e30f ? 1e-12 : 0.0);
 }
 
 }  // namespace
@@ -236,9 +255,11 @@ CullingScene::CullingScene(const Scene& scene) : scene_(scene) {
     for (uint32_t item : tree_.items(int32_t(n))) ++leavesHolding[item];
   faceShare_.assign(tree_.nodes().size(), 0.0);
   for (size_t n = 0; n < tree_.nodes().size(); ++n)
-    for (uint32_t item : tree_.items(int32_t(n))) faceShare_[n] += double(objectFaces[item]) / double(leavesHolding[item]);
+    for (uint32_t item : tree_.items(int32_t(n)))
+      faceShare_[n] += double(objectFaces[item]) / double(leavesHolding[item]);
   // Children come after their parent in the depth-first layout.
-  for (size_t n = tree_.nodes().size(); n-- > 1;) faceShare_[size_t(tree_.node(int32_t(n)).parent)] += faceShare_[n];
+  for (size_t n = tree_.nodes().size(); n-- > 1;)
+    faceShare_[size_t(tree_.node(int32_t(n)).parent)] += faceShare_[n];
 }
 
 double CullingScene::drawMsPerFace() const {
@@ -260,7 +281,9 @@ std::vector<size_t> CullingScene::bestOccluders(const glm::dvec3& viewpoint, siz
   }
   const size_t n = std::min(k, scored.size());
   std::partial_sort(scored.begin(), scored.begin() + std::ptrdiff_t(n), scored.end(),
-                    [](const auto& a, const auto& b) { return a.first > b.first || (a.first == b.first && a.second < b.second); });
+                    [](const auto& a, const auto& b) {
+                      return a.first > b.first || (a.first == b.first && a.second < b.second);
+                    });
   std::vector<size_t> chosen(n);
   for (size_t i = 0; i < n; ++i) chosen[i] = scored[i].second;
   return chosen;
@@ -275,8 +298,8 @@ CullingViewer::CullingViewer(const CullingScene& scene, const CullingOptions& op
 namespace {
 
 bool closedBoxesMeet(const Box3f& a, const Box3f& b) {
-  return a.lo.x <= b.hi.x && b.lo.x <= a.hi.x && a.lo.y <= b.hi.y && b.lo.y <= a.hi.y && a.lo.z <= b.hi.z &&
-         b.lo.z <= a.hi.z;
+  return a.lo.x <= b.hi.x && b.lo.x <= a.hi.x && a.lo.y <= b.hi.y && b.lo.y <= a.hi.y &&
+         a.lo.z <= b.hi.z && b.lo.z <= a.hi.z;
 }
 
 }  // namespace
@@ -333,7 +356,8 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
   if (glm::length(r) < 1e-9) r = glm::dvec3(1, 0, 0);
   r = glm::normalize(r);
   const glm::dvec3 u = glm::cross(r, f);
-  const double th = std::tan(options_.fovDeg * 0.5 * 3.14159265358979323846 / 180.0), tv = th / options_.aspect;
+  const double th = std::tan(options_.fovDeg * 0.5 * 3.14159265358979323846 / 180.0),
+               tv = th / options_.aspect;
   const Frustum frustum{eye, {th * f - r, th * f + r, tv * f - u, tv * f + u}};
 
   // The occlusion tree of the k best occluders for this viewpoint.
@@ -347,7 +371,8 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
     Box3f b;
     for (const glm::dvec3& v : candidates[i].vertices) {
       // Rounded outward, and widened by far more than the rounding of float boxes.
-      const glm::vec3 lo(v - glm::dvec3(1e-4 * (1.0 + glm::length(v)))), hi(v + glm::dvec3(1e-4 * (1.0 + glm::length(v))));
+      const glm::vec3 lo(v - glm::dvec3(1e-4 * (1.0 + glm::length(v)))),
+          hi(v + glm::dvec3(1e-4 * (1.0 + glm::length(v))));
       b.extend(lo);
       b.extend(hi);
     }
@@ -357,7 +382,8 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
 
   const CullingMethod method = options_.method;
   const bool updating = method != CullingMethod::Classical;
-  const bool propagating = method == CullingMethod::Propagation || method == CullingMethod::Conservative ||
+  const bool propagating = method == CullingMethod::Propagation ||
+                           method == CullingMethod::Conservative ||
                            method == CullingMethod::Adaptive;
   const bool adaptive = method == CullingMethod::Adaptive;
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
@@ -369,8 +395,10 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
       const int32_t n = stack.back();
       stack.pop_back();
       const KdNode& kn = tree.node(n);
-      if (kn.isLeaf()) result.leafVisible[size_t(n)] = 1;
-      else stack.insert(stack.end(), {kn.children[0], kn.children[1]});
+      if (kn.isLeaf())
+        result.leafVisible[size_t(n)] = 1;
+      else
+        stack.insert(stack.end(), {kn.children[0], kn.children[1]});
     }
   };
 
@@ -382,14 +410,18 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
     for (int axis = 0; axis < 3; ++axis) {
       const double e = eye[axis];
       bool high;
-      if (e < double(b.lo[axis])) high = false;
-      else if (e > double(b.hi[axis])) high = true;
-      else continue;
+      if (e < double(b.lo[axis]))
+        high = false;
+      else if (e > double(b.hi[axis]))
+        high = true;
+      else
+        continue;
       anyFace = true;
       Box3f faceBox = b;
       faceBox.lo[axis] = faceBox.hi[axis] = high ? b.hi[axis] : b.lo[axis];
       const Fact fact = faceFact(n, KdFace(kdFace(axis, high)), faceBox);
-      if (fact == Fact::Unknown || (combined != Fact::Unknown && fact != combined)) return Fact::Unknown;
+      if (fact == Fact::Unknown || (combined != Fact::Unknown && fact != combined))
+        return Fact::Unknown;
       combined = fact;
     }
     if (!anyFace) return Fact::Unknown;  // the eye is in the box
@@ -403,7 +435,8 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
   // less visible since its last classification, and over how many frames.
   auto learn = [&](NodeState& s, NodeVisibility previous, bool wasTermination) {
     if (adaptive && wasTermination && s.classifiedFrame > 0) {
-      const double changed = s.visibility < previous ? 1.0 : 0.0, frames = double(frame_ - s.classifiedFrame);
+      const double changed = s.visibility < previous ? 1.0 : 0.0,
+                   frames = double(frame_ - s.classifiedFrame);
       s.changes = 0.8f * s.changes + float(changed);
       s.span = 0.8f * s.span + float(frames);
       changes_ = 0.995 * changes_ + changed;
@@ -427,10 +460,13 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
       return;
     }
     auto demote = [&](NodeVisibility v) {
-      return v == NodeVisibility::Visible && inFrustum == 1 && !kn.isLeaf() ? NodeVisibility::PartiallyVisible : v;
+      return v == NodeVisibility::Visible && inFrustum == 1 && !kn.isLeaf()
+                 ? NodeVisibility::PartiallyVisible
+                 : v;
     };
     if (scene_.nodeFaces(n) <= options_.smallNodeFaces) {
-      s.visibility = inFrustum == 2 || kn.isLeaf() ? NodeVisibility::Visible : NodeVisibility::PartiallyVisible;
+      s.visibility = inFrustum == 2 || kn.isLeaf() ? NodeVisibility::Visible
+                                                   : NodeVisibility::PartiallyVisible;
       return;
     }
     if (propagating && previous != NodeVisibility::PartiallyVisible) {
@@ -439,12 +475,14 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
       if (succeededLastFrame || uniform(rng_) < p) {
         ++result.propagationTries;
         const Fact fact = propagate(n);
-        if (adaptive) s.propagationRate = 0.7f * s.propagationRate + (fact != Fact::Unknown ? 0.3f : 0.0f);
+        if (adaptive)
+          s.propagationRate = 0.7f * s.propagationRate + (fact != Fact::Unknown ? 0.3f : 0.0f);
         if (fact != Fact::Unknown) {
           ++result.propagated;
           s.propagatedFrame = frame_;
           s.fact = fact;
-          s.visibility = demote(fact == Fact::Hidden ? NodeVisibility::Invisible : NodeVisibility::Visible);
+          s.visibility =
+              demote(fact == Fact::Hidden ? NodeVisibility::Invisible : NodeVisibility::Visible);
           learn(s, previous, wasTermination);
           return;
         }
@@ -453,7 +491,8 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
     // Conservative hierarchy updating: a node visible last frame (or a
     // partially visible leaf) is assumed to stay visible.
     if ((method == CullingMethod::Conservative || adaptive) && wasTermination &&
-        previous != NodeVisibility::Invisible && (kn.isLeaf() || previous == NodeVisibility::Visible)) {
+        previous != NodeVisibility::Invisible &&
+        (kn.isLeaf() || previous == NodeVisibility::Visible)) {
       double p = options_.pSkip;
       if (adaptive) {
         // Skip while the expected cost of drawing the node in vain is below
@@ -464,8 +503,8 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
         const double chance = std::min(1.0, rate * double(frame_ - s.classifiedFrame));
         const double waste = chance * scene_.faceShare(n) * scene_.drawMsPerFace();
         // A node is retested at least every kMaxSkipFrames frames, whatever the estimates say.
-        p = testMs_ > 0.0 && waste < testMs_ && frame_ - s.classifiedFrame < kMaxSkipFrames ? 1.0 : 0.0;
-
+        p = testMs_ > 0.0 && waste < testMs_ && frame_ - s.classifiedFrame < kMaxSkipFrames ? 1.0
+                                                                                            : 0.0;
       }
       if (uniform(rng_) < p) {
         s.visibility = NodeVisibility::Visible;
@@ -485,7 +524,9 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
     } else {
       v = occlusion.classify(kn.box);
     }
-    s.fact = v == NodeVisibility::Invisible ? Fact::Hidden : v == NodeVisibility::Visible ? Fact::Lit : Fact::Unknown;
+    s.fact = v == NodeVisibility::Invisible ? Fact::Hidden
+             : v == NodeVisibility::Visible ? Fact::Lit
+                                            : Fact::Unknown;
     s.visibility = demote(v);
     learn(s, previous, wasTermination);
   };
@@ -498,12 +539,15 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
     // A node with a small child is never skipped: the small child would be
     // drawn without a test, which is only right while this node really is
     // partially visible, and only a test of this node can tell.
-    const bool smallChild = !kn.isLeaf() && (scene_.nodeFaces(kn.children[0]) <= options_.smallNodeFaces ||
-                                             scene_.nodeFaces(kn.children[1]) <= options_.smallNodeFaces);
+    const bool smallChild =
+        !kn.isLeaf() && (scene_.nodeFaces(kn.children[0]) <= options_.smallNodeFaces ||
+                         scene_.nodeFaces(kn.children[1]) <= options_.smallNodeFaces);
     const bool termination = kn.isLeaf() || s.visibility != NodeVisibility::PartiallyVisible ||
                              s.frame < frame_ - 1 || smallChild;
-    if (!updating || termination) classify(n, s);
-    else s.fact = Fact::Unknown;  // opened node: its fact is pulled up from its children
+    if (!updating || termination)
+      classify(n, s);
+    else
+      s.fact = Fact::Unknown;  // opened node: its fact is pulled up from its children
     s.frame = frame_;
     switch (s.visibility) {
       case NodeVisibility::Visible:
@@ -531,7 +575,6 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
   // Culling ends here; gathering the faces to draw is the renderer's work.
   result.cullingMs = clock.ms();
 
-
   std::vector<uint8_t> objectSeen(scene_.scene().objects.size(), 0);
   for (size_t n = 0; n < result.leafVisible.size(); ++n) {
     if (!result.leafVisible[n]) continue;
@@ -541,7 +584,8 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
   std::vector<uint32_t> faces;
   for (size_t o = 0; o < objectSeen.size(); ++o)
     if (objectSeen[o])
-      faces.insert(faces.end(), scene_.scene().objects[o].mesh.faceIds.begin(), scene_.scene().objects[o].mesh.faceIds.end());
+      faces.insert(faces.end(), scene_.scene().objects[o].mesh.faceIds.begin(),
+                   scene_.scene().objects[o].mesh.faceIds.end());
   std::sort(faces.begin(), faces.end());
   faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
   result.visibleFaces = faces.size();

@@ -60,7 +60,13 @@
 
 namespace vistream {
 
-enum class CullingMethod : uint8_t { Classical, HierarchyUpdating, Propagation, Conservative, Adaptive };
+enum class CullingMethod : uint8_t {
+  Classical,
+  HierarchyUpdating,
+  Propagation,
+  Conservative,
+  Adaptive
+};
 
 // Parses "A", "B", "C", "D" or "adaptive"; throws InputError otherwise.
 CullingMethod parseCullingMethod(const std::string& name);
@@ -68,27 +74,27 @@ const char* cullingMethodName(CullingMethod m);
 
 struct CullingOptions {
   CullingMethod method = CullingMethod::Classical;
-  size_t occluders = 16;        // k best occluders per viewpoint
-  double pSkip = 0.5;           // method D
-  double pVp = 0.5;             // methods C and D
+  size_t occluders = 16;  // k best occluders per viewpoint
+  double pSkip = 0.5;     // method D
+  double pVp = 0.5;       // methods C and D
   uint64_t seed = 1;
-  double fovDeg = 60.0;         // horizontal field of view
+  double fovDeg = 60.0;  // horizontal field of view
   double aspect = 4.0 / 3.0;
   // Small-node rule: a node with at most this many faces is cheaper to draw
   // than to test and is classified visible without a test.
   size_t smallNodeFaces = 8;
-  bool collectFaces = false;    // fill FrameResult::faces
+  bool collectFaces = false;  // fill FrameResult::faces
 };
 
 struct FrameResult {
-  uint64_t nodeTests = 0;        // occlusion-tree node visibility tests
-  uint64_t propagated = 0;       // nodes classified by visibility propagation
-  uint64_t propagationTries = 0; // propagation attempts, successful or not
-  uint64_t skipped = 0;          // methods D and adaptive: tests skipped
-  double cullingMs = 0.0;        // occluder selection, occlusion tree and traversal (not face gathering)
-  size_t visibleLeaves = 0;      // visible or partially visible leaves
+  uint64_t nodeTests = 0;         // occlusion-tree node visibility tests
+  uint64_t propagated = 0;        // nodes classified by visibility propagation
+  uint64_t propagationTries = 0;  // propagation attempts, successful or not
+  uint64_t skipped = 0;           // methods D and adaptive: tests skipped
+  double cullingMs = 0.0;  // occluder selection, occlusion tree and traversal (not face gathering)
+  size_t visibleLeaves = 0;  // visible or partially visible leaves
   size_t visibleFaces = 0;
-  std::vector<uint32_t> faces;   // sorted, when CullingOptions::collectFaces
+  std::vector<uint32_t> faces;       // sorted, when CullingOptions::collectFaces
   std::vector<uint8_t> leafVisible;  // per kD-tree node: 1 for leaves drawn this frame
 };
 
@@ -147,8 +153,9 @@ class CullingViewer {
     int64_t frame = -10;
     int64_t propagatedFrame = -10;  // last frame propagation classified this node
     int64_t classifiedFrame = -10;  // last frame a test or propagation classified this node
-    float changes = 0.0f, span = 0.0f;  // adaptive: decayed counts of turning less visible, and of frames
-    float propagationRate = 0.5f;   // adaptive: recent rate of successful propagation
+    float changes = 0.0f,
+          span = 0.0f;  // adaptive: decayed counts of turning less visible, and of frames
+    float propagationRate = 0.5f;  // adaptive: recent rate of successful propagation
   };
   Fact faceFact(int32_t node, KdFace face, const Box3f& faceBox) const;
   Fact subtreeFact(int32_t node, const Box3f& faceBox) const;
@@ -158,7 +165,7 @@ class CullingViewer {
   std::vector<NodeState> state_;
   int64_t frame_ = 0;
   std::mt19937_64 rng_;
-  double testMs_ = 0.0;  // adaptive: running estimate of one node test's cost
+  double testMs_ = 0.0;                // adaptive: running estimate of one node test's cost
   double changes_ = 0.0, span_ = 0.0;  // adaptive: the same counts over all nodes (the prior)
 };
 

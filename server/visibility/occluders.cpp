@@ -47,7 +47,9 @@ WeldedMesh weld(const Object& o) {
     const glm::uvec3 tri = o.mesh.triangles[t];
     const glm::uvec3 w(remap[tri.x], remap[tri.y], remap[tri.z]);
     if (w.x == w.y || w.y == w.z || w.x == w.z) continue;
-    if (isDegenerateTriangle(o.mesh.positions[tri.x], o.mesh.positions[tri.y], o.mesh.positions[tri.z])) continue;
+    if (isDegenerateTriangle(o.mesh.positions[tri.x], o.mesh.positions[tri.y],
+                             o.mesh.positions[tri.z]))
+      continue;
     m.triangles.push_back(w);
     m.faceIds.push_back(o.mesh.faceIds[t]);
   }
@@ -55,16 +57,19 @@ WeldedMesh weld(const Object& o) {
 }
 
 glm::dvec3 unitNormal(const WeldedMesh& m, const glm::uvec3& t) {
-  const glm::dvec3 n = glm::cross(m.vertices[t.y] - m.vertices[t.x], m.vertices[t.z] - m.vertices[t.x]);
+  const glm::dvec3 n =
+      glm::cross(m.vertices[t.y] - m.vertices[t.x], m.vertices[t.z] - m.vertices[t.x]);
   return n / glm::length(n);
 }
 
 double triangleArea(const WeldedMesh& m, const glm::uvec3& t) {
-  return 0.5 * glm::length(glm::cross(m.vertices[t.y] - m.vertices[t.x], m.vertices[t.z] - m.vertices[t.x]));
+  return 0.5 * glm::length(glm::cross(m.vertices[t.y] - m.vertices[t.x],
+                                      m.vertices[t.z] - m.vertices[t.x]));
 }
 
 // Edge-connected components (over welded vertices) of a set of triangles.
-std::vector<std::vector<uint32_t>> components(const WeldedMesh& m, const std::vector<uint32_t>& tris) {
+std::vector<std::vector<uint32_t>> components(const WeldedMesh& m,
+                                              const std::vector<uint32_t>& tris) {
   std::vector<uint32_t> parent(tris.size());
   std::iota(parent.begin(), parent.end(), 0u);
   auto find = [&](uint32_t x) {
@@ -128,7 +133,8 @@ bool makeSolid(const WeldedMesh& m, const std::vector<uint32_t>& tris, uint32_t 
   double volume = 0.0;
   for (uint32_t ti : tris) {
     const glm::uvec3 t = m.triangles[ti];
-    volume += glm::dot(m.vertices[t.x] - centroid, glm::cross(m.vertices[t.y] - centroid, m.vertices[t.z] - centroid));
+    volume += glm::dot(m.vertices[t.x] - centroid,
+                       glm::cross(m.vertices[t.y] - centroid, m.vertices[t.z] - centroid));
   }
   if (!(std::abs(volume) > 0.0)) return false;
   const double sign = volume > 0.0 ? 1.0 : -1.0;
@@ -146,7 +152,8 @@ bool makeSolid(const WeldedMesh& m, const std::vector<uint32_t>& tris, uint32_t 
       if (glm::dot(n, m.vertices[v]) - d0 > tolerance * (1.0 + mag)) return false;
     // Innermost vertex of the face, then the margin.
     const double d = std::min({glm::dot(n, m.vertices[t.x]), glm::dot(n, m.vertices[t.y]),
-                               glm::dot(n, m.vertices[t.z])}) - margin;
+                               glm::dot(n, m.vertices[t.z])}) -
+                     margin;
     // Merge with an existing plane of (numerically) the same normal.
     bool merged = false;
     for (glm::dvec4& p : planes)
@@ -228,8 +235,9 @@ bool makePolygon(const WeldedMesh& m, const std::vector<uint32_t>& tris, uint32_
   if (loop.size() != next.size()) return false;  // holes or several loops
 
   // A 2D frame in the plane.
-  const glm::dvec3 u = glm::normalize(std::abs(normal.x) < 0.9 ? glm::cross(normal, glm::dvec3(1, 0, 0))
-                                                               : glm::cross(normal, glm::dvec3(0, 1, 0)));
+  const glm::dvec3 u =
+      glm::normalize(std::abs(normal.x) < 0.9 ? glm::cross(normal, glm::dvec3(1, 0, 0))
+                                              : glm::cross(normal, glm::dvec3(0, 1, 0)));
   const glm::dvec3 w = glm::cross(normal, u);
   const glm::dvec3 origin = m.vertices[loop.front()];
   std::vector<glm::dvec2> p2;
@@ -308,7 +316,8 @@ OccluderSet extractOccluders(const Scene& scene, const OccluderOptions& options)
       ConvexOccluder solid;
       if (options.solids && makeSolid(m, comp, oi, options.coplanarTolerance, solid)) {
         const glm::vec3 e = solid.bounds.extent();
-        if (std::max({e.x, e.y, e.z}) < options.minOccluderSize) continue;  // a solid part: never an occludee-only polygon either
+        if (std::max({e.x, e.y, e.z}) < options.minOccluderSize)
+          continue;  // a solid part: never an occludee-only polygon either
         set.occluders.push_back(std::move(solid));
         ++set.stats.solids;
       } else {
@@ -322,7 +331,9 @@ OccluderSet extractOccluders(const Scene& scene, const OccluderOptions& options)
     std::vector<std::pair<glm::dvec4, std::vector<uint32_t>>> planes;
     for (uint32_t ti : leftover) {
       const glm::dvec3 n = unitNormal(m, m.triangles[ti]);
-      const glm::dvec3 c = (m.vertices[m.triangles[ti].x] + m.vertices[m.triangles[ti].y] + m.vertices[m.triangles[ti].z]) / 3.0;
+      const glm::dvec3 c = (m.vertices[m.triangles[ti].x] + m.vertices[m.triangles[ti].y] +
+                            m.vertices[m.triangles[ti].z]) /
+                           3.0;
       const double d = glm::dot(n, c);
       bool placed = false;
       for (auto& [p, members] : planes)
@@ -337,7 +348,8 @@ OccluderSet extractOccluders(const Scene& scene, const OccluderOptions& options)
       for (const auto& group : components(m, members)) {
         ConvexOccluder poly;
         if (makePolygon(m, group, oi, glm::dvec3(p), poly)) {
-          if (poly.area >= options.minPolygonArea && std::sqrt(poly.area) >= options.minOccluderSize) {
+          if (poly.area >= options.minPolygonArea &&
+              std::sqrt(poly.area) >= options.minOccluderSize) {
             set.stats.mergedPolygons += group.size() > 1;
             ++set.stats.polygons;
             set.occluders.push_back(std::move(poly));
@@ -351,7 +363,8 @@ OccluderSet extractOccluders(const Scene& scene, const OccluderOptions& options)
         for (const auto& [face, faceTris] : byFace) {
           for (const auto& piece : components(m, faceTris)) {
             if (makePolygon(m, piece, oi, glm::dvec3(p), poly)) {
-              if (poly.area >= options.minPolygonArea && std::sqrt(poly.area) >= options.minOccluderSize) {
+              if (poly.area >= options.minPolygonArea &&
+                  std::sqrt(poly.area) >= options.minOccluderSize) {
                 ++set.stats.polygons;
                 set.occluders.push_back(std::move(poly));
               }
@@ -359,7 +372,8 @@ OccluderSet extractOccluders(const Scene& scene, const OccluderOptions& options)
             }
             for (uint32_t ti : piece)
               if (makePolygon(m, {ti}, oi, unitNormal(m, m.triangles[ti]), poly) &&
-                  poly.area >= options.minPolygonArea && std::sqrt(poly.area) >= options.minOccluderSize) {
+                  poly.area >= options.minPolygonArea &&
+                  std::sqrt(poly.area) >= options.minOccluderSize) {
                 ++set.stats.polygons;
                 set.occluders.push_back(std::move(poly));
               }
@@ -381,8 +395,10 @@ bool occluderBlocksSegment(const ConvexOccluder& o, const glm::dvec3& a, const g
       if (da >= 0.0 && db >= 0.0) return false;
       if (da < 0.0 && db < 0.0) continue;
       const double t = da / (da - db);
-      if (da >= 0.0) t0 = std::max(t0, t);
-      else t1 = std::min(t1, t);
+      if (da >= 0.0)
+        t0 = std::max(t0, t);
+      else
+        t1 = std::min(t1, t);
       if (!(t0 < t1)) return false;
     }
     return t0 < t1;

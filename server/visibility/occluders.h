@@ -22,9 +22,8 @@
 #pragma once
 
 #include <cstdint>
-#include <vector>
-
 #include <glm/glm.hpp>
+#include <vector>
 
 #include "common/core/box.h"
 #include "common/scene/scene.h"
@@ -34,15 +33,15 @@ namespace vistream {
 struct ConvexOccluder {
   enum class Kind : uint8_t { Solid, Polygon };
   Kind kind = Kind::Solid;
-  uint32_t object = 0;              // index into Scene::objects
+  uint32_t object = 0;  // index into Scene::objects
   // Solid: half-spaces dot(n, x) < d (outward n, unit length), already shrunk.
   // Polygon: the edge half-spaces within the polygon plane, already shrunk,
   // then one last entry (n, h): the slab of half-thickness h around the
   // supporting plane that holds every vertex (float noise).
-  std::vector<glm::dvec4> planes;   // (n.x, n.y, n.z, d)
-  glm::dvec4 plane{0.0};            // Polygon only: supporting plane (unit n, d)
-  Box3f bounds;                     // of the occluder region (for the acceleration structure)
-  double area = 0.0;                // surface area (solid) or polygon area, m^2
+  std::vector<glm::dvec4> planes;  // (n.x, n.y, n.z, d)
+  glm::dvec4 plane{0.0};           // Polygon only: supporting plane (unit n, d)
+  Box3f bounds;                    // of the occluder region (for the acceleration structure)
+  double area = 0.0;               // surface area (solid) or polygon area, m^2
   glm::dvec3 centre{0.0};
 };
 
@@ -60,22 +59,24 @@ struct OccluderSet {
 };
 
 struct OccluderOptions {
-  bool solids = true;              // closed convex components as solid occluders
-  bool polygons = true;            // convex planar polygons
+  bool solids = true;    // closed convex components as solid occluders
+  bool polygons = true;  // convex planar polygons
   // Occluders smaller than this across (solids: longest box side; polygons:
   // square root of the area) cost more tests than they cull. Leaving them out
   // only makes a PVS larger, never wrong. Tuned on bigcity, whose window
   // frames and sills would otherwise be 60% of all occluders.
-  double minOccluderSize = 1.0;    // metres
-  double minPolygonArea = 0.0;     // m^2; smaller polygons are not occluders
-  double coplanarTolerance = 1e-5; // metres (relative to 1 + coordinate size) for grouping
+  double minOccluderSize = 1.0;     // metres
+  double minPolygonArea = 0.0;      // m^2; smaller polygons are not occluders
+  double coplanarTolerance = 1e-5;  // metres (relative to 1 + coordinate size) for grouping
 };
 
 OccluderSet extractOccluders(const Scene& scene, const OccluderOptions& options = {});
 
 // Rounding margin for geometry of a given coordinate magnitude: far above the
 // error of double arithmetic on float inputs, far below anything visible.
-inline double occluderMargin(double magnitude) { return 1e-7 * (1.0 + magnitude); }
+inline double occluderMargin(double magnitude) {
+  return 1e-7 * (1.0 + magnitude);
+}
 
 // True if the open segment (a, b) passes through the occluder's region
 // (strictly inside: grazing never blocks).

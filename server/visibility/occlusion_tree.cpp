@@ -341,7 +341,8 @@ struct HalfSpace {
 // set they cut out of the box is a convex polytope; it is non-empty exactly
 // when one of its facets is, and every facet lies on a box face or on one of
 // the half-spaces' planes: so clip each of those polygons by all the others.
-bool boxMeetsHalfSpaces(const glm::dvec3& lo, const glm::dvec3& hi, const std::vector<HalfSpace>& cuts, double tol) {
+bool boxMeetsHalfSpaces(const glm::dvec3& lo, const glm::dvec3& hi,
+                        const std::vector<HalfSpace>& cuts, double tol) {
   std::vector<HalfSpace> all = cuts;
   for (int axis = 0; axis < 3; ++axis) {
     glm::dvec3 n(0.0);
@@ -356,13 +357,16 @@ bool boxMeetsHalfSpaces(const glm::dvec3& lo, const glm::dvec3& hi, const std::v
     // A square on plane j around the box centre's projection, larger than the box.
     const glm::dvec3 n = all[j].normal;
     const glm::dvec3 c = centre - (glm::dot(n, centre) - all[j].offset) * n;
-    const glm::dvec3 a = glm::normalize(std::abs(n.x) < 0.9 ? glm::cross(n, glm::dvec3(1, 0, 0)) : glm::cross(n, glm::dvec3(0, 1, 0)));
+    const glm::dvec3 a = glm::normalize(std::abs(n.x) < 0.9 ? glm::cross(n, glm::dvec3(1, 0, 0))
+                                                            : glm::cross(n, glm::dvec3(0, 1, 0)));
     const glm::dvec3 b = glm::cross(n, a);
-    Polygon3 poly = {c - size * a - size * b, c + size * a - size * b, c + size * a + size * b, c - size * a + size * b};
+    Polygon3 poly = {c - size * a - size * b, c + size * a - size * b, c + size * a + size * b,
+                     c - size * a + size * b};
     for (size_t i = 0; i < all.size() && !poly.empty(); ++i) {
       if (i == j) continue;
       g.resize(poly.size());
-      for (size_t v = 0; v < poly.size(); ++v) g[v] = glm::dot(all[i].normal, poly[v]) - all[i].offset + tol;
+      for (size_t v = 0; v < poly.size(); ++v)
+        g[v] = glm::dot(all[i].normal, poly[v]) - all[i].offset + tol;
       poly = clip(poly, g);
     }
     if (!poly.empty()) return true;
@@ -391,7 +395,8 @@ NodeVisibility OcclusionTree::classifyRelative(const glm::dvec3& lo, const glm::
     ++visited;
     if (id == kInLeaf || id == kOutLeaf) {
       bool& reached = id == kInLeaf ? reachedIn : reachedOut;
-      if (!reached && (straddled.size() < 2 || boxMeetsHalfSpaces(lo, hi, straddled, tol))) reached = true;
+      if (!reached && (straddled.size() < 2 || boxMeetsHalfSpaces(lo, hi, straddled, tol)))
+        reached = true;
       return;
     }
     const Node& node = nodes_[size_t(id)];

@@ -1,8 +1,11 @@
 #include "server/visibility/pvs_bake.h"
 
 #include <fcntl.h>
+#include <spdlog/spdlog.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for_each.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -10,10 +13,6 @@
 #include <map>
 #include <memory>
 #include <mutex>
-
-#include <spdlog/spdlog.h>
-#include <tbb/global_control.h>
-#include <tbb/parallel_for_each.h>
 
 #include "common/core/check.h"
 #include "common/core/error.h"
@@ -62,8 +61,8 @@ struct JournalRecord {
 // checksum and, with `decode`, that it names a cell below `cellLimit` and
 // holds a valid face list (faces below `faceLimit`): a record passes into
 // the database only if all of that holds.
-JournalRecord readJournalRecord(const uint8_t* data, size_t size, size_t pos, uint64_t cellLimit, uint32_t faceLimit,
-                                bool decode) {
+JournalRecord readJournalRecord(const uint8_t* data, size_t size, size_t pos, uint64_t cellLimit,
+                                uint32_t faceLimit, bool decode) {
   using Status = JournalRecord::Status;
   JournalRecord r;
   if (size - pos < kRecordHeadBytes) {
@@ -109,19 +108,21 @@ JournalRecord readJournalRecord(const uint8_t* data, size_t size, size_t pos, ui
 }
 
 // Journal: magic, fingerprint, then records
-// [index u32][count u32][bytes u32][face list][FNV-1a 64 of the 12 + bytes before it, u64], host byte order.
+// [index u32][count u32][bytes u32][face list][FNV-1a 64 of the 12 + bytes before it, u64], host
+// byte order.
 class Journal {
  public:
   // Opens (creating if needed) the journal at `path` and puts the cells of
   // its valid prefix into `done` (records for cells < cellLimit, with faces
   // < faceLimit).
-  Journal(const std::filesystem::path& path, uint64_t fingerprint, uint64_t cellLimit, uint32_t faceLimit,
-          std::map<uint32_t, std::vector<uint32_t>>& done)
+  Journal(const std::filesystem::path& path, uint64_t fingerprint, uint64_t cellLimit,
+          uint32_t faceLimit, std::map<uint32_t, std::vector<uint32_t>>& done)
       : path_(path) {
     const bool exists = std::filesystem::exists(path);
     if (exists) readExisting(fingerprint, cellLimit, faceLimit, done);
     fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-    if (fd_ < 0) throwInputError("{}: cannot open bake journal: {}", path.string(), std::strerror(errno));
+    if (fd_ < 0)
+      throwInputError("{}: cannot open bake journal: {}", path.string(), std::strerror(errno));
     if (::lseek(fd_, 0, SEEK_END) == 0) {
       char header[kJournalHeaderBytes];
       std::memcpy(header, kJournalMagic, 8);
@@ -185,15 +186,20 @@ class Journal {
     const size_t size = size_t(st.st_size);
     void* map = size ? ::mmap(nullptr, size, PROT_READ, MAP_PRIVATE, fd, 0) : nullptr;
     ::close(fd);
-    if (map == MAP_FAILED) throwInputError("{}: cannot map bake journal: {}", name, std::strerror(errno));
-    const std::unique_ptr<void, std::function<void(void*)>> unmap(map, [size](void* m) { ::munmap(m, size); });
+    if (map == MAP_FAILED)
+      throwInputError("{}: cannot map bake journal: {}", name, std::strerror(errno));
+    const std::unique_ptr<void, std::function<void(void*)>> unmap(
+        map, [size](void* m) { ::munmap(m, size); });
     const auto* data = static_cast<const uint8_t*>(map);
     size_t valid = 0;
     if (size < kJournalHeaderBytes) {
-      spdlog::warn("{}: bake journal is only {} bytes, less than its header; starting over", name, size);
-    } else if (std::memcmp(data, kJournalMagic, 6) == 0 && std::memcmp(data, kJournalMagic, 8) != 0) {
-      spdlog::warn("{}: bake journal of another format (magic '{}', this build writes '{}'); starting over", name,
-                   std::string(reinterpret_cast<const char*>(data), 7), std::string(kJournalMagic, 7));
+      spdlog::warn("{}: bake journal is only {} bytes, less than its header; starting over", name,
+                   size);
+    } else if (std::memcmp(data, kJournalMagic, 6) == 0 &&
+               std::memcmp(data, kJournalMagic, 8) != 0) {
+      spdlog::warn(
+          "{}: bake journal of another format (magic '{}', this build writes '{}'); starting over",
+          name, std::string(reinterpret_cast<const char*>(data), 7), std::string(kJournalMagic, 7));
     } else if (std::memcmp(data, kJournalMagic, 8) != 0) {
       spdlog::warn("{}: not a bake journal (bad magic); starting over", name);
     } else if (std::memcmp(data + 8, &fingerprint, 8) != 0) {
@@ -220,18 +226,23 @@ class Journal {
   // Says what is dropped from the bad record `bad` at `offset` on: its bytes
   // and how many well-formed records follow it (by their checksums; parsing
   // stops where the record chain breaks).
-  void warnDropped(const uint8_t* data, size_t size, size_t offset, size_t recordsBefore, const JournalRecord& bad,
-                   uint64_t cellLimit, uint32_t faceLimit) const {
+  void warnDropped(const uint8_t* data, size_t size, size_t offset, size_t recordsBefore,
+                   const JournalRecord& bad, uint64_t cellLimit, uint32_t faceLimit) const {
     if (bad.status == JournalRecord::Status::Incomplete) {
-      spdlog::warn("{}: incomplete record at byte offset {} ({}) after {} good records; dropping the last {} "
-                   "bytes (a bake killed mid-write leaves such a record, and so does a corrupt length field). "
-                   "Resuming from the {} good records",
-                   path_.string(), offset, bad.why, recordsBefore, size - offset, recordsBefore);
+      spdlog::warn(
+          "{}: incomplete record at byte offset {} ({}) after {} good records; dropping the last "
+          "{} "
+          "bytes (a bake killed mid-write leaves such a record, and so does a corrupt length "
+          "field). "
+          "Resuming from the {} good records",
+          path_.string(), offset, bad.why, recordsBefore, size - offset, recordsBefore);
       return;
     }
     std::string dropped;
     if (bad.end == 0) {
-      dropped = "that record and everything after it (with its length unusable, later records cannot be counted)";
+      dropped =
+          "that record and everything after it (with its length unusable, later records cannot be "
+          "counted)";
     } else {
       size_t after = 0, pos = bad.end;
       while (pos < size) {
@@ -240,12 +251,16 @@ class Journal {
         ++after;
         pos = r.end;
       }
-      dropped = fmt::format("that record and the {} record{} after it", after, after == 1 ? "" : "s");
-      if (pos < size) dropped += fmt::format(", then {} bytes that do not parse as records", size - pos);
+      dropped =
+          fmt::format("that record and the {} record{} after it", after, after == 1 ? "" : "s");
+      if (pos < size)
+        dropped += fmt::format(", then {} bytes that do not parse as records", size - pos);
     }
-    spdlog::warn("{}: corrupt record at byte offset {} ({}) after {} good records; dropping the {} bytes from "
-                 "there: {}. Resuming from the {} good records; the dropped cells are computed again",
-                 path_.string(), offset, bad.why, recordsBefore, size - offset, dropped, recordsBefore);
+    spdlog::warn(
+        "{}: corrupt record at byte offset {} ({}) after {} good records; dropping the {} bytes "
+        "from "
+        "there: {}. Resuming from the {} good records; the dropped cells are computed again",
+        path_.string(), offset, bad.why, recordsBefore, size - offset, dropped, recordsBefore);
   }
 
   std::filesystem::path path_;
@@ -274,8 +289,8 @@ ViewCellGrid bakeGrid(const Scene& scene, const FreeSpace& fs, const BakeOptions
   if (region.empty()) throwInputError("the bake region is empty");
   const glm::vec3 dims = glm::ceil(region.extent() / options.cellSize);
   if (double(dims.x) * double(dims.y) * double(dims.z) > 1e9)
-    throwInputError("cell size {}x{}x{} gives more than 10^9 cells", options.cellSize.x, options.cellSize.y,
-                    options.cellSize.z);
+    throwInputError("cell size {}x{}x{} gives more than 10^9 cells", options.cellSize.x,
+                    options.cellSize.y, options.cellSize.z);
   return ViewCellGrid(region, options.cellSize);
 }
 
@@ -304,8 +319,8 @@ std::vector<uint32_t> freeSpaceCells(const Scene&, const ViewCellGrid& grid, con
   return out;
 }
 
-BakeReport bakePvs(const Scene& scene, const EpsilonPvs& pvs, const FreeSpace& fs, const BakeOptions& options,
-                   const std::filesystem::path& out) {
+BakeReport bakePvs(const Scene& scene, const EpsilonPvs& pvs, const FreeSpace& fs,
+                   const BakeOptions& options, const std::filesystem::path& out) {
   if (options.shardCount == 0 || options.shardIndex >= options.shardCount)
     throwInputError("shard {}/{} is not valid (expected i/n with 0 <= i < n)", options.shardIndex,
                     options.shardCount);
@@ -330,7 +345,8 @@ BakeReport bakePvs(const Scene& scene, const EpsilonPvs& pvs, const FreeSpace& f
   std::map<uint64_t, std::vector<uint32_t>> blocks;
   for (uint32_t c : cells) {
     const glm::ivec3 ijk = grid.cellAt(c);
-    const uint64_t key = (uint64_t(ijk.z / 2) * uint64_t(grid.dims().y) + uint64_t(ijk.y)) * uint64_t(grid.dims().x) +
+    const uint64_t key = (uint64_t(ijk.z / 2) * uint64_t(grid.dims().y) + uint64_t(ijk.y)) *
+                             uint64_t(grid.dims().x) +
                          uint64_t(ijk.x / 2);
     blocks[key].push_back(c);
   }
@@ -342,8 +358,8 @@ BakeReport bakePvs(const Scene& scene, const EpsilonPvs& pvs, const FreeSpace& f
   for (const auto& b : mine) report.shardCells += b.size();
 
   std::map<uint32_t, std::vector<uint32_t>> done;
-  Journal journal(out.string() + ".journal", bakeFingerprint(header, options), grid.cellCount(), header.sceneFaces,
-                  done);
+  Journal journal(out.string() + ".journal", bakeFingerprint(header, options), grid.cellCount(),
+                  header.sceneFaces, done);
   std::mutex doneMutex;  // guards `done` while workers add cells
   std::atomic<size_t> progress{0};
   for (const auto& b : mine)
@@ -353,7 +369,8 @@ BakeReport bakePvs(const Scene& scene, const EpsilonPvs& pvs, const FreeSpace& f
   if (options.progress) options.progress(progress.load(), report.shardCells);
 
   std::optional<tbb::global_control> limit;
-  if (options.threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, options.threads);
+  if (options.threads > 0)
+    limit.emplace(tbb::global_control::max_allowed_parallelism, options.threads);
   std::atomic<size_t> computed{0};
   tbb::parallel_for_each(mine.begin(), mine.end(), [&](const std::vector<uint32_t>& block) {
     std::vector<uint32_t> pending;
@@ -398,12 +415,15 @@ BakeReport bakePvs(const Scene& scene, const EpsilonPvs& pvs, const FreeSpace& f
   writePvsDatabase(out, header, shardCells);
   journal.remove();
   report.timeMs = clock.ms();
-  const unsigned threads = options.threads ? options.threads : unsigned(tbb::info::default_concurrency());
-  report.meanCellMs = report.computedCells ? report.timeMs * threads / double(report.computedCells) : 0.0;
+  const unsigned threads =
+      options.threads ? options.threads : unsigned(tbb::info::default_concurrency());
+  report.meanCellMs =
+      report.computedCells ? report.timeMs * threads / double(report.computedCells) : 0.0;
   return report;
 }
 
-void mergePvsDatabases(const std::vector<std::filesystem::path>& inputs, const std::filesystem::path& out) {
+void mergePvsDatabases(const std::vector<std::filesystem::path>& inputs,
+                       const std::filesystem::path& out) {
   if (inputs.empty()) throwInputError("merge needs at least one database");
   std::map<uint32_t, std::vector<uint32_t>> cells;
   PvsDatabaseHeader header;
@@ -419,7 +439,8 @@ void mergePvsDatabases(const std::vector<std::filesystem::path>& inputs, const s
       auto faces = *db.cell(c);
       const auto [it, inserted] = cells.try_emplace(c, std::move(faces));
       if (!inserted && it->second != *db.cell(c))
-        throwInputError("{}: cell {} differs from the same cell in an earlier input", inputs[i].string(), c);
+        throwInputError("{}: cell {} differs from the same cell in an earlier input",
+                        inputs[i].string(), c);
     }
   }
   writePvsDatabase(out, header, cells);

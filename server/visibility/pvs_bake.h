@@ -42,8 +42,8 @@ namespace vistream {
 
 struct BakeOptions {
   glm::vec3 cellSize{4.0f, 4.0f, 4.0f};
-  std::optional<Box3f> region;      // local frame; default derived from the free space
-  unsigned threads = 0;             // 0: all cores
+  std::optional<Box3f> region;  // local frame; default derived from the free space
+  unsigned threads = 0;         // 0: all cores
   uint32_t shardIndex = 0, shardCount = 1;
   bool coarseToFine = true;
   PvsOptions pvs;
@@ -51,25 +51,27 @@ struct BakeOptions {
 };
 
 struct BakeReport {
-  size_t gridCells = 0;        // cells in the grid
-  size_t freeCells = 0;        // cells over the free space (all shards)
-  size_t shardCells = 0;       // cells this shard bakes
-  size_t resumedCells = 0;     // this shard's cells taken from the journal
+  size_t gridCells = 0;     // cells in the grid
+  size_t freeCells = 0;     // cells over the free space (all shards)
+  size_t shardCells = 0;    // cells this shard bakes
+  size_t resumedCells = 0;  // this shard's cells taken from the journal
   size_t computedCells = 0;
   double timeMs = 0.0;
-  double meanCellMs = 0.0;     // per computed cell, wall time x threads / cells
-  uint64_t totalFaces = 0;     // sum of PVS sizes of this shard's cells
+  double meanCellMs = 0.0;  // per computed cell, wall time x threads / cells
+  uint64_t totalFaces = 0;  // sum of PVS sizes of this shard's cells
 };
 
 // The grid and the free-space cells a bake would use (shared by bake and tests).
 ViewCellGrid bakeGrid(const Scene& scene, const FreeSpace& freeSpace, const BakeOptions& options);
-std::vector<uint32_t> freeSpaceCells(const Scene& scene, const ViewCellGrid& grid, const FreeSpace& freeSpace);
+std::vector<uint32_t> freeSpaceCells(const Scene& scene, const ViewCellGrid& grid,
+                                     const FreeSpace& freeSpace);
 
 BakeReport bakePvs(const Scene& scene, const EpsilonPvs& pvs, const FreeSpace& freeSpace,
                    const BakeOptions& options, const std::filesystem::path& out);
 
 // Merges shard databases of one scene, grid and method into one. Throws
 // InputError naming the file that does not match the first.
-void mergePvsDatabases(const std::vector<std::filesystem::path>& inputs, const std::filesystem::path& out);
+void mergePvsDatabases(const std::vector<std::filesystem::path>& inputs,
+                       const std::filesystem::path& out);
 
 }  // namespace vistream

@@ -1,19 +1,18 @@
 #include "server/visibility/pvs_database.h"
 
 #include <fcntl.h>
+#include <spdlog/spdlog.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_invoke.h>
+#include <tbb/parallel_reduce.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cstring>
 #include <fstream>
 #include <limits>
-
-#include <spdlog/spdlog.h>
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_invoke.h>
-#include <tbb/parallel_reduce.h>
 
 #include "common/core/error.h"
 #include "pvs_database_generated.h"
@@ -29,10 +28,22 @@ uint64_t fnvValue(uint64_t h, const T& v) {
   return fnv1a64(&v, sizeof(T), h);
 }
 
-void putU32(uint8_t* p, uint32_t v) { for (int i = 0; i < 4; ++i) p[i] = uint8_t(v >> (8 * i)); }
-void putU64(uint8_t* p, uint64_t v) { for (int i = 0; i < 8; ++i) p[i] = uint8_t(v >> (8 * i)); }
-uint32_t getU32(const uint8_t* p) { uint32_t v = 0; for (int i = 0; i < 4; ++i) v |= uint32_t(p[i]) << (8 * i); return v; }
-uint64_t getU64(const uint8_t* p) { uint64_t v = 0; for (int i = 0; i < 8; ++i) v |= uint64_t(p[i]) << (8 * i); return v; }
+void putU32(uint8_t* p, uint32_t v) {
+  for (int i = 0; i < 4; ++i) p[i] = uint8_t(v >> (8 * i));
+}
+void putU64(uint8_t* p, uint64_t v) {
+  for (int i = 0; i < 8; ++i) p[i] = uint8_t(v >> (8 * i));
+}
+uint32_t getU32(const uint8_t* p) {
+  uint32_t v = 0;
+  for (int i = 0; i < 4; ++i) v |= uint32_t(p[i]) << (8 * i);
+  return v;
+}
+uint64_t getU64(const uint8_t* p) {
+  uint64_t v = 0;
+  for (int i = 0; i < 8; ++i) v |= uint64_t(p[i]) << (8 * i);
+  return v;
+}
 
 // Reads one LEB128 varint of at most 5 bytes (a 32-bit value needs no more)
 // at `pos`; false if it is cut off or longer.
@@ -54,8 +65,8 @@ inline bool readVarint(const uint8_t* data, size_t size, size_t& pos, uint64_t& 
 // increasing IDs below `faceLimit` (<= 2^32). The one decoder behind
 // decodeFaceList, open()'s validation and cell(), so they cannot disagree.
 template <typename Emit>
-std::optional<std::string> scanFaceList(const uint8_t* data, size_t size, uint32_t expected, uint64_t faceLimit,
-                                        Emit&& emit) {
+std::optional<std::string> scanFaceList(const uint8_t* data, size_t size, uint32_t expected,
+                                        uint64_t faceLimit, Emit&& emit) {
   faceLimit = std::min(faceLimit, uint64_t(1) << 32);  // face IDs are 32-bit
   // Every face takes at least one byte: this also bounds the caller's reserve().
   if (expected > size) return fmt::format("face list claims {} faces in {} bytes", expected, size);
@@ -65,17 +76,21 @@ std::optional<std::string> scanFaceList(const uint8_t* data, size_t size, uint32
   while (pos < size) {
     const size_t start = pos;
     uint64_t value = 0;
-    if (!readVarint(data, size, pos, value)) return fmt::format("face list has a malformed varint at byte {}", start);
+    if (!readVarint(data, size, pos, value))
+      return fmt::format("face list has a malformed varint at byte {}", start);
     if (count > 0 && value == 0)
-      return fmt::format("face list is not strictly increasing at entry {} (face {} repeated)", count, prev);
+      return fmt::format("face list is not strictly increasing at entry {} (face {} repeated)",
+                         count, prev);
     const uint64_t face = count == 0 ? value : prev + value;  // < 2^32 + 2^35: no overflow
     if (face >= faceLimit)
-      return fmt::format("face list entry {} is face {}, not below the face count {}", count, face, faceLimit);
+      return fmt::format("face list entry {} is face {}, not below the face count {}", count, face,
+                         faceLimit);
     emit(uint32_t(face));
     prev = face;
     ++count;
   }
-  if (count != expected) return fmt::format("face list holds {} faces, header says {}", count, expected);
+  if (count != expected)
+    return fmt::format("face list holds {} faces, header says {}", count, expected);
   return std::nullopt;
 }
 
@@ -120,8 +135,8 @@ ViewCellGrid PvsDatabaseHeader::grid() const {
 }
 
 bool PvsDatabaseHeader::compatible(const PvsDatabaseHeader& o) const {
-  return sceneFingerprint == o.sceneFingerprint && sceneFaces == o.sceneFaces && gridLo == o.gridLo &&
-         cellSize == o.cellSize && dims == o.dims && method == o.method;
+  return sceneFingerprint == o.sceneFingerprint && sceneFaces == o.sceneFaces &&
+         gridLo == o.gridLo && cellSize == o.cellSize && dims == o.dims && method == o.method;
 }
 
 std::vector<uint8_t> encodeFaceList(const std::vector<uint32_t>& faces) {
@@ -140,10 +155,12 @@ std::vector<uint8_t> encodeFaceList(const std::vector<uint32_t>& faces) {
   return out;
 }
 
-std::vector<uint32_t> decodeFaceList(const uint8_t* data, size_t size, uint32_t expected, uint64_t faceLimit) {
+std::vector<uint32_t> decodeFaceList(const uint8_t* data, size_t size, uint32_t expected,
+                                     uint64_t faceLimit) {
   std::vector<uint32_t> out;
   if (expected <= size) out.reserve(expected);
-  if (auto fault = scanFaceList(data, size, expected, faceLimit, [&](uint32_t f) { out.push_back(f); }))
+  if (auto fault =
+          scanFaceList(data, size, expected, faceLimit, [&](uint32_t f) { out.push_back(f); }))
     throw InputError(*fault);
   return out;
 }
@@ -155,15 +172,16 @@ void writePvsDatabase(const std::filesystem::path& path, const PvsDatabaseHeader
   cellOffsets.reserve(cells.size());
   for (const auto& [index, faces] : cells) {
     const auto bytes = encodeFaceList(faces);
-    cellOffsets.push_back(pvsdb::CreateCellPvs(b, index, uint32_t(faces.size()), b.CreateVector(bytes)));
+    cellOffsets.push_back(
+        pvsdb::CreateCellPvs(b, index, uint32_t(faces.size()), b.CreateVector(bytes)));
   }
   const std::vector<double> origin = {h.origin.x, h.origin.y, h.origin.z};
   const std::vector<float> lo = {h.gridLo.x, h.gridLo.y, h.gridLo.z};
   const std::vector<float> size = {h.cellSize.x, h.cellSize.y, h.cellSize.z};
   const std::vector<int> dims = {h.dims.x, h.dims.y, h.dims.z};
-  const auto root = pvsdb::CreateDatabaseDirect(b, kPvsDbVersion, h.sceneName.c_str(), h.sceneFingerprint,
-                                                h.sceneFaces, &origin, &lo, &size, &dims, h.method.c_str(),
-                                                &cellOffsets);
+  const auto root = pvsdb::CreateDatabaseDirect(b, kPvsDbVersion, h.sceneName.c_str(),
+                                                h.sceneFingerprint, h.sceneFaces, &origin, &lo,
+                                                &size, &dims, h.method.c_str(), &cellOffsets);
   pvsdb::FinishDatabaseBuffer(b, root);
 
   uint8_t header[kHeaderBytes] = {};
@@ -174,7 +192,8 @@ void writePvsDatabase(const std::filesystem::path& path, const PvsDatabaseHeader
 
   const std::filesystem::path tmp = path.string() + ".tmp";
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  if (fd < 0) throwInputError("{}: cannot open for writing: {}", tmp.string(), std::strerror(errno));
+  if (fd < 0)
+    throwInputError("{}: cannot open for writing: {}", tmp.string(), std::strerror(errno));
   auto writeAll = [&](const uint8_t* p, size_t n) {
     while (n > 0) {
       const ssize_t w = ::write(fd, p, n);
@@ -197,7 +216,9 @@ void writePvsDatabase(const std::filesystem::path& path, const PvsDatabaseHeader
   if (ec) throwInputError("{}: cannot rename into place: {}", path.string(), ec.message());
 }
 
-PvsDatabase::PvsDatabase(PvsDatabase&& o) noexcept { *this = std::move(o); }
+PvsDatabase::PvsDatabase(PvsDatabase&& o) noexcept {
+  *this = std::move(o);
+}
 
 PvsDatabase& PvsDatabase::operator=(PvsDatabase&& o) noexcept {
   if (this != &o) {
@@ -240,14 +261,15 @@ PvsDatabase PvsDatabase::open(const std::filesystem::path& path) {
   if (std::memcmp(p, kMagic, 8) != 0) throwInputError("{}: not a PVS database (bad magic)", name);
   const uint32_t version = getU32(p + 8);
   if (version != kPvsDbVersion)
-    throwInputError("{}: PVS database format version {} is not supported (this build reads version {}{}); "
-                    "re-bake it with this build's vistream-pvs bake",
-                    name, version, kPvsDbVersion,
-                    version == 1 ? "; version 1 seeded its checksum with a wrong FNV offset basis" : "");
+    throwInputError(
+        "{}: PVS database format version {} is not supported (this build reads version {}{}); "
+        "re-bake it with this build's vistream-pvs bake",
+        name, version, kPvsDbVersion,
+        version == 1 ? "; version 1 seeded its checksum with a wrong FNV offset basis" : "");
   const uint64_t payload = getU64(p + 16);
   if (payload != size - kHeaderBytes)
-    throwInputError("{}: truncated or padded: header says {} payload bytes, file has {}", name, payload,
-                    size - kHeaderBytes);
+    throwInputError("{}: truncated or padded: header says {} payload bytes, file has {}", name,
+                    payload, size - kHeaderBytes);
   // The checksum and the structure (verifier, header fields, every cell's
   // face list) are two passes over the payload of about the same length, so
   // they run side by side. The verifier makes reading the payload safe
@@ -275,9 +297,11 @@ void PvsDatabase::readPayload() {
   // The verifier's default cap of 10^6 tables would refuse big bakes (one
   // table per cell); every table takes at least 4 bytes, so this cap still
   // bounds verification by the file's size.
-  flatbuffers::Verifier verifier(payload, payloadBytes, 64,
-                                 flatbuffers::uoffset_t(std::min<uint64_t>(payloadBytes / 4 + 1, 0xffffffffu)));
-  if (!pvsdb::VerifyDatabaseBuffer(verifier)) throwInputError("{}: database structure fails verification", name);
+  flatbuffers::Verifier verifier(
+      payload, payloadBytes, 64,
+      flatbuffers::uoffset_t(std::min<uint64_t>(payloadBytes / 4 + 1, 0xffffffffu)));
+  if (!pvsdb::VerifyDatabaseBuffer(verifier))
+    throwInputError("{}: database structure fails verification", name);
   const auto* root = pvsdb::GetDatabase(payload);
   root_ = root;
   auto vec3 = [&](const auto* v, const char* what) {
@@ -307,9 +331,11 @@ void PvsDatabase::readPayload() {
   for (flatbuffers::uoffset_t n = 0; n < cells->size(); ++n) {
     const uint32_t index = cells->Get(n)->index();
     if (int64_t(index) <= prev || index >= cellsTotal)
-      throwInputError("{}: cell entry {} has index {}: cell indices must be increasing and inside the grid of {} "
-                      "cells",
-                      name, n, index, cellsTotal);
+      throwInputError(
+          "{}: cell entry {} has index {}: cell indices must be increasing and inside the grid of "
+          "{} "
+          "cells",
+          name, n, index, cellsTotal);
     prev = index;
   }
   // Every face list is decoded here, once, so that cell() cannot fail later
@@ -319,8 +345,8 @@ void PvsDatabase::readPayload() {
   auto listFault = [&](flatbuffers::uoffset_t n) {
     const auto* c = cells->Get(n);
     const auto* bytes = c->faces();
-    return scanFaceList(bytes ? bytes->data() : nullptr, bytes ? bytes->size() : 0, c->face_count(), h.sceneFaces,
-                        [](uint32_t) {});
+    return scanFaceList(bytes ? bytes->data() : nullptr, bytes ? bytes->size() : 0, c->face_count(),
+                        h.sceneFaces, [](uint32_t) {});
   };
   using Range = tbb::blocked_range<flatbuffers::uoffset_t>;
   constexpr flatbuffers::uoffset_t kNone = std::numeric_limits<flatbuffers::uoffset_t>::max();
@@ -335,7 +361,8 @@ void PvsDatabase::readPayload() {
   if (firstBad != kNone) {
     const uint32_t index = cells->Get(firstBad)->index();
     const glm::ivec3 ijk = cellOfIndex(index, h.dims);
-    throwInputError("{}: cell {} (i,j,k {},{},{}): {}", name, index, ijk.x, ijk.y, ijk.z, *listFault(firstBad));
+    throwInputError("{}: cell {} (i,j,k {},{},{}): {}", name, index, ijk.x, ijk.y, ijk.z,
+                    *listFault(firstBad));
   }
 }
 
@@ -361,12 +388,15 @@ std::optional<std::vector<uint32_t>> PvsDatabase::cell(uint32_t linearIndex) con
   faces.reserve(bytes ? std::min<size_t>(c->face_count(), bytes->size()) : 0);
   // open() decoded this list with the same function; it can only fail if the
   // file changed under the mapping since.
-  if (auto fault = scanFaceList(bytes ? bytes->data() : nullptr, bytes ? bytes->size() : 0, c->face_count(),
-                                header_.sceneFaces, [&](uint32_t f) { faces.push_back(f); })) {
+  if (auto fault =
+          scanFaceList(bytes ? bytes->data() : nullptr, bytes ? bytes->size() : 0, c->face_count(),
+                       header_.sceneFaces, [&](uint32_t f) { faces.push_back(f); })) {
     const glm::ivec3 ijk = cellOfIndex(linearIndex, header_.dims);
-    spdlog::error("{}: cell {} (i,j,k {},{},{}): {} (the file changed after it was opened?); treating the cell "
-                  "as not baked",
-                  path_.string(), linearIndex, ijk.x, ijk.y, ijk.z, *fault);
+    spdlog::error(
+        "{}: cell {} (i,j,k {},{},{}): {} (the file changed after it was opened?); treating the "
+        "cell "
+        "as not baked",
+        path_.string(), linearIndex, ijk.x, ijk.y, ijk.z, *fault);
     return std::nullopt;
   }
   return faces;

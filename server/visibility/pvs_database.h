@@ -37,12 +37,11 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <glm/glm.hpp>
 #include <map>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <glm/glm.hpp>
 
 #include "common/scene/scene.h"
 #include "server/visibility/view_cell_grid.h"

@@ -6,7 +6,8 @@
 
 namespace vistream {
 
-ViewCellGrid::ViewCellGrid(const Box3f& region, const glm::vec3& cellSize) : lo_(region.lo), size_(cellSize) {
+ViewCellGrid::ViewCellGrid(const Box3f& region, const glm::vec3& cellSize)
+    : lo_(region.lo), size_(cellSize) {
   VS_CHECK(cellSize.x > 0.0f && cellSize.y > 0.0f && cellSize.z > 0.0f);
   VS_CHECK(!region.empty());
   const glm::vec3 ext = region.extent();

@@ -9,9 +9,8 @@
 #pragma once
 
 #include <cstdint>
-#include <optional>
-
 #include <glm/glm.hpp>
+#include <optional>
 
 #include "common/core/box.h"
 

@@ -12,7 +12,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   vistream::wire::FrameDecoder decoder(1u << 16);
   // Feed in two pieces to exercise reassembly.
   const size_t half = size / 2;
-  for (auto piece : {std::span<const uint8_t>(data, half), std::span<const uint8_t>(data + half, size - half)}) {
+  for (auto piece :
+       {std::span<const uint8_t>(data, half), std::span<const uint8_t>(data + half, size - half)}) {
     if (!decoder.feed(piece)) break;
     while (auto frame = decoder.next()) {
       const auto* env = vistream::wire::envelopeOf(*frame);

@@ -35,30 +35,38 @@ std::string streetObj() {
   return o;
 }
 
-const char* kWalk = "t,x,y,z,yaw_deg,pitch_deg\n0,0,1.7,10,0,0\n0.1,0,1.7,9.9,2,0\n0.2,0,1.7,9.8,4,1\n";
+const char* kWalk =
+    "t,x,y,z,yaw_deg,pitch_deg\n0,0,1.7,10,0,0\n0.1,0,1.7,9.9,2,0\n0.2,0,1.7,9.8,4,1\n";
 
-nlohmann::json parseJson(const std::string& text) { return nlohmann::json::parse(text); }
+nlohmann::json parseJson(const std::string& text) {
+  return nlohmann::json::parse(text);
+}
 
 TEST(ClientTool, AHeadlessWalkWritesFramesAndTheJsonContract) {
   vistream::testing::TempDir dir;
   const fs::path scene = dir.write("street.obj", streetObj());
   const fs::path path = dir.write("walk.csv", kWalk);
   const fs::path out = dir.path() / "frames";
-  const auto r = runTool("vistream-client", "--scene " + scene.string() + " --headless --path " + path.string() +
-                                                " --frames 3 --size 160x120 --near-distance 40 --polygon-budget 0 --out " + out.string() +
-                                                " --json");
+  const auto r =
+      runTool("vistream-client",
+              "--scene " + scene.string() + " --headless --path " + path.string() +
+                  " --frames 3 --size 160x120 --near-distance 40 --polygon-budget 0 --out " +
+                  out.string() + " --json");
   ASSERT_EQ(r.status, 0) << r.err;
   const auto j = parseJson(r.out);
   EXPECT_EQ(j["frames"], 3);
   EXPECT_GT(j["mean_frame_ms"].get<double>(), 0.0);
-  for (const char* k : {"polygon", "horizon", "cache", "ray_hit", "ray_miss"}) EXPECT_TRUE(j["pixels"].contains(k)) << k;
+  for (const char* k : {"polygon", "horizon", "cache", "ray_hit", "ray_miss"})
+    EXPECT_TRUE(j["pixels"].contains(k)) << k;
   ASSERT_EQ(j["per_frame"].size(), 3u);
   for (const auto& f : j["per_frame"]) {
     const auto& p = f["pixels"];
-    const size_t total = p["polygon"].get<size_t>() + p["horizon"].get<size_t>() + p["cache"].get<size_t>() +
-                         p["ray_hit"].get<size_t>() + p["ray_miss"].get<size_t>() + p["background"].get<size_t>();
+    const size_t total = p["polygon"].get<size_t>() + p["horizon"].get<size_t>() +
+                         p["cache"].get<size_t>() + p["ray_hit"].get<size_t>() +
+                         p["ray_miss"].get<size_t>() + p["background"].get<size_t>();
     EXPECT_EQ(total, 160u * 120u) << "every pixel has exactly one class";
-    EXPECT_TRUE(f["stages"]["far_field"]["ran"].get<bool>()) << "the street reaches beyond d = 40 m";
+    EXPECT_TRUE(f["stages"]["far_field"]["ran"].get<bool>())
+        << "the street reaches beyond d = 40 m";
   }
   for (int i = 0; i < 3; ++i) {
     const auto img = vistream::readPng(out / ("frame_0000" + std::to_string(i) + ".png"));
@@ -73,17 +81,20 @@ TEST(ClientTool, TheThreeModesRenderTheSameImagesSideBySide) {
   const fs::path path = dir.write("walk.csv", kWalk);
   std::map<std::string, nlohmann::json> runs;
   for (const std::string mode : {"pipeline", "raycast-all", "geometry-all"}) {
-    const auto r = runTool("vistream-client", "--scene " + scene.string() + " --headless --path " + path.string() +
-                                                  " --size 200x150 --near-distance 40 --polygon-budget 0 --mode " + mode + " --out " +
-                                                  (dir.path() / mode).string() + " --json");
+    const auto r = runTool("vistream-client",
+                           "--scene " + scene.string() + " --headless --path " + path.string() +
+                               " --size 200x150 --near-distance 40 --polygon-budget 0 --mode " +
+                               mode + " --out " + (dir.path() / mode).string() + " --json");
     ASSERT_EQ(r.status, 0) << mode << ": " << r.err;
     runs[mode] = parseJson(r.out);
   }
   for (const auto& f : runs["raycast-all"]["per_frame"])
-    EXPECT_EQ(f["pixels"]["ray_hit"].get<size_t>() + f["pixels"]["ray_miss"].get<size_t>(), 200u * 150u);
+    EXPECT_EQ(f["pixels"]["ray_hit"].get<size_t>() + f["pixels"]["ray_miss"].get<size_t>(),
+              200u * 150u);
   for (const auto& f : runs["geometry-all"]["per_frame"]) {
     EXPECT_EQ(f["pixels"]["ray_hit"].get<size_t>() + f["pixels"]["ray_miss"].get<size_t>(), 0u);
-    EXPECT_EQ(f["pixels"]["polygon"].get<size_t>() + f["pixels"]["background"].get<size_t>(), 200u * 150u);
+    EXPECT_EQ(f["pixels"]["polygon"].get<size_t>() + f["pixels"]["background"].get<size_t>(),
+              200u * 150u);
   }
   for (int i = 0; i < 3; ++i) {
     const std::string name = "frame_0000" + std::to_string(i) + ".png";
@@ -102,21 +113,23 @@ TEST(ClientTool, ConnectedHeadlessRendersWhatTheServerStreams) {
   const std::string bin = VISTREAM_BIN_DIR, d = dir.path().string();
   // The server streams within 400 m, so it sends the whole street and the
   // connected frames must match the local ones.
-  const std::string script = bin + "/vistream-server --scene " + scene.string() + " --port 0 --port-file " + d +
-                             "/port --radius 400 --log-level warn > " + d + "/server.log 2>&1 & echo $! > " + d +
-                             "/pid; for i in $(seq 1 300); do [ -s " + d + "/port ] && break; sleep 0.1; done; " + bin +
-                             "/vistream-client --host 127.0.0.1 --port $(cat " + d + "/port) --headless --path " +
-                             path.string() + " --size 160x120 --near-distance 40 --out " + d + "/net --json > " + d +
-                             "/net.json 2> " + d + "/client.err; echo $? > " + d + "/status; kill -TERM $(cat " + d +
-                             "/pid); wait $(cat " + d + "/pid) 2>/dev/null";
+  const std::string script =
+      bin + "/vistream-server --scene " + scene.string() + " --port 0 --port-file " + d +
+      "/port --radius 400 --log-level warn > " + d + "/server.log 2>&1 & echo $! > " + d +
+      "/pid; for i in $(seq 1 300); do [ -s " + d + "/port ] && break; sleep 0.1; done; " + bin +
+      "/vistream-client --host 127.0.0.1 --port $(cat " + d + "/port) --headless --path " +
+      path.string() + " --size 160x120 --near-distance 40 --out " + d + "/net --json > " + d +
+      "/net.json 2> " + d + "/client.err; echo $? > " + d + "/status; kill -TERM $(cat " + d +
+      "/pid); wait $(cat " + d + "/pid) 2>/dev/null";
   ASSERT_EQ(std::system(("bash -c '" + script + "'").c_str()), 0);
   std::ifstream st(dir.path() / "status");
   int status = -1;
   st >> status;
   std::ifstream err(dir.path() / "client.err");
   ASSERT_EQ(status, 0) << std::string((std::istreambuf_iterator<char>(err)), {});
-  const auto local = runTool("vistream-client", "--scene " + scene.string() + " --headless --path " + path.string() +
-                                                    " --size 160x120 --near-distance 40 --out " + d + "/local --json");
+  const auto local = runTool("vistream-client",
+                             "--scene " + scene.string() + " --headless --path " + path.string() +
+                                 " --size 160x120 --near-distance 40 --out " + d + "/local --json");
   ASSERT_EQ(local.status, 0) << local.err;
   for (int i = 0; i < 3; ++i) {
     const std::string name = "frame_0000" + std::to_string(i) + ".png";
@@ -140,7 +153,8 @@ TEST(ClientTool, BadArgumentsGetAClearErrorAndANonZeroExit) {
       {common + " --horizon-subsample 0", "--horizon-subsample"},
       {"--headless --path " + path.string(), "--scene"},
       {"--scene " + scene.string() + " --headless", "--path"},
-      {"--scene " + scene.string() + " --headless --path " + (dir.path() / "missing.csv").string(), "missing.csv"},
+      {"--scene " + scene.string() + " --headless --path " + (dir.path() / "missing.csv").string(),
+       "missing.csv"},
       {"--host 127.0.0.1 --port 1 --headless --path " + path.string(), "127.0.0.1:1"},
   };
   for (const auto& [args, mention] : cases) {
@@ -162,12 +176,16 @@ TEST(ClientTool, AServerThatSendsGarbageEndsTheClientWithAClearError) {
   const fs::path fake = dir.write("fake.py",
                                   "import socket\n"
                                   "s = socket.socket(); s.bind(('127.0.0.1', 0)); s.listen(1)\n"
-                                  "open('" + d + "/port', 'w').write(str(s.getsockname()[1]))\n"
-                                  "c, _ = s.accept(); c.sendall(b'HTTP/1.1 400 Bad Request\\r\\n\\r\\n'); c.recv(1024); c.close()\n");
+                                  "open('" +
+                                      d +
+                                      "/port', 'w').write(str(s.getsockname()[1]))\n"
+                                      "c, _ = s.accept(); c.sendall(b'HTTP/1.1 400 Bad "
+                                      "Request\\r\\n\\r\\n'); c.recv(1024); c.close()\n");
   const std::string script = "python3 " + fake.string() + " & for i in $(seq 1 100); do [ -s " + d +
                              "/port ] && break; sleep 0.1; done; " + VISTREAM_BIN_DIR +
-                             "/vistream-client --host 127.0.0.1 --port $(cat " + d + "/port) --headless --path " +
-                             path.string() + " > " + d + "/out 2> " + d + "/err; echo $? > " + d + "/status; wait";
+                             "/vistream-client --host 127.0.0.1 --port $(cat " + d +
+                             "/port) --headless --path " + path.string() + " > " + d + "/out 2> " +
+                             d + "/err; echo $? > " + d + "/status; wait";
   ASSERT_EQ(std::system(("bash -c '" + script + "'").c_str()), 0);
   std::ifstream st(dir.path() / "status");
   int status = 0;

@@ -1,13 +1,13 @@
 #include "client/farfield/field_grid.h"
 
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
 #include <random>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "common/raycast/ray_query.h"
 
@@ -43,7 +43,9 @@ RenderGeometry randomGeometry(uint32_t seed, int n) {
   return g;
 }
 
-float horizontalDistance(glm::vec3 a, glm::vec3 b) { return glm::length(glm::vec2(a.x - b.x, a.z - b.z)); }
+float horizontalDistance(glm::vec3 a, glm::vec3 b) {
+  return glm::length(glm::vec2(a.x - b.x, a.z - b.z));
+}
 
 // Strictly inside the view frustum (exact camera-basis geometry, 0.1% margin).
 bool insideFrustum(const Camera& c, glm::vec3 p) {
@@ -93,7 +95,8 @@ TEST(FieldGrid, NearFieldListsEachTriangleAtMostOnce) {
         grid.nearField(cam, d, out, stamp, stampValue);
         std::vector<uint32_t> sorted = out;
         std::sort(sorted.begin(), sorted.end());
-        EXPECT_EQ(std::adjacent_find(sorted.begin(), sorted.end()), sorted.end()) << "cell " << cell << " d " << d;
+        EXPECT_EQ(std::adjacent_find(sorted.begin(), sorted.end()), sorted.end())
+            << "cell " << cell << " d " << d;
         EXPECT_TRUE(sorted.empty() || sorted.back() < g.size());
       }
   }
@@ -117,7 +120,8 @@ TEST(FieldGrid, NearFieldHoldsEveryTriangleAPixelRaySeesWithinD) {
         const glm::vec3 dir = cam.rayDirection(float(x) + 0.5f, float(y) + 0.5f);
         rays->allHits(Ray{cam.eye, dir, cam.zNear, cam.zFar}, hits);
         for (const Hit& h : hits)
-          seenAt[h.triangle] = std::min(seenAt[h.triangle], horizontalDistance(cam.eye + h.t * dir, cam.eye));
+          seenAt[h.triangle] =
+              std::min(seenAt[h.triangle], horizontalDistance(cam.eye + h.t * dir, cam.eye));
       }
     for (const FieldGrid& grid : grids) {
       std::vector<uint32_t> out, stamp;
@@ -146,7 +150,8 @@ TEST(FieldGrid, NearFieldHoldsEveryTriangleWithAPointInTheFrustumWithinD) {
   // Points on each triangle: corners, edge midpoints, centroid, random ones.
   std::vector<std::vector<glm::vec3>> samples(g.size());
   for (size_t t = 0; t < g.size(); ++t) {
-    const glm::vec3 a = g.triangles.vertex(t, 0), b = g.triangles.vertex(t, 1), c = g.triangles.vertex(t, 2);
+    const glm::vec3 a = g.triangles.vertex(t, 0), b = g.triangles.vertex(t, 1),
+                    c = g.triangles.vertex(t, 2);
     samples[t] = {a, b, c, 0.5f * (a + b), 0.5f * (b + c), 0.5f * (c + a), (a + b + c) / 3.0f};
     for (int k = 0; k < 16; ++k) {
       float u = U(), v = U();
@@ -190,7 +195,8 @@ TEST(FieldGrid, NearFieldLeavesOutTrianglesFartherThanDPlusACellDiagonal) {
       for (float d : {0.0f, 5.0f, 30.0f, 120.0f}) {
         grid.nearField(cam, d, out, stamp, stampValue);
         size_t tooFar = 0;
-        for (uint32_t t : out) tooFar += rectangleDistance(g.triangles, t, cam.eye) > (d + reach) * 1.0001f + 1e-3f;
+        for (uint32_t t : out)
+          tooFar += rectangleDistance(g.triangles, t, cam.eye) > (d + reach) * 1.0001f + 1e-3f;
         EXPECT_EQ(tooFar, 0u) << "cell " << grid.cellSize() << " d " << d;
         leftOut += g.size() - out.size();
       }
@@ -244,8 +250,8 @@ TEST(FieldGrid, AnythingBeyondIsFalseWhenEveryVertexLiesACellDiagonalWithinD) {
       }
   }
   EXPECT_GT(cases, 0u);
-  EXPECT_EQ(wrong, 0u) << "of " << cases << "; e.g. eye (" << example.x << ", " << example.z << "), d " << exampleD
-                       << ", farthest vertex " << exampleFar;
+  EXPECT_EQ(wrong, 0u) << "of " << cases << "; e.g. eye (" << example.x << ", " << example.z
+                       << "), d " << exampleD << ", farthest vertex " << exampleFar;
 }
 
 }  // namespace

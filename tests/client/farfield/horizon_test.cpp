@@ -1,5 +1,7 @@
 #include "client/farfield/horizon.h"
 
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -7,8 +9,6 @@
 #include <random>
 #include <sstream>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "common/raycast/ray_query.h"
 #include "tests/common/support/box_scenes.h"
@@ -49,9 +49,12 @@ double horizontalDistance(const FlatTriangles& f, size_t t, glm::vec3 eye) {
   const glm::dvec2 p(eye.x, eye.z);
   std::array<glm::dvec2, 3> v;
   for (int k = 0; k < 3; ++k) v[size_t(k)] = {f.vertex(t, k).x, f.vertex(t, k).z};
-  auto cross = [](glm::dvec2 a, glm::dvec2 b, glm::dvec2 q) { return (b.x - a.x) * (q.y - a.y) - (b.y - a.y) * (q.x - a.x); };
+  auto cross = [](glm::dvec2 a, glm::dvec2 b, glm::dvec2 q) {
+    return (b.x - a.x) * (q.y - a.y) - (b.y - a.y) * (q.x - a.x);
+  };
   const double c0 = cross(v[0], v[1], p), c1 = cross(v[1], v[2], p), c2 = cross(v[2], v[0], p);
-  if (cross(v[0], v[1], v[2]) != 0.0 && ((c0 >= 0 && c1 >= 0 && c2 >= 0) || (c0 <= 0 && c1 <= 0 && c2 <= 0)))
+  if (cross(v[0], v[1], v[2]) != 0.0 &&
+      ((c0 >= 0 && c1 >= 0 && c2 >= 0) || (c0 <= 0 && c1 <= 0 && c2 <= 0)))
     return 0.0;
   double best = std::numeric_limits<double>::infinity();
   for (size_t k = 0; k < 3; ++k) {
@@ -68,7 +71,8 @@ FlatTriangles farField(const FlatTriangles& all, glm::vec3 eye, float nearDistan
   FlatTriangles far;
   for (size_t t = 0; t < all.size(); ++t) {
     if (!(horizontalDistance(all, t, eye) > double(nearDistance))) continue;
-    far.positions.insert(far.positions.end(), {all.vertex(t, 0), all.vertex(t, 1), all.vertex(t, 2)});
+    far.positions.insert(far.positions.end(),
+                         {all.vertex(t, 0), all.vertex(t, 1), all.vertex(t, 2)});
     far.faceIds.push_back(all.faceIds[t]);
     far.objectIds.push_back(all.objectIds[t]);
     far.degenerate.push_back(all.degenerate[t]);
@@ -115,7 +119,8 @@ void checkConservative(const RenderGeometry& g, const std::vector<Camera>& camer
       };
       std::vector<Config> configs;
       for (size_t m = 0; m < maps.size(); ++m)
-        for (int k : {1, 4}) configs.push_back({cellSizes[m], k, maps[m].trace(cam, nearDistance, k)});
+        for (int k : {1, 4})
+          configs.push_back({cellSizes[m], k, maps[m].trace(cam, nearDistance, k)});
       for (int y = 0; y < cam.height; ++y)
         for (int x = 0; x < cam.width; ++x) {
           const glm::vec3 dir = cam.rayDirection(float(x) + 0.5f, float(y) + 0.5f);
@@ -124,12 +129,17 @@ void checkConservative(const RenderGeometry& g, const std::vector<Camera>& camer
           for (const Config& c : configs) {
             if (!(slope > c.slopes[size_t(x)])) continue;
             ++tally.sky;
-            if (hit < 0) hit = rays->occluded(Ray{cam.eye, dir, 0.0f, std::numeric_limits<float>::infinity()}) ? 1 : 0;
+            if (hit < 0)
+              hit = rays->occluded(Ray{cam.eye, dir, 0.0f, std::numeric_limits<float>::infinity()})
+                        ? 1
+                        : 0;
             if (hit == 1 && tally.violations++ < 5)
-              tally.examples << "\n  camera " << ci << " eye (" << cam.eye.x << ", " << cam.eye.y << ", " << cam.eye.z
-                             << ") yaw " << cam.yawDeg << " pitch " << cam.pitchDeg << ", near " << nearDistance
-                             << ", cell " << c.cell << ", subsample " << c.subsample << ", pixel (" << x << ", " << y
-                             << "): ray slope " << slope << " > column slope " << c.slopes[size_t(x)];
+              tally.examples << "\n  camera " << ci << " eye (" << cam.eye.x << ", " << cam.eye.y
+                             << ", " << cam.eye.z << ") yaw " << cam.yawDeg << " pitch "
+                             << cam.pitchDeg << ", near " << nearDistance << ", cell " << c.cell
+                             << ", subsample " << c.subsample << ", pixel (" << x << ", " << y
+                             << "): ray slope " << slope << " > column slope "
+                             << c.slopes[size_t(x)];
           }
         }
     }
@@ -173,14 +183,16 @@ TEST(HorizonMap, CallsEveryClimbingPixelSkyOverFlatGround) {
           size_t climbing = 0, sky = 0;
           for (int y = 0; y < cam.height; ++y)
             for (int x = 0; x < cam.width; ++x) {
-              const float slope = HorizonMap::raySlope(cam.rayDirection(float(x) + 0.5f, float(y) + 0.5f));
-              if (slope <= 0.0f) continue;  // the ground lies below the eye: a climbing ray never meets it
+              const float slope =
+                  HorizonMap::raySlope(cam.rayDirection(float(x) + 0.5f, float(y) + 0.5f));
+              if (slope <= 0.0f)
+                continue;  // the ground lies below the eye: a climbing ray never meets it
               ++climbing;
               sky += slope > slopes[size_t(x)];
             }
           EXPECT_EQ(climbing, size_t(cam.width * cam.height / 2));
-          EXPECT_EQ(sky, climbing) << "cell " << cell << " yaw " << yaw << " near " << nearDistance << " subsample "
-                                   << k;
+          EXPECT_EQ(sky, climbing) << "cell " << cell << " yaw " << yaw << " near " << nearDistance
+                                   << " subsample " << k;
         }
   }
 }

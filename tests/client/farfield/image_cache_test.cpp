@@ -1,12 +1,12 @@
 #include "client/farfield/image_cache.h"
 
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cmath>
 #include <random>
 #include <set>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "client/render/camera.h"
 
@@ -35,8 +35,12 @@ glm::vec3 direction(double azimuth, double elevation) {
   return glm::vec3(glm::dvec3(-std::sin(azimuth) * std::cos(elevation), std::sin(elevation),
                               -std::cos(azimuth) * std::cos(elevation)));
 }
-double azimuthOf(glm::vec3 d) { return std::atan2(-double(d.x), -double(d.z)); }
-double elevationOf(glm::vec3 d) { return std::atan2(double(d.y), std::hypot(double(d.x), double(d.z))); }
+double azimuthOf(glm::vec3 d) {
+  return std::atan2(-double(d.x), -double(d.z));
+}
+double elevationOf(glm::vec3 d) {
+  return std::atan2(double(d.y), std::hypot(double(d.x), double(d.z)));
+}
 
 // The texel is the same for every direction within 2e-4 rad of d in azimuth and
 // elevation: d is not on a texel border, so float noise cannot move it.
@@ -49,17 +53,22 @@ bool awayFromTexelBorders(const PanoramicCache& cache, glm::vec3 d) {
   return true;
 }
 
-std::vector<int64_t> texelsSeenBy(const PanoramicCache& cache, const Camera& cam, int x0 = 0, int x1 = -1) {
+std::vector<int64_t> texelsSeenBy(const PanoramicCache& cache, const Camera& cam, int x0 = 0,
+                                  int x1 = -1) {
   if (x1 < 0) x1 = cam.width;
   std::vector<int64_t> texels;
   for (int y = 0; y < cam.height; ++y)
-    for (int x = x0; x < x1; ++x) texels.push_back(cache.texelOf(cam.rayDirection(float(x) + 0.5f, float(y) + 0.5f)));
+    for (int x = x0; x < x1; ++x)
+      texels.push_back(cache.texelOf(cam.rayDirection(float(x) + 0.5f, float(y) + 0.5f)));
   return texels;
 }
 
-glm::u8vec3 colourOf(int64_t texel) { return {uint8_t(texel % 251), uint8_t(texel / 251 % 251), 7}; }
+glm::u8vec3 colourOf(int64_t texel) {
+  return {uint8_t(texel % 251), uint8_t(texel / 251 % 251), 7};
+}
 
-void storeTraced(PanoramicCache& cache, const std::vector<int64_t>& texels, const std::vector<uint8_t>& trace) {
+void storeTraced(PanoramicCache& cache, const std::vector<int64_t>& texels,
+                 const std::vector<uint8_t>& trace) {
   for (size_t i = 0; i < texels.size(); ++i)
     if (trace[i] && texels[i] >= 0) cache.store(texels[i], colourOf(texels[i]));
 }
@@ -78,12 +87,14 @@ TEST(PanoramicCache, MapsAWorldDirectionToTheSameTexelWhicheverCameraSawIt) {
     if (!awayFromTexelBorders(cache, d)) continue;
     ++checked;
     // ... which a camera aimed along d sees at its image centre ...
-    const Camera b = makeCamera(a.eye, float(glm::degrees(azimuthOf(d))), float(glm::degrees(elevationOf(d))));
+    const Camera b =
+        makeCamera(a.eye, float(glm::degrees(azimuthOf(d))), float(glm::degrees(elevationOf(d))));
     EXPECT_EQ(cache.texelOf(b.rayDirection(80.0f, 60.0f)), cache.texelOf(d)) << "sample " << i;
     // ... and a camera turned 25 degrees to the left sees it right of its centre.
     const Camera c = makeCamera(a.eye, b.yawDeg + 25.0f, 0.0f);
     const glm::vec4 clip = c.viewProjection() * glm::vec4(c.eye + d, 1.0f);
-    const float wx = (clip.x / clip.w * 0.5f + 0.5f) * 160.0f, wy = (0.5f - clip.y / clip.w * 0.5f) * 120.0f;
+    const float wx = (clip.x / clip.w * 0.5f + 0.5f) * 160.0f,
+                wy = (0.5f - clip.y / clip.w * 0.5f) * 120.0f;
     ASSERT_GT(clip.w, 0.0f);
     EXPECT_EQ(cache.texelOf(c.rayDirection(wx, wy)), cache.texelOf(d)) << "sample " << i;
     // The length of a direction does not matter either.
@@ -109,7 +120,9 @@ TEST(PanoramicCache, GivesDirectionsMoreThanTwoTexelAnglesApartDifferentTexels) 
       double a1 = a0, e1 = e0;
       const int kind = i % 3;
       if (kind == 0) a1 = a0 + (i % 2 ? 1 : -1) * U(2.05, 4.0) * texelAngle;
-      if (kind == 1) e1 = std::clamp(e0 + (i % 2 ? 1 : -1) * U(2.05, 4.0) * texelAngle, -maxElevation, maxElevation);
+      if (kind == 1)
+        e1 = std::clamp(e0 + (i % 2 ? 1 : -1) * U(2.05, 4.0) * texelAngle, -maxElevation,
+                        maxElevation);
       if (kind == 2) a1 = U(-kPi, kPi), e1 = U(-maxElevation, maxElevation);
       const double da = std::abs(std::remainder(a1 - a0, 2.0 * kPi)), de = std::abs(e1 - e0);
       if (!(da > 2.0 * texelAngle || de > 2.0 * texelAngle)) continue;
@@ -187,7 +200,8 @@ TEST_F(CachePlan, ReusesEverythingFromTheSameEyeAndReturnsTheStoredColours) {
   const std::vector<int64_t> after = texelsSeenBy(cache, turned);
   const std::set<int64_t> stored(texels.begin(), texels.end());
   const CachePlanStats t = cache.plan(cam.eye, after, 0, kMaxStale, trace);
-  const size_t shared = size_t(std::count_if(after.begin(), after.end(), [&](int64_t x) { return stored.count(x) > 0; }));
+  const size_t shared = size_t(
+      std::count_if(after.begin(), after.end(), [&](int64_t x) { return stored.count(x) > 0; }));
   EXPECT_EQ(t.reused, shared);
   EXPECT_EQ(t.mustTrace, after.size() - shared);
   EXPECT_GT(shared, after.size() / 2);
@@ -197,7 +211,8 @@ TEST_F(CachePlan, RetracesEverythingAfterATeleportEvenWithoutBudget) {
   const std::vector<int64_t> texels = texelsSeenBy(cache, cam);
   cache.plan(cam.eye, texels, 0, kMaxStale, trace);
   storeTraced(cache, texels, trace);
-  const glm::vec3 away = cam.eye + glm::vec3(0.8f * kMaxStale, 0.0f, 0.8f * kMaxStale);  // 1.13 maxStale
+  const glm::vec3 away =
+      cam.eye + glm::vec3(0.8f * kMaxStale, 0.0f, 0.8f * kMaxStale);  // 1.13 maxStale
   const CachePlanStats s = cache.plan(away, texels, 0, kMaxStale, trace);
   EXPECT_EQ(s.mustTrace, texels.size());
   EXPECT_EQ(s.reused, 0u);
@@ -231,7 +246,8 @@ TEST_F(CachePlan, RetracesTheRecordsFarthestFromTheEyeFirst) {
   std::vector<int64_t> right;
   for (int64_t t : texelsSeenBy(cache, cam, 100, 160))
     if (!leftSet.count(t)) right.push_back(t);
-  const glm::vec3 a = cam.eye, b = a + glm::vec3(0.4f, 0.0f, 0.0f), c = a + glm::vec3(0.3f, 0.0f, 0.0f);
+  const glm::vec3 a = cam.eye, b = a + glm::vec3(0.4f, 0.0f, 0.0f),
+                  c = a + glm::vec3(0.3f, 0.0f, 0.0f);
   cache.plan(a, left, 0, kMaxStale, trace);
   storeTraced(cache, left, trace);
   cache.plan(b, right, 0, kMaxStale, trace);
@@ -242,7 +258,9 @@ TEST_F(CachePlan, RetracesTheRecordsFarthestFromTheEyeFirst) {
   EXPECT_EQ(s.mustTrace, 0u);
   EXPECT_EQ(s.budgeted, left.size());
   EXPECT_EQ(std::count(trace.begin(), trace.begin() + std::ptrdiff_t(right.size()), uint8_t(1)), 0);
-  EXPECT_EQ(size_t(std::count(trace.begin() + std::ptrdiff_t(right.size()), trace.end(), uint8_t(1))), left.size());
+  EXPECT_EQ(
+      size_t(std::count(trace.begin() + std::ptrdiff_t(right.size()), trace.end(), uint8_t(1))),
+      left.size());
 }
 
 TEST_F(CachePlan, RecyclesRecordsNoTexelPointsTo) {
@@ -305,7 +323,8 @@ TEST(CacheEdges, RetracesOnlyTexelsOnAColourEdgeAfterTheViewTurned) {
   EXPECT_EQ(still.reused, texels.size());
   const CachePlanStats turned = cache.plan(cam.eye, texels, 0, 1.0f, trace, /*viewTurned=*/true);
   EXPECT_EQ(turned.edges, expected);
-  for (size_t i = 0; i < texels.size(); ++i) EXPECT_EQ(trace[i] != 0, onEdge(texels[i])) << "texel " << texels[i];
+  for (size_t i = 0; i < texels.size(); ++i)
+    EXPECT_EQ(trace[i] != 0, onEdge(texels[i])) << "texel " << texels[i];
 }
 
 }  // namespace

@@ -2,9 +2,9 @@
 // (RaycastAll), on generated scenes and on the hard cases of the issue.
 #include "client/farfield/pipeline.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "client/app/walkthrough.h"
 #include "common/generate/generate.h"
@@ -15,11 +15,14 @@ namespace {
 
 // Adds an axis-aligned box as 12 triangles.
 void addBox(RenderGeometry& g, glm::vec3 lo, glm::vec3 hi) {
-  const glm::vec3 c[8] = {{lo.x, lo.y, lo.z}, {hi.x, lo.y, lo.z}, {hi.x, hi.y, lo.z}, {lo.x, hi.y, lo.z},
-                          {lo.x, lo.y, hi.z}, {hi.x, lo.y, hi.z}, {hi.x, hi.y, hi.z}, {lo.x, hi.y, hi.z}};
-  const int q[6][4] = {{0, 1, 2, 3}, {5, 4, 7, 6}, {4, 0, 3, 7}, {1, 5, 6, 2}, {3, 2, 6, 7}, {4, 5, 1, 0}};
+  const glm::vec3 c[8] = {{lo.x, lo.y, lo.z}, {hi.x, lo.y, lo.z}, {hi.x, hi.y, lo.z},
+                          {lo.x, hi.y, lo.z}, {lo.x, lo.y, hi.z}, {hi.x, lo.y, hi.z},
+                          {hi.x, hi.y, hi.z}, {lo.x, hi.y, hi.z}};
+  const int q[6][4] = {{0, 1, 2, 3}, {5, 4, 7, 6}, {4, 0, 3, 7},
+                       {1, 5, 6, 2}, {3, 2, 6, 7}, {4, 5, 1, 0}};
   for (const auto& f : q)
-    for (const auto& t : {std::array<int, 3>{f[0], f[1], f[2]}, std::array<int, 3>{f[0], f[2], f[3]}}) {
+    for (const auto& t :
+         {std::array<int, 3>{f[0], f[1], f[2]}, std::array<int, 3>{f[0], f[2], f[3]}}) {
       for (int k : t) g.triangles.positions.push_back(c[k]);
       g.triangles.faceIds.push_back(uint32_t(g.triangles.faceIds.size() / 2));
       g.triangles.objectIds.push_back(0);
@@ -38,11 +41,13 @@ void finish(RenderGeometry& g) {
 // A long street: ground, and buildings on both sides for `length` metres along -Z.
 RenderGeometry streetScene(float length, glm::vec3 offset = glm::vec3(0.0f)) {
   RenderGeometry g;
-  addBox(g, offset + glm::vec3(-200.0f, -1.0f, -length - 200.0f), offset + glm::vec3(200.0f, 0.0f, 200.0f));
+  addBox(g, offset + glm::vec3(-200.0f, -1.0f, -length - 200.0f),
+         offset + glm::vec3(200.0f, 0.0f, 200.0f));
   for (float z = 0.0f; z > -length; z -= 25.0f) {
     const float h = 10.0f + std::fmod(std::abs(z) * 0.37f, 30.0f);
     addBox(g, offset + glm::vec3(-30.0f, 0.0f, z - 20.0f), offset + glm::vec3(-8.0f, h, z));
-    addBox(g, offset + glm::vec3(8.0f, 0.0f, z - 20.0f), offset + glm::vec3(30.0f, h * 0.8f + 5.0f, z));
+    addBox(g, offset + glm::vec3(8.0f, 0.0f, z - 20.0f),
+           offset + glm::vec3(30.0f, h * 0.8f + 5.0f, z));
   }
   finish(g);
   return g;
@@ -124,7 +129,8 @@ TEST(Pipeline, TurningHalfwayRoundInOneFrameShowsNoStalePixels) {
   PipelineOptions o = optionsWithD(60.0f);
   o.pixelBudget = 0;  // only pixels the cache must refresh are traced
   Renderers r(g, o);
-  for (int i = 0; i < 5; ++i) (void)r.frame(cameraAt({0.0f, 1.7f, -100.0f - 0.05f * float(i)}, 0.0f));
+  for (int i = 0; i < 5; ++i)
+    (void)r.frame(cameraAt({0.0f, 1.7f, -100.0f - 0.05f * float(i)}, 0.0f));
   const auto [report, diff, interior] = r.frame(cameraAt({0.0f, 1.7f, -100.3f}, 180.0f));
   EXPECT_GT(report.cachePlan.mustTrace, 0u) << "directions never seen are traced";
   EXPECT_EQ(interior, 0u) << "holes or stale pixels";
@@ -136,7 +142,8 @@ TEST(Pipeline, TeleportingNeverShowsTheOldView) {
   PipelineOptions o = optionsWithD(60.0f);
   o.pixelBudget = 0;
   Renderers r(g, o);
-  for (int i = 0; i < 5; ++i) (void)r.frame(cameraAt({0.0f, 1.7f, -50.0f - 0.05f * float(i)}, 0.0f));
+  for (int i = 0; i < 5; ++i)
+    (void)r.frame(cameraAt({0.0f, 1.7f, -50.0f - 0.05f * float(i)}, 0.0f));
   const auto [report, diff, interior] = r.frame(cameraAt({0.0f, 1.7f, -700.0f}, 0.0f));
   EXPECT_EQ(report.cachePlan.reused, 0u) << "nothing cached 650 m away is valid here";
   EXPECT_EQ(interior, 0u) << "holes or stale pixels";
@@ -151,7 +158,8 @@ TEST(Pipeline, ReusesCachedPixelsWhenStandingStillAndStaysExact) {
   (void)r.frame(cameraAt({0.0f, 1.7f, -5.0f}, 0.0f));
   const auto [report, diff, interior] = r.frame(cameraAt({0.0f, 1.7f, -5.0f}, 0.0f));
   EXPECT_GT(report.pixels.cache, 0u);
-  EXPECT_EQ(report.pixels.rayHit + report.pixels.rayMiss, 0u) << "nothing moved, nothing to retrace";
+  EXPECT_EQ(report.pixels.rayHit + report.pixels.rayMiss, 0u)
+      << "nothing moved, nothing to retrace";
   EXPECT_EQ(interior, 0u) << "holes or stale pixels";
   EXPECT_LT(diff.differingFraction, 0.005);
 }
@@ -163,7 +171,8 @@ TEST(Pipeline, ASceneWithNoSkySkipsHorizonTracingAndStillMatches) {
   addBox(g, {-10.0f, 6.0f, -300.0f}, {10.0f, 7.0f, 10.0f});
   addBox(g, {-11.0f, 0.0f, -300.0f}, {-10.0f, 6.0f, 10.0f});
   addBox(g, {10.0f, 0.0f, -300.0f}, {11.0f, 6.0f, 10.0f});
-  for (float z = -20.0f; z > -290.0f; z -= 30.0f) addBox(g, {-3.0f, 0.0f, z - 1.0f}, {3.0f, 3.0f, z});
+  for (float z = -20.0f; z > -290.0f; z -= 30.0f)
+    addBox(g, {-3.0f, 0.0f, z - 1.0f}, {3.0f, 3.0f, z});
   finish(g);
   Renderers r(g, optionsWithD(40.0f));
   const auto [report, diff, interior] = r.frame(cameraAt({0.0f, 1.7f, 0.0f}, 0.0f, 10.0f));
@@ -212,7 +221,8 @@ TEST(Pipeline, FarFromTheOriginTheImageStillMatches) {
   const glm::vec3 offset(50'000.0f, 0.0f, -30'000.0f);
   const RenderGeometry g = streetScene(1500.0f, offset);
   Renderers r(g, optionsWithD(60.0f));
-  const auto [report, diff, interior] = r.frame(cameraAt(offset + glm::vec3(0.0f, 1.7f, -5.0f), 0.0f));
+  const auto [report, diff, interior] =
+      r.frame(cameraAt(offset + glm::vec3(0.0f, 1.7f, -5.0f), 0.0f));
   EXPECT_TRUE(report.farFieldRan);
   EXPECT_EQ(interior, 0u);
   EXPECT_LT(diff.differingFraction, 0.005);

@@ -25,7 +25,8 @@ TEST(GlPipeline, AnOpenGLFrameMatchesTheHeadlessFrameOfTheSamePose) {
   try {
     window = std::make_unique<GlWindow>(GlWindowOptions{kW, kH, "gl_pipeline_test", false, false});
   } catch (const InputError& e) {
-    FAIL() << "cannot open an OpenGL window: " << e.what() << " (run through ctest, which uses xvfb-run)";
+    FAIL() << "cannot open an OpenGL window: " << e.what()
+           << " (run through ctest, which uses xvfb-run)";
   }
   const Scene scene = toScene(generate("city1"));
   const RenderGeometry g = renderGeometryFromScene(scene);
@@ -64,16 +65,20 @@ TEST(GlPipeline, AnOpenGLFrameMatchesTheHeadlessFrameOfTheSamePose) {
 // the child) renders a path to PNG frames that match its headless frames.
 TEST(GlPipeline, TheWindowedClientRendersAPathLikeTheHeadlessOne) {
   vistream::testing::TempDir dir;
-  const std::string path = dir.write("walk.csv", "t,x,y,z,yaw_deg,pitch_deg\n0,0,1.7,0,0,0\n0.1,0,1.7,-0.1,20,0\n")
-                               .string();
-  const std::string common = "--scene city1 --path " + path + " --size 200x150 --near-distance 50 --polygon-budget 0";
-  const auto window = vistream::testing::runTool("vistream-client", common + " --out " + (dir.path() / "gl").string());
+  const std::string path =
+      dir.write("walk.csv", "t,x,y,z,yaw_deg,pitch_deg\n0,0,1.7,0,0,0\n0.1,0,1.7,-0.1,20,0\n")
+          .string();
+  const std::string common =
+      "--scene city1 --path " + path + " --size 200x150 --near-distance 50 --polygon-budget 0";
+  const auto window = vistream::testing::runTool("vistream-client",
+                                                 common + " --out " + (dir.path() / "gl").string());
   ASSERT_EQ(window.status, 0) << window.err;
-  const auto headless =
-      vistream::testing::runTool("vistream-client", common + " --headless --out " + (dir.path() / "soft").string());
+  const auto headless = vistream::testing::runTool(
+      "vistream-client", common + " --headless --out " + (dir.path() / "soft").string());
   ASSERT_EQ(headless.status, 0) << headless.err;
   for (const char* name : {"frame_00000.png", "frame_00001.png"}) {
-    const ImageDifference d = compareImages(readPng(dir.path() / "gl" / name), readPng(dir.path() / "soft" / name));
+    const ImageDifference d =
+        compareImages(readPng(dir.path() / "gl" / name), readPng(dir.path() / "soft" / name));
     EXPECT_LT(d.differingFraction, 0.005) << name;
     EXPECT_EQ(d.interiorDiffering, 0u) << name;
   }

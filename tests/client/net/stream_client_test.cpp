@@ -5,9 +5,9 @@
 
 #include <gtest/gtest.h>
 
-#include <utility>  // before Boost.Asio
 #include <boost/asio.hpp>
 #include <thread>
+#include <utility>  // before Boost.Asio
 
 #include "common/core/error.h"
 #include "protocol/geometry/geometry_codec.h"
@@ -24,7 +24,8 @@ using namespace vistream::wire;
 // and then keeps the connection open until the client closes it.
 class ScriptedServer {
  public:
-  explicit ScriptedServer(std::vector<std::vector<uint8_t>> frames) : acceptor_(io_, {asio::ip::make_address("127.0.0.1"), 0}) {
+  explicit ScriptedServer(std::vector<std::vector<uint8_t>> frames)
+      : acceptor_(io_, {asio::ip::make_address("127.0.0.1"), 0}) {
     port_ = acceptor_.local_endpoint().port();
     thread_ = std::thread([this, frames = std::move(frames)] {
       tcp::socket s(io_);
@@ -98,7 +99,8 @@ TEST(StreamClient, EndsTheSessionWhenTheServerSendsMoreTrianglesThanItsLimit) {
   StreamClientOptions o = to(server);
   o.maxTriangles = 10;
   StreamClient client(o);
-  for (int i = 0; i < 200 && client.error().empty(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  for (int i = 0; i < 200 && client.error().empty(); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
   EXPECT_NE(client.error().find("more than 10 triangles"), std::string::npos) << client.error();
   client.sendPose({0, 1.7f, 0}, 0, 0);  // dropped, not queued forever
 }
@@ -109,7 +111,8 @@ TEST(StreamClient, HoldsWhatAWellBehavedServerSends) {
     faces.push_back({f, 0, {{float(f), 0, 0}, {float(f) + 1, 0, 0}, {float(f), 1, 0}}});
   ScriptedServer server({encodeMessage(goodWelcome()), encodeMessage(encodeGeometry(faces))});
   StreamClient client(to(server));
-  for (int i = 0; i < 200 && client.facesHeld() < 5; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  for (int i = 0; i < 200 && client.facesHeld() < 5; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
   EXPECT_EQ(client.facesHeld(), 5u);
   const RenderGeometry g = client.snapshot();
   EXPECT_EQ(g.size(), 5u);

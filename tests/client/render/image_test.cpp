@@ -1,9 +1,9 @@
 #include "client/render/image.h"
 
+#include <gtest/gtest.h>
+
 #include <filesystem>
 #include <fstream>
-
-#include <gtest/gtest.h>
 
 #include "common/core/error.h"
 
@@ -13,7 +13,8 @@ namespace {
 TEST(PngImage, RoundTripsEveryPixelExactly) {
   ImageRgb8 img(17, 9);
   for (int y = 0; y < img.height; ++y)
-    for (int x = 0; x < img.width; ++x) img.set(x, y, {uint8_t(x * 15), uint8_t(y * 28), uint8_t(x ^ y)});
+    for (int x = 0; x < img.width; ++x)
+      img.set(x, y, {uint8_t(x * 15), uint8_t(y * 28), uint8_t(x ^ y)});
   const auto path = std::filesystem::temp_directory_path() / "vistream_image_test.png";
   writePng(img, path);
   EXPECT_FALSE(std::filesystem::exists(path.string() + ".tmp"));

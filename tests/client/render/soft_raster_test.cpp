@@ -1,5 +1,7 @@
 #include "client/render/soft_raster.h"
 
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -7,8 +9,6 @@
 #include <random>
 #include <sstream>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "common/raycast/ray_query.h"
 
@@ -92,7 +92,8 @@ std::vector<glm::dvec2> windowOutline(const Camera& c, const FlatTriangles& f, u
   const double aspect = double(c.width) / double(c.height);
   std::vector<glm::dvec2> w;
   for (const glm::dvec3& v : out)
-    w.emplace_back((v.x / v.z / (t2 * aspect) + 1.0) * 0.5 * c.width, (1.0 - v.y / v.z / t2) * 0.5 * c.height);
+    w.emplace_back((v.x / v.z / (t2 * aspect) + 1.0) * 0.5 * c.width,
+                   (1.0 - v.y / v.z / t2) * 0.5 * c.height);
   return w;
 }
 
@@ -170,7 +171,8 @@ bool withinBounds(const std::array<glm::dvec2, N>& poly, glm::dvec2 p, double ma
     lo = glm::min(lo, v);
     hi = glm::max(hi, v);
   }
-  return p.x >= lo.x - margin && p.x <= hi.x + margin && p.y >= lo.y - margin && p.y <= hi.y + margin;
+  return p.x >= lo.x - margin && p.x <= hi.x + margin && p.y >= lo.y - margin &&
+         p.y <= hi.y + margin;
 }
 
 template <size_t N>
@@ -209,15 +211,18 @@ TEST(SoftwareRasterizer, DrawsTheTriangleThatARayThroughEachPixelCentreHitsFirst
         drawn += got != kNoTriangle;
         if (got == want) continue;
         ++mismatches;
-        const bool nearEdge = edgeNear(cam, soup, got, x, y, 0.5) || edgeNear(cam, soup, want, x, y, 0.5);
+        const bool nearEdge =
+            edgeNear(cam, soup, got, x, y, 0.5) || edgeNear(cam, soup, want, x, y, 0.5);
         const bool tie = got != kNoTriangle && want != kNoHit && oracle.depthTie(got, want, x, y);
-        const bool hole = got == kNoTriangle && want != kNoHit && !edgeNear(cam, soup, want, x, y, 1.0);
+        const bool hole =
+            got == kNoTriangle && want != kNoHit && !edgeNear(cam, soup, want, x, y, 1.0);
         holes += hole;
         if (hole || (!nearEdge && !tie)) {
           unexplained += !hole;
           if (holes + unexplained <= 5)
-            examples << " (" << x << "," << y << ") raster " << int64_t(got == kNoTriangle ? -1 : int64_t(got))
-                     << " ray " << int64_t(want == kNoHit ? -1 : int64_t(want));
+            examples << " (" << x << "," << y << ") raster "
+                     << int64_t(got == kNoTriangle ? -1 : int64_t(got)) << " ray "
+                     << int64_t(want == kNoHit ? -1 : int64_t(want));
         }
       }
     const size_t pixels = size_t(cam.width) * size_t(cam.height);
@@ -232,8 +237,8 @@ TEST(SoftwareRasterizer, DrawsTheTriangleThatARayThroughEachPixelCentreHitsFirst
 
 // A convex quad with its corners on the rays through window points `w`, at depths
 // `z` (so it need not be planar), split along the diagonal 0-2 or 1-3.
-FlatTriangles quadThrough(const Camera& cam, const std::array<glm::dvec2, 4>& w, const std::array<float, 4>& z,
-                          bool otherDiagonal) {
+FlatTriangles quadThrough(const Camera& cam, const std::array<glm::dvec2, 4>& w,
+                          const std::array<float, 4>& z, bool otherDiagonal) {
   std::array<glm::vec3, 4> v;
   for (size_t k = 0; k < 4; ++k) v[k] = onPixelRay(cam, w[k], z[k]);
   FlatTriangles f;
@@ -283,7 +288,8 @@ TEST(SoftwareRasterizer, DrawsEveryPixelOfAQuadSplitOnADiagonalExactlyOnce) {
   SoftwareRasterizer raster;
   std::mt19937 rng(7);
   auto U = [&](float a, float b) { return std::uniform_real_distribution<float>(a, b)(rng); };
-  const std::vector<Camera> cameras = {makeCamera({0, 0, 0}, 0, 0), makeCamera({3, 1.5f, -2}, 37, 12)};
+  const std::vector<Camera> cameras = {makeCamera({0, 0, 0}, 0, 0),
+                                       makeCamera({3, 1.5f, -2}, 37, 12)};
   int caseNo = 0;
   for (const Camera& cam : cameras)
     for (const auto& w : quadCases())
@@ -321,7 +327,8 @@ TEST(SoftwareRasterizer, CoverageWithAnInsetCountsOnlyCentresThatFarInsideATrian
   std::mt19937 rng(11);
   auto U = [&](double a, double b) { return std::uniform_real_distribution<double>(a, b)(rng); };
   for (int i = 0; i < 12; ++i) {
-    const std::array<glm::dvec2, 3> w = {glm::dvec2{U(-20, 180), U(-20, 140)}, glm::dvec2{U(-20, 180), U(-20, 140)},
+    const std::array<glm::dvec2, 3> w = {glm::dvec2{U(-20, 180), U(-20, 140)},
+                                         glm::dvec2{U(-20, 180), U(-20, 140)},
                                          glm::dvec2{U(-20, 180), U(-20, 140)}};
     FlatTriangles f;
     addTriangle(f, onPixelRay(cam, w[0], float(U(2, 20))), onPixelRay(cam, w[1], float(U(2, 20))),
@@ -378,7 +385,8 @@ TEST(SoftwareRasterizer, CoverageWithAnInsetIsASubsetOfWhatDrawFills) {
 
 TEST(SoftwareRasterizer, DrawsAQuadFarFromTheOriginLikeTheExactProjection) {
   // Window corners and depths of the quad; the same at the origin and 100 km away.
-  const std::array<glm::dvec2, 4> w = {glm::dvec2{30.3, 20.7}, {130.6, 25.2}, {120.1, 100.4}, {40.8, 90.9}};
+  const std::array<glm::dvec2, 4> w = {
+      glm::dvec2{30.3, 20.7}, {130.6, 25.2}, {120.1, 100.4}, {40.8, 90.9}};
   const std::array<float, 4> z = {30.0f, 34.0f, 40.0f, 36.0f};
   SoftwareRasterizer raster;
   size_t countAt[2] = {0, 0};
@@ -392,7 +400,8 @@ TEST(SoftwareRasterizer, DrawsAQuadFarFromTheOriginLikeTheExactProjection) {
     // A vertex 1e5 m out is off by a few float ulps (7.8 mm each) through its
     // rounding and the view matrix; 4 ulps at 30 m, where a pixel is 0.29 m, is
     // 0.11 px. Centres closer than that to the outline are not decided.
-    const double pixelAtNearest = 2.0 * std::tan(0.5 * glm::radians(double(cam.vfovDeg))) * 30.0 / cam.height;
+    const double pixelAtNearest =
+        2.0 * std::tan(0.5 * glm::radians(double(cam.vfovDeg))) * 30.0 / cam.height;
     const double tolerance = far ? 4.0 * 0.0078125 / pixelAtNearest + 0.01 : 0.01;
     size_t wrong = 0;
     double worst = 0.0;  // px from the outline, of the farthest wrong centre
@@ -411,8 +420,9 @@ TEST(SoftwareRasterizer, DrawsAQuadFarFromTheOriginLikeTheExactProjection) {
           worst = std::max(worst, std::abs(in));
         }
       }
-    EXPECT_EQ(wrong, 0u) << "centres up to " << worst << " px from the outline on the wrong side (tolerance "
-                         << tolerance << " px)";
+    EXPECT_EQ(wrong, 0u) << "centres up to " << worst
+                         << " px from the outline on the wrong side (tolerance " << tolerance
+                         << " px)";
   }
   EXPECT_LE(std::max(countAt[0], countAt[1]) - std::min(countAt[0], countAt[1]), band);
   EXPECT_GT(countAt[0], 5000u);
@@ -427,7 +437,9 @@ TEST(SoftwareRasterizer, DrawsNothingForTrianglesBehindTheCamera) {
     // Behind the eye; mirrored through it, many would cover the whole image.
     const double spread = i % 4 == 0 ? 2000 : 100;
     std::array<glm::vec3, 3> v;
-    for (auto& p : v) p = onPixelRay(cam, {U(-spread, 160 + spread), U(-spread, 120 + spread)}, float(U(-30, -0.01)));
+    for (auto& p : v)
+      p = onPixelRay(cam, {U(-spread, 160 + spread), U(-spread, 120 + spread)},
+                     float(U(-30, -0.01)));
     addTriangle(behind, v[0], v[1], v[2]);
   }
   SoftwareRasterizer raster;
@@ -457,7 +469,8 @@ TEST(SoftwareRasterizer, DrawsThePixelsARayCastSeesOfATriangleCrossingTheNearPla
   for (size_t i = 0; i < cases.size(); ++i) {
     SCOPED_TRACE("case " + std::to_string(i));
     FlatTriangles f;
-    addTriangle(f, onPixelRay(cam, cases[i][0].w, cases[i][0].z), onPixelRay(cam, cases[i][1].w, cases[i][1].z),
+    addTriangle(f, onPixelRay(cam, cases[i][0].w, cases[i][0].z),
+                onPixelRay(cam, cases[i][1].w, cases[i][1].z),
                 onPixelRay(cam, cases[i][2].w, cases[i][2].z));
     const auto rays = makeBruteForceRayQuery(f);
     const RayOracle oracle{cam, *rays};

@@ -1,5 +1,6 @@
 // End-to-end tests of the vistream-scene executable: arguments in, exit
 // status and stdout/stderr out.
+#include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -8,12 +9,10 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <nlohmann/json.hpp>
 #include <string>
 
-#include <gtest/gtest.h>
-
 #include "tests/common/support/run_tool.h"
-#include <nlohmann/json.hpp>
 
 namespace {
 
@@ -21,7 +20,9 @@ namespace fs = std::filesystem;
 
 using vistream::testing::ToolRun;
 
-ToolRun runTool(const std::string& args) { return vistream::testing::runTool("vistream-scene", args); }
+ToolRun runTool(const std::string& args) {
+  return vistream::testing::runTool("vistream-scene", args);
+}
 
 // A wall in front of a hidden box, 50 km from the origin, as OBJ quads.
 // Face IDs: 0 ground; wall faces 1..6 (-x,+x,-y,+y,-z,+z); hidden box 7..12.
@@ -32,17 +33,31 @@ fs::path writeWallScene() {
   std::ofstream o(file);
   const double X = 50000.0, Z = -50000.0;
   int base = 1;
-  auto v = [&](double x, double y, double z) { o << "v " << std::setprecision(17) << x + X << " " << y << " " << z + Z << "\n"; };
+  auto v = [&](double x, double y, double z) {
+    o << "v " << std::setprecision(17) << x + X << " " << y << " " << z + Z << "\n";
+  };
   o << "o ground\n";
-  v(-50, 0, -50); v(-50, 0, 50); v(50, 0, 50); v(50, 0, -50);
+  v(-50, 0, -50);
+  v(-50, 0, 50);
+  v(50, 0, 50);
+  v(50, 0, -50);
   o << "f 1 2 3 4\n";
   base = 5;
-  auto box = [&](const char* name, double x0, double y0, double z0, double x1, double y1, double z1) {
+  auto box = [&](const char* name, double x0, double y0, double z0, double x1, double y1,
+                 double z1) {
     o << "o " << name << "\n";
-    v(x0, y0, z0); v(x1, y0, z0); v(x1, y1, z0); v(x0, y1, z0);
-    v(x0, y0, z1); v(x1, y0, z1); v(x1, y1, z1); v(x0, y1, z1);
+    v(x0, y0, z0);
+    v(x1, y0, z0);
+    v(x1, y1, z0);
+    v(x0, y1, z0);
+    v(x0, y0, z1);
+    v(x1, y0, z1);
+    v(x1, y1, z1);
+    v(x0, y1, z1);
     const int b = base;
-    auto f = [&](int a, int c, int d, int e) { o << "f " << b + a << " " << b + c << " " << b + d << " " << b + e << "\n"; };
+    auto f = [&](int a, int c, int d, int e) {
+      o << "f " << b + a << " " << b + c << " " << b + d << " " << b + e << "\n";
+    };
     f(0, 4, 7, 3);  // -x
     f(1, 2, 6, 5);  // +x
     f(0, 1, 5, 4);  // -y
@@ -65,7 +80,8 @@ TEST(SceneTool, HelpListsTheSubcommandsAndExitsZero) {
 
 TEST(SceneTool, VisibleSpeaksInFileCoordinatesAndFaceIdsFarFromTheOrigin) {
   const fs::path scene = writeWallScene();
-  const ToolRun r = runTool("visible --scene " + scene.string() + " --cell 49999,1,-50000,50001,2,-49998 --json");
+  const ToolRun r =
+      runTool("visible --scene " + scene.string() + " --cell 49999,1,-50000,50001,2,-49998 --json");
   ASSERT_EQ(r.status, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);
   EXPECT_EQ(j["faces"].get<std::vector<uint32_t>>(), (std::vector<uint32_t>{0, 6}));
@@ -158,7 +174,8 @@ TEST(SceneTool, HelpShowsTheDefaultTriangleLimit) {
 TEST(SceneTool, GeneratesAPathFileThatStartsWithTheHeader) {
   const fs::path scene = writeWallScene();
   const fs::path out = scene.parent_path() / "p.csv";
-  const ToolRun r = runTool("path --scene " + scene.string() + " --frames 10 --out " + out.string());
+  const ToolRun r =
+      runTool("path --scene " + scene.string() + " --frames 10 --out " + out.string());
   ASSERT_EQ(r.status, 0) << r.err;
   std::ifstream in(out);
   std::string header;

@@ -3,7 +3,6 @@
 // with outward faces, no degenerate or duplicated faces), free streets and
 // connected free space, and the triangulated and OBJ forms of a scene.
 #include "common/generate/generate.h"
-#include "common/scene/scene_loader.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -25,6 +24,7 @@
 #include <vector>
 
 #include "common/core/error.h"
+#include "common/scene/scene_loader.h"
 
 namespace vistream {
 namespace {
@@ -580,8 +580,8 @@ TEST(TerrainGenerator, SameSeedGivesTheSameLandAndAnotherSeedAnotherOne) {
 // ---- dispatch ------------------------------------------------------------------
 
 TEST(SceneTypes, ListsTheSixGeneratorsAndEachGeneratesANamedScene) {
-  EXPECT_EQ(sceneTypes(),
-            (std::vector<std::string>{"city1", "city2", "bigcity", "interior", "interior2", "terrain"}));
+  EXPECT_EQ(sceneTypes(), (std::vector<std::string>{"city1", "city2", "bigcity", "interior",
+                                                    "interior2", "terrain"}));
   for (const char* type : {"city1", "interior", "terrain"}) {
     const PolygonScene scene = generate(type, 1);
     EXPECT_EQ(scene.name, type);

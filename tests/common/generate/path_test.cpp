@@ -1,10 +1,10 @@
 #include "common/generate/path.h"
 
-#include <filesystem>
-#include <fstream>
+#include <gtest/gtest.h>
 #include <unistd.h>
 
-#include <gtest/gtest.h>
+#include <filesystem>
+#include <fstream>
 
 #include "common/core/error.h"
 #include "common/raycast/sampled_visibility.h"
@@ -96,7 +96,8 @@ TEST(WalkthroughPath, MovesAtTheRequestedSpeedWithoutPassingThroughWalls) {
 TEST(WalkthroughPath, TurnsTheGazeAtABoundedRateAndStaysUpright) {
   const auto path = walk(1.0, 600, 3);
   for (size_t i = 1; i < path.size(); ++i) {
-    EXPECT_LE(std::abs(std::remainder(path[i].yawDeg - path[i - 1].yawDeg, 360.0)), 120.0 / 30.0 + 1e-9);
+    EXPECT_LE(std::abs(std::remainder(path[i].yawDeg - path[i - 1].yawDeg, 360.0)),
+              120.0 / 30.0 + 1e-9);
     EXPECT_EQ(path[i].pitchDeg, 0.0);
   }
 }
@@ -109,7 +110,8 @@ TEST(WalkthroughPath, IsDeterministicBySeed) {
 }
 
 TEST(ViewDirection, FollowsThePathFileConvention) {
-  const glm::dvec3 ahead = viewDirection(0, 0), left = viewDirection(90, 0), up = viewDirection(0, 90);
+  const glm::dvec3 ahead = viewDirection(0, 0), left = viewDirection(90, 0),
+                   up = viewDirection(0, 90);
   EXPECT_NEAR(ahead.z, -1.0, 1e-12);
   EXPECT_NEAR(left.x, -1.0, 1e-12);
   EXPECT_NEAR(up.y, 1.0, 1e-12);
@@ -117,7 +119,8 @@ TEST(ViewDirection, FollowsThePathFileConvention) {
 
 class PathFile : public ::testing::Test {
  protected:
-  std::filesystem::path file = std::filesystem::temp_directory_path() / ("vistream_path_" + std::to_string(::getpid()) + ".csv");
+  std::filesystem::path file = std::filesystem::temp_directory_path() /
+                               ("vistream_path_" + std::to_string(::getpid()) + ".csv");
   void write(const std::string& text) { std::ofstream(file) << text; }
   void TearDown() override { std::filesystem::remove(file); }
   std::string errorOf() {

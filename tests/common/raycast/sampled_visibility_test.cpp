@@ -76,8 +76,9 @@ TEST(SampledVisibility, EmbreeAndBruteForceSeeTheSameFaces) {
     for (int k = 0; k < 6; ++k)
       // Offsets keep box edges off the sampled ray directions: exact edge
       // grazes are decided differently by float and double arithmetic.
-      addBox(w.scene, "b", {i * 12.13f - 36.29f, 0, k * 11.97f - 36.41f},
-             {i * 12.13f - 29.07f, 3.17f + float((i * 7 + k * 3) % 9) * 1.03f, k * 11.97f - 29.23f});
+      addBox(
+          w.scene, "b", {i * 12.13f - 36.29f, 0, k * 11.97f - 36.41f},
+          {i * 12.13f - 29.07f, 3.17f + float((i * 7 + k * 3) % 9) * 1.03f, k * 11.97f - 29.23f});
   w.build();
   const auto brute = makeBruteForceRayQuery(w.triangles);
   SampledVisibilityOptions options;

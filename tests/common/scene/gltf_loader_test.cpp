@@ -6,6 +6,10 @@
 //   min/max, sampler input ranges, node children);
 // - small .gltf files written by the tests, with an embedded base64 buffer,
 //   whose transformed positions are worked out by hand.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -14,25 +18,20 @@
 #include <fstream>
 #include <limits>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <set>
 #include <string>
-#include <unistd.h>
-
-#include <gmock/gmock.h>
-#include <gtest/gtest.h>
-
-#include "tests/common/support/temp_dir.h"
-#include <nlohmann/json.hpp>
 
 #include "common/core/error.h"
 #include "common/scene/scene_loader.h"
+#include "tests/common/support/temp_dir.h"
 
 namespace vistream {
 namespace {
 
+using nlohmann::json;
 using ::testing::HasSubstr;
 using testing::inputErrorOf;
-using nlohmann::json;
 namespace fs = std::filesystem;
 
 const fs::path kFox = fs::path(VISTREAM_SHARED_DIR) / "data" / "Fox.glb";
@@ -130,8 +129,8 @@ class GltfDoc {
   }
 
   int addPositions(const std::vector<glm::vec3>& p) {
-    const int a = addAccessor(addView(p.data(), p.size() * sizeof(glm::vec3)), kFloat, p.size(),
-                              "VEC3");
+    const int a =
+        addAccessor(addView(p.data(), p.size() * sizeof(glm::vec3)), kFloat, p.size(), "VEC3");
     glm::vec3 lo(1e30f), hi(-1e30f);
     for (const glm::vec3& v : p) {
       lo = glm::min(lo, v);
@@ -196,9 +195,8 @@ class GltfDoc {
 
   std::string text() {
     json d = doc_;
-    d["buffers"] = json::array(
-        {{{"byteLength", bin_.size()},
-          {"uri", "data:application/octet-stream;base64," + base64(bin_)}}});
+    d["buffers"] = json::array({{{"byteLength", bin_.size()},
+                                 {"uri", "data:application/octet-stream;base64," + base64(bin_)}}});
     return d.dump(1);
   }
 
@@ -356,7 +354,8 @@ TEST(GltfLoader, NumbersFacesInPrimitiveOrderWithU8U16AndU32Indices) {
 TEST(GltfLoader, ReadsNonIndexedPrimitivesAsConsecutiveTriples) {
   const TempDir dir;
   GltfDoc g;
-  const int pos = g.addPositions({{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {5, 0, 0}, {6, 0, 0}, {5, 1, 0}});
+  const int pos =
+      g.addPositions({{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {5, 0, 0}, {6, 0, 0}, {5, 1, 0}});
   g.addNode({{"name", "soup"}, {"mesh", g.addMesh("soup", {GltfDoc::primitive(pos)})}});
   g.setRoots({0});
   const Scene scene = loadGltf(dir.write("soup.gltf", g.text()));
@@ -383,8 +382,7 @@ TEST(GltfLoader, UnrollsATriangleStripWithConsistentWinding) {
   GltfDoc g;
   // Zig-zag strip over [0,2]x[0,1]: 5 vertices, 3 triangles of area 1/2.
   const int pos = g.addPositions({{0, 0, 0}, {0, 1, 0}, {1, 0, 0}, {1, 1, 0}, {2, 0, 0}});
-  g.addNode({{"name", "strip"},
-             {"mesh", g.addMesh("strip", {GltfDoc::primitive(pos, -1, 5)})}});
+  g.addNode({{"name", "strip"}, {"mesh", g.addMesh("strip", {GltfDoc::primitive(pos, -1, 5)})}});
   g.setRoots({0});
   const Scene scene = loadGltf(dir.write("strip.gltf", g.text()));
   const auto tris = withNormals(scene);
@@ -395,8 +393,9 @@ TEST(GltfLoader, UnrollsATriangleStripWithConsistentWinding) {
   for (size_t k = 0; k < 3; ++k) {
     for (size_t c = 0; c < 3; ++c) {
       const auto& corners = tris[k].first;
-      EXPECT_TRUE(std::any_of(corners.begin(), corners.end(),
-                              [&](const glm::dvec3& p) { return glm::length(p - v[k + c]) < 1e-6; }))
+      EXPECT_TRUE(
+          std::any_of(corners.begin(), corners.end(),
+                      [&](const glm::dvec3& p) { return glm::length(p - v[k + c]) < 1e-6; }))
           << "triangle " << k << " misses strip vertex " << k + c;
     }
     // ... and every one winds like the first, (v0, v1, v2): normal -z.
@@ -437,7 +436,8 @@ TEST(GltfLoader, FlagsAnAnimatedNodeAndItsChildrenDynamicButNotTheirSiblings) {
   g.doc()["animations"] = json::array(
       {{{"name", "open"},
         {"samplers", json::array({{{"input", times}, {"output", values}}})},
-        {"channels", json::array({{{"sampler", 0}, {"target", {{"node", 0}, {"path", "translation"}}}}})}}});
+        {"channels",
+         json::array({{{"sampler", 0}, {"target", {{"node", 0}, {"path", "translation"}}}}})}}});
   const Scene scene = loadGltf(dir.write("door.gltf", g.text()));
   ASSERT_EQ(scene.objects.size(), 3u);
   EXPECT_TRUE(findObject(scene, "door")->dynamic);
@@ -476,7 +476,8 @@ TEST(GltfLoader, ReadsTexcoordsPerVertex) {
   GltfDoc g;
   const int pos = g.addPositions(kUnitTriangle);
   const std::vector<glm::vec2> uv{{0.0f, 0.0f}, {1.0f, 0.0f}, {0.0f, 1.0f}};
-  const int tex = g.addAccessor(g.addView(uv.data(), uv.size() * sizeof(glm::vec2)), kFloat, 3, "VEC2");
+  const int tex =
+      g.addAccessor(g.addView(uv.data(), uv.size() * sizeof(glm::vec2)), kFloat, 3, "VEC2");
   json prim = GltfDoc::primitive(pos);
   prim["attributes"]["TEXCOORD_0"] = tex;
   g.addNode({{"name", "uv"}, {"mesh", g.addMesh("uv", {prim})}});
@@ -501,9 +502,11 @@ TEST(GltfLoader, KeepsJointsPerVertexWhenOnlySomePrimitivesAreSkinned) {
   const int plain = g.addPositions(kUnitTriangle);
   const int skinned = g.addPositions({{5, 0, 0}, {6, 0, 0}, {5, 1, 0}});
   const std::vector<uint16_t> joints{1, 0, 0, 0, 2, 0, 0, 0, 3, 0, 0, 0};
-  const int j = g.addAccessor(g.addView(joints.data(), joints.size() * 2), kUnsignedShort, 3, "VEC4");
+  const int j =
+      g.addAccessor(g.addView(joints.data(), joints.size() * 2), kUnsignedShort, 3, "VEC4");
   const std::vector<glm::vec4> weights(3, glm::vec4(1, 0, 0, 0));
-  const int w = g.addAccessor(g.addView(weights.data(), weights.size() * sizeof(glm::vec4)), kFloat, 3, "VEC4");
+  const int w = g.addAccessor(g.addView(weights.data(), weights.size() * sizeof(glm::vec4)), kFloat,
+                              3, "VEC4");
   json prim = GltfDoc::primitive(skinned);
   prim["attributes"]["JOINTS_0"] = j;
   prim["attributes"]["WEIGHTS_0"] = w;
@@ -529,7 +532,8 @@ std::string fileWithTexcoordCount(uint64_t count) {
   GltfDoc g;
   const int pos = g.addPositions(kUnitTriangle);
   const std::vector<glm::vec2> uv(3, glm::vec2(0.0f));
-  const int tex = g.addAccessor(g.addView(uv.data(), uv.size() * sizeof(glm::vec2)), kFloat, 3, "VEC2");
+  const int tex =
+      g.addAccessor(g.addView(uv.data(), uv.size() * sizeof(glm::vec2)), kFloat, 3, "VEC2");
   g.doc()["accessors"][size_t(tex)]["count"] = count;
   json prim = GltfDoc::primitive(pos);
   prim["attributes"]["TEXCOORD_0"] = tex;
@@ -574,8 +578,9 @@ TEST(GltfLoader, RejectsAnIndexOutOfRangeNamingTheMeshAndPrimitive) {
   const int pos = g.addPositions(kUnitTriangle);
   const int good = g.addIndices({0, 1, 2}, kUnsignedShort);
   const int bad = g.addIndices({0, 1, 3}, kUnsignedShort);
-  g.addNode({{"name", "n"},
-             {"mesh", g.addMesh("roof", {GltfDoc::primitive(pos, good), GltfDoc::primitive(pos, bad)})}});
+  g.addNode(
+      {{"name", "n"},
+       {"mesh", g.addMesh("roof", {GltfDoc::primitive(pos, good), GltfDoc::primitive(pos, bad)})}});
   g.setRoots({0});
   const fs::path p = dir.write("range.gltf", g.text());
   const std::string msg = inputErrorOf([&] { loadGltf(p); });
@@ -1000,7 +1005,8 @@ TEST_F(Fox, HasOneSkinOf24JointsWithInverseBindMatrices) {
     ASSERT_LT(size_t(j), scene_->nodes.size());
   }
   // An inverse bind matrix is invertible (a rigid transform here, up to scale).
-  for (const glm::mat4& m : skin.inverseBindMatrices) EXPECT_GT(std::abs(glm::determinant(m)), 1e-6f);
+  for (const glm::mat4& m : skin.inverseBindMatrices)
+    EXPECT_GT(std::abs(glm::determinant(m)), 1e-6f);
 }
 
 TEST_F(Fox, HasTheThreeClipsWithTheDurationsOfTheirSamplers) {
@@ -1012,7 +1018,8 @@ TEST_F(Fox, HasTheThreeClipsWithTheDurationsOfTheirSamplers) {
     // Oracle: the largest "max" of the sampler input accessors in the JSON.
     double expected = 0.0;
     for (const json& s : (*json_)["animations"][a]["samplers"])
-      expected = std::max(expected, (*json_)["accessors"][s["input"].get<size_t>()]["max"][0].get<double>());
+      expected = std::max(expected,
+                          (*json_)["accessors"][s["input"].get<size_t>()]["max"][0].get<double>());
     EXPECT_GT(anim.duration, 0.0f);
     EXPECT_NEAR(anim.duration, expected, 1e-5) << anim.name;
     EXPECT_FALSE(anim.channels.empty());

@@ -5,22 +5,22 @@
 // expected positions and face IDs follow from those texts by hand. The real
 // data (delfshaven.obj, Fox.glb, the HDR) is used through absolute paths or a
 // copy, with the counts from shared/data/README.md.
+#include "common/scene/manifest.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <atomic>
 #include <fstream>
 #include <map>
 #include <set>
 #include <string>
-#include <unistd.h>
-
-#include <gmock/gmock.h>
-#include <gtest/gtest.h>
-
-#include "tests/common/support/temp_dir.h"
 
 #include "common/core/error.h"
-#include "common/scene/manifest.h"
 #include "common/scene/scene_loader.h"
+#include "tests/common/support/temp_dir.h"
 
 namespace vistream {
 namespace {
@@ -38,8 +38,7 @@ class TempDir : public testing::TempDir {
 };
 
 // Two faces (a quad and a triangle, three triangles) in object "A" near the origin.
-const char* const kA =
-    "o A\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\nf 1 2 3\n";
+const char* const kA = "o A\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\nf 1 2 3\n";
 // Three faces in object "B" around (100, 0, 0).
 const char* const kB =
     "o B\nv 100 0 0\nv 101 0 0\nv 100 1 0\nv 100 0 1\nf 1 2 3\nf 1 3 4\nf 1 4 2\n";
@@ -119,7 +118,8 @@ TEST(Manifest, KeepsFilePositionsOfEveryPartUnderTheCommonOrigin) {
 TEST(Manifest, ResolvesGeometryPathsRelativeToTheManifest) {
   const TempDir dir;
   dir.write("models/b.obj", kB);
-  const Scene scene = loadManifest(dir.write("scenes/m.json", R"({"geometry": ["../models/b.obj"]})"));
+  const Scene scene =
+      loadManifest(dir.write("scenes/m.json", R"({"geometry": ["../models/b.obj"]})"));
   EXPECT_EQ(scene.faceCount, 3u);
   ASSERT_NE(findObject(scene, "B"), nullptr);
 }
@@ -128,8 +128,8 @@ TEST(Manifest, MarksEveryObjectOfADynamicFileDynamic) {
   const TempDir dir;
   dir.write("a.obj", kA);
   dir.write("b.obj", kB);
-  const Scene scene = loadManifest(dir.write(
-      "m.json", R"({"geometry": ["a.obj", {"file": "b.obj", "dynamic": true}]})"));
+  const Scene scene = loadManifest(
+      dir.write("m.json", R"({"geometry": ["a.obj", {"file": "b.obj", "dynamic": true}]})"));
   EXPECT_FALSE(findObject(scene, "A")->dynamic);
   EXPECT_TRUE(findObject(scene, "B")->dynamic);
   EXPECT_EQ(scene.dynamicObjectCount(), 1u);
@@ -198,8 +198,8 @@ TEST(Manifest, PlacesAFile50KmOutWithSubMillimetrePrecision) {
 TEST(Manifest, LoadsTheSameFileTwiceAsTwoPlacedCopies) {
   const TempDir dir;
   dir.write("b.obj", kB);
-  const Scene scene = loadManifest(dir.write(
-      "m.json", R"({"geometry": [{"file": "b.obj", "name": "left"},
+  const Scene scene =
+      loadManifest(dir.write("m.json", R"({"geometry": [{"file": "b.obj", "name": "left"},
                                  {"file": "b.obj", "name": "right", "translate": [0, 0, 10]}]})"));
   EXPECT_EQ(scene.faceCount, 6u);
   ASSERT_EQ(scene.objects.size(), 2u);
@@ -256,8 +256,8 @@ TEST(Manifest, ParsesEverySkyMode) {
 TEST(Manifest, ReadsSkyColourAndNearFieldRadius) {
   const TempDir dir;
   dir.write("a.obj", kA);
-  const Scene scene = loadManifest(dir.write(
-      "m.json", R"({"geometry": ["a.obj"], "near_field_radius": 80.5,
+  const Scene scene =
+      loadManifest(dir.write("m.json", R"({"geometry": ["a.obj"], "near_field_radius": 80.5,
                    "environment": {"sky": "open", "sky_color": [0.1, 0.2, 0.3]}})"));
   EXPECT_FLOAT_EQ(scene.environment.nearFieldRadius, 80.5f);
   EXPECT_EQ(scene.environment.skyColor, glm::vec3(0.1f, 0.2f, 0.3f));
@@ -270,9 +270,9 @@ TEST(Manifest, ResolvesTheHdrPathRelativeToTheManifest) {
   const fs::path copy = dir.path() / "sky" / "beach.hdr";
   fs::create_directories(copy.parent_path());
   fs::copy_file(kSharedData / "spiaggia_di_mondello_1k.hdr", copy);
-  const Scene scene = loadManifest(dir.write(
-      "scenes/m.json",
-      R"({"geometry": ["../a.obj"], "environment": {"hdr": "../sky/beach.hdr"}})"));
+  const Scene scene = loadManifest(
+      dir.write("scenes/m.json",
+                R"({"geometry": ["../a.obj"], "environment": {"hdr": "../sky/beach.hdr"}})"));
   ASSERT_FALSE(scene.environment.hdrImage.empty());
   EXPECT_TRUE(fs::equivalent(scene.environment.hdrImage, copy));
 }
@@ -322,8 +322,8 @@ TEST(Manifest, RejectsAnUnknownKeyInAGeometryEntry) {
 
 TEST(Manifest, RejectsMissingOrEmptyGeometry) {
   const TempDir dir;
-  for (const char* text : {R"({"name": "nothing"})", R"({"geometry": []})",
-                           R"({"geometry": "a.obj"})"}) {
+  for (const char* text :
+       {R"({"name": "nothing"})", R"({"geometry": []})", R"({"geometry": "a.obj"})"}) {
     SCOPED_TRACE(text);
     const std::string msg = manifestError(dir, text);
     EXPECT_THAT(msg, HasSubstr("bad.json"));
@@ -430,8 +430,8 @@ TEST(Manifest, PassesOnTheErrorOfABrokenGeometryFile) {
 
 TEST(Manifest, RejectsInvalidJson) {
   const TempDir dir;
-  for (const char* text : {R"({"geometry": ["a.obj",]})", "", "not json at all",
-                           R"({"geometry": ["a.obj"])"}) {
+  for (const char* text :
+       {R"({"geometry": ["a.obj",]})", "", "not json at all", R"({"geometry": ["a.obj"])"}) {
     SCOPED_TRACE(text);
     EXPECT_THAT(manifestError(dir, text), HasSubstr("bad.json"));
   }
@@ -513,13 +513,12 @@ TEST(Manifest, CombinesDelfshavenWithAPlacedDynamicFox) {
   const TempDir dir;
   const fs::path city = fs::absolute(kSharedData / "delfshaven.obj");
   const fs::path fox = fs::absolute(kSharedData / "Fox.glb");
-  const Scene scene = loadManifest(dir.write(
-      "harbour.json",
-      fmt::format(R"({{"name": "harbour walk",
+  const Scene scene = loadManifest(
+      dir.write("harbour.json", fmt::format(R"({{"name": "harbour walk",
                       "geometry": ["{}", {{"file": "{}", "dynamic": true, "name": "fox",
                                            "translate": [0, 0, 5], "scale": 0.01}}],
                       "environment": {{"sky": "open"}}}})",
-                  city.generic_string(), fox.generic_string())));
+                                            city.generic_string(), fox.generic_string())));
   // shared/data/README.md: 853 buildings with 38,772 triangles; a fox of 576.
   constexpr uint32_t kCityFaces = 38772, kFoxFaces = 576;
   EXPECT_EQ(scene.name, "harbour walk");

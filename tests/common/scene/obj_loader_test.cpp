@@ -3,6 +3,10 @@
 // Expected values come from the OBJ text written in each test (positions,
 // face order, line numbers counted by hand) and, for delfshaven.obj, from the
 // counts published in shared/data/README.md.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <unistd.h>
+
 #include <atomic>
 #include <cmath>
 #include <fstream>
@@ -11,15 +15,10 @@
 #include <random>
 #include <set>
 #include <string>
-#include <unistd.h>
-
-#include <gmock/gmock.h>
-#include <gtest/gtest.h>
-
-#include "tests/common/support/temp_dir.h"
 
 #include "common/core/error.h"
 #include "common/scene/scene_loader.h"
+#include "tests/common/support/temp_dir.h"
 
 namespace vistream {
 namespace {
@@ -74,8 +73,8 @@ void expectNear(const glm::dvec3& actual, const glm::dvec3& expected, double tol
 // ---- faces and face IDs -----------------------------------------------------
 
 TEST(ObjLoader, SplitsAQuadIntoTwoTrianglesSharingOneFaceId) {
-  const Scene scene = loadObjFromMemory(
-      "v 0 0 0\nv 2 0 0\nv 2 3 0\nv 0 3 0\nf 1 2 3 4\n", "quad.obj");
+  const Scene scene =
+      loadObjFromMemory("v 0 0 0\nv 2 0 0\nv 2 3 0\nv 0 3 0\nf 1 2 3 4\n", "quad.obj");
   EXPECT_EQ(scene.faceCount, 1u);
   const auto tris = fileTriangles(scene);
   ASSERT_EQ(tris.size(), 2u);
@@ -93,11 +92,11 @@ TEST(ObjLoader, NumbersFacesByFLineOrderNotByTriangleAcrossObjects) {
   const Scene scene = loadObjFromMemory(
       "o Wall\n"
       "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
-      "f 1 2 3 4\n"           // face 0: a quad, two triangles
+      "f 1 2 3 4\n"  // face 0: a quad, two triangles
       "o Roof\n"
       "v 0 0 1\nv 1 0 1\nv 0 1 1\nv 1 1 1\n"
-      "f 5 6 7\n"             // face 1
-      "f 6 8 7\n",            // face 2
+      "f 5 6 7\n"   // face 1
+      "f 6 8 7\n",  // face 2
       "two.obj");
   EXPECT_EQ(scene.faceCount, 3u);
   ASSERT_EQ(scene.objects.size(), 2u);
@@ -158,10 +157,10 @@ TEST(ObjLoader, TriangulatesAConcavePolygonFaceUnderOneFaceId) {
 TEST(ObjLoader, ResolvesRelativeNegativeIndices) {
   const Scene scene = loadObjFromMemory(
       "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
-      "f -3 -2 -1\n"                     // vertices 1 2 3
+      "f -3 -2 -1\n"  // vertices 1 2 3
       "v 5 0 0\nv 6 0 0\nv 5 1 0\n"
-      "f -3 -2 -1\n"                     // vertices 4 5 6
-      "f -6 2 -1\n",                     // vertices 1 2 6
+      "f -3 -2 -1\n"  // vertices 4 5 6
+      "f -6 2 -1\n",  // vertices 1 2 6
       "relative.obj");
   std::map<uint32_t, FileTriangle> byFace;
   for (const FileTriangle& t : fileTriangles(scene)) byFace.emplace(t.faceId, t);
@@ -199,8 +198,7 @@ TEST(ObjLoader, ReadsEveryVertexIndexForm) {
 
 TEST(ObjLoader, IgnoresCommentsBlankLinesAndCarriageReturns) {
   const Scene scene = loadObjFromMemory(
-      "# a comment\r\n\r\nv 0 0 0\r\nv 1 0 0 # trailing\r\nv 0 1 0\r\n\tf 1 2 3\r\n",
-      "crlf.obj");
+      "# a comment\r\n\r\nv 0 0 0\r\nv 1 0 0 # trailing\r\nv 0 1 0\r\n\tf 1 2 3\r\n", "crlf.obj");
   ASSERT_EQ(scene.triangleCount(), 1u);
   const FileTriangle t = fileTriangles(scene).at(0);
   expectNear(t.v[1], {1, 0, 0}, 1e-9);
@@ -269,8 +267,8 @@ TEST(ObjLoader, RejectsANanCoordinateNamingItsLine) {
 }
 
 TEST(ObjLoader, RejectsAnInfiniteCoordinateNamingItsLine) {
-  const std::string msg = inputErrorOf(
-      [] { loadObjFromMemory("v 0 0 0\nv inf 0 0\nv 0 1 0\nf 1 2 3\n", "inf.obj"); });
+  const std::string msg =
+      inputErrorOf([] { loadObjFromMemory("v 0 0 0\nv inf 0 0\nv 0 1 0\nf 1 2 3\n", "inf.obj"); });
   EXPECT_THAT(msg, HasSubstr("inf.obj:2:"));
   const std::string huge = inputErrorOf(
       [] { loadObjFromMemory("v 0 0 0\nv 1 0 0\nv 0 1e999 0\nf 1 2 3\n", "huge.obj"); });
@@ -292,15 +290,14 @@ TEST(ObjLoader, RejectsAVertexWithTooFewCoordinates) {
 }
 
 TEST(ObjLoader, RejectsAFaceWithTwoVerticesNamingItsLine) {
-  const std::string msg = inputErrorOf([] {
-    loadObjFromMemory("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2\n", "line.obj");
-  });
+  const std::string msg = inputErrorOf(
+      [] { loadObjFromMemory("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2\n", "line.obj"); });
   EXPECT_THAT(msg, HasSubstr("line.obj:5:"));
 }
 
 TEST(ObjLoader, RejectsIndexZeroNamingItsLine) {
-  const std::string msg = inputErrorOf(
-      [] { loadObjFromMemory("v 0 0 0\nv 1 0 0\nv 0 1 0\n\nf 0 1 2\n", "zero.obj"); });
+  const std::string msg =
+      inputErrorOf([] { loadObjFromMemory("v 0 0 0\nv 1 0 0\nv 0 1 0\n\nf 0 1 2\n", "zero.obj"); });
   EXPECT_THAT(msg, HasSubstr("zero.obj:5:"));
 }
 
@@ -311,16 +308,15 @@ TEST(ObjLoader, RejectsAnOutOfRangeIndexNamingItsLine) {
   EXPECT_THAT(msg, HasSubstr("range.obj:5:"));
   // A vertex defined after the face does not make a forward reference valid
   // for a relative index.
-  const std::string rel = inputErrorOf(
-      [] { loadObjFromMemory("v 0 0 0\nv 1 0 0\nf -1 -2 -3\nv 0 1 0\n", "rel.obj"); });
+  const std::string rel =
+      inputErrorOf([] { loadObjFromMemory("v 0 0 0\nv 1 0 0\nf -1 -2 -3\nv 0 1 0\n", "rel.obj"); });
   EXPECT_THAT(rel, HasSubstr("rel.obj:3:"));
 }
 
 TEST(ObjLoader, RejectsAMalformedIndexToken) {
-  EXPECT_THAT(inputErrorOf([] {
-                loadObjFromMemory("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n", "token.obj");
-              }),
-              HasSubstr("token.obj:4:"));
+  EXPECT_THAT(
+      inputErrorOf([] { loadObjFromMemory("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n", "token.obj"); }),
+      HasSubstr("token.obj:4:"));
 }
 
 TEST(ObjLoader, RejectsEmptyAndWhitespaceOnlyFiles) {
@@ -368,9 +364,15 @@ TEST(ObjLoader, NeverThrowsAnythingButInputErrorOnGarbage) {
       for (int e = 0; e < edits; ++e) {
         const size_t at = rng() % text.size();
         switch (rng() % 3) {
-          case 0: text[at] = alphabet[rng() % alphabet.size()]; break;
-          case 1: text.insert(at, 1, alphabet[rng() % alphabet.size()]); break;
-          default: text.erase(at, 1); break;
+          case 0:
+            text[at] = alphabet[rng() % alphabet.size()];
+            break;
+          case 1:
+            text.insert(at, 1, alphabet[rng() % alphabet.size()]);
+            break;
+          default:
+            text.erase(at, 1);
+            break;
         }
       }
     }
@@ -396,9 +398,9 @@ TEST(ObjLoader, NeverThrowsAnythingButInputErrorOnGarbage) {
 TEST(ObjLoader, CountsDegenerateTrianglesAndKeepsThem) {
   const Scene scene = loadObjFromMemory(
       "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\n"
-      "f 1 2 3\n"    // fine
-      "f 1 1 2\n"    // repeated index
-      "f 1 2 4\n",   // three collinear points
+      "f 1 2 3\n"   // fine
+      "f 1 1 2\n"   // repeated index
+      "f 1 2 4\n",  // three collinear points
       "degenerate.obj");
   EXPECT_EQ(scene.triangleCount(), 3u);
   EXPECT_EQ(scene.faceCount, 3u);
@@ -458,8 +460,7 @@ TEST(ObjLoader, AppliesDiffuseColoursFromUsemtl) {
       "usemtl red\nf 1 2 3\n"
       "usemtl green\nf 2 4 3\nf 1 2 4\n"
       "usemtl red\nf 1 4 3\n",
-      "painted.obj",
-      "newmtl green\nKd 0 1 0\n\nnewmtl red\nKd 1 0 0\n");
+      "painted.obj", "newmtl green\nKd 0 1 0\n\nnewmtl red\nKd 1 0 0\n");
   std::map<uint32_t, glm::vec3> colourOfFace;
   for (const FileTriangle& t : fileTriangles(scene)) {
     ASSERT_LT(t.material, scene.materials.size());
@@ -489,8 +490,9 @@ TEST(ObjLoader, ReadsTheMtllibBesideTheFile) {
 
 TEST(ObjLoader, LoadsWithDefaultMaterialsWhenTheMtllibIsMissing) {
   const TempDir dir;
-  const fs::path p = dir.write("bare.obj", "mtllib gone.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
-                                           "usemtl nowhere\nf 1 2 3\n");
+  const fs::path p = dir.write("bare.obj",
+                               "mtllib gone.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+                               "usemtl nowhere\nf 1 2 3\n");
   const Scene scene = loadObj(p);
   ASSERT_EQ(scene.triangleCount(), 1u);
   ASSERT_FALSE(scene.materials.empty());

@@ -9,6 +9,10 @@
 //   inside the polygon (even-odd ray crossing test) must lie in exactly one
 //   output triangle, each point outside in none. This catches overlapping or
 //   missing triangles that an area sum alone could hide.
+#include "common/scene/triangulate.h"
+
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -16,10 +20,6 @@
 #include <random>
 #include <set>
 #include <vector>
-
-#include <gtest/gtest.h>
-
-#include "common/scene/triangulate.h"
 
 namespace vistream {
 namespace {
@@ -148,8 +148,8 @@ void expectValidTriangulation(const Polygon2& poly, const std::vector<glm::uvec3
       if (nearEdge) continue;
       ++checked;
       const int expected = insidePolygon(poly, q) ? 1 : 0;
-      ASSERT_EQ(covered, expected) << "sample (" << q.x << ", " << q.y << ") is covered "
-                                   << covered << " times";
+      ASSERT_EQ(covered, expected)
+          << "sample (" << q.x << ", " << q.y << ") is covered " << covered << " times";
     }
   }
   EXPECT_GT(checked, samplesPerAxis * samplesPerAxis / 2) << "too few samples were decidable";
@@ -167,10 +167,14 @@ Polygon2 regularPolygon(int n, double radius, double phase = 0.3) {
 }
 
 // Area 3.
-Polygon2 lShape() { return {{0, 0}, {2, 0}, {2, 1}, {1, 1}, {1, 2}, {0, 2}}; }
+Polygon2 lShape() {
+  return {{0, 0}, {2, 0}, {2, 1}, {1, 1}, {1, 2}, {0, 2}};
+}
 
 // A 3x3 square with a 1x2 notch cut from the top middle: area 7.
-Polygon2 uShape() { return {{0, 0}, {3, 0}, {3, 3}, {2, 3}, {2, 1}, {1, 1}, {1, 3}, {0, 3}}; }
+Polygon2 uShape() {
+  return {{0, 0}, {3, 0}, {3, 3}, {2, 3}, {2, 1}, {1, 1}, {1, 3}, {0, 3}};
+}
 
 Polygon2 star(int points, double outer, double inner) {
   Polygon2 p;

@@ -8,8 +8,8 @@ namespace vistream {
 namespace {
 
 using testing::addBox;
-using testing::addGround;
 using testing::addFaces;
+using testing::addGround;
 
 struct World {
   Scene scene;

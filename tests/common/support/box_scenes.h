@@ -53,7 +53,8 @@ inline uint32_t addGround(Scene& scene, float x0, float z0, float x1, float z1, 
 // from its first vertex (which must see every other vertex); a loop's winding
 // gives its normal by the right-hand rule. Returns the first face ID.
 using Loop = std::vector<glm::vec3>;
-inline uint32_t addFaces(Scene& scene, const std::string& name, const std::vector<Loop>& faces, bool dynamic = false) {
+inline uint32_t addFaces(Scene& scene, const std::string& name, const std::vector<Loop>& faces,
+                         bool dynamic = false) {
   Object o;
   o.name = name;
   o.dynamic = dynamic;
@@ -76,15 +77,20 @@ enum BoxSide : uint32_t { kMinusX = 0, kPlusX, kMinusY, kPlusY, kMinusZ, kPlusZ 
 
 // Appends a box standing on y = 0 as an OBJ object (8 vertices, 6 quads);
 // `base` is the 1-based index its first vertex gets, advanced by 8.
-inline void appendBoxObj(std::string& obj, int& base, const std::string& name, double x0, double z0, double x1,
-                         double z1, double h) {
+inline void appendBoxObj(std::string& obj, int& base, const std::string& name, double x0, double z0,
+                         double x1, double z1, double h) {
   obj += "o " + name + "\n";
   for (int k = 0; k < 8; ++k)
-    obj += "v " + std::to_string((k & 1) ? x1 : x0) + " " + std::to_string((k & 2) ? h : 0.0) + " " +
-           std::to_string((k & 4) ? z1 : z0) + "\n";
-  for (const auto& f : {std::array{0, 4, 6, 2}, {1, 3, 7, 5}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 2, 3, 1}, {4, 5, 7, 6}})
-    obj += "f " + std::to_string(base + f[0]) + " " + std::to_string(base + f[1]) + " " + std::to_string(base + f[2]) +
-           " " + std::to_string(base + f[3]) + "\n";
+    obj += "v " + std::to_string((k & 1) ? x1 : x0) + " " + std::to_string((k & 2) ? h : 0.0) +
+           " " + std::to_string((k & 4) ? z1 : z0) + "\n";
+  for (const auto& f : {std::array{0, 4, 6, 2},
+                        {1, 3, 7, 5},
+                        {0, 1, 5, 4},
+                        {2, 6, 7, 3},
+                        {0, 2, 3, 1},
+                        {4, 5, 7, 6}})
+    obj += "f " + std::to_string(base + f[0]) + " " + std::to_string(base + f[1]) + " " +
+           std::to_string(base + f[2]) + " " + std::to_string(base + f[3]) + "\n";
   base += 8;
 }
 

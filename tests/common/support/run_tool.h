@@ -22,9 +22,11 @@ struct ToolRun {
 
 inline ToolRun runTool(const std::string& tool, const std::string& args) {
   static int counter = 0;
-  const std::filesystem::path errFile = std::filesystem::temp_directory_path() /
-                                        ("vistream_tool_err_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
-  const std::string cmd = std::string(VISTREAM_BIN_DIR) + "/" + tool + " " + args + " 2>" + errFile.string();
+  const std::filesystem::path errFile =
+      std::filesystem::temp_directory_path() /
+      ("vistream_tool_err_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
+  const std::string cmd =
+      std::string(VISTREAM_BIN_DIR) + "/" + tool + " " + args + " 2>" + errFile.string();
   ToolRun r;
   FILE* pipe = ::popen(cmd.c_str(), "r");
   if (!pipe) return r;

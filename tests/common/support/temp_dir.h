@@ -2,14 +2,13 @@
 // expected InputError.
 #pragma once
 
+#include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <atomic>
 #include <filesystem>
 #include <fstream>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "common/core/error.h"
 
@@ -23,8 +22,8 @@ class TempDir {
     static std::atomic<int> counter{0};
     const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
     path_ = std::filesystem::temp_directory_path() /
-            (prefix + "_" + std::string(info ? info->name() : "x") + "_" + std::to_string(::getpid()) + "_" +
-             std::to_string(counter++));
+            (prefix + "_" + std::string(info ? info->name() : "x") + "_" +
+             std::to_string(::getpid()) + "_" + std::to_string(counter++));
     std::filesystem::remove_all(path_);
     std::filesystem::create_directories(path_);
   }

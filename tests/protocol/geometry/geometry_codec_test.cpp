@@ -17,7 +17,9 @@ std::vector<uint8_t> bufferOf(const flatbuffers::FlatBufferBuilder& b) {
   return {b.GetBufferPointer(), b.GetBufferPointer() + b.GetSize()};
 }
 
-const Geometry& geometryIn(const std::vector<uint8_t>& buffer) { return *GetEnvelope(buffer.data())->payload_as_Geometry(); }
+const Geometry& geometryIn(const std::vector<uint8_t>& buffer) {
+  return *GetEnvelope(buffer.data())->payload_as_Geometry();
+}
 
 std::vector<FaceTriangles> randomFaces(size_t n, uint32_t seed, float extent) {
   std::mt19937 rng(seed);
@@ -27,7 +29,8 @@ std::vector<FaceTriangles> randomFaces(size_t n, uint32_t seed, float extent) {
     FaceTriangles f;
     f.face = uint32_t(i * 3 + 7);
     f.material = uint16_t(i % 5);
-    const glm::vec3 a(u(rng), u(rng), u(rng)), b(u(rng), u(rng), u(rng)), c(u(rng), u(rng), u(rng)), d(u(rng), u(rng), u(rng));
+    const glm::vec3 a(u(rng), u(rng), u(rng)), b(u(rng), u(rng), u(rng)), c(u(rng), u(rng), u(rng)),
+        d(u(rng), u(rng), u(rng));
     f.corners = {a, b, c, a, c, d};  // a quad: two triangles sharing an edge
     faces.push_back(f);
   }
@@ -52,7 +55,8 @@ TEST(GeometryCodec, RoundTripsFacesWithinHalfAQuantizationStep) {
       for (size_t rot = 0; rot < 3; ++rot) {
         float worst = 0.0f;
         for (size_t k = 0; k < 3; ++k)
-          worst = std::max(worst, glm::length(g.positions[g.indices[6 * i + 3 * t + k]] - faces[i].corners[3 * t + (k + rot) % 3]));
+          worst = std::max(worst, glm::length(g.positions[g.indices[6 * i + 3 * t + k]] -
+                                              faces[i].corners[3 * t + (k + rot) % 3]));
         best = std::min(best, worst);
       }
       EXPECT_LE(best, 0.87f * step + 1e-4f);

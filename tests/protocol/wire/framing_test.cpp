@@ -24,7 +24,8 @@ TEST(FrameDecoder, ReturnsTheHelloThatWasEncoded) {
 }
 
 TEST(FrameDecoder, ReassemblesFramesDeliveredOneByteAtATime) {
-  const auto bytes = concat({encodeHello(1, "a"), encodeBye("done"), encodeError(ErrorCode::BadToken, "no")});
+  const auto bytes =
+      concat({encodeHello(1, "a"), encodeBye("done"), encodeError(ErrorCode::BadToken, "no")});
   FrameDecoder decoder;
   std::vector<Payload> seen;
   for (uint8_t b : bytes) {

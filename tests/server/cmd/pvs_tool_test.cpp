@@ -1,5 +1,6 @@
 // End-to-end tests of the vistream-pvs executable: the command-line and JSON
 // contracts of cell, bake, query, merge and walk.
+#include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -7,13 +8,10 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <string>
 
-#include <gtest/gtest.h>
-
 #include "tests/common/support/run_tool.h"
-#include <nlohmann/json.hpp>
-
 #include "tests/common/support/temp_dir.h"
 
 namespace {
@@ -22,21 +20,24 @@ namespace fs = std::filesystem;
 
 using vistream::testing::ToolRun;
 
-ToolRun runPvs(const std::string& args) { return vistream::testing::runTool("vistream-pvs", args); }
+ToolRun runPvs(const std::string& args) {
+  return vistream::testing::runTool("vistream-pvs", args);
+}
 
 // Ground, a wall and a box hidden behind it. Face IDs: 0 ground; wall 1..6
 // (-x,+x,-y,+y,-z,+z); hidden box 7..12.
 std::string wallScene() {
   std::string o = "o ground\nv -50 0 -50\nv -50 0 50\nv 50 0 50\nv 50 0 -50\nf 1 2 3 4\n";
   int base = 5;
-  auto box = [&](const char* name, double x0, double y0, double z0, double x1, double y1, double z1) {
+  auto box = [&](const char* name, double x0, double y0, double z0, double x1, double y1,
+                 double z1) {
     o += std::string("o ") + name + "\n";
     for (int k = 0; k < 8; ++k)
-      o += "v " + std::to_string((k & 1) ? x1 : x0) + " " + std::to_string((k & 2) ? y1 : y0) + " " +
-           std::to_string((k & 4) ? z1 : z0) + "\n";
+      o += "v " + std::to_string((k & 1) ? x1 : x0) + " " + std::to_string((k & 2) ? y1 : y0) +
+           " " + std::to_string((k & 4) ? z1 : z0) + "\n";
     auto f = [&](int a, int b, int c, int d) {
-      o += "f " + std::to_string(base + a) + " " + std::to_string(base + b) + " " + std::to_string(base + c) + " " +
-           std::to_string(base + d) + "\n";
+      o += "f " + std::to_string(base + a) + " " + std::to_string(base + b) + " " +
+           std::to_string(base + c) + " " + std::to_string(base + d) + "\n";
     };
     f(0, 4, 6, 2);  // -x
     f(1, 3, 7, 5);  // +x
@@ -59,18 +60,22 @@ TEST(PvsTool, CellPrintsTheContractedJsonAndCullsTheHiddenBox) {
   const auto j = nlohmann::json::parse(r.out);
   const auto faces = j["faces"].get<std::vector<uint32_t>>();
   EXPECT_TRUE(std::is_sorted(faces.begin(), faces.end()));
-  for (uint32_t hidden = 7; hidden <= 12; ++hidden) EXPECT_FALSE(std::binary_search(faces.begin(), faces.end(), hidden));
+  for (uint32_t hidden = 7; hidden <= 12; ++hidden)
+    EXPECT_FALSE(std::binary_search(faces.begin(), faces.end(), hidden));
   EXPECT_TRUE(std::binary_search(faces.begin(), faces.end(), 6u));  // the wall's front face
-  EXPECT_EQ(j["objects"].get<std::vector<std::string>>(), (std::vector<std::string>{"ground", "wall"}));
-  for (const char* key : {"time_ms", "occluders_used", "lines_cast", "line_box_tests", "line_polygon_tests",
-                          "faces_culled_by_box_stage"})
+  EXPECT_EQ(j["objects"].get<std::vector<std::string>>(),
+            (std::vector<std::string>{"ground", "wall"}));
+  for (const char* key : {"time_ms", "occluders_used", "lines_cast", "line_box_tests",
+                          "line_polygon_tests", "faces_culled_by_box_stage"})
     EXPECT_TRUE(j["stats"].contains(key)) << key;
-  for (const char* flags : {"--no-bbox", "--no-incremental", "--no-redundant-occluders", "--no-redundant-rays",
-                            "--method fused --epsilon 0.5"}) {
-    const ToolRun other = runPvs("cell --scene " + scene.string() + " --cell -1,1,0,1,2,2 --json " + flags);
+  for (const char* flags : {"--no-bbox", "--no-incremental", "--no-redundant-occluders",
+                            "--no-redundant-rays", "--method fused --epsilon 0.5"}) {
+    const ToolRun other =
+        runPvs("cell --scene " + scene.string() + " --cell -1,1,0,1,2,2 --json " + flags);
     ASSERT_EQ(other.status, 0) << flags << other.err;
     const auto of = nlohmann::json::parse(other.out)["faces"].get<std::vector<uint32_t>>();
-    EXPECT_TRUE(std::includes(faces.begin(), faces.end(), of.begin(), of.end()) || of == faces) << flags;
+    EXPECT_TRUE(std::includes(faces.begin(), faces.end(), of.begin(), of.end()) || of == faces)
+        << flags;
     for (uint32_t f : {0u, 6u}) EXPECT_TRUE(std::binary_search(of.begin(), of.end(), f)) << flags;
   }
 }
@@ -79,7 +84,8 @@ TEST(PvsTool, BakesQueriesAndMergesAndRejectsACorruptDatabase) {
   vistream::testing::TempDir dir;
   const fs::path scene = dir.write("wall.obj", wallScene());
   const std::string db = (dir / "w.db").string();
-  ToolRun r = runPvs("bake --scene " + scene.string() + " --cell-size 4,2,4 --out " + db + " --json");
+  ToolRun r =
+      runPvs("bake --scene " + scene.string() + " --cell-size 4,2,4 --out " + db + " --json");
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_GT(nlohmann::json::parse(r.out)["computed_cells"].get<int>(), 10);
   r = runPvs("query --db " + db + " --point 0,1.5,1 --json");
@@ -89,11 +95,13 @@ TEST(PvsTool, BakesQueriesAndMergesAndRejectsACorruptDatabase) {
   const auto faces = q["faces"].get<std::vector<uint32_t>>();
   EXPECT_TRUE(std::binary_search(faces.begin(), faces.end(), 6u));
   for (int shard = 0; shard < 2; ++shard)
-    ASSERT_EQ(runPvs("bake --scene " + scene.string() + " --cell-size 4,2,4 --shard " + std::to_string(shard) +
-                     "/2 --out " + (dir / ("s" + std::to_string(shard) + ".db")).string())
+    ASSERT_EQ(runPvs("bake --scene " + scene.string() + " --cell-size 4,2,4 --shard " +
+                     std::to_string(shard) + "/2 --out " +
+                     (dir / ("s" + std::to_string(shard) + ".db")).string())
                   .status,
               0);
-  r = runPvs("merge " + (dir / "s0.db").string() + " " + (dir / "s1.db").string() + " --out " + (dir / "m.db").string());
+  r = runPvs("merge " + (dir / "s0.db").string() + " " + (dir / "s1.db").string() + " --out " +
+             (dir / "m.db").string());
   ASSERT_EQ(r.status, 0) << r.err;
   r = runPvs("query --db " + (dir / "m.db").string() + " --point 0,1.5,1 --json");
   ASSERT_EQ(r.status, 0) << r.err;
@@ -114,24 +122,30 @@ TEST(PvsTool, BakesQueriesAndMergesAndRejectsACorruptDatabase) {
 TEST(PvsTool, WalkPrintsTheSummaryAndOneRecordPerFrame) {
   vistream::testing::TempDir dir;
   const fs::path scene = dir.write("wall.obj", wallScene());
-  const fs::path path = dir.write("p.csv", "t,x,y,z,yaw_deg,pitch_deg\n0,0,1.7,2,0,0\n0.033,0,1.7,1.95,10,0\n0.066,0,1.7,1.9,180,0\n");
+  const fs::path path = dir.write(
+      "p.csv",
+      "t,x,y,z,yaw_deg,pitch_deg\n0,0,1.7,2,0,0\n0.033,0,1.7,1.95,10,0\n0.066,0,1.7,1.9,180,0\n");
   for (const char* method : {"A", "B", "C", "D", "adaptive"}) {
-    const ToolRun r = runPvs("walk --scene " + scene.string() + " --path " + path.string() + " --method " + method +
-                             " --json --with-faces");
+    const ToolRun r = runPvs("walk --scene " + scene.string() + " --path " + path.string() +
+                             " --method " + method + " --json --with-faces");
     ASSERT_EQ(r.status, 0) << r.err;
     const auto j = nlohmann::json::parse(r.out);
-    for (const char* key : {"node_tests_mean", "culling_ms_mean", "frame_ms_mean", "visible_faces_mean"})
+    for (const char* key :
+         {"node_tests_mean", "culling_ms_mean", "frame_ms_mean", "visible_faces_mean"})
       EXPECT_TRUE(j["summary"].contains(key)) << key;
     ASSERT_EQ(j["frames"].size(), 3u);
     for (const auto& f : j["frames"]) {
-      for (const char* key : {"node_tests", "culling_ms", "visible_faces", "faces"}) EXPECT_TRUE(f.contains(key)) << key;
+      for (const char* key : {"node_tests", "culling_ms", "visible_faces", "faces"})
+        EXPECT_TRUE(f.contains(key)) << key;
       EXPECT_EQ(f["faces"].size(), f["visible_faces"].get<size_t>());
     }
   }
-  const ToolRun bad = runPvs("walk --scene " + scene.string() + " --path " + path.string() + " --method Q");
+  const ToolRun bad =
+      runPvs("walk --scene " + scene.string() + " --path " + path.string() + " --method Q");
   EXPECT_EQ(bad.status, 1);
   EXPECT_NE(bad.err.find("--method"), std::string::npos) << bad.err;
-  const ToolRun badP = runPvs("walk --scene " + scene.string() + " --path " + path.string() + " --method C --p-vp 1.5");
+  const ToolRun badP = runPvs("walk --scene " + scene.string() + " --path " + path.string() +
+                              " --method C --p-vp 1.5");
   EXPECT_EQ(badP.status, 1);
   EXPECT_NE(badP.err.find("--p-vp"), std::string::npos) << badP.err;
 }

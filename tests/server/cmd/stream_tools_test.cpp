@@ -174,17 +174,20 @@ std::string sh(const std::string& script) {
 TEST(StreamTools, AServerFromAConfigFileServesWalkingClientsAndStopsOnSigterm) {
   vistream::testing::TempDir dir;
   const fs::path scene = dir.write("street.obj", streetObj());
-  const fs::path path = dir.write("walk.csv",
-                                  "t,x,y,z,yaw_deg,pitch_deg\n0,0,1.7,20,0,0\n4,0,1.7,14.4,0,0\n8,0,1.7,8.8,0,0\n");
-  const fs::path config = dir.write("server.ini", "scene=" + scene.string() + "\nport=0\nport-file=" +
-                                                      (dir.path() / "port").string() + "\nradius=60\nlog-level=warn\n");
+  const fs::path path = dir.write(
+      "walk.csv", "t,x,y,z,yaw_deg,pitch_deg\n0,0,1.7,20,0,0\n4,0,1.7,14.4,0,0\n8,0,1.7,8.8,0,0\n");
+  const fs::path config =
+      dir.write("server.ini", "scene=" + scene.string() + "\nport=0\nport-file=" +
+                                  (dir.path() / "port").string() + "\nradius=60\nlog-level=warn\n");
   const std::string bin = VISTREAM_BIN_DIR;
   const std::string d = dir.path().string();
-  sh(bin + "/vistream-server --config " + config.string() + " > " + d + "/server.log 2>&1 & echo $! > " + d +
-     "/pid; for i in $(seq 1 200); do [ -s " + d + "/port ] && break; sleep 0.1; done; " + bin +
-     "/vistream-loadtest --port $(cat " + d + "/port) --clients 3 --path " + path.string() +
-     " --duration 2 --speed 1 --scene " + scene.string() + " --check-every 3 --json > " + d + "/out.json; echo $? > " +
-     d + "/lt_status; kill -TERM $(cat " + d + "/pid); wait $(cat " + d + "/pid) 2>/dev/null; sleep 0.5");
+  sh(bin + "/vistream-server --config " + config.string() + " > " + d +
+     "/server.log 2>&1 & echo $! > " + d + "/pid; for i in $(seq 1 200); do [ -s " + d +
+     "/port ] && break; sleep 0.1; done; " + bin + "/vistream-loadtest --port $(cat " + d +
+     "/port) --clients 3 --path " + path.string() + " --duration 2 --speed 1 --scene " +
+     scene.string() + " --check-every 3 --json > " + d + "/out.json; echo $? > " + d +
+     "/lt_status; kill -TERM $(cat " + d + "/pid); wait $(cat " + d +
+     "/pid) 2>/dev/null; sleep 0.5");
   std::ifstream ltStatus(dir.path() / "lt_status");
   int status = -1;
   ltStatus >> status;
@@ -193,10 +196,12 @@ TEST(StreamTools, AServerFromAConfigFileServesWalkingClientsAndStopsOnSigterm) {
   ASSERT_EQ(status, 0) << serverLog;
   std::ifstream out(dir.path() / "out.json");
   const auto j = nlohmann::json::parse(out);
-  for (const char* key : {"clients", "duration_s", "bytes_per_client_per_s", "cell_ready_latency_ms", "visibility_misses",
-                          "frames_checked", "initial_load_ms", "errors", "server_cpu_ms_per_s_per_client"})
+  for (const char* key : {"clients", "duration_s", "bytes_per_client_per_s",
+                          "cell_ready_latency_ms", "visibility_misses", "frames_checked",
+                          "initial_load_ms", "errors", "server_cpu_ms_per_s_per_client"})
     EXPECT_TRUE(j.contains(key)) << key;
-  for (const char* key : {"p50", "p95", "p99"}) EXPECT_TRUE(j["cell_ready_latency_ms"].contains(key)) << key;
+  for (const char* key : {"p50", "p95", "p99"})
+    EXPECT_TRUE(j["cell_ready_latency_ms"].contains(key)) << key;
   EXPECT_EQ(j["clients"], 3);
   EXPECT_EQ(j["errors"], 0) << j.dump();
   EXPECT_EQ(j["clients_loaded"], 3);
@@ -323,7 +328,8 @@ TEST(StreamTools, HelpAndBadArgumentsGiveClearExits) {
   ToolRun r = runTool("vistream-server", "--scene " + scene.string() + " --policy nearest");
   EXPECT_EQ(r.status, 1);
   EXPECT_NE(r.err.find("--policy"), std::string::npos) << r.err;
-  r = runTool("vistream-server", "--scene " + scene.string() + " --token-file " + (dir.path() / "none").string());
+  r = runTool("vistream-server",
+              "--scene " + scene.string() + " --token-file " + (dir.path() / "none").string());
   EXPECT_EQ(r.status, 1);
   EXPECT_NE(r.err.find("none"), std::string::npos) << r.err;
   r = runTool("vistream-server", "--no-such-option");
@@ -331,7 +337,9 @@ TEST(StreamTools, HelpAndBadArgumentsGiveClearExits) {
   r = runTool("vistream-loadtest", "--clients 2 --path a.csv --paths auto");
   EXPECT_EQ(r.status, 1);
   EXPECT_NE(r.err.find("--path"), std::string::npos) << r.err;
-  r = runTool("vistream-loadtest", "--clients 0 --path " + dir.write("p.csv", "t,x,y,z,yaw_deg,pitch_deg\n0,0,1.7,0,0,0\n").string());
+  r = runTool("vistream-loadtest",
+              "--clients 0 --path " +
+                  dir.write("p.csv", "t,x,y,z,yaw_deg,pitch_deg\n0,0,1.7,0,0,0\n").string());
   EXPECT_EQ(r.status, 1);
   EXPECT_NE(r.err.find("--clients"), std::string::npos) << r.err;
   r = runTool("vistream-loadtest", "--grace -1 --path " + (dir.path() / "p.csv").string());

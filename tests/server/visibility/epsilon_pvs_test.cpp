@@ -21,6 +21,8 @@
 // answers rely on is far larger than OccluderOptions::minOccluderSize.
 #include "server/visibility/epsilon_pvs.h"
 
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cstdio>
 #include <functional>
@@ -28,8 +30,6 @@
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "common/generate/generate.h"
 #include "common/raycast/ray_query.h"
@@ -52,7 +52,6 @@ using testing::kPlusZ;
 using testing::addFaces;
 using testing::Loop;
 
-
 // A quad in the plane z = const facing +z, over [x0,x1] x [y0,y1].
 Loop quadFacingPlusZ(float x0, float y0, float x1, float y1, float z) {
   return {{x0, y0, z}, {x1, y0, z}, {x1, y1, z}, {x0, y1, z}};
@@ -69,8 +68,8 @@ Loop operator+(Loop loop, const glm::vec3& d) {
 
 std::string describe(const Box3f& b) {
   char text[160];
-  std::snprintf(text, sizeof text, "[%g,%g,%g]-[%g,%g,%g]", double(b.lo.x), double(b.lo.y), double(b.lo.z),
-                double(b.hi.x), double(b.hi.y), double(b.hi.z));
+  std::snprintf(text, sizeof text, "[%g,%g,%g]-[%g,%g,%g]", double(b.lo.x), double(b.lo.y),
+                double(b.lo.z), double(b.hi.x), double(b.hi.y), double(b.hi.z));
   return text;
 }
 
@@ -100,7 +99,9 @@ class World {
     return *pvs_;
   }
 
-  PvsResult compute(const Box3f& cell, const PvsOptions& options = {}) { return pvs().compute(cell, options); }
+  PvsResult compute(const Box3f& cell, const PvsOptions& options = {}) {
+    return pvs().compute(cell, options);
+  }
 
   // Faces hit first by some ray from some of 24 viewpoints of the cell.
   std::vector<uint32_t> sampled(const Box3f& cell) {
@@ -131,9 +132,11 @@ class World {
 }
 
 // Every face of `inner` is in `outer` (both sorted).
-::testing::AssertionResult includes(const std::vector<uint32_t>& outer, const std::vector<uint32_t>& inner) {
+::testing::AssertionResult includes(const std::vector<uint32_t>& outer,
+                                    const std::vector<uint32_t>& inner) {
   std::vector<uint32_t> missing;
-  std::set_difference(inner.begin(), inner.end(), outer.begin(), outer.end(), std::back_inserter(missing));
+  std::set_difference(inner.begin(), inner.end(), outer.begin(), outer.end(),
+                      std::back_inserter(missing));
   if (missing.empty()) return ::testing::AssertionSuccess();
   return ::testing::AssertionFailure() << missing.size() << " faces missing:" << list(missing);
 }
@@ -149,7 +152,9 @@ class World {
 const glm::vec3 kWallLo(-5, 0, -0.25f), kWallHi(5, 4, 0.25f);
 const Box3f kCell({-1, 1, 4}, {1, 2.25f, 5});
 
-Box3f shifted(const Box3f& b, const glm::vec3& d) { return Box3f(b.lo + d, b.hi + d); }
+Box3f shifted(const Box3f& b, const glm::vec3& d) {
+  return Box3f(b.lo + d, b.hi + d);
+}
 
 // --- Hand-built configurations --------------------------------------------
 // Each builder adds its objects translated by `d` and returns the first face
@@ -186,9 +191,11 @@ Ids groundWallAndTargets(Scene& s, glm::vec3 d) {
   Ids ids;
   ids["ground"] = addGround(s, -50 + d.x, -50 + d.z, 50 + d.x, 50 + d.z, d.y);
   ids["wall"] = addBox(s, "wall", kWallLo + d, kWallHi + d);
-  ids["raised"] = addBox(s, "raised", glm::vec3(-0.5f, 0.5f, -3) + d, glm::vec3(0.5f, 1.5f, -2) + d);
+  ids["raised"] =
+      addBox(s, "raised", glm::vec3(-0.5f, 0.5f, -3) + d, glm::vec3(0.5f, 1.5f, -2) + d);
   ids["standing"] = addBox(s, "standing", glm::vec3(2, 0, -3) + d, glm::vec3(3, 1, -2) + d);
-  ids["basement"] = addBox(s, "basement", glm::vec3(-0.5f, -3, 3.5f) + d, glm::vec3(0.5f, -2, 4.5f) + d);
+  ids["basement"] =
+      addBox(s, "basement", glm::vec3(-0.5f, -3, 3.5f) + d, glm::vec3(0.5f, -2, 4.5f) + d);
   return ids;
 }
 
@@ -206,8 +213,10 @@ Ids flushOnTheWall(Scene& s, glm::vec3 d) {
   ids["front poster"] = addFaces(s, "front poster", {quadFacingPlusZ(-1, 1, 1, 2, 0.25f) + d});
   ids["back poster"] = addFaces(s, "back poster", {quadFacingMinusZ(-1, 1, 1, 2, -0.25f) + d});
   ids["full poster"] = addFaces(s, "full poster", {quadFacingPlusZ(-5, 0, 5, 4, 0.25f) + d});
-  ids["front box"] = addBox(s, "front box", glm::vec3(2, 0.5f, 0.25f) + d, glm::vec3(3, 2, 1.25f) + d);
-  ids["back box"] = addBox(s, "back box", glm::vec3(-1, 0.5f, -1.25f) + d, glm::vec3(1, 2, -0.25f) + d);
+  ids["front box"] =
+      addBox(s, "front box", glm::vec3(2, 0.5f, 0.25f) + d, glm::vec3(3, 2, 1.25f) + d);
+  ids["back box"] =
+      addBox(s, "back box", glm::vec3(-1, 0.5f, -1.25f) + d, glm::vec3(1, 2, -0.25f) + d);
   return ids;
 }
 
@@ -262,8 +271,9 @@ Ids grazingPastAPolygonEdge(Scene& s, glm::vec3 d) {
 // whose edge BC lies on x + y = 6, seen from the cell below. As a polygon at
 // z = 0 and as a closed prism z in [-0.25, 0.25].
 const glm::vec2 kTriA(-4, -4), kTriB(10, -4), kTriC(-4, 10);
-const Box3f kSlantCell({-2, 1, 4}, {0, 2.25f, 5});           // for the polygon at z = 0
-const Box3f kSlantPrismCell({-2, 1, 4.25f}, {0, 2.25f, 5.25f});  // for the prism's front at z = 0.25
+const Box3f kSlantCell({-2, 1, 4}, {0, 2.25f, 5});  // for the polygon at z = 0
+const Box3f kSlantPrismCell({-2, 1, 4.25f},
+                            {0, 2.25f, 5.25f});  // for the prism's front at z = 0.25
 
 // The target triangles of the slanted-edge scenes, all at z = zt (see
 // GrazingLineFromOneCellCornerPastASlantedEdgeKeepsTheFace): `grazed` has
@@ -280,7 +290,9 @@ void addSlantTargets(Scene& s, Ids& ids, glm::vec3 d, float zt) {
 
 Ids slantedPolygonEdge(Scene& s, glm::vec3 d) {
   Ids ids;
-  ids["occluder"] = addFaces(s, "occluder", {Loop{{kTriA.x, kTriA.y, 0}, {kTriB.x, kTriB.y, 0}, {kTriC.x, kTriC.y, 0}} + d});
+  ids["occluder"] =
+      addFaces(s, "occluder",
+               {Loop{{kTriA.x, kTriA.y, 0}, {kTriB.x, kTriB.y, 0}, {kTriC.x, kTriC.y, 0}} + d});
   addSlantTargets(s, ids, d, -5);
   return ids;
 }
@@ -292,11 +304,12 @@ Ids slantedPrismEdge(Scene& s, glm::vec3 d) {
   auto b = [&](glm::vec2 p) { return glm::vec3(p.x, p.y, zb); };
   // Front (+z) counter-clockwise, back reversed; the side of edge P->Q is
   // (P_back, Q_back, Q_front, P_front), which faces outward.
-  ids["occluder"] = addFaces(s, "occluder",
-                             {Loop{f(kTriA), f(kTriB), f(kTriC)} + d, Loop{b(kTriA), b(kTriC), b(kTriB)} + d,
-                              Loop{b(kTriA), b(kTriB), f(kTriB), f(kTriA)} + d,
-                              Loop{b(kTriB), b(kTriC), f(kTriC), f(kTriB)} + d,
-                              Loop{b(kTriC), b(kTriA), f(kTriA), f(kTriC)} + d});
+  ids["occluder"] =
+      addFaces(s, "occluder",
+               {Loop{f(kTriA), f(kTriB), f(kTriC)} + d, Loop{b(kTriA), b(kTriC), b(kTriB)} + d,
+                Loop{b(kTriA), b(kTriB), f(kTriB), f(kTriA)} + d,
+                Loop{b(kTriB), b(kTriC), f(kTriC), f(kTriB)} + d,
+                Loop{b(kTriC), b(kTriA), f(kTriA), f(kTriC)} + d});
   addSlantTargets(s, ids, d, -4.75f);
   return ids;
 }
@@ -311,14 +324,17 @@ Ids polygonWallAndTarget(Scene& s, glm::vec3 d) {
 Ids vehicles(Scene& s, glm::vec3 d, bool dynamic) {
   Ids ids;
   ids["wall"] = addBox(s, "wall", kWallLo + d, kWallHi + d);
-  ids["car behind"] = addBox(s, "car behind", glm::vec3(-1, 0.5f, -3) + d, glm::vec3(1, 2, -2) + d, dynamic);
+  ids["car behind"] =
+      addBox(s, "car behind", glm::vec3(-1, 0.5f, -3) + d, glm::vec3(1, 2, -2) + d, dynamic);
   // A bus between the cell and a target beside the wall.
   ids["bus"] = addBox(s, "bus", glm::vec3(6, 0, -1) + d, glm::vec3(20, 4, 1) + d, dynamic);
   ids["target"] = addBox(s, "target", glm::vec3(19, 1, -6) + d, glm::vec3(20, 2, -5) + d);
   return ids;
 }
 
-Ids dynamicObjects(Scene& s, glm::vec3 d) { return vehicles(s, d, true); }
+Ids dynamicObjects(Scene& s, glm::vec3 d) {
+  return vehicles(s, d, true);
+}
 
 struct Config {
   const char* name;
@@ -329,7 +345,8 @@ struct Config {
 const std::vector<Config>& configs() {
   static const std::vector<Config> all = {
       {"wall hiding a box", wallHidingABox, kCell},
-      {"wall hiding a box, cell on the wall's face", wallHidingABox, Box3f({-1, 1, 0.25f}, {1, 2.25f, 1.25f})},
+      {"wall hiding a box, cell on the wall's face", wallHidingABox,
+       Box3f({-1, 1, 0.25f}, {1, 2.25f, 1.25f})},
       {"slit between two walls", slitBetweenTwoWalls, kCell},
       {"two touching walls", twoTouchingWalls, kCell},
       {"ground, cell on the ground", groundWallAndTargets, Box3f({-1, 0, 4}, {1, 1.25f, 5})},
@@ -356,7 +373,8 @@ TEST(EpsilonPvs, WallHidesTheBoxBehindItAndKeepsItsOwnFrontFace) {
   // Target x in [-1,1], y in [0.5,2.5], z in [-3,-2]: every corner-vertex
   // segment stays inside x in [-1,1], y in [0.5,2.5] (convex combinations), so
   // it crosses the whole wall thickness strictly inside the wall.
-  for (uint32_t side = 0; side < 6; ++side) EXPECT_FALSE(inPvs(r, id.at("target") + side)) << "target side " << side;
+  for (uint32_t side = 0; side < 6; ++side)
+    EXPECT_FALSE(inPvs(r, id.at("target") + side)) << "target side " << side;
   // The wall's front face faces the cell.
   EXPECT_TRUE(inPvs(r, id.at("wall") + kPlusZ));
   // Its back face is hidden by the wall itself: each segment from a corner
@@ -367,7 +385,8 @@ TEST(EpsilonPvs, WallHidesTheBoxBehindItAndKeepsItsOwnFrontFace) {
   // one occluder: the segment to a vertex of their front edge arrives from
   // outside (z > 0.25) and only touches the wall at that vertex. The paper's
   // test keeps them (no back-face culling: the PVS serves any view direction).
-  for (uint32_t side : {kMinusX, kPlusX, kMinusY, kPlusY}) EXPECT_TRUE(inPvs(r, id.at("wall") + side)) << side;
+  for (uint32_t side : {kMinusX, kPlusX, kMinusY, kPlusY})
+    EXPECT_TRUE(inPvs(r, id.at("wall") + side)) << side;
   EXPECT_TRUE(holdsGroundTruth(w, kCell, r));
   EXPECT_EQ(r.objects, std::vector<uint32_t>{0});
 }
@@ -398,7 +417,8 @@ TEST(EpsilonPvs, KeepsABoxHiddenOnlyByTwoTouchingWallsTogetherBecauseOccludersAr
   EXPECT_TRUE(inPvs(r, id.at("target") + kPlusZ));
   // Truly hidden: the oracle sees no face of the target.
   const std::vector<uint32_t> seen = w.sampled(kCell);
-  for (uint32_t side = 0; side < 6; ++side) EXPECT_FALSE(inSet(seen, id.at("target") + side)) << side;
+  for (uint32_t side = 0; side < 6; ++side)
+    EXPECT_FALSE(inSet(seen, id.at("target") + side)) << side;
   EXPECT_TRUE(includes(r.faces, seen));
 }
 
@@ -410,7 +430,8 @@ TEST(EpsilonPvs, CoplanarQuadsOfOneWallFuseButTheSameQuadsAsTwoObjectsDoNot) {
     SCOPED_TRACE(oneObject ? "one object" : "two objects");
     World w;
     if (oneObject) {
-      addFaces(w.scene(), "wall", {quadFacingPlusZ(-5, 0, 0, 4, 0), quadFacingPlusZ(0, 0, 5, 4, 0)});
+      addFaces(w.scene(), "wall",
+               {quadFacingPlusZ(-5, 0, 0, 4, 0), quadFacingPlusZ(0, 0, 5, 4, 0)});
     } else {
       addFaces(w.scene(), "left", {quadFacingPlusZ(-5, 0, 0, 4, 0)});
       addFaces(w.scene(), "right", {quadFacingPlusZ(0, 0, 5, 4, 0)});
@@ -489,7 +510,8 @@ TEST(EpsilonPvs, CellStandingOnTheGroundPolygon) {
   // x in [-1,1], z in [3.5,5], well inside the ground: all of it is culled.
   const Box3f lifted({-1, 0.5f, 4}, {1, 1.75f, 5});
   const PvsResult r2 = w.compute(lifted);
-  for (uint32_t side = 0; side < 6; ++side) EXPECT_FALSE(inPvs(r2, id.at("basement") + side)) << side;
+  for (uint32_t side = 0; side < 6; ++side)
+    EXPECT_FALSE(inPvs(r2, id.at("basement") + side)) << side;
   EXPECT_TRUE(inPvs(r2, id.at("ground")));
   EXPECT_TRUE(holdsGroundTruth(w, lifted, r2));
 }
@@ -504,10 +526,11 @@ TEST(EpsilonPvs, CellPartlyInsideABuilding) {
   const Ids id = buildingAroundTheCell(w.scene(), glm::vec3(0));
   const Box3f cell({4, 1, -1}, {6, 2.25f, 1});
   const PvsResult r = w.compute(cell);
-  EXPECT_TRUE(inPvs(r, id.at("building") + kPlusX));   // seen from the outside part
-  EXPECT_FALSE(inPvs(r, id.at("building") + kMinusX)); // the far wall, behind the building
+  EXPECT_TRUE(inPvs(r, id.at("building") + kPlusX));    // seen from the outside part
+  EXPECT_FALSE(inPvs(r, id.at("building") + kMinusX));  // the far wall, behind the building
   // The walls meeting the +x wall: their edge at x = 5 is reached from outside.
-  for (uint32_t side : {kMinusY, kPlusY, kMinusZ, kPlusZ}) EXPECT_TRUE(inPvs(r, id.at("building") + side)) << side;
+  for (uint32_t side : {kMinusY, kPlusY, kMinusZ, kPlusZ})
+    EXPECT_TRUE(inPvs(r, id.at("building") + side)) << side;
   for (uint32_t side = 0; side < 6; ++side) {
     EXPECT_FALSE(inPvs(r, id.at("behind") + side)) << "behind, side " << side;
     // Inside the closed building: only viewpoints inside solid geometry could
@@ -541,10 +564,12 @@ TEST(EpsilonPvs, BoxFlushAgainstTheWallsBackIsHiddenAndOnItsFrontIsVisible) {
   const PvsResult r = w.compute(kCell);
   // Back box x in [-1,1], y in [0.5,2], z in [-1.25,-0.25]: its front face
   // lies on the wall's back face, strictly inside it. All culled.
-  for (uint32_t side = 0; side < 6; ++side) EXPECT_FALSE(inPvs(r, id.at("back box") + side)) << side;
+  for (uint32_t side = 0; side < 6; ++side)
+    EXPECT_FALSE(inPvs(r, id.at("back box") + side)) << side;
   // Front box x in [2,3], y in [0.5,2], z in [0.25,1.25], resting against
   // the wall's front face: its front, top and -x side face the cell.
-  for (uint32_t side : {kPlusZ, kPlusY, kMinusX}) EXPECT_TRUE(inPvs(r, id.at("front box") + side)) << side;
+  for (uint32_t side : {kPlusZ, kPlusY, kMinusX})
+    EXPECT_TRUE(inPvs(r, id.at("front box") + side)) << side;
   EXPECT_TRUE(holdsGroundTruth(w, kCell, r));
 }
 
@@ -600,8 +625,8 @@ TEST(EpsilonPvs, GrazingLineThroughAPolygonsEdgeKeepsTheFace) {
   const Ids id = grazingPastAPolygonEdge(w.scene(), glm::vec3(0));
   const PvsResult r = w.compute(kPolygonGrazeCell);
   EXPECT_TRUE(inPvs(r, id.at("grazed")));
-  EXPECT_FALSE(inPvs(r, id.at("hidden")));   // crosses z = 0 at x = 7.875 / 2 < 4
-  EXPECT_TRUE(inPvs(r, id.at("visible")));   // crosses z = 0 at x = 8.125 / 2 > 4
+  EXPECT_FALSE(inPvs(r, id.at("hidden")));  // crosses z = 0 at x = 7.875 / 2 < 4
+  EXPECT_TRUE(inPvs(r, id.at("visible")));  // crosses z = 0 at x = 8.125 / 2 > 4
   EXPECT_TRUE(holdsGroundTruth(w, kPolygonGrazeCell, r));
 }
 
@@ -634,7 +659,8 @@ TEST(EpsilonPvs, GrazingLineFromOneCellCornerPastASlantedEdgeKeepsTheFace) {
     ASSERT_EQ(occluders.size(), 1u);
     const glm::dvec3 tip(6, 3.75, c.cell.lo.z == kSlantCell.lo.z ? -5.0 : -4.75);
     for (int k = 0; k < 8; ++k) {
-      const glm::dvec3 corner((k & 1) ? c.cell.hi.x : c.cell.lo.x, (k & 2) ? c.cell.hi.y : c.cell.lo.y,
+      const glm::dvec3 corner((k & 1) ? c.cell.hi.x : c.cell.lo.x,
+                              (k & 2) ? c.cell.hi.y : c.cell.lo.y,
                               (k & 4) ? c.cell.hi.z : c.cell.lo.z);
       EXPECT_EQ(occluderBlocksSegment(occluders[0], corner, tip), k != 7) << "corner " << k;
     }
@@ -665,7 +691,8 @@ TEST(EpsilonPvs, DynamicObjectsAreAlwaysInThePvsAndNeverOcclude) {
     if (dynamic) {
       EXPECT_TRUE(inPvs(r, id.at("target") + kPlusZ));
       // The car behind the wall: in the PVS whatever hides it.
-      for (uint32_t side = 0; side < 6; ++side) EXPECT_TRUE(inPvs(r, id.at("car behind") + side)) << side;
+      for (uint32_t side = 0; side < 6; ++side)
+        EXPECT_TRUE(inPvs(r, id.at("car behind") + side)) << side;
       for (uint32_t side = 0; side < 6; ++side) EXPECT_TRUE(inPvs(r, id.at("bus") + side)) << side;
     } else {
       EXPECT_FALSE(inPvs(r, id.at("target") + kPlusZ));
@@ -715,7 +742,8 @@ TEST(EpsilonPvs, EachAccelerationSwitchedOffGivesTheSamePvsOnTheHandBuiltScenes)
     for (const size_t k : {size_t(1), size_t(2)}) {
       PvsOptions o;
       o.largeOccluders = k;
-      EXPECT_TRUE(includes(w.compute(c.cell, o).faces, base.faces)) << "the " << k << " largest occluders";
+      EXPECT_TRUE(includes(w.compute(c.cell, o).faces, base.faces))
+          << "the " << k << " largest occluders";
     }
   }
 }
@@ -735,7 +763,8 @@ TEST(EpsilonPvs, TheSameSceneFiftyKilometresFromTheOriginGivesTheSamePvs) {
     EXPECT_EQ(farOrigin.compute(c.cell).faces, base.faces) << "Scene::origin 50 km away";
     World farLocal(glm::dvec3(40000, 0, -40000));
     c.build(farLocal.scene(), far);
-    EXPECT_EQ(farLocal.compute(shifted(c.cell, far)).faces, base.faces) << "local coordinates near 1e4";
+    EXPECT_EQ(farLocal.compute(shifted(c.cell, far)).faces, base.faces)
+        << "local coordinates near 1e4";
   }
 }
 
@@ -777,8 +806,10 @@ const City& city1() {
 
 std::vector<Box3f> quarters(const Box3f& b) {
   const glm::vec3 m = b.center();
-  return {Box3f({b.lo.x, b.lo.y, b.lo.z}, {m.x, b.hi.y, m.z}), Box3f({m.x, b.lo.y, b.lo.z}, {b.hi.x, b.hi.y, m.z}),
-          Box3f({b.lo.x, b.lo.y, m.z}, {m.x, b.hi.y, b.hi.z}), Box3f({m.x, b.lo.y, m.z}, {b.hi.x, b.hi.y, b.hi.z})};
+  return {Box3f({b.lo.x, b.lo.y, b.lo.z}, {m.x, b.hi.y, m.z}),
+          Box3f({m.x, b.lo.y, b.lo.z}, {b.hi.x, b.hi.y, m.z}),
+          Box3f({b.lo.x, b.lo.y, m.z}, {m.x, b.hi.y, b.hi.z}),
+          Box3f({m.x, b.lo.y, m.z}, {b.hi.x, b.hi.y, b.hi.z})};
 }
 
 TEST(EpsilonPvs, EachAccelerationSwitchedOffGivesTheSamePvsOnCity1Cells) {
@@ -797,7 +828,8 @@ TEST(EpsilonPvs, EachAccelerationSwitchedOffGivesTheSamePvsOnCity1Cells) {
     for (const size_t k : {size_t(16), size_t(256)}) {
       PvsOptions o;
       o.largeOccluders = k;
-      EXPECT_TRUE(includes(city.pvs->compute(cell, o).faces, base.faces)) << "the " << k << " largest occluders";
+      EXPECT_TRUE(includes(city.pvs->compute(cell, o).faces, base.faces))
+          << "the " << k << " largest occluders";
     }
   }
 }
@@ -811,20 +843,22 @@ TEST(EpsilonPvs, CoarseToFineCellsTestOnlyTheCoarsePvsAndStillHoldTheirGroundTru
   for (const Box3f& coarse : city.coarseCells) {
     SCOPED_TRACE(describe(coarse));
     const PvsResult coarsePvs = city.pvs->compute(coarse);
-    EXPECT_TRUE(includes(coarsePvs.faces, sampleVisibleFaces(*city.rays, city.triangles, coarse, sampling).faces));
+    EXPECT_TRUE(includes(coarsePvs.faces,
+                         sampleVisibleFaces(*city.rays, city.triangles, coarse, sampling).faces));
     for (const Box3f& fine : quarters(coarse)) {
       SCOPED_TRACE(describe(fine));
       PvsOptions o;
       o.candidateFaces = &coarsePvs.faces;
       const PvsResult finePvs = city.pvs->compute(fine, o);
       EXPECT_TRUE(includes(coarsePvs.faces, finePvs.faces)) << "fine PVS outside the coarse one";
-      EXPECT_TRUE(includes(finePvs.faces, sampleVisibleFaces(*city.rays, city.triangles, fine, sampling).faces));
+      EXPECT_TRUE(includes(finePvs.faces,
+                           sampleVisibleFaces(*city.rays, city.triangles, fine, sampling).faces));
       // Candidates only remove faces the coarse cell already hid: every face
       // of the fine cell's own PVS that the coarse PVS holds is still there.
       const PvsResult alone = city.pvs->compute(fine);
       std::vector<uint32_t> both;
-      std::set_intersection(alone.faces.begin(), alone.faces.end(), coarsePvs.faces.begin(), coarsePvs.faces.end(),
-                            std::back_inserter(both));
+      std::set_intersection(alone.faces.begin(), alone.faces.end(), coarsePvs.faces.begin(),
+                            coarsePvs.faces.end(), std::back_inserter(both));
       EXPECT_TRUE(includes(finePvs.faces, both));
     }
   }

@@ -86,7 +86,8 @@ TEST_P(CullingOnScene, ConservativeAndAdaptiveUpdatingDrawEverythingTheClassical
     const auto d = run(w, method, 0.7);
     uint64_t skipped = 0;
     for (size_t i = 0; i < a.size(); ++i) {
-      EXPECT_TRUE(std::includes(d[i].faces.begin(), d[i].faces.end(), a[i].faces.begin(), a[i].faces.end()))
+      EXPECT_TRUE(
+          std::includes(d[i].faces.begin(), d[i].faces.end(), a[i].faces.begin(), a[i].faces.end()))
           << cullingMethodName(method) << " frame " << i;
       skipped += d[i].skipped;
     }
@@ -105,7 +106,8 @@ TEST_P(CullingOnScene, EveryFaceSeenThroughTheFrustumIsDrawn) {
     const glm::dvec3 r = glm::normalize(glm::cross(f, glm::dvec3(0, 1, 0))), u = glm::cross(r, f);
     for (int y = 0; y < 24; ++y)
       for (int x = 0; x < 32; ++x) {
-        const glm::dvec3 d = f + r * (th * ((x + 0.5) / 16.0 - 1.0)) + u * (tv * ((y + 0.5) / 12.0 - 1.0));
+        const glm::dvec3 d =
+            f + r * (th * ((x + 0.5) / 16.0 - 1.0)) + u * (tv * ((y + 0.5) / 12.0 - 1.0));
         const Hit h = w.rays->firstHit(Ray{glm::vec3(s.position), glm::vec3(d), 0.0f, 1e30f});
         if (!h.valid()) continue;
         ++checked;
@@ -118,7 +120,8 @@ TEST_P(CullingOnScene, EveryFaceSeenThroughTheFrustumIsDrawn) {
 }
 
 INSTANTIATE_TEST_SUITE_P(GeneratedScenes, CullingOnScene,
-                         ::testing::Values("interior", "interior2", "city1", "city2", "terrain", "bigcity"));
+                         ::testing::Values("interior", "interior2", "city1", "city2", "terrain",
+                                           "bigcity"));
 
 TEST(HierarchicalCulling, ViewersOnOneSceneKeepTheirOwnCoherence) {
   const Walk w("interior", 40);
@@ -154,14 +157,16 @@ TEST(HierarchicalCulling, AViewpointTouchingAWallStillSeesWhatIsInFrontOfIt) {
     o.collectFaces = true;
     o.smallNodeFaces = 0;  // test every node
     CullingViewer viewer(culling, o);
-    const FrameResult r = viewer.frame({0.0, 1.5, 0.0}, 0.0, 0.0);  // eye on the back wall's face, looking -Z
+    const FrameResult r =
+        viewer.frame({0.0, 1.5, 0.0}, 0.0, 0.0);  // eye on the back wall's face, looking -Z
     EXPECT_TRUE(std::binary_search(r.faces.begin(), r.faces.end(), box + testing::kPlusZ));
   }
 }
 
 // Every face that one of 64 x 48 rays through the frustum hits first is drawn
 // by every method; returns the faces drawn by A.
-std::vector<uint32_t> expectConservativeFrom(const Scene& s, const glm::dvec3& eye, double yaw, double pitch) {
+std::vector<uint32_t> expectConservativeFrom(const Scene& s, const glm::dvec3& eye, double yaw,
+                                             double pitch) {
   const CullingScene culling(s);
   const FlatTriangles tris = flattenScene(s, true);
   const auto rays = makeBruteForceRayQuery(tris);
@@ -171,20 +176,23 @@ std::vector<uint32_t> expectConservativeFrom(const Scene& s, const glm::dvec3& e
   const double th = std::tan(30.0 * 3.14159265358979323846 / 180.0), tv = th * 0.75;
   for (int y = 0; y < 48; ++y)
     for (int x = 0; x < 64; ++x) {
-      const glm::dvec3 d = f + r * (th * ((x + 0.5) / 32.0 - 1.0)) + u * (tv * ((y + 0.5) / 24.0 - 1.0));
+      const glm::dvec3 d =
+          f + r * (th * ((x + 0.5) / 32.0 - 1.0)) + u * (tv * ((y + 0.5) / 24.0 - 1.0));
       const Hit h = rays->firstHit(Ray{glm::vec3(eye), glm::vec3(d), 0.0f, 1e30f});
       if (h.valid()) seen.push_back(tris.faceIds[h.triangle]);
     }
   std::vector<uint32_t> drawnByA;
-  for (const auto method : {CullingMethod::Classical, CullingMethod::HierarchyUpdating, CullingMethod::Propagation,
-                            CullingMethod::Conservative, CullingMethod::Adaptive}) {
+  for (const auto method :
+       {CullingMethod::Classical, CullingMethod::HierarchyUpdating, CullingMethod::Propagation,
+        CullingMethod::Conservative, CullingMethod::Adaptive}) {
     CullingOptions o;
     o.method = method;
     o.collectFaces = true;
     o.smallNodeFaces = 0;  // test every node
     CullingViewer viewer(culling, o);
     FrameResult result;
-    for (int frame = 0; frame < 3; ++frame) result = viewer.frame(eye, yaw, pitch);  // coherence from the same view
+    for (int frame = 0; frame < 3; ++frame)
+      result = viewer.frame(eye, yaw, pitch);  // coherence from the same view
     for (uint32_t face : seen)
       EXPECT_TRUE(std::binary_search(result.faces.begin(), result.faces.end(), face))
           << cullingMethodName(method) << " misses face " << face;

@@ -4,10 +4,10 @@
 // cross an occluder's interior rather than touch its boundary.
 #include "server/visibility/occluders.h"
 
+#include <gtest/gtest.h>
+
 #include <string>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "tests/common/support/box_scenes.h"
 
@@ -19,12 +19,12 @@ using testing::addBox;
 using testing::addFaces;
 using testing::Loop;
 
-
 // A closed prism over a loop in the XZ plane from y0 to y1, outward-facing.
 // The loop must have a positive signed area sum(x_i z_{i+1} - x_{i+1} z_i)
 // (the fan of such a loop faces -y, so it is the bottom) and be star-shaped
 // from its first vertex.
-uint32_t addPrism(Scene& scene, const std::string& name, const std::vector<glm::vec2>& xz, float y0, float y1) {
+uint32_t addPrism(Scene& scene, const std::string& name, const std::vector<glm::vec2>& xz, float y0,
+                  float y1) {
   std::vector<Loop> faces;
   Loop bottom, top;
   for (const glm::vec2& p : xz) bottom.emplace_back(p.x, y0, p.y);
@@ -137,7 +137,9 @@ TEST(Occluders, LShapedClosedPrismIsNotASolid) {
 TEST(Occluders, TwoCoplanarQuadsSharingAnEdgeMergeIntoOnePolygon) {
   // A wall at z = 0 made of [0,1]x[0,1] and [1,2]x[0,1], sharing the edge x = 1.
   Scene scene;
-  addFaces(scene, "wall", {{{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}, {{1, 0, 0}, {2, 0, 0}, {2, 1, 0}, {1, 1, 0}}});
+  addFaces(
+      scene, "wall",
+      {{{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}, {{1, 0, 0}, {2, 0, 0}, {2, 1, 0}, {1, 1, 0}}});
   const OccluderSet set = extract(scene);
   ASSERT_EQ(set.occluders.size(), 1u);
   EXPECT_EQ(set.occluders[0].kind, kPolygon);
@@ -171,11 +173,14 @@ TEST(Occluders, LShapedFloorOfQuadsDoesNotCoverItsNotch) {
   const OccluderSet set = extract(scene);
   EXPECT_EQ(set.stats.nonConvexGroups, 1u);
   EXPECT_EQ(countKind(set, kPolygon), 3u);  // one per quad
-  for (const glm::dvec2 p : {glm::dvec2(1.5, 1.5), glm::dvec2(1.1, 1.1), glm::dvec2(1.9, 1.9), glm::dvec2(1.2, 1.7)})
-    EXPECT_FALSE(anyBlocks(set, {p.x, 1, p.y}, {p.x, -1, p.y})) << "through the notch at " << p.x << "," << p.y;
+  for (const glm::dvec2 p :
+       {glm::dvec2(1.5, 1.5), glm::dvec2(1.1, 1.1), glm::dvec2(1.9, 1.9), glm::dvec2(1.2, 1.7)})
+    EXPECT_FALSE(anyBlocks(set, {p.x, 1, p.y}, {p.x, -1, p.y}))
+        << "through the notch at " << p.x << "," << p.y;
   // Each quad still blocks lines through its own interior.
   for (const glm::dvec2 p : {glm::dvec2(0.5, 0.5), glm::dvec2(1.5, 0.5), glm::dvec2(0.5, 1.5)})
-    EXPECT_TRUE(anyBlocks(set, {p.x, 1, p.y}, {p.x, -1, p.y})) << "through the floor at " << p.x << "," << p.y;
+    EXPECT_TRUE(anyBlocks(set, {p.x, 1, p.y}, {p.x, -1, p.y}))
+        << "through the floor at " << p.x << "," << p.y;
 }
 
 TEST(Occluders, DegenerateTrianglesNeverMakeOccluders) {
@@ -214,7 +219,7 @@ TEST(Occluders, DynamicObjectsNeverOcclude) {
   const OccluderSet set = extract(scene);
   ASSERT_EQ(set.occluders.size(), 1u);
   EXPECT_EQ(set.occluders[0].object, 2u);
-  EXPECT_FALSE(anyBlocks(set, {-2, 0, 0}, {2, 0, 0}));      // through the car
+  EXPECT_FALSE(anyBlocks(set, {-2, 0, 0}, {2, 0, 0}));         // through the car
   EXPECT_FALSE(anyBlocks(set, {0.5, 0.5, 4}, {0.5, 0.5, 6}));  // through the flag
 }
 
@@ -236,7 +241,7 @@ TEST(Occluders, OccludersSmallerThanTheMinimumSizeAreLeftOut) {
   // Solids by their longest side, polygons by the square root of their area.
   Scene scene;
   addBox(scene, "small box", {0, 0, 0}, {0.5f, 0.5f, 0.5f});
-  addBox(scene, "thin slab", {2, 0, 0}, {3.5f, 0.1f, 0.1f});   // longest side 1.5 m
+  addBox(scene, "thin slab", {2, 0, 0}, {3.5f, 0.1f, 0.1f});  // longest side 1.5 m
   addFaces(scene, "small quad", {{{0, 0, 5}, {0.5f, 0, 5}, {0.5f, 0.5f, 5}, {0, 0.5f, 5}}});
   addFaces(scene, "large quad", {{{0, 0, 8}, {2, 0, 8}, {2, 2, 8}, {0, 2, 8}}});
   OccluderOptions oneMetre = everySize();
@@ -255,7 +260,9 @@ TEST(Occluders, OccludersSmallerThanTheMinimumSizeAreLeftOut) {
 // z = 0, both centred at `c`. Each expectation says why.
 void expectBoxSegments(const ConvexOccluder& box, const glm::dvec3& c) {
   ASSERT_EQ(box.kind, kSolid);
-  auto blocks = [&](glm::dvec3 a, glm::dvec3 b) { return occluderBlocksSegment(box, c + a, c + b); };
+  auto blocks = [&](glm::dvec3 a, glm::dvec3 b) {
+    return occluderBlocksSegment(box, c + a, c + b);
+  };
   // Through the centre, along an axis and along a diagonal.
   EXPECT_TRUE(blocks({-2, 0, 0}, {2, 0, 0}));
   EXPECT_TRUE(blocks({-2, -2, -2}, {2, 2, 2}));
@@ -284,7 +291,9 @@ void expectBoxSegments(const ConvexOccluder& box, const glm::dvec3& c) {
 
 void expectPolygonSegments(const ConvexOccluder& quad, const glm::dvec3& c) {
   ASSERT_EQ(quad.kind, kPolygon);
-  auto blocks = [&](glm::dvec3 a, glm::dvec3 b) { return occluderBlocksSegment(quad, c + a, c + b); };
+  auto blocks = [&](glm::dvec3 a, glm::dvec3 b) {
+    return occluderBlocksSegment(quad, c + a, c + b);
+  };
   // Straight through the middle and obliquely through the interior.
   EXPECT_TRUE(blocks({0, 0, -1}, {0, 0, 1}));
   EXPECT_TRUE(blocks({-0.5, -0.5, -1}, {0.5, 0.5, 1}));
@@ -328,8 +337,9 @@ TEST(OccluderBlocksSegment, DecidesGrazingLinesTheSameWayAtTheOriginAndFiftyKilo
     scene.origin = at.origin;
     const glm::vec3 c = at.local;
     addBox(scene, "box", c + glm::vec3(-1), c + glm::vec3(1));
-    addFaces(scene, "quad", {{c + glm::vec3(-1, -1, 5), c + glm::vec3(1, -1, 5), c + glm::vec3(1, 1, 5),
-                              c + glm::vec3(-1, 1, 5)}});
+    addFaces(scene, "quad",
+             {{c + glm::vec3(-1, -1, 5), c + glm::vec3(1, -1, 5), c + glm::vec3(1, 1, 5),
+               c + glm::vec3(-1, 1, 5)}});
     const OccluderSet set = extract(scene);
     ASSERT_EQ(set.occluders.size(), 2u);
     expectBoxSegments(set.occluders[0], glm::dvec3(c));

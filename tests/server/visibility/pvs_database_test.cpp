@@ -1,5 +1,8 @@
 #include "server/visibility/pvs_database.h"
 
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <cstring>
@@ -9,16 +12,12 @@
 #include <random>
 #include <string_view>
 
-#include <gmock/gmock.h>
-#include <gtest/gtest.h>
-#include <spdlog/spdlog.h>
-
 #include "common/core/error.h"
 #include "common/raycast/ray_query.h"
 #include "common/raycast/sampled_visibility.h"
 #include "server/visibility/pvs_bake.h"
-#include "tests/common/support/captured_log.h"
 #include "tests/common/support/box_scenes.h"
+#include "tests/common/support/captured_log.h"
 #include "tests/common/support/temp_dir.h"
 
 namespace vistream {
@@ -30,14 +29,18 @@ using ::testing::HasSubstr;
 using testing::CapturedLog;
 using testing::TempDir;
 
-std::string errorOf(const std::function<void()>& f) { return testing::inputErrorOf(f); }
+std::string errorOf(const std::function<void()>& f) {
+  return testing::inputErrorOf(f);
+}
 
 std::string readBytes(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);
   return std::string((std::istreambuf_iterator<char>(in)), {});
 }
 
-void writeBytes(const fs::path& p, const std::string& bytes) { std::ofstream(p, std::ios::binary) << bytes; }
+void writeBytes(const fs::path& p, const std::string& bytes) {
+  std::ofstream(p, std::ios::binary) << bytes;
+}
 
 // FNV-1a 64 written out from its definition (Fowler, Noll and Vo: offset
 // basis 0xcbf29ce484222325 = 14695981039346656037, prime 0x100000001b3),
@@ -66,14 +69,17 @@ void resealChecksum(std::string& db, uint64_t basis = kReferenceFnvBasis) {
   putLe64(db, 24, referenceFnv1a64(std::string_view(db).substr(32), basis));
 }
 
-std::string asString(const std::vector<uint8_t>& v) { return std::string(v.begin(), v.end()); }
+std::string asString(const std::vector<uint8_t>& v) {
+  return std::string(v.begin(), v.end());
+}
 
 // Replaces the one occurrence of `from` in `bytes` by `to`, of the same length.
 void replaceOnce(std::string& bytes, const std::string& from, const std::string& to) {
   ASSERT_EQ(from.size(), to.size());
   const size_t at = bytes.find(from);
   ASSERT_NE(at, std::string::npos);
-  ASSERT_EQ(bytes.find(from, at + 1), std::string::npos) << "the pattern must be unique in the file";
+  ASSERT_EQ(bytes.find(from, at + 1), std::string::npos)
+      << "the pattern must be unique in the file";
   bytes.replace(at, from.size(), to);
 }
 
@@ -98,13 +104,17 @@ TEST(FaceList, RoundTripsSortedIdsOfEveryMagnitude) {
 
 TEST(FaceList, RejectsTruncatedRepeatedAndMiscountedLists) {
   const std::vector<uint8_t> truncated = {0x85};  // continuation bit, then nothing
-  EXPECT_THAT(errorOf([&] { decodeFaceList(truncated.data(), truncated.size(), 1); }), HasSubstr("malformed varint"));
-  const std::vector<uint8_t> repeated = {5, 0};   // delta 0 after the first
-  EXPECT_THAT(errorOf([&] { decodeFaceList(repeated.data(), repeated.size(), 2); }), HasSubstr("strictly increasing"));
+  EXPECT_THAT(errorOf([&] { decodeFaceList(truncated.data(), truncated.size(), 1); }),
+              HasSubstr("malformed varint"));
+  const std::vector<uint8_t> repeated = {5, 0};  // delta 0 after the first
+  EXPECT_THAT(errorOf([&] { decodeFaceList(repeated.data(), repeated.size(), 2); }),
+              HasSubstr("strictly increasing"));
   const std::vector<uint8_t> two = {5, 1};
-  EXPECT_THAT(errorOf([&] { decodeFaceList(two.data(), two.size(), 1); }), HasSubstr("header says 1"));
+  EXPECT_THAT(errorOf([&] { decodeFaceList(two.data(), two.size(), 1); }),
+              HasSubstr("header says 1"));
   const std::vector<uint8_t> huge = {0xff, 0xff, 0xff, 0xff, 0x7f};  // > 32 bits
-  EXPECT_THAT(errorOf([&] { decodeFaceList(huge.data(), huge.size(), 1); }), HasSubstr("face list"));
+  EXPECT_THAT(errorOf([&] { decodeFaceList(huge.data(), huge.size(), 1); }),
+              HasSubstr("face list"));
 }
 
 TEST(FaceList, RejectsFacesAtOrBeyondTheFaceLimit) {
@@ -174,7 +184,8 @@ TEST(PvsDatabase, RejectsCorruptTruncatedAndForeignFilesNamingTheFile) {
   EXPECT_THAT(variant("version.db", version), HasSubstr("version 9"));
   EXPECT_THAT(variant("empty.db", ""), HasSubstr("only 0 bytes"));
   EXPECT_THAT(errorOf([&] { PvsDatabase::open(dir / "missing.db"); }), HasSubstr("missing.db"));
-  EXPECT_THAT(errorOf([&] { PvsDatabase::open(fs::temp_directory_path()); }), HasSubstr("not a regular file"));
+  EXPECT_THAT(errorOf([&] { PvsDatabase::open(fs::temp_directory_path()); }),
+              HasSubstr("not a regular file"));
 }
 
 TEST(PvsDatabase, ChecksumIsFnv1a64OfThePayload) {
@@ -206,7 +217,8 @@ TEST(PvsDatabase, OpensADatabaseOfMoreThanAMillionCells) {
   PvsDatabaseHeader h = smallHeader();
   h.dims = {1024, 1, 1000};
   std::map<uint32_t, std::vector<uint32_t>> cells;
-  for (uint32_t c = 0; c < 1024u * 1000u; ++c) cells.emplace_hint(cells.end(), c, std::vector<uint32_t>{});
+  for (uint32_t c = 0; c < 1024u * 1000u; ++c)
+    cells.emplace_hint(cells.end(), c, std::vector<uint32_t>{});
   cells[777'777] = {5, 6, 999};
   TempDir dir;
   writePvsDatabase(dir / "big.db", h, cells);
@@ -228,7 +240,8 @@ const std::vector<uint32_t> kCell7 = {100, 200, 21279};
 // Writes a good database, replaces cell 7's face bytes by `edited` (same
 // length) and recomputes the checksum, so only the face list is wrong;
 // returns the message of open()'s InputError.
-std::string openErrorWithCell7Bytes(const TempDir& dir, const std::string& name, const std::string& edited) {
+std::string openErrorWithCell7Bytes(const TempDir& dir, const std::string& name,
+                                    const std::string& edited) {
   writePvsDatabase(dir / "good.db", cityHeader(), {{0, {1, 2, 3}}, {7, kCell7}, {24, {0, 21279}}});
   std::string bytes = readBytes(dir / "good.db");
   replaceOnce(bytes, asString(encodeFaceList(kCell7)), edited);
@@ -239,14 +252,16 @@ std::string openErrorWithCell7Bytes(const TempDir& dir, const std::string& name,
 
 TEST(PvsDatabase, OpensTheUneditedCityDatabaseItsCorruptVariantsStartFrom) {
   TempDir dir;
-  EXPECT_EQ(openErrorWithCell7Bytes(dir, "same.db", asString(encodeFaceList(kCell7))), "<no InputError thrown>");
+  EXPECT_EQ(openErrorWithCell7Bytes(dir, "same.db", asString(encodeFaceList(kCell7))),
+            "<no InputError thrown>");
   EXPECT_EQ(*PvsDatabase::open(dir / "same.db").cell(7), kCell7);
 }
 
 TEST(PvsDatabase, RefusesAtOpenACellListThatIsNotStrictlyIncreasingNamingTheFileAndCell) {
   TempDir dir;
   // 100, 100, 21179: a zero delta, in as many bytes as the good list.
-  const std::string error = openErrorWithCell7Bytes(dir, "repeated.db", asString(encodeFaceList({100, 100, 21179})));
+  const std::string error =
+      openErrorWithCell7Bytes(dir, "repeated.db", asString(encodeFaceList({100, 100, 21179})));
   EXPECT_THAT(error, HasSubstr("repeated.db"));
   EXPECT_THAT(error, HasSubstr("cell 7 (i,j,k 2,0,1)"));
   EXPECT_THAT(error, HasSubstr("not strictly increasing at entry 1"));
@@ -254,7 +269,8 @@ TEST(PvsDatabase, RefusesAtOpenACellListThatIsNotStrictlyIncreasingNamingTheFile
 
 TEST(PvsDatabase, RefusesAtOpenACellListingAFaceIdEqualToTheFaceCountNamingTheFileAndCell) {
   TempDir dir;
-  const std::string error = openErrorWithCell7Bytes(dir, "beyond.db", asString(encodeFaceList({100, 200, 21280})));
+  const std::string error =
+      openErrorWithCell7Bytes(dir, "beyond.db", asString(encodeFaceList({100, 200, 21280})));
   EXPECT_THAT(error, HasSubstr("beyond.db"));
   EXPECT_THAT(error, HasSubstr("cell 7 (i,j,k 2,0,1)"));
   EXPECT_THAT(error, HasSubstr("entry 2 is face 21280, not below the face count 21280"));
@@ -282,8 +298,9 @@ struct Town {
     testing::addGround(scene, -30, -30, 30, 30);
     for (int i = 0; i < 3; ++i)
       for (int k = 0; k < 3; ++k)
-        testing::addBox(scene, "b", {-26.0f + 18.0f * float(i), 0.0f, -26.0f + 18.0f * float(k)},
-                        {-16.0f + 18.0f * float(i), 8.0f + 3.0f * float(i), -16.0f + 18.0f * float(k)});
+        testing::addBox(
+            scene, "b", {-26.0f + 18.0f * float(i), 0.0f, -26.0f + 18.0f * float(k)},
+            {-16.0f + 18.0f * float(i), 8.0f + 3.0f * float(i), -16.0f + 18.0f * float(k)});
     finalizeScene(scene);
     triangles = flattenScene(scene, true);
     rays = makeEmbreeRayQuery(triangles);
@@ -315,8 +332,10 @@ TEST(PvsBake, CoversTheStreetsButNotTheInsideOfBuildings) {
     const glm::vec2 lo(b.lo.x, b.lo.z), hi(b.hi.x, b.hi.z);
     for (int i = 0; i < 3; ++i)
       for (int k = 0; k < 3; ++k) {
-        const glm::vec2 blo(-26.0f + 18.0f * float(i), -26.0f + 18.0f * float(k)), bhi = blo + glm::vec2(10.0f);
-        EXPECT_FALSE(lo.x >= blo.x && hi.x <= bhi.x && lo.y >= blo.y && hi.y <= bhi.y) << "cell " << c;
+        const glm::vec2 blo(-26.0f + 18.0f * float(i), -26.0f + 18.0f * float(k)),
+            bhi = blo + glm::vec2(10.0f);
+        EXPECT_FALSE(lo.x >= blo.x && hi.x <= bhi.x && lo.y >= blo.y && hi.y <= bhi.y)
+            << "cell " << c;
       }
   }
 }
@@ -325,7 +344,8 @@ TEST(PvsBake, StoresForEveryCellThePvsOfItsBox) {
   TempDir dir;
   BakeOptions options = townBake();
   options.coarseToFine = false;
-  const BakeReport report = bakePvs(town().scene, *town().pvs, town().freeSpace, options, dir / "t.db");
+  const BakeReport report =
+      bakePvs(town().scene, *town().pvs, town().freeSpace, options, dir / "t.db");
   EXPECT_EQ(report.computedCells, report.freeCells);
   EXPECT_FALSE(fs::exists(dir / "t.db.journal"));
   const PvsDatabase db = PvsDatabase::open(dir / "t.db");
@@ -351,8 +371,10 @@ TEST(PvsBake, CoarseToFineKeepsEveryCellConservativeAndNoLarger) {
     SampledVisibilityOptions gt;
     gt.points = 12;
     gt.resolution = 48;
-    for (uint32_t f : sampleVisibleFaces(*town().rays, town().triangles, grid.cellBox(grid.cellAt(c)), gt).faces)
-      EXPECT_TRUE(std::binary_search(fb.begin(), fb.end(), f)) << "cell " << c << " misses face " << f;
+    for (uint32_t f :
+         sampleVisibleFaces(*town().rays, town().triangles, grid.cellBox(grid.cellAt(c)), gt).faces)
+      EXPECT_TRUE(std::binary_search(fb.begin(), fb.end(), f))
+          << "cell " << c << " misses face " << f;
   }
 }
 
@@ -367,16 +389,19 @@ TEST(PvsBake, ResumesFromAJournalWithATornTailAndGivesTheSameDatabase) {
   dying.progress = [&](size_t, size_t) {
     if (++calls == 6) throw std::runtime_error("killed");
   };
-  EXPECT_THROW(bakePvs(town().scene, *town().pvs, town().freeSpace, dying, dir / "resumed.db"), std::runtime_error);
+  EXPECT_THROW(bakePvs(town().scene, *town().pvs, town().freeSpace, dying, dir / "resumed.db"),
+               std::runtime_error);
   const fs::path journal = dir / "resumed.db.journal";
   ASSERT_TRUE(fs::exists(journal));
   EXPECT_FALSE(fs::exists(dir / "resumed.db"));
   fs::resize_file(journal, fs::file_size(journal) - 3);
-  const BakeReport report = bakePvs(town().scene, *town().pvs, town().freeSpace, townBake(), dir / "resumed.db");
+  const BakeReport report =
+      bakePvs(town().scene, *town().pvs, town().freeSpace, townBake(), dir / "resumed.db");
   EXPECT_GT(report.resumedCells, 0u);
   EXPECT_LT(report.computedCells, report.freeCells);
   std::ifstream a(dir / "fresh.db", std::ios::binary), b(dir / "resumed.db", std::ios::binary);
-  const std::string ba((std::istreambuf_iterator<char>(a)), {}), bb((std::istreambuf_iterator<char>(b)), {});
+  const std::string ba((std::istreambuf_iterator<char>(a)), {}),
+      bb((std::istreambuf_iterator<char>(b)), {});
   EXPECT_EQ(ba, bb);
 }
 
@@ -413,7 +438,8 @@ std::string dyingBakeJournal(const TempDir& dir, const std::string& out, size_t 
   dying.progress = [&](size_t, size_t) {
     if (++calls == cells + 1) throw std::runtime_error("killed");  // the first call reports 0 cells
   };
-  EXPECT_THROW(bakePvs(town().scene, *town().pvs, town().freeSpace, dying, dir / out), std::runtime_error);
+  EXPECT_THROW(bakePvs(town().scene, *town().pvs, town().freeSpace, dying, dir / out),
+               std::runtime_error);
   return readBytes(dir / (out + ".journal"));
 }
 
@@ -430,17 +456,19 @@ TEST(PvsBake, ResumesPastABitFlipInTheJournalFromItsValidPrefixWarnsAndGivesTheS
   writeBytes(dir / "resumed.db.journal", journal);
 
   CapturedLog log;
-  const BakeReport report = bakePvs(town().scene, *town().pvs, town().freeSpace, townBake(), dir / "resumed.db");
+  const BakeReport report =
+      bakePvs(town().scene, *town().pvs, town().freeSpace, townBake(), dir / "resumed.db");
   EXPECT_EQ(report.resumedCells, 5u);
   EXPECT_EQ(report.computedCells, report.shardCells - 5);
   EXPECT_EQ(readBytes(dir / "resumed.db"), readBytes(dir / "fresh.db"));
   EXPECT_FALSE(fs::exists(dir / "resumed.db.journal"));
   const std::string warnings = log.warnings();
   EXPECT_THAT(warnings, HasSubstr((dir / "resumed.db.journal").string()));
-  EXPECT_THAT(warnings, HasSubstr(fmt::format("corrupt record at byte offset {} (checksum mismatch) after 5 good "
-                                              "records; dropping the {} bytes from there: that record and the 5 "
-                                              "records after it.",
-                                              bad.offset, journal.size() - bad.offset)));
+  EXPECT_THAT(warnings, HasSubstr(fmt::format(
+                            "corrupt record at byte offset {} (checksum mismatch) after 5 good "
+                            "records; dropping the {} bytes from there: that record and the 5 "
+                            "records after it.",
+                            bad.offset, journal.size() - bad.offset)));
 }
 
 TEST(PvsBake, RecomputesAJournalRecordWhoseChecksumPassesButThatNamesAFaceBeyondTheScene) {
@@ -452,8 +480,8 @@ TEST(PvsBake, RecomputesAJournalRecordWhoseChecksumPassesButThatNamesAFaceBeyond
   // Record 2 gets the scene's face count (one past the last face ID) added to
   // its list and a correct checksum, as a buggy or crafted writer could leave.
   const JournalRecordAt& r = records[2];
-  std::vector<uint32_t> faces = decodeFaceList(reinterpret_cast<const uint8_t*>(journal.data() + r.offset + 12),
-                                               r.bytes, r.count);
+  std::vector<uint32_t> faces = decodeFaceList(
+      reinterpret_cast<const uint8_t*>(journal.data() + r.offset + 12), r.bytes, r.count);
   faces.push_back(town().scene.faceCount);
   const std::string list = asString(encodeFaceList(faces));
   std::string record(12, '\0');
@@ -466,11 +494,13 @@ TEST(PvsBake, RecomputesAJournalRecordWhoseChecksumPassesButThatNamesAFaceBeyond
              journal.substr(0, r.offset) + record + journal.substr(r.offset + r.size()));
 
   CapturedLog log;
-  const BakeReport report = bakePvs(town().scene, *town().pvs, town().freeSpace, townBake(), dir / "resumed.db");
+  const BakeReport report =
+      bakePvs(town().scene, *town().pvs, town().freeSpace, townBake(), dir / "resumed.db");
   EXPECT_EQ(report.resumedCells, 2u);
   EXPECT_EQ(readBytes(dir / "resumed.db"), readBytes(dir / "fresh.db"));
-  EXPECT_THAT(log.warnings(), HasSubstr(fmt::format("is face {}, not below the face count {}", town().scene.faceCount,
-                                                    town().scene.faceCount)));
+  EXPECT_THAT(log.warnings(),
+              HasSubstr(fmt::format("is face {}, not below the face count {}",
+                                    town().scene.faceCount, town().scene.faceCount)));
   EXPECT_THAT(log.warnings(), HasSubstr("that record and the 3 records after it."));
 }
 
@@ -483,8 +513,10 @@ TEST(PvsBake, IgnoresAJournalFromOtherParameters) {
   other.progress = [&](size_t, size_t) {
     if (++calls == 4) throw std::runtime_error("killed");
   };
-  EXPECT_THROW(bakePvs(town().scene, *town().pvs, town().freeSpace, other, dir / "x.db"), std::runtime_error);
-  const BakeReport report = bakePvs(town().scene, *town().pvs, town().freeSpace, townBake(), dir / "x.db");
+  EXPECT_THROW(bakePvs(town().scene, *town().pvs, town().freeSpace, other, dir / "x.db"),
+               std::runtime_error);
+  const BakeReport report =
+      bakePvs(town().scene, *town().pvs, town().freeSpace, townBake(), dir / "x.db");
   EXPECT_EQ(report.resumedCells, 0u);
   EXPECT_EQ(report.computedCells, report.freeCells);
 }
@@ -497,10 +529,13 @@ TEST(PvsBake, ShardsMergeIntoTheWholeBakeAndMismatchedDatabasesAreRefused) {
     BakeOptions o = townBake();
     o.shardIndex = i;
     o.shardCount = 3;
-    shardCells += bakePvs(town().scene, *town().pvs, town().freeSpace, o, dir / ("s" + std::to_string(i) + ".db")).shardCells;
+    shardCells += bakePvs(town().scene, *town().pvs, town().freeSpace, o,
+                          dir / ("s" + std::to_string(i) + ".db"))
+                      .shardCells;
   }
   mergePvsDatabases({dir / "s0.db", dir / "s1.db", dir / "s2.db"}, dir / "merged.db");
-  const PvsDatabase all = PvsDatabase::open(dir / "all.db"), merged = PvsDatabase::open(dir / "merged.db");
+  const PvsDatabase all = PvsDatabase::open(dir / "all.db"),
+                    merged = PvsDatabase::open(dir / "merged.db");
   EXPECT_EQ(shardCells, all.cellCount());
   ASSERT_EQ(merged.cellIndices(), all.cellIndices());
   for (uint32_t c : all.cellIndices()) EXPECT_EQ(*merged.cell(c), *all.cell(c));
@@ -508,13 +543,17 @@ TEST(PvsBake, ShardsMergeIntoTheWholeBakeAndMismatchedDatabasesAreRefused) {
   BakeOptions coarse = townBake();
   coarse.cellSize = {8.0f, 2.0f, 8.0f};
   bakePvs(town().scene, *town().pvs, town().freeSpace, coarse, dir / "coarse.db");
-  EXPECT_THAT(errorOf([&] { mergePvsDatabases({dir / "all.db", dir / "coarse.db"}, dir / "bad.db"); }),
+  EXPECT_THAT(errorOf([&] {
+                mergePvsDatabases({dir / "all.db", dir / "coarse.db"}, dir / "bad.db");
+              }),
               HasSubstr("coarse.db"));
   EXPECT_FALSE(fs::exists(dir / "bad.db"));
   BakeOptions badShard = townBake();
   badShard.shardIndex = 3;
   badShard.shardCount = 3;
-  EXPECT_THAT(errorOf([&] { bakePvs(town().scene, *town().pvs, town().freeSpace, badShard, dir / "z.db"); }),
+  EXPECT_THAT(errorOf([&] {
+                bakePvs(town().scene, *town().pvs, town().freeSpace, badShard, dir / "z.db");
+              }),
               HasSubstr("shard 3/3"));
 }
 

@@ -23,14 +23,14 @@
 // stays near 30 s.
 //
 // Slow (about 75 s in Release on two busy cores): carries the ctest label "slow".
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cstdio>
 #include <iostream>
 #include <limits>
 #include <string>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "common/core/timer.h"
 #include "common/generate/generate.h"
@@ -70,12 +70,14 @@ std::vector<Cell> pickCells(const FreeSpace& fs, const SceneCase& c) {
     for (size_t k = 0; k < count; ++k) {
       const glm::ivec2 col = columns[(k * columns.size() + phase) / count % columns.size()];
       const glm::vec2 xz = fs.columnCentre(col.x, col.y);
-      const glm::vec3 lo(xz.x - 0.5f * size.x, fs.floorHeight(col.x, col.y) + kEyeLow, xz.y - 0.5f * size.z);
+      const glm::vec3 lo(xz.x - 0.5f * size.x, fs.floorHeight(col.x, col.y) + kEyeLow,
+                         xz.y - 0.5f * size.z);
       out.push_back({Box3f(lo, lo + size), large});
     }
   };
   add(c.cells, c.cellSize, false, columns.size() / (2 * std::max<size_t>(1, c.cells)));
-  add(c.largeCells, c.largeCellSize, true, columns.size() / (3 * std::max<size_t>(1, c.largeCells)));
+  add(c.largeCells, c.largeCellSize, true,
+      columns.size() / (3 * std::max<size_t>(1, c.largeCells)));
   return out;
 }
 
@@ -85,12 +87,15 @@ std::string describe(const glm::vec3& p) {
   return text;
 }
 
-std::string describe(const Box3f& b) { return describe(b.lo) + "-" + describe(b.hi); }
+std::string describe(const Box3f& b) {
+  return describe(b.lo) + "-" + describe(b.hi);
+}
 
 // Strictly outside solid geometry: no axis ray from p first hits the back of
 // a face. Stricter than the sampler's majority vote (see the file comment).
 bool strictlyOutside(const RayQuery& rays, const glm::vec3& p) {
-  static const glm::vec3 dirs[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  static const glm::vec3 dirs[6] = {{1, 0, 0},  {-1, 0, 0}, {0, 1, 0},
+                                    {0, -1, 0}, {0, 0, 1},  {0, 0, -1}};
   for (const glm::vec3& d : dirs) {
     const Hit h = rays.firstHit(Ray{p, d, 0.0f, std::numeric_limits<float>::infinity()});
     if (h.valid() && h.t > 0.0f && glm::dot(h.normal, d) > 0.0f) return false;
@@ -124,7 +129,8 @@ Verdict reexamine(const RayQuery& rays, const FlatTriangles& triangles, const Bo
       }
     if (witness) v.witnesses.append(" ").append(describe(p));
   }
-  for (size_t i = 0; i < suspects.size(); ++i) (confirmed[i] ? v.missing : v.excused).push_back(suspects[i]);
+  for (size_t i = 0; i < suspects.size(); ++i)
+    (confirmed[i] ? v.missing : v.excused).push_back(suspects[i]);
   return v;
 }
 
@@ -155,7 +161,8 @@ TEST_P(PvsGroundTruth, EveryFaceSampledVisibleFromACellIsInItsPvs) {
   sampling.resolution = kResolution;
 
   double ratioSum = 0.0, pvsMs = 0.0, sampleMs = 0.0;
-  size_t ratioCells = 0, pvsFaces = 0, seenFaces = 0, missingTotal = 0, excusedTotal = 0, insideTotal = 0;
+  size_t ratioCells = 0, pvsFaces = 0, seenFaces = 0, missingTotal = 0, excusedTotal = 0,
+         insideTotal = 0;
   for (const Cell& cell : cells) {
     const PvsResult r = pvs.compute(cell.box);
     const SampledVisibility seen = sampleVisibleFaces(*rays, triangles, cell.box, sampling);
@@ -169,12 +176,13 @@ TEST_P(PvsGroundTruth, EveryFaceSampledVisibleFromACellIsInItsPvs) {
       const Verdict v = reexamine(*rays, triangles, cell.box, suspects);
       missingTotal += v.missing.size();
       excusedTotal += v.excused.size();
-      EXPECT_TRUE(v.missing.empty()) << c.type << " cell " << describe(cell.box) << (cell.large ? " (large)" : "")
-                                     << ": " << v.missing.size() << " sampled-visible faces missing from the PVS:"
-                                     << list(v.missing) << "; seen from" << v.witnesses;
+      EXPECT_TRUE(v.missing.empty())
+          << c.type << " cell " << describe(cell.box) << (cell.large ? " (large)" : "") << ": "
+          << v.missing.size() << " sampled-visible faces missing from the PVS:" << list(v.missing)
+          << "; seen from" << v.witnesses;
       if (!v.excused.empty())
-        std::cout << "[ excused  ] " << c.type << " cell " << describe(cell.box) << ": faces" << list(v.excused)
-                  << " seen only from viewpoints inside solid geometry\n";
+        std::cout << "[ excused  ] " << c.type << " cell " << describe(cell.box) << ": faces"
+                  << list(v.excused) << " seen only from viewpoints inside solid geometry\n";
     }
     if (!seen.faces.empty()) {
       ratioSum += double(r.faces.size()) / double(seen.faces.size());
@@ -188,15 +196,18 @@ TEST_P(PvsGroundTruth, EveryFaceSampledVisibleFromACellIsInItsPvs) {
   const double ratio = ratioCells ? ratioSum / double(ratioCells) : 0.0;
   std::cout << "[ pvs/gt   ] " << c.type << ": " << cells.size() << " cells, " << scene.faceCount
             << " faces, mean PVS " << pvsFaces / cells.size() << ", mean sampled visible "
-            << seenFaces / cells.size() << ", overestimation " << ratio << ", missing " << missingTotal
-            << ", excused " << excusedTotal << ", viewpoints inside solid " << insideTotal << "; setup "
-            << setupMs << " ms, PVS " << pvsMs << " ms, sampling " << sampleMs << " ms\n";
+            << seenFaces / cells.size() << ", overestimation " << ratio << ", missing "
+            << missingTotal << ", excused " << excusedTotal << ", viewpoints inside solid "
+            << insideTotal << "; setup " << setupMs << " ms, PVS " << pvsMs << " ms, sampling "
+            << sampleMs << " ms\n";
   RecordProperty("overestimation", std::to_string(ratio));
   RecordProperty("cells", std::to_string(cells.size()));
   RecordProperty("missing", std::to_string(missingTotal));
 }
 
-std::string sceneName(const ::testing::TestParamInfo<SceneCase>& param) { return param.param.type; }
+std::string sceneName(const ::testing::TestParamInfo<SceneCase>& param) {
+  return param.param.type;
+}
 
 INSTANTIATE_TEST_SUITE_P(
     GeneratedScenes, PvsGroundTruth,
