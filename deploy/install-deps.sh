@@ -6,7 +6,7 @@ set -euo pipefail
 
 packages=(
   # toolchain
-  build-essential cmake ninja-build pkg-config git clang libclang-rt-14-dev
+  build-essential cmake ninja-build pkg-config git clang clang-format libclang-rt-14-dev
   # libraries found by CMake
   libboost-dev libflatbuffers-dev flatbuffers-compiler libglm-dev libglfw3-dev
   libembree-dev libspdlog-dev libfmt-dev libtbb-dev libepoxy-dev

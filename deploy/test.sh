@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs what is missing, builds and runs the whole test suite with ctest:
-# first a Release build with warnings as errors (binaries in build/bin), then
+# first a check that every C++ file matches .clang-format, then a Release
+# build with warnings as errors (binaries in build/bin), then
 # the same tests under AddressSanitizer + UndefinedBehaviorSanitizer (clang),
 # which also builds the fuzzers and runs each on its seed corpus, and last the
 # streaming server's tests under ThreadSanitizer.
@@ -24,6 +25,18 @@ esac
 deploy/install-deps.sh
 
 start=$(date +%s)
+echo "== Formatting (.clang-format) =="
+mapfile -t sources < <(git ls-files '*.cpp' '*.h' 2>/dev/null || find common protocol server client tests -name '*.cpp' -o -name '*.h')
+unformatted=()
+for f in "${sources[@]}"; do
+  clang-format --dry-run -Werror "$f" >/dev/null 2>&1 || unformatted+=("$f")
+done
+if [ ${#unformatted[@]} -gt 0 ]; then
+  echo "test.sh: ${#unformatted[@]} files do not match .clang-format (run clang-format -i on them):" >&2
+  printf '  %s\n' "${unformatted[@]}" >&2
+  exit 1
+fi
+echo "${#sources[@]} files formatted"
 if [ "$release" = 1 ]; then
   echo "== Release build (warnings are errors) =="
   cmake --preset ci >/dev/null
