@@ -7,6 +7,7 @@
 #include <GLFW/glfw3.h>
 
 #include "common/core/error.h"
+#include "common/core/view.h"
 
 namespace vistream {
 namespace {
@@ -112,8 +113,7 @@ bool GlWindow::navigate(Camera& camera, double dt, float speed) {
     camera.pitchDeg = std::clamp(camera.pitchDeg + pitch, -kMaxPitchDeg, kMaxPitchDeg);
 
   // Moving: upright, so forward and back stay horizontal whatever the pitch.
-  const float yawRad = glm::radians(camera.yawDeg);
-  const glm::vec3 ahead(-std::sin(yawRad), 0.0f, -std::cos(yawRad));
+  const glm::vec3 ahead(viewDirection(camera.yawDeg, 0.0));
   glm::vec3 move(0.0f);
   if (w.key(GLFW_KEY_W)) move += ahead;
   if (w.key(GLFW_KEY_S)) move -= ahead;

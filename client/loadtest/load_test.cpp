@@ -13,6 +13,7 @@
 #include <thread>
 
 #include "common/core/error.h"
+#include "common/core/ivec_less.h"
 #include "common/raycast/ray_query.h"
 #include "protocol/geometry/geometry_codec.h"
 #include "protocol/wire/messages.h"
@@ -402,11 +403,6 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
   glm::ivec3 dims_{1}, cell_{0};
   float radius_ = 0.0f;
   std::vector<uint64_t> held_;
-  struct IvecLess {
-    bool operator()(const glm::ivec3& a, const glm::ivec3& b) const {
-      return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z);
-    }
-  };
   std::set<glm::ivec3, IvecLess> ready_;
   std::map<glm::ivec3, Clock::time_point, IvecLess> pending_;
   uint64_t frame_ = 0;

@@ -15,6 +15,7 @@
 #include <utility>  // before Boost.Asio, whose awaitable.hpp uses std::exchange
 
 #include "common/core/error.h"
+#include "common/core/ivec_less.h"
 #include "protocol/geometry/geometry_codec.h"
 #include "protocol/wire/messages.h"
 
@@ -28,11 +29,6 @@ namespace {
 struct HeldFace {
   uint16_t material = 0;
   std::vector<glm::vec3> corners;
-};
-struct IvecLess {
-  bool operator()(const glm::ivec3& a, const glm::ivec3& b) const {
-    return a.x != b.x ? a.x < b.x : a.y != b.y ? a.y < b.y : a.z < b.z;
-  }
 };
 }  // namespace
 

@@ -3,16 +3,16 @@
 #include <cmath>
 #include <glm/gtc/matrix_transform.hpp>
 
+#include "common/core/view.h"
+
 namespace vistream {
 
 glm::vec3 Camera::forward() const {
-  const float yaw = glm::radians(yawDeg), pitch = glm::radians(pitchDeg);
-  return {-std::sin(yaw) * std::cos(pitch), std::sin(pitch), -std::cos(yaw) * std::cos(pitch)};
+  return glm::vec3(viewDirection(yawDeg, pitchDeg));
 }
 
 glm::vec3 Camera::right() const {
-  const float yaw = glm::radians(yawDeg);
-  return {std::cos(yaw), 0.0f, -std::sin(yaw)};
+  return glm::vec3(viewRight(yawDeg));
 }
 
 glm::vec3 Camera::up() const {

@@ -206,10 +206,7 @@ int cmdVisible(const std::string& spec, const SceneLimits& limits, const std::st
 }  // namespace
 
 int runSceneTool(int argc, char** argv) {
-  CLI::App app{
-      "vistream-scene: generate, inspect and sample scenes.\n"
-      "A SCENE is a file (.obj, .gltf, .glb, .json manifest) or a built-in name "
-      "(city1, city2, bigcity, interior, terrain; 'city1@SEED' picks a seed)."};
+  CLI::App app{"vistream-scene: generate, inspect and sample scenes.\n" + sceneSpecHelp()};
   std::string logLevel;
   setUpToolApp(app, logLevel);
 

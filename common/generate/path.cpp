@@ -71,11 +71,6 @@ bool lineOfSight(const FreeSpace& fs, glm::vec2 a, glm::vec2 b) {
 
 }  // namespace
 
-glm::dvec3 viewDirection(double yawDeg, double pitchDeg) {
-  const double y = yawDeg * kDeg, p = pitchDeg * kDeg;
-  return {-std::sin(y) * std::cos(p), std::sin(p), -std::cos(y) * std::cos(p)};
-}
-
 std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& fs,
                                      const PathOptions& options) {
   if (fs.walkableCount() == 0)

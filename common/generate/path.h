@@ -5,7 +5,7 @@
 // frame; t in seconds (non-decreasing), x,y,z the eye position in the scene
 // file's coordinates (metres, Y up). yaw 0 looks along -Z, positive yaw turns
 // left (towards -X, counter-clockwise seen from above); positive pitch looks
-// up. The view direction is (-sin(yaw)cos(pitch), sin(pitch), -cos(yaw)cos(pitch)).
+// up (common/core/view.h: viewDirection).
 #pragma once
 
 #include <cstdint>
@@ -13,6 +13,7 @@
 #include <glm/glm.hpp>
 #include <vector>
 
+#include "common/core/view.h"
 #include "common/scene/scene.h"
 #include "common/spatial/free_space.h"
 
@@ -24,9 +25,6 @@ struct PathSample {
   double yawDeg = 0.0;
   double pitchDeg = 0.0;
 };
-
-// The unit view direction of a yaw/pitch pair, as documented above.
-glm::dvec3 viewDirection(double yawDeg, double pitchDeg);
 
 struct PathOptions {
   double speed = 1.0;  // relative: 1.0 = walking, 1.4 m/s

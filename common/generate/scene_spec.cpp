@@ -12,6 +12,13 @@
 
 namespace vistream {
 
+std::string sceneSpecHelp() {
+  return fmt::format(
+      "A SCENE is a file (.obj, .gltf, .glb, .json manifest) or a built-in name ({}; "
+      "'city1@SEED' picks a seed).",
+      fmt::join(sceneTypes(), ", "));
+}
+
 Scene openScene(const std::string& spec, const SceneLimits& limits) {
   std::error_code ec;
   if (std::filesystem::exists(spec, ec)) return loadScene(spec, limits);

@@ -319,8 +319,8 @@ int cmdWalk(const std::string& spec, const SceneLimits& limits, const std::strin
 int runPvsTool(int argc, char** argv) {
   CLI::App app{
       "vistream-pvs: conservative potentially visible sets of view cells "
-      "(Cohen-Or and Zadicario 1998).\nA SCENE is a file (.obj, .gltf, .glb, .json manifest) "
-      "or a built-in name (city1, city2, bigcity, interior, terrain)."};
+      "(Cohen-Or and Zadicario 1998).\n" +
+      sceneSpecHelp()};
   std::string logLevel;
   setUpToolApp(app, logLevel);
 

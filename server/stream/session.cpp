@@ -443,7 +443,7 @@ void Session::requestFaceSets() {
   for (StreamScheduler::CellRequest& r : scheduler_->takeCellRequests()) {
     const uint32_t l = r.cell;
     world_.cellFaceSet(
-        world_.grid().cellAt(l), cfg.policy, radius_, server_.workers(),
+        world_.grid().cellAt(l), cfg.policy, scheduler_->radius(), server_.workers(),
         [self = shared_from_this(), l](FaceListPtr faces) {
           asio::post(self->strand_, [self, l, faces] {
             if (self->state_ != State::Active || !self->scheduler_->isRequested(l)) return;

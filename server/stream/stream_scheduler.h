@@ -60,6 +60,7 @@ class StreamScheduler {
   // A new pose (local frame; checked for plausibility by the caller).
   void setPose(const glm::dvec3& position, const glm::vec3& velocity, float yawDeg, float pitchDeg);
   bool hasPose() const { return hasPose_; }
+  float radius() const { return radius_; }  // the client's near-field radius (metres)
   const std::vector<uint32_t>& neededCells() const {
     return needed_;
   }  // linear indices, current first

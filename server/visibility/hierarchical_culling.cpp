@@ -12,7 +12,7 @@
 
 #include "common/core/error.h"
 #include "common/core/timer.h"
-#include "common/generate/path.h"
+#include "common/core/view.h"
 
 namespace vistream {
 

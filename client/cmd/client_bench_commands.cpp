@@ -10,6 +10,8 @@
 // times over the whole path; frame times are medians over the repeats of the
 // mean frame time of a run. Error: share of pixels differing from the
 // reference and mean colour error, averaged over frames.
+#include "client/cmd/client_bench_commands.h"
+
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
@@ -364,7 +366,9 @@ int runBench(const BenchArgs& a) {
 }  // namespace
 }  // namespace vistream
 
-int main(int argc, char** argv) {
+namespace vistream {
+
+int runClientBenchTool(int argc, char** argv) {
   using namespace vistream;
   BenchArgs a;
   CLI::App app{
@@ -386,3 +390,5 @@ int main(int argc, char** argv) {
   return runFlatToolApp("vistream-client-bench", app, argc, argv, a.logLevel,
                         [&] { return runBench(a); });
 }
+
+}  // namespace vistream

@@ -3,6 +3,8 @@
 // panoramic image cache, ray casting), from a local scene (--scene) or from
 // what a vistream-server streams (--host/--port); in a window (OpenGL) or
 // headless (software near field, PNG frames, statistics).
+#include "client/cmd/client_commands.h"
+
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
@@ -343,15 +345,16 @@ int run(const Args& a) {
 }  // namespace
 }  // namespace vistream
 
-int main(int argc, char** argv) {
+namespace vistream {
+
+int runClientTool(int argc, char** argv) {
   using namespace vistream;
   Args a;
   CLI::App app{
       "vistream-client: renders a walkthrough; near field as polygons, far field by horizon "
       "tracing, a panoramic "
       "image cache and ray casting (Wimmer 2001, chapter 4)"};
-  app.add_option("--scene", a.scene,
-                 "local mode: a scene file or built-in name (city1, bigcity, terrain, ...)");
+  app.add_option("--scene", a.scene, "local mode: a SCENE. " + sceneSpecHelp());
   addSceneLimitsOption(app, a.sceneLimits);
   app.add_option("--host", a.host, "connected mode: the vistream-server to stream from");
   app.add_option("--port", a.port, "the server's port")->capture_default_str();
@@ -399,3 +402,5 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   return runFlatToolApp("vistream-client", app, argc, argv, a.logLevel, [&] { return run(a); });
 }
+
+}  // namespace vistream

@@ -3,6 +3,8 @@
 // connected, got its initial load and finished cleanly; 1 for bad input or a
 // failed run (the report is still printed on stdout, and one line
 // "vistream-loadtest: error: ..." on stderr says why); 2 for bad usage.
+#include "client/cmd/loadtest_commands.h"
+
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
@@ -17,9 +19,9 @@
 #include "common/raycast/ray_query.h"
 #include "common/spatial/free_space.h"
 
-using namespace vistream;
+namespace vistream {
 
-int main(int argc, char** argv) {
+int runLoadTestTool(int argc, char** argv) {
   CLI::App app{
       "vistream-loadtest: simulated clients walking through a scene served by vistream-server, "
       "over real "
@@ -130,3 +132,5 @@ int main(int argc, char** argv) {
     return 1;
   });
 }
+
+}  // namespace vistream

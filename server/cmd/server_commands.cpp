@@ -1,5 +1,7 @@
 // vistream-server: streams a scene to many clients over TCP (see
 // server/stream/stream_server.h and protocol/README.md).
+#include "server/cmd/server_commands.h"
+
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -11,15 +13,14 @@
 #include "common/generate/scene_spec.h"
 #include "server/stream/stream_server.h"
 
-using namespace vistream;
+namespace vistream {
 
-int main(int argc, char** argv) {
+int runServerTool(int argc, char** argv) {
   CLI::App app{
       "vistream-server: streams to each client the part of a scene it can see (a conservative PVS "
       "of its "
-      "view cell), over TCP.\nA SCENE is a file (.obj, .gltf, .glb, .json manifest) or a built-in "
-      "name "
-      "(city1, city2, bigcity, interior, interior2, terrain)."};
+      "view cell), over TCP.\n" +
+      sceneSpecHelp()};
   app.set_config("--config", "",
                  "read options from a TOML/INI file (keys are the long option names)");
   std::string logLevel, scene, pvsDb, tokenFile, policy = "visibility", portFile;
@@ -104,3 +105,5 @@ int main(int argc, char** argv) {
     return 0;
   });
 }
+
+}  // namespace vistream
