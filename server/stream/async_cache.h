@@ -3,7 +3,8 @@
 // (the worker pool), later requests for the same key wait for that one
 // computation, and every waiter's callback is invoked (on the worker thread
 // that finished it) with the shared, immutable value. At most `capacity`
-// finished values are kept; the least recently used is dropped first.
+// finished values, costing at most `maxCost` together (by the cost function,
+// e.g. bytes), are kept; the least recently used is dropped first.
 //
 // Cancellation: a request may carry an Interest (a token its requester
 // holds). A computation that has not started when every waiter's interest
@@ -24,6 +25,7 @@
 #include <boost/asio/post.hpp>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <list>
 #include <memory>
 #include <mutex>
@@ -48,10 +50,15 @@ class AsyncCache {
   // Called with the key and the exception's message when a computation throws.
   using OnError = std::function<void(const Key&, const char*)>;
 
-  AsyncCache(size_t capacity, Compute compute, OnError onError = {})
+  using Cost = std::function<size_t(const Value&)>;
+
+  AsyncCache(size_t capacity, Compute compute, OnError onError = {},
+             size_t maxCost = std::numeric_limits<size_t>::max(), Cost cost = {})
       : capacity_(capacity ? capacity : 1),
+        maxCost_(maxCost),
         compute_(std::move(compute)),
-        onError_(std::move(onError)) {}
+        onError_(std::move(onError)),
+        cost_(std::move(cost)) {}
 
   // The value if it is cached (counts as a hit and a use), else null.
   Ptr find(const Key& key) {
@@ -95,6 +102,10 @@ class AsyncCache {
   uint64_t computed() const { return computed_; }
   // Computations dropped before they started because nobody waited any more.
   uint64_t cancelled() const { return cancelled_; }
+  size_t cost() const {
+    std::lock_guard lock(mutex_);
+    return totalCost_;
+  }
   size_t size() const {
     std::lock_guard lock(mutex_);
     return lru_.size();
@@ -109,6 +120,7 @@ class AsyncCache {
   };
   struct Entry {
     Ptr value;
+    size_t cost = 0;
     bool running = false;
     std::vector<Waiter> waiters;
     typename std::list<Key>::iterator position;
@@ -116,6 +128,7 @@ class AsyncCache {
   void touch(Entry& e) { lru_.splice(lru_.begin(), lru_, e.position); }
 
   void run(const Key& key) {
+    std::vector<Waiter> dropped;  // destroyed after the lock: they may hold sessions
     {
       std::lock_guard guard(mutex_);
       auto it = entries_.find(key);
@@ -124,7 +137,8 @@ class AsyncCache {
       bool wanted = false;
       for (const Waiter& w : entry.waiters) wanted = wanted || w.wanted();
       if (!wanted) {
-        entries_.erase(it);  // the callbacks (and what they hold) go with it
+        dropped.swap(entry.waiters);
+        entries_.erase(it);
         ++cancelled_;
         return;
       }
@@ -135,6 +149,8 @@ class AsyncCache {
       value = std::make_shared<const Value>(compute_(key));
     } catch (const std::exception& e) {
       if (onError_) onError_(key, e.what());
+    } catch (...) {
+      if (onError_) onError_(key, "an exception of unknown type");
     }
     std::vector<Waiter> waiters;
     {
@@ -146,12 +162,17 @@ class AsyncCache {
       } else {
         Entry& entry = it->second;
         entry.value = value;
+        entry.cost = cost_ ? cost_(*value) : 1;
         entry.running = false;
+        totalCost_ += entry.cost;
         lru_.push_front(key);
         entry.position = lru_.begin();
         ++computed_;
-        while (lru_.size() > capacity_) {
-          entries_.erase(lru_.back());
+        // The newest value stays even if it alone costs more than the limit.
+        while (lru_.size() > capacity_ || (totalCost_ > maxCost_ && lru_.size() > 1)) {
+          auto victim = entries_.find(lru_.back());
+          totalCost_ -= victim->second.cost;
+          entries_.erase(victim);
           lru_.pop_back();
         }
       }
@@ -159,10 +180,12 @@ class AsyncCache {
     for (auto& w : waiters) w.done(value);
   }
 
-  size_t capacity_;
+  size_t capacity_, maxCost_;
   Compute compute_;
   OnError onError_;
-  mutable std::mutex mutex_;  // guards entries_ and lru_
+  Cost cost_;
+  mutable std::mutex mutex_;  // guards entries_, lru_ and totalCost_
+  size_t totalCost_ = 0;      // of the finished values kept
   std::unordered_map<Key, Entry, Hash> entries_;
   std::list<Key> lru_;
   std::atomic<uint64_t> hits_{0}, misses_{0}, computed_{0}, cancelled_{0};

@@ -61,10 +61,12 @@ void Session::shutdown(const std::string& reason) {
   asio::dispatch(strand_, [self = shared_from_this(), reason] {
     if (self->state_ == State::Closed || self->state_ == State::Closing) return;
     self->cancelWork();
-    self->send(std::make_shared<const std::vector<uint8_t>>(encodeBye(reason)));
+    // Closing before the send: a send over the queue limit closes at once,
+    // and nothing may turn Closed back into Closing.
     self->state_ = State::Closing;
     self->closingSince_ = Clock::now();
-    if (self->queue_.empty()) self->close("shutdown");
+    self->send(std::make_shared<const std::vector<uint8_t>>(encodeBye(reason)));
+    if (self->state_ == State::Closing && self->queue_.empty()) self->close("shutdown");
   });
 }
 
@@ -334,9 +336,9 @@ void Session::fail(ErrorCode code, const std::string& text) {
   server_.peerWarnings().warn("session {}: {} ({}); closing it", id_, text,
                               EnumNameErrorCode(code));
   cancelWork();
-  send(std::make_shared<const std::vector<uint8_t>>(encodeError(code, text)));
-  state_ = State::Closing;
+  state_ = State::Closing;  // before the send, which may close (see shutdown)
   closingSince_ = Clock::now();
+  send(std::make_shared<const std::vector<uint8_t>>(encodeError(code, text)));
 }
 
 void Session::close(const char* why) {
@@ -355,7 +357,7 @@ void Session::close(const char* why) {
     std::lock_guard lock(snapshotMutex_);
     snapshot_.active = false;
   }
-  server_.sessionEnded(id_);
+  server_.sessionEnded(id_, hasPose_);
 }
 
 void Session::send(std::shared_ptr<const std::vector<uint8_t>> frame) {
@@ -376,23 +378,24 @@ void Session::writeNext() {
   if (writing_ || queue_.empty() || state_ == State::Closed) return;
   writing_ = true;
   writeStarted_ = Clock::now();
+  // The handler holds the frame: close() may clear the queue while the
+  // write is still in flight.
   asio::async_write(
       socket_, asio::buffer(*queue_.front()),
-      asio::bind_executor(
-          strand_, [self = shared_from_this()](const boost::system::error_code& ec, size_t n) {
-            self->writing_ = false;
-            if (self->state_ == State::Closed) return;
-            if (ec) return self->close("write error");
-            self->bytesSent_ += n;
-            self->server_.countSent(n);
-            self->queued_ -= self->queue_.front()->size();
-            self->queuedAtomic_ = self->queued_;
-            self->queue_.pop_front();
-            if (self->state_ == State::Closing && self->queue_.empty())
-              return self->close("closing");
-            self->writeNext();
-            self->pump();
-          }));
+      asio::bind_executor(strand_, [self = shared_from_this(), frame = queue_.front()](
+                                       const boost::system::error_code& ec, size_t n) {
+        self->writing_ = false;
+        if (self->state_ == State::Closed || self->queue_.empty()) return;
+        if (ec) return self->close("write error");
+        self->bytesSent_ += n;
+        self->server_.countSent(n);
+        self->queued_ -= self->queue_.front()->size();
+        self->queuedAtomic_ = self->queued_;
+        self->queue_.pop_front();
+        if (self->state_ == State::Closing && self->queue_.empty()) return self->close("closing");
+        self->writeNext();
+        self->pump();
+      }));
 }
 
 void Session::housekeeping() {

@@ -35,6 +35,7 @@ void StreamScheduler::setHeld(uint32_t face, bool on) {
   if (on) {
     heldBytes_ += world_.faceBytes(face);
     ++heldCount_;
+    evictionsExhausted_ = false;
   } else {
     heldBytes_ -= world_.faceBytes(face);
     --heldCount_;
@@ -73,6 +74,7 @@ void StreamScheduler::updateNeededCells() {
       if (nearX && nearZ) add(cell_ + glm::ivec3(dx, 0, dz));
     }
   needed_ = std::move(needed);
+  evictionsExhausted_ = false;  // the faces to keep may have changed
   // Forget the face sets of cells no longer needed (their faces stay held),
   // and drop their requests: the newest pose wins.
   for (auto it = cellSets_.begin(); it != cellSets_.end();) {
@@ -106,6 +108,7 @@ bool StreamScheduler::onFaceSet(uint32_t cell, FaceListPtr faces) {
   if (requested_.erase(cell) == 0 || !faces || !isNeeded(cell)) return false;
   cellSets_[cell] = std::move(faces);
   cursor_[cell] = 0;
+  evictionsExhausted_ = false;
   return true;
 }
 
@@ -134,7 +137,10 @@ bool StreamScheduler::readyToStream(bool cullingInFlight) const {
 
 std::vector<uint32_t> StreamScheduler::takeEvictions() {
   std::vector<uint32_t> evicted;
-  if (budget_ == 0 || heldBytes_ <= budget_ * 9 / 10) return evicted;
+  // The budget is the client's number: thresholds without overflow, and no
+  // scan again until something held or needed changed since a fruitless one.
+  if (budget_ == 0 || heldBytes_ <= budget_ / 10 * 9 || evictionsExhausted_) return evicted;
+  const uint64_t target = budget_ / 10 * 7;
   // Keep what the needed cells stream; evict the rest, farthest first.
   std::vector<uint8_t> keep(world_.faceCount(), 0);
   for (const auto& [l, set] : cellSets_)
@@ -148,10 +154,11 @@ std::vector<uint32_t> StreamScheduler::takeEvictions() {
     }
   std::sort(candidates.begin(), candidates.end(), std::greater<>());
   for (const auto& [d, f] : candidates) {
-    if (heldBytes_ <= budget_ * 7 / 10) break;
+    if (heldBytes_ <= target) break;
     setHeld(f, false);
     evicted.push_back(f);
   }
+  evictionsExhausted_ = evicted.empty();
   std::sort(evicted.begin(), evicted.end());
   // Cells announced ready may have lost faces: they are announced again when whole.
   for (auto it = announced_.begin(); it != announced_.end();)
@@ -168,9 +175,12 @@ std::vector<uint32_t> StreamScheduler::takeBatch() {
     batch.push_back(f);
     bytes += world_.faceBytes(f);
   };
-  for (uint32_t f : visibleNow_) {
-    if (bytes >= config_.batchBytes) break;
-    take(f);
+  // Faces in view first, while the culling is of the cell the client is in.
+  if (!needed_.empty() && visibleNowCell_ == needed_.front()) {
+    for (uint32_t f : visibleNow_) {
+      if (bytes >= config_.batchBytes) break;
+      take(f);
+    }
   }
   for (uint32_t l : needed_) {
     auto it = cellSets_.find(l);

@@ -138,6 +138,7 @@ class StreamScheduler {
   FaceList visibleNow_;
   uint32_t culledCell_ = UINT32_MAX, visibleNowCell_ = UINT32_MAX;
   double lastCullS_ = -1e300;
+  bool evictionsExhausted_ = false;  // the last scan found nothing to evict; nothing changed since
 };
 
 }  // namespace vistream

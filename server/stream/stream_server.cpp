@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 #include <sys/resource.h>
 
+#include <boost/asio/bind_executor.hpp>
 #include <boost/asio/post.hpp>
 #include <boost/asio/signal_set.hpp>
 #include <unordered_map>
@@ -33,7 +34,8 @@ StreamServer::StreamServer(StreamWorld& world, StreamServerConfig config)
       acceptor_(io_),
       avatarTimer_(io_),
       statsTimer_(io_),
-      acceptRetryTimer_(io_),
+      acceptStrand_(asio::make_strand(io_)),
+      acceptRetryTimer_(acceptStrand_),
       maxClients_(config_.maxClients) {}
 
 StreamServer::~StreamServer() {
@@ -96,7 +98,9 @@ void StreamServer::fitOpenFileLimit() {
 
 void StreamServer::accept() {
   acceptor_.async_accept(
-      asio::make_strand(io_), [this](const boost::system::error_code& ec, tcp::socket socket) {
+      asio::make_strand(io_),
+      asio::bind_executor(acceptStrand_, [this](const boost::system::error_code& ec,
+                                                tcp::socket socket) {
         if (ec) {
           if (ec == asio::error::operation_aborted || stopping_ || !acceptor_.is_open()) return;
           // Out of descriptors: retrying at once would spin (and log) in a tight
@@ -111,15 +115,22 @@ void StreamServer::accept() {
               std::chrono::seconds(1), std::max<std::chrono::milliseconds>(
                                            std::chrono::milliseconds(10), 2 * acceptBackoff_));
           acceptRetryTimer_.expires_after(acceptBackoff_);
-          acceptRetryTimer_.async_wait([this](const boost::system::error_code& e) {
-            if (!e && !stopping_) accept();
-          });
+          acceptRetryTimer_.async_wait(
+              asio::bind_executor(acceptStrand_, [this](const boost::system::error_code& e) {
+                if (!e && !stopping_) accept();
+              }));
           return;
         }
         acceptBackoff_ = std::chrono::milliseconds(0);
         boost::system::error_code ignored;
         socket.set_option(tcp::no_delay(true), ignored);
-        const auto remote = socket.remote_endpoint(ignored);
+        boost::system::error_code remoteError;
+        const auto remote = socket.remote_endpoint(remoteError);
+        if (remoteError) {  // gone before we looked: nothing to serve
+          socket.close(ignored);
+          if (!stopping_) accept();
+          return;
+        }
         const asio::ip::address address = remote.address();
         uint32_t id;
         std::string refusal;
@@ -154,14 +165,16 @@ void StreamServer::accept() {
           session->start();
         }
         if (!stopping_) accept();
-      });
+      }));
 }
 
-void StreamServer::sessionEnded(uint32_t id) {
+void StreamServer::sessionEnded(uint32_t id, bool wasPlaced) {
   std::lock_guard lock(sessionsMutex_);
   if (sessions_.erase(id)) {
     ++ended_;
-    departed_.push_back(id);
+    // Only sessions others may have seen are announced, and only while
+    // avatar updates run (they drain the list).
+    if (wasPlaced && config_.avatarHz > 0.0) departed_.push_back(id);
   }
   if (auto it = addressOf_.find(id); it != addressOf_.end()) {
     if (--perAddress_[it->second] == 0) perAddress_.erase(it->second);
@@ -272,7 +285,7 @@ void StreamServer::statsTick() {
 
 void StreamServer::stop() {
   if (stopping_.exchange(true)) return;
-  asio::post(io_, [this] {
+  asio::post(acceptStrand_, [this] {
     boost::system::error_code ignored;
     acceptor_.close(ignored);
     avatarTimer_.cancel();

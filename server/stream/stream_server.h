@@ -17,6 +17,7 @@
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/steady_timer.hpp>
+#include <boost/asio/strand.hpp>
 #include <boost/asio/thread_pool.hpp>
 #include <chrono>
 #include <cstdint>
@@ -93,7 +94,9 @@ class StreamServer {
   const StreamServerConfig& config() const { return config_; }
   boost::asio::thread_pool& workers() { return workers_; }
   boost::asio::io_context& io() { return io_; }
-  void sessionEnded(uint32_t id);
+  // A session ended; `wasPlaced` if it ever had a pose (others may have
+  // seen its avatar, so its departure is announced).
+  void sessionEnded(uint32_t id, bool wasPlaced);
   void countSent(size_t bytes) { bytesSent_ += bytes; }
   double cpuMsPerSecond() const { return cpuMsPerS_; }
   size_t sessionCount() const;
@@ -120,7 +123,10 @@ class StreamServer {
   boost::asio::io_context io_;
   boost::asio::thread_pool workers_;
   boost::asio::ip::tcp::acceptor acceptor_;
-  boost::asio::steady_timer avatarTimer_, statsTimer_, acceptRetryTimer_;
+  boost::asio::steady_timer avatarTimer_, statsTimer_;
+  // The accept chain, its retry timer and stop() run on this strand.
+  boost::asio::strand<boost::asio::io_context::executor_type> acceptStrand_;
+  boost::asio::steady_timer acceptRetryTimer_;
   uint16_t port_ = 0;
   size_t maxClients_ = 0;
   std::chrono::milliseconds acceptBackoff_{0};

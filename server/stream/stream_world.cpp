@@ -25,6 +25,10 @@ const char* streamPolicyName(StreamPolicy p) {
 
 namespace {
 
+size_t faceListBytes(const FaceList& f) {
+  return f.size() * sizeof(uint32_t) + 64;
+}
+
 float boxDistance(const Box3f& a, const Box3f& b) {
   const glm::vec3 gap = glm::max(glm::vec3(0.0f), glm::max(a.lo - b.hi, b.lo - a.hi));
   return glm::length(gap);
@@ -97,7 +101,8 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
       [this](const uint32_t& c, const char* what) {
         const glm::ivec3 i = grid_.cellAt(c);
         spdlog::error("PVS of cell ({}, {}, {}) failed: {}", i.x, i.y, i.z, what);
-      });
+      },
+      options.pvsCacheBytes, faceListBytes);
   faceSetCache_ = std::make_unique<AsyncCache<FaceSetKey, FaceList, FaceSetKeyHash>>(
       options.faceSetCacheEntries,
       [this](const FaceSetKey& k) {
@@ -115,7 +120,8 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
       [this](const FaceSetKey& k, const char* what) {
         const glm::ivec3 i = grid_.cellAt(k.cell);
         spdlog::error("face set of cell ({}, {}, {}) failed: {}", i.x, i.y, i.z, what);
-      });
+      },
+      options.faceSetCacheBytes, faceListBytes);
   spdlog::info(
       "stream world: scene '{}' ({} faces), {} x {} x {} cells of {:.1f} m, PVS {}, ready in "
       "{:.0f} ms",

@@ -40,6 +40,10 @@ struct StreamWorldOptions {
   float cellSize = 4.0f;              // without a database (metres), the paper's scale
   size_t pvsCacheCells = 4096;
   size_t faceSetCacheEntries = 4096;
+  // Memory bounds of the two caches (face IDs at 4 bytes each). Clients pick
+  // part of a face set's key (their radius), so entries alone do not bound it.
+  size_t pvsCacheBytes = size_t(1) << 30;
+  size_t faceSetCacheBytes = size_t(1) << 30;
 };
 
 using FaceList = std::vector<uint32_t>;  // sorted face IDs

@@ -201,6 +201,25 @@ TEST_F(SchedulerTest, PrefetchesCellsAheadAlongTheVelocityWithABoundedNumberOfSa
   EXPECT_TRUE(ahead);
 }
 
+TEST_F(SchedulerTest, FacesSeenFromACellTheClientLeftNoLongerGoFirst) {
+  StreamSchedulerConfig cfg;
+  cfg.batchBytes = 1;  // one face a batch: the order shows
+  StreamScheduler s(world(), cfg, 200.0f, 0);
+  s.setPose(kPoint, glm::vec3(0.0f), 0.0f, 0.0f);
+  answerRequests(s);
+  const auto cull = s.takeCullRequest(0.0);
+  ASSERT_TRUE(cull);
+  s.onCulled(cull->cell, {cull->faceSet->back()});
+  // The client walks to the other side of the wall before anything is sent.
+  const glm::dvec3 far{0.0, 1.7, -24.0};
+  s.setPose(far, glm::vec3(0.0f), 0.0f, 0.0f);
+  answerRequests(s);
+  const auto batch = s.takeBatch();
+  ASSERT_EQ(batch.size(), 1u);
+  EXPECT_EQ(batch.front(), faceSet(cellOf(far))->front())
+      << "the new cell's faces come in order, not the old cell's view";
+}
+
 TEST_F(SchedulerTest, TheRadiusPolicyStreamsWithoutCulling) {
   StreamSchedulerConfig cfg;
   cfg.policy = StreamPolicy::Radius;
