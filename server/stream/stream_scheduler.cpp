@@ -54,7 +54,9 @@ void StreamScheduler::updateNeededCells() {
   // half a cell or more, whatever the speed.
   const float speed = float(std::min(double(glm::length(velocity_)), config_.maxSpeedMps));
   if (speed > 1e-3f) {
-    const double horizon = config_.prefetchSeconds * speed;
+    // Never farther than across the whole grid.
+    const double gridDiagonal = glm::length(glm::dvec3(grid.cellSize()) * glm::dvec3(grid.dims()));
+    const double horizon = std::min(config_.prefetchSeconds * speed, gridDiagonal);
     const double step =
         std::max(0.5 * std::min(grid.cellSize().x, grid.cellSize().z), horizon / kMaxPrefetchSteps);
     const glm::vec3 direction = glm::normalize(velocity_);

@@ -6,6 +6,7 @@
 #include <boost/asio/bind_executor.hpp>
 #include <boost/asio/post.hpp>
 #include <boost/asio/signal_set.hpp>
+#include <cerrno>
 #include <unordered_map>
 
 #include "common/core/error.h"
@@ -105,10 +106,11 @@ void StreamServer::accept() {
           if (ec == asio::error::operation_aborted || stopping_ || !acceptor_.is_open()) return;
           // Out of descriptors: retrying at once would spin (and log) in a tight
           // loop until a session ends. Back off, 10 ms doubling to 1 s.
-          const bool outOfDescriptors = ec == boost::system::errc::too_many_files_open ||
-                                        ec == boost::system::errc::too_many_files_open_in_system ||
-                                        ec == boost::system::errc::not_enough_memory ||
-                                        ec == boost::system::errc::no_buffer_space;
+          // errno values compared directly: constructing error_conditions from
+          // errc here trips UBSan's vptr check inside Boost 1.74.
+          const int v = ec.value();
+          const bool outOfDescriptors = ec.category() == boost::system::system_category() &&
+                                        (v == EMFILE || v == ENFILE || v == ENOMEM || v == ENOBUFS);
           peerWarnings_.warn("accept: {}{}", ec.message(), outOfDescriptors ? "; backing off" : "");
           if (!outOfDescriptors) return accept();
           acceptBackoff_ = std::min<std::chrono::milliseconds>(

@@ -162,8 +162,10 @@ FaceList StreamWorld::computePvs(uint32_t linear) {
 
 std::optional<glm::ivec3> StreamWorld::cellOf(const glm::vec3& p) const {
   if (grid_.cellCount() == 0) return std::nullopt;
-  const glm::vec3 rel = (p - grid_.origin()) / grid_.cellSize();
-  return glm::clamp(glm::ivec3(glm::floor(rel)), glm::ivec3(0), grid_.dims() - 1);
+  // Clamped in float before the conversion: a point far outside the grid
+  // would not fit an int.
+  const glm::vec3 rel = glm::floor((p - grid_.origin()) / grid_.cellSize());
+  return glm::ivec3(glm::clamp(rel, glm::vec3(0.0f), glm::vec3(grid_.dims() - 1)));
 }
 
 void StreamWorld::pvs(const glm::ivec3& cell, boost::asio::thread_pool& pool,
