@@ -106,196 +106,260 @@ FrameReport FrameRenderer::renderFarField(const Camera& camera, ImageRgb8& farIm
   return run(camera, farImage, &near);
 }
 
-FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out,
-                               std::vector<uint32_t>* glNear) {
-  Stopwatch total;
+// One frame of the pipeline as named steps (the thesis's stages 1-7). Built
+// and run by FrameRenderer::run; holds the frame's intermediate buffers.
+struct FrameRun {
+  FrameRenderer& r;
+  const Camera& camera;
+  ImageRgb8& out;
+  std::vector<uint32_t>* glNear;  // OpenGL draws the near field: only its triangles are wanted
+  const int W, H;
+  const size_t pixels;
+  const RenderMode mode;
+  const float d;
+  const glm::u8vec3 sky;
+  bool turned = false;
+  bool wholeScene = false;
   FrameReport rep;
-  const int W = camera.width, H = camera.height;
-  const size_t pixels = size_t(W) * size_t(H);
-  const RenderMode mode = options_.mode;
-  const float d = options_.nearDistance;
-  const bool turned =
-      !havePrevious_ || camera.yawDeg != previousYaw_ || camera.pitchDeg != previousPitch_;
-  rep.moving = havePrevious_ && (glm::length(camera.eye - previousEye_) > 1e-3f || turned);
-  havePrevious_ = true;
-  previousEye_ = camera.eye;
-  previousYaw_ = camera.yawDeg;
-  previousPitch_ = camera.pitchDeg;
-  if (out.width != W || out.height != H) out = ImageRgb8(W, H);
+  std::vector<float> slopes;         // per column: the horizon's slope
+  std::vector<uint32_t> candidates;  // far-field pixels
+  std::vector<glm::vec3> dirs;       // their ray directions
+  std::vector<uint8_t> trace;        // per candidate: cast a ray this frame
+  std::vector<int64_t> texels;       // per candidate: its cache texel
+  bool useCache = false;
+  std::vector<Ray> rays;
+  std::vector<uint32_t> rayOf;  // per ray: its candidate
+  std::vector<Hit> hits;
+
+  FrameRun(FrameRenderer& renderer, const Camera& c, ImageRgb8& o, std::vector<uint32_t>* gl)
+      : r(renderer),
+        camera(c),
+        out(o),
+        glNear(gl),
+        W(c.width),
+        H(c.height),
+        pixels(size_t(c.width) * size_t(c.height)),
+        mode(renderer.options_.mode),
+        d(renderer.options_.nearDistance),
+        sky(renderer.geometry_.sky) {}
+
+  void setPixel(size_t p, glm::u8vec3 c) { out.set(int(p % size_t(W)), int(p / size_t(W)), c); }
+
+  // Whether the viewer moved or turned since the previous frame.
+  void trackMotion() {
+    turned =
+        !r.havePrevious_ || camera.yawDeg != r.previousYaw_ || camera.pitchDeg != r.previousPitch_;
+    rep.moving = r.havePrevious_ && (glm::length(camera.eye - r.previousEye_) > 1e-3f || turned);
+    r.havePrevious_ = true;
+    r.previousEye_ = camera.eye;
+    r.previousYaw_ = camera.yawDeg;
+    r.previousPitch_ = camera.pitchDeg;
+    if (out.width != W || out.height != H) out = ImageRgb8(W, H);
+    wholeScene = mode == RenderMode::Pipeline && r.wholeScene_;
+  }
 
   // 1. Near field: the triangles to draw as polygons.
-  const bool wholeScene = mode == RenderMode::Pipeline && wholeScene_;
-  Stopwatch clock;
-  if (mode == RenderMode::RaycastAll)
-    near_.clear();
-  else
-    grid_.nearField(
-        camera,
-        mode == RenderMode::GeometryAll || wholeScene ? std::numeric_limits<float>::infinity() : d,
-        near_, stamp_, stampValue_);
-  rep.nearTriangles = near_.size();
-  rep.ms.nearSelect = clock.ms();
+  void selectNearField() {
+    Stopwatch clock;
+    if (mode == RenderMode::RaycastAll)
+      r.near_.clear();
+    else
+      r.grid_.nearField(camera,
+                        mode == RenderMode::GeometryAll || wholeScene
+                            ? std::numeric_limits<float>::infinity()
+                            : d,
+                        r.near_, r.stamp_, r.stampValue_);
+    rep.nearTriangles = r.near_.size();
+    rep.ms.nearSelect = clock.ms();
+  }
 
   // 2. Polygons and the opacity buffer.
-  clock = Stopwatch();
-  if (glNear) {
-    *glNear = near_;
-    raster_.coverage(camera, geometry_.triangles, near_, kGlInsetPx, covered_, polygonDistance());
-    rep.ms.opacity = clock.ms();
-  } else {
-    raster_.draw(camera, geometry_.triangles, near_, ids_, polygonDistance());
+  void drawPolygons() {
+    Stopwatch clock;
+    const auto& triangles = r.geometry_.triangles;
+    if (glNear) {
+      *glNear = r.near_;
+      r.raster_.coverage(camera, triangles, r.near_, kGlInsetPx, r.covered_, r.polygonDistance());
+      rep.ms.opacity = clock.ms();
+      return;
+    }
+    r.raster_.draw(camera, triangles, r.near_, r.ids_, r.polygonDistance());
     rep.ms.nearDraw = clock.ms();
     clock = Stopwatch();
-    covered_.resize(pixels);
+    r.covered_.resize(pixels);
     for (size_t p = 0; p < pixels; ++p)
-      covered_[p] = ids_.ids[p] == kNoTriangle       ? kUncovered
-                    : ids_.ids[p] == kBeyondDistance ? kBeyond
-                                                     : kCovered;
+      r.covered_[p] = r.ids_.ids[p] == kNoTriangle       ? kUncovered
+                      : r.ids_.ids[p] == kBeyondDistance ? kBeyond
+                                                         : kCovered;
     rep.ms.opacity = clock.ms();
   }
 
-  // 3. What the far field calls for in this frame.
-  if (mode == RenderMode::GeometryAll) {
-    rep.farFieldWhy = "geometry-all draws every triangle in the frustum; no far field";
-  } else if (mode == RenderMode::RaycastAll) {
-    rep.farFieldRan = true;
-    rep.farFieldWhy = "raycast-all casts a ray through every pixel";
-  } else if (wholeScene) {
-    rep.farFieldWhy = fmt::format(
-        "the whole scene ({} triangles) fits the polygon budget of {}: drawn as polygons",
-        geometry_.size(), options_.polygonBudget);
-  } else if (!options_.farFieldAllowed) {
-    rep.farFieldWhy = "the scene has no geometry beyond d";
-  } else if (!grid_.anythingBeyond(camera.eye, d)) {
-    rep.farFieldWhy = fmt::format("all geometry lies within d = {:.0f} m of the viewer", d);
-  } else {
-    rep.farFieldRan = true;
-    rep.farFieldWhy = fmt::format("geometry beyond d = {:.0f} m", d);
-  }
-
-  clock = Stopwatch();
-  std::vector<float> slopes;
-  if (mode != RenderMode::Pipeline) {
-    rep.horizonWhy = fmt::format("{} mode", renderModeName(mode));
-  } else if (!rep.farFieldRan) {
-    rep.horizonWhy = "no far field";
-  } else if (!options_.horizonAllowed) {
-    rep.horizonWhy = "the scene has no open sky";
-  } else if (std::abs(camera.pitchDeg) + 0.5f * camera.vfovDeg >= 89.0f) {
-    rep.horizonWhy = "the view reaches the zenith or nadir, where columns are not vertical";
-  } else if (rays_->occluded(Ray{
-                 camera.eye, {0.0f, 1.0f, 0.0f}, 0.0f, std::numeric_limits<float>::infinity()})) {
-    rep.horizonWhy = "a ceiling above the viewer: no sky in reach";
-  } else {
-    const int k = rep.moving ? std::max(1, options_.horizonSubsampleMoving) : 1;
-    slopes = horizon_.trace(camera, d, k, &rep.horizonStats);
-    rep.horizonRan = true;
-    rep.horizonWhy = k > 1 ? fmt::format("open sky; every {}th column traced while moving", k)
-                           : std::string("open sky; every column traced");
-  }
-  rep.ms.horizon = clock.ms();
-
-  // 4. Classify the uncovered pixels.
-  std::vector<uint32_t> candidates;
-  std::vector<glm::vec3> dirs;
-  const glm::u8vec3 sky = geometry_.sky;
-  const Camera::PixelRays pixelRays = camera.pixelRays();
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      const size_t p = size_t(y) * size_t(W) + size_t(x);
-      if (covered_[p] == kCovered) {
-        ++rep.pixels.polygon;
-        if (!glNear) out.set(x, y, geometry_.colours[ids_.ids[p]]);
-        continue;
-      }
-      if (!rep.farFieldRan) {
-        ++rep.pixels.background;
-        out.set(x, y, sky);
-        continue;
-      }
-      const glm::vec3 dir = pixelRays.at(float(x) + 0.5f, float(y) + 0.5f);
-      // Only pixels no polygon reaches can be sky: the horizon bounds the far
-      // field, and a pixel with a polygon beyond d sees at least that.
-      if (rep.horizonRan && covered_[p] == kUncovered &&
-          HorizonMap::raySlope(dir) > slopes[size_t(x)]) {
-        ++rep.pixels.horizon;
-        out.set(x, y, sky);
-        continue;
-      }
-      candidates.push_back(uint32_t(p));
-      dirs.push_back(dir);
+  // 3a. What the far field calls for in this frame.
+  void decideFarField() {
+    const PipelineOptions& options = r.options_;
+    if (mode == RenderMode::GeometryAll) {
+      rep.farFieldWhy = "geometry-all draws every triangle in the frustum; no far field";
+    } else if (mode == RenderMode::RaycastAll) {
+      rep.farFieldRan = true;
+      rep.farFieldWhy = "raycast-all casts a ray through every pixel";
+    } else if (wholeScene) {
+      rep.farFieldWhy = fmt::format(
+          "the whole scene ({} triangles) fits the polygon budget of {}: drawn as polygons",
+          r.geometry_.size(), options.polygonBudget);
+    } else if (!options.farFieldAllowed) {
+      rep.farFieldWhy = "the scene has no geometry beyond d";
+    } else if (!r.grid_.anythingBeyond(camera.eye, d)) {
+      rep.farFieldWhy = fmt::format("all geometry lies within d = {:.0f} m of the viewer", d);
+    } else {
+      rep.farFieldRan = true;
+      rep.farFieldWhy = fmt::format("geometry beyond d = {:.0f} m", d);
     }
-  if (glNear)
-    for (size_t p = 0; p < pixels; ++p)
-      if (covered_[p] == kCovered) out.set(int(p % size_t(W)), int(p / size_t(W)), sky);
+  }
+
+  // 3b. Horizon tracing, where there is open sky in reach.
+  void traceHorizon() {
+    Stopwatch clock;
+    const PipelineOptions& options = r.options_;
+    if (mode != RenderMode::Pipeline) {
+      rep.horizonWhy = fmt::format("{} mode", renderModeName(mode));
+    } else if (!rep.farFieldRan) {
+      rep.horizonWhy = "no far field";
+    } else if (!options.horizonAllowed) {
+      rep.horizonWhy = "the scene has no open sky";
+    } else if (std::abs(camera.pitchDeg) + 0.5f * camera.vfovDeg >= 89.0f) {
+      rep.horizonWhy = "the view reaches the zenith or nadir, where columns are not vertical";
+    } else if (r.rays_->occluded(Ray{
+                   camera.eye, {0.0f, 1.0f, 0.0f}, 0.0f, std::numeric_limits<float>::infinity()})) {
+      rep.horizonWhy = "a ceiling above the viewer: no sky in reach";
+    } else {
+      const int k = rep.moving ? std::max(1, options.horizonSubsampleMoving) : 1;
+      slopes = r.horizon_.trace(camera, d, k, &rep.horizonStats);
+      rep.horizonRan = true;
+      rep.horizonWhy = k > 1 ? fmt::format("open sky; every {}th column traced while moving", k)
+                             : std::string("open sky; every column traced");
+    }
+    rep.ms.horizon = clock.ms();
+  }
+
+  // 4. Classify the uncovered pixels: polygon, background, sky above the
+  // horizon, or far-field candidates.
+  void classifyPixels() {
+    const std::vector<uint8_t>& covered = r.covered_;
+    const Camera::PixelRays pixelRays = camera.pixelRays();
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        const size_t p = size_t(y) * size_t(W) + size_t(x);
+        if (covered[p] == kCovered) {
+          ++rep.pixels.polygon;
+          if (!glNear) out.set(x, y, r.geometry_.colours[r.ids_.ids[p]]);
+          continue;
+        }
+        if (!rep.farFieldRan) {
+          ++rep.pixels.background;
+          out.set(x, y, sky);
+          continue;
+        }
+        const glm::vec3 dir = pixelRays.at(float(x) + 0.5f, float(y) + 0.5f);
+        // Only pixels no polygon reaches can be sky: the horizon bounds the far
+        // field, and a pixel with a polygon beyond d sees at least that.
+        if (rep.horizonRan && covered[p] == kUncovered &&
+            HorizonMap::raySlope(dir) > slopes[size_t(x)]) {
+          ++rep.pixels.horizon;
+          out.set(x, y, sky);
+          continue;
+        }
+        candidates.push_back(uint32_t(p));
+        dirs.push_back(dir);
+      }
+    if (glNear)
+      for (size_t p = 0; p < pixels; ++p)
+        if (covered[p] == kCovered) setPixel(p, sky);
+  }
 
   // 5. The image cache decides which candidates to retrace.
-  clock = Stopwatch();
-  std::vector<uint8_t> trace;
-  std::vector<int64_t> texels;
-  const bool useCache = mode == RenderMode::Pipeline && options_.cache && rep.farFieldRan;
-  if (mode != RenderMode::Pipeline) {
-    rep.cacheWhy = fmt::format("{} mode", renderModeName(mode));
-  } else if (!rep.farFieldRan) {
-    rep.cacheWhy = "no far field";
-  } else if (!options_.cache) {
-    rep.cacheWhy = "switched off";
-  }
-  if (useCache) {
-    if (!cache_ || cachePixelAngle_ != camera.pixelAngle()) {
-      cachePixelAngle_ = camera.pixelAngle();
-      cache_ = std::make_unique<PanoramicCache>(cachePixelAngle_, options_.cacheOptions);
+  void planCache() {
+    Stopwatch clock;
+    const PipelineOptions& options = r.options_;
+    useCache = mode == RenderMode::Pipeline && options.cache && rep.farFieldRan;
+    if (mode != RenderMode::Pipeline) {
+      rep.cacheWhy = fmt::format("{} mode", renderModeName(mode));
+    } else if (!rep.farFieldRan) {
+      rep.cacheWhy = "no far field";
+    } else if (!options.cache) {
+      rep.cacheWhy = "switched off";
+    }
+    if (!useCache) {
+      trace.assign(candidates.size(), 1);
+      rep.ms.cache = clock.ms();
+      return;
+    }
+    if (!r.cache_ || r.cachePixelAngle_ != camera.pixelAngle()) {
+      r.cachePixelAngle_ = camera.pixelAngle();
+      r.cache_ = std::make_unique<PanoramicCache>(r.cachePixelAngle_, options.cacheOptions);
     }
     texels.resize(candidates.size());
-    for (size_t i = 0; i < candidates.size(); ++i) texels[i] = cache_->texelOf(dirs[i]);
-    const float maxStale = options_.maxStalePixels * camera.pixelAngle() * d;
-    rep.cachePlan = cache_->plan(camera.eye, texels, options_.pixelBudget, maxStale, trace, turned);
+    for (size_t i = 0; i < candidates.size(); ++i) texels[i] = r.cache_->texelOf(dirs[i]);
+    const float maxStale = options.maxStalePixels * camera.pixelAngle() * d;
+    rep.cachePlan =
+        r.cache_->plan(camera.eye, texels, options.pixelBudget, maxStale, trace, turned);
     rep.cacheRan = true;
     rep.cacheWhy =
         rep.cachePlan.degraded
             ? "far-field pixels to fill; the ray budget ran out, older pixels wait for later frames"
             : "far-field pixels to fill; every pixel outside the error bound retraced";
-  } else {
-    trace.assign(candidates.size(), 1);
+    rep.ms.cache = clock.ms();
   }
-  rep.ms.cache = clock.ms();
 
   // 6. Ray casting.
-  clock = Stopwatch();
-  std::vector<Ray> rays;
-  std::vector<uint32_t> rayOf;
-  for (size_t i = 0; i < candidates.size(); ++i)
-    if (trace[i]) {
-      // dirs[i] has a unit component along the view axis, so t is the view
-      // depth: starting at zNear clips rays exactly where polygons are clipped.
-      rays.push_back(
-          Ray{camera.eye, dirs[i], camera.zNear, std::numeric_limits<float>::infinity()});
-      rayOf.push_back(uint32_t(i));
-    }
-  std::vector<Hit> hits;
-  castRays(*rays_, rays, hits);
-  rep.ms.raycast = clock.ms();
-
-  // 7. Compose.
-  clock = Stopwatch();
-  for (size_t r = 0; r < rays.size(); ++r) {
-    const size_t i = rayOf[r];
-    const glm::u8vec3 c = hits[r].valid() ? geometry_.colours[hits[r].triangle] : sky;
-    hits[r].valid() ? ++rep.pixels.rayHit : ++rep.pixels.rayMiss;
-    const uint32_t p = candidates[i];
-    out.set(int(p % uint32_t(W)), int(p / uint32_t(W)), c);
-    if (useCache && texels[i] >= 0) cache_->store(texels[i], c);
-  }
-  if (useCache)
+  void castFarRays() {
+    Stopwatch clock;
     for (size_t i = 0; i < candidates.size(); ++i)
-      if (!trace[i]) {
-        ++rep.pixels.cache;
-        const uint32_t p = candidates[i];
-        out.set(int(p % uint32_t(W)), int(p / uint32_t(W)), cache_->colour(texels[i]));
+      if (trace[i]) {
+        // dirs[i] has a unit component along the view axis, so t is the view
+        // depth: starting at zNear clips rays exactly where polygons are clipped.
+        rays.push_back(
+            Ray{camera.eye, dirs[i], camera.zNear, std::numeric_limits<float>::infinity()});
+        rayOf.push_back(uint32_t(i));
       }
-  rep.ms.compose = clock.ms();
-  rep.ms.total = total.ms();
-  return rep;
+    castRays(*r.rays_, rays, hits);
+    rep.ms.raycast = clock.ms();
+  }
+
+  // 7. Compose: ray colours (stored in the cache), then cached colours.
+  void compose() {
+    Stopwatch clock;
+    for (size_t k = 0; k < rays.size(); ++k) {
+      const size_t i = rayOf[k];
+      const glm::u8vec3 c = hits[k].valid() ? r.geometry_.colours[hits[k].triangle] : sky;
+      hits[k].valid() ? ++rep.pixels.rayHit : ++rep.pixels.rayMiss;
+      setPixel(candidates[i], c);
+      if (useCache && texels[i] >= 0) r.cache_->store(texels[i], c);
+    }
+    if (useCache)
+      for (size_t i = 0; i < candidates.size(); ++i)
+        if (!trace[i]) {
+          ++rep.pixels.cache;
+          setPixel(candidates[i], r.cache_->colour(texels[i]));
+        }
+    rep.ms.compose = clock.ms();
+  }
+};
+
+FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out,
+                               std::vector<uint32_t>* glNear) {
+  Stopwatch total;
+  FrameRun f(*this, camera, out, glNear);
+  f.trackMotion();
+  f.selectNearField();
+  f.drawPolygons();
+  f.decideFarField();
+  f.traceHorizon();
+  f.classifyPixels();
+  f.planCache();
+  f.castFarRays();
+  f.compose();
+  f.rep.ms.total = total.ms();
+  return std::move(f.rep);
 }
 
 }  // namespace vistream

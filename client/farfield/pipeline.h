@@ -138,6 +138,7 @@ class FrameRenderer {
   void reset();
 
  private:
+  friend struct FrameRun;  // one frame's steps (pipeline.cpp)
   FrameReport run(const Camera& camera, ImageRgb8& out, std::vector<uint32_t>* glNear);
 
   const RenderGeometry& geometry_;

@@ -310,9 +310,22 @@ void checkNodeTransform(const tinygltf::Node& node, size_t index, const std::str
                         index, v);
 }
 
-}  // namespace
+// A mesh instance while the node walk builds it; positions in file
+// coordinates (double) until the scene's origin is known.
+struct PendingObject {
+  std::string name;
+  std::vector<glm::dvec3> positions;
+  std::vector<glm::vec2> texcoords;
+  std::vector<glm::u16vec4> joints;
+  std::vector<glm::vec4> weights;
+  std::vector<glm::uvec3> triangles;
+  std::vector<uint32_t> materials;
+  int32_t skin = -1;
+  bool dynamic = false;
+};
 
-Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits) {
+// Parses the file with tinygltf after the checks tinygltf does not make.
+tinygltf::Model parseGltf(const std::filesystem::path& path, const SceneLimits& limits) {
   const std::string file = path.string();
   const std::string bytes = readSceneFile(path, limits);
   if (bytes.empty()) throwInputError("{}: file is empty", file);
@@ -345,279 +358,340 @@ Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits) {
   if (!warn.empty()) spdlog::debug("{}: {}", file, warn);
   if (!ok)
     throwInputError("{}: {}", file, err.empty() ? std::string("not a valid glTF file") : err);
-  const std::vector<int> roots = rootNodes(model);
-  checkGeometryLimits(model, roots, file, limits);
+  return model;
+}
 
-  const AccessorReader reader(model, file);
-  Scene scene;
-  scene.name = path.stem().string();
-  scene.sources = {path};
-
-  for (const auto& m : model.materials) {
-    Material mat;
-    mat.name = m.name;
-    const auto& f = m.pbrMetallicRoughness.baseColorFactor;
-    if (f.size() == 4)
-      mat.baseColor = glm::vec4(float(f[0]), float(f[1]), float(f[2]), float(f[3]));
-    mat.diffuse = glm::vec3(mat.baseColor);
-    const int tex = m.pbrMetallicRoughness.baseColorTexture.index;
-    if (tex >= 0 && size_t(tex) < model.textures.size()) {
-      const int src = model.textures[size_t(tex)].source;
-      if (src >= 0 && size_t(src) < model.images.size()) {
-        const auto& img = model.images[size_t(src)];
-        mat.baseColorTexture = !img.uri.empty()
-                                   ? img.uri
-                                   : (!img.name.empty() ? img.name : fmt::format("image_{}", src));
-      }
-    }
-    scene.materials.push_back(mat);
+// Builds a Scene from a parsed model, one named step per part of the file.
+// Every index the model holds is checked before it is used.
+class GltfSceneBuilder {
+ public:
+  GltfSceneBuilder(const tinygltf::Model& model, const std::filesystem::path& path)
+      : model_(model), file_(path.string()), reader_(model, file_) {
+    scene_.name = path.stem().string();
+    scene_.sources = {path};
   }
-  const uint32_t defaultMaterial = uint32_t(scene.materials.size());
-  scene.materials.push_back(Material::named("default"));
+
+  void readMaterials() {
+    for (const auto& m : model_.materials) {
+      Material mat;
+      mat.name = m.name;
+      const auto& f = m.pbrMetallicRoughness.baseColorFactor;
+      if (f.size() == 4)
+        mat.baseColor = glm::vec4(float(f[0]), float(f[1]), float(f[2]), float(f[3]));
+      mat.diffuse = glm::vec3(mat.baseColor);
+      const int tex = m.pbrMetallicRoughness.baseColorTexture.index;
+      if (tex >= 0 && size_t(tex) < model_.textures.size()) {
+        const int src = model_.textures[size_t(tex)].source;
+        if (src >= 0 && size_t(src) < model_.images.size()) {
+          const auto& img = model_.images[size_t(src)];
+          mat.baseColorTexture =
+              !img.uri.empty() ? img.uri
+                               : (!img.name.empty() ? img.name : fmt::format("image_{}", src));
+        }
+      }
+      scene_.materials.push_back(mat);
+    }
+    defaultMaterial_ = uint32_t(scene_.materials.size());
+    scene_.materials.push_back(Material::named("default"));
+  }
 
   // Nodes: hierarchy and rest transforms, kept for skins and animations.
-  scene.nodes.resize(model.nodes.size());
-  for (size_t i = 0; i < model.nodes.size(); ++i) {
-    const auto& n = model.nodes[i];
-    Node& out = scene.nodes[i];
-    out.name = n.name;
-    checkNodeTransform(n, i, file);
-    if (n.translation.size() == 3)
-      out.translation =
-          glm::vec3(float(n.translation[0]), float(n.translation[1]), float(n.translation[2]));
-    if (n.rotation.size() == 4)
-      out.rotation = glm::vec4(float(n.rotation[0]), float(n.rotation[1]), float(n.rotation[2]),
-                               float(n.rotation[3]));
-    if (n.scale.size() == 3)
-      out.scale = glm::vec3(float(n.scale[0]), float(n.scale[1]), float(n.scale[2]));
-    for (int c : n.children) {
-      if (c < 0 || size_t(c) >= model.nodes.size())
-        throwInputError("{}: node {} has child {} which does not exist", file, i, c);
-      if (scene.nodes[size_t(c)].parent >= 0)
-        throwInputError("{}: node {} has more than one parent", file, c);
-      scene.nodes[size_t(c)].parent = int32_t(i);
-    }
-  }
-
-  for (size_t s = 0; s < model.skins.size(); ++s) {
-    const auto& sk = model.skins[s];
-    Skin skin;
-    skin.name = sk.name;
-    for (int j : sk.joints) {
-      if (j < 0 || size_t(j) >= model.nodes.size())
-        throwInputError("{}: skin {} names joint node {} which does not exist", file, s, j);
-      skin.joints.push_back(j);
-    }
-    if (sk.inverseBindMatrices >= 0) {
-      const auto m =
-          reader.read(sk.inverseBindMatrices, 16, fmt::format("skin {} inverse bind matrices", s));
-      for (size_t k = 0; k + 16 <= m.size(); k += 16) {
-        glm::mat4 mat;
-        for (int e = 0; e < 16; ++e) glm::value_ptr(mat)[e] = float(m[k + size_t(e)]);
-        skin.inverseBindMatrices.push_back(mat);
+  void readNodes() {
+    scene_.nodes.resize(model_.nodes.size());
+    for (size_t i = 0; i < model_.nodes.size(); ++i) {
+      const auto& n = model_.nodes[i];
+      Node& out = scene_.nodes[i];
+      out.name = n.name;
+      checkNodeTransform(n, i, file_);
+      if (n.translation.size() == 3)
+        out.translation =
+            glm::vec3(float(n.translation[0]), float(n.translation[1]), float(n.translation[2]));
+      if (n.rotation.size() == 4)
+        out.rotation = glm::vec4(float(n.rotation[0]), float(n.rotation[1]), float(n.rotation[2]),
+                                 float(n.rotation[3]));
+      if (n.scale.size() == 3)
+        out.scale = glm::vec3(float(n.scale[0]), float(n.scale[1]), float(n.scale[2]));
+      for (int c : n.children) {
+        if (c < 0 || size_t(c) >= model_.nodes.size())
+          throwInputError("{}: node {} has child {} which does not exist", file_, i, c);
+        if (scene_.nodes[size_t(c)].parent >= 0)
+          throwInputError("{}: node {} has more than one parent", file_, c);
+        scene_.nodes[size_t(c)].parent = int32_t(i);
       }
     }
-    scene.skins.push_back(std::move(skin));
   }
 
-  std::vector<uint8_t> animatedNode(model.nodes.size(), 0);
-  for (size_t a = 0; a < model.animations.size(); ++a) {
-    const auto& an = model.animations[a];
-    Animation anim;
-    anim.name = an.name.empty() ? fmt::format("animation_{}", a) : an.name;
-    for (size_t c = 0; c < an.channels.size(); ++c) {
-      const auto& ch = an.channels[c];
-      if (ch.sampler < 0 || size_t(ch.sampler) >= an.samplers.size())
-        throwInputError("{}: animation {} channel {} uses sampler {} which does not exist", file, a,
-                        c, ch.sampler);
-      if (ch.target_node < 0 || size_t(ch.target_node) >= model.nodes.size()) continue;
-      AnimationChannel out;
-      out.node = ch.target_node;
-      int comps = 3;
-      if (ch.target_path == "translation")
-        out.path = AnimationChannel::Path::Translation;
-      else if (ch.target_path == "rotation") {
-        out.path = AnimationChannel::Path::Rotation;
-        comps = 4;
-      } else if (ch.target_path == "scale")
-        out.path = AnimationChannel::Path::Scale;
-      else
-        continue;  // morph weights are not used
-      const auto& sampler = an.samplers[size_t(ch.sampler)];
-      if (sampler.interpolation == "STEP")
-        out.interpolation = AnimationChannel::Interpolation::Step;
-      else if (sampler.interpolation == "CUBICSPLINE")
-        out.interpolation = AnimationChannel::Interpolation::CubicSpline;
-      const std::string what = fmt::format("animation '{}' channel {}", anim.name, c);
-      for (double t : reader.read(sampler.input, 1, what + " times")) out.times.push_back(float(t));
-      const auto values = reader.read(sampler.output, comps, what + " values");
-      for (size_t k = 0; k + size_t(comps) <= values.size(); k += size_t(comps))
-        out.values.emplace_back(float(values[k]), float(values[k + 1]), float(values[k + 2]),
-                                comps == 4 ? float(values[k + 3]) : 0.0f);
-      if (!out.times.empty()) anim.duration = std::max(anim.duration, out.times.back());
-      animatedNode[size_t(out.node)] = 1;
-      anim.channels.push_back(std::move(out));
+  void readSkins() {
+    for (size_t s = 0; s < model_.skins.size(); ++s) {
+      const auto& sk = model_.skins[s];
+      Skin skin;
+      skin.name = sk.name;
+      for (int j : sk.joints) {
+        if (j < 0 || size_t(j) >= model_.nodes.size())
+          throwInputError("{}: skin {} names joint node {} which does not exist", file_, s, j);
+        skin.joints.push_back(j);
+      }
+      if (sk.inverseBindMatrices >= 0) {
+        const auto m = reader_.read(sk.inverseBindMatrices, 16,
+                                    fmt::format("skin {} inverse bind matrices", s));
+        for (size_t k = 0; k + 16 <= m.size(); k += 16) {
+          glm::mat4 mat;
+          for (int e = 0; e < 16; ++e) glm::value_ptr(mat)[e] = float(m[k + size_t(e)]);
+          skin.inverseBindMatrices.push_back(mat);
+        }
+      }
+      scene_.skins.push_back(std::move(skin));
     }
-    scene.animations.push_back(std::move(anim));
   }
 
-  // Geometry: depth-first over the default scene (or every root when there is
-  // none), world transforms in double, one object per mesh instance.
-  struct Pending {
-    std::string name;
-    std::vector<glm::dvec3> positions;
-    std::vector<glm::vec2> texcoords;
-    std::vector<glm::u16vec4> joints;
-    std::vector<glm::vec4> weights;
-    std::vector<glm::uvec3> triangles;
-    std::vector<uint32_t> materials;
-    int32_t skin = -1;
-    bool dynamic = false;
-  };
-  std::vector<Pending> pending;
+  // Animations, and which nodes they move (their meshes become dynamic).
+  void readAnimations() {
+    animatedNode_.assign(model_.nodes.size(), 0);
+    for (size_t a = 0; a < model_.animations.size(); ++a) {
+      const auto& an = model_.animations[a];
+      Animation anim;
+      anim.name = an.name.empty() ? fmt::format("animation_{}", a) : an.name;
+      for (size_t c = 0; c < an.channels.size(); ++c) {
+        AnimationChannel out;
+        if (!readChannel(an, a, c, anim.name, out)) continue;
+        if (!out.times.empty()) anim.duration = std::max(anim.duration, out.times.back());
+        animatedNode_[size_t(out.node)] = 1;
+        anim.channels.push_back(std::move(out));
+      }
+      scene_.animations.push_back(std::move(anim));
+    }
+  }
 
-  // Depth-first, pre-order, children in order, on an explicit stack.
-  struct Visit {
-    int node;
-    glm::dmat4 parent;
-    bool animatedAbove;
-  };
-  std::vector<Visit> stack;
-  for (auto r = roots.rbegin(); r != roots.rend(); ++r)
-    stack.push_back({*r, glm::dmat4(1.0), false});
-  std::vector<uint8_t> visited(model.nodes.size(), 0);
-  while (!stack.empty()) {
-    const Visit top = stack.back();
-    stack.pop_back();
-    const int ni = top.node;
-    const glm::dmat4& parent = top.parent;
-    const bool animatedAbove = top.animatedAbove;
-    if (ni < 0 || size_t(ni) >= model.nodes.size())
-      throwInputError("{}: scene refers to node {} which does not exist", file, ni);
-    if (visited[size_t(ni)])
-      throwInputError("{}: node {} is reached twice (cycle or shared child)", file, ni);
-    visited[size_t(ni)] = 1;
-    const auto& node = model.nodes[size_t(ni)];
-    const glm::dmat4 world = parent * localMatrix(node);
-    const bool animated = animatedAbove || animatedNode[size_t(ni)];
-    if (node.mesh >= 0) {
-      if (size_t(node.mesh) >= model.meshes.size())
-        throwInputError("{}: node {} uses mesh {} which does not exist", file, ni, node.mesh);
-      const auto& mesh = model.meshes[size_t(node.mesh)];
-      Pending obj;
-      obj.name = !node.name.empty() ? node.name
-                                    : (!mesh.name.empty() ? mesh.name : fmt::format("node_{}", ni));
-      obj.skin = node.skin >= 0 && size_t(node.skin) < model.skins.size() ? node.skin : -1;
-      obj.dynamic = obj.skin >= 0 || animated;
-      // Skinned vertices live in the skin's bind space: the mesh node's own
-      // transform is ignored, as the glTF specification requires.
-      const glm::dmat4 xf = obj.skin >= 0 ? glm::dmat4(1.0) : world;
-      for (size_t p = 0; p < mesh.primitives.size(); ++p) {
-        const auto& prim = mesh.primitives[p];
-        const std::string what = fmt::format("mesh '{}' primitive {}", mesh.name, p);
-        if (prim.mode != kTriangles && prim.mode != kTriangleStrip && prim.mode != kTriangleFan &&
-            prim.mode != -1) {
-          spdlog::warn("{}: {} has mode {} (not triangles); skipped", file, what, prim.mode);
-          continue;
-        }
-        const auto posIt = prim.attributes.find("POSITION");
-        if (posIt == prim.attributes.end())
-          throwInputError("{}: {} has no POSITION attribute", file, what);
-        const auto pos = reader.read(posIt->second, 3, what + " POSITION");
-        const size_t nv = pos.size() / 3;
-        const uint32_t base = uint32_t(obj.positions.size());
-        for (size_t v = 0; v < nv; ++v)
-          obj.positions.push_back(
-              glm::dvec3(xf * glm::dvec4(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2], 1.0)));
-        auto attr = [&](const char* key, int comps) -> std::vector<double> {
-          const auto it = prim.attributes.find(key);
-          if (it == prim.attributes.end()) return {};
-          auto values = reader.read(it->second, comps, what + " " + key);
-          if (values.size() != nv * size_t(comps))
-            throwInputError("{}: {} {} has {} elements, POSITION has {}", file, what, key,
-                            values.size() / size_t(comps), nv);
-          return values;
-        };
-        const auto uv = attr("TEXCOORD_0", 2);
-        const auto joints = attr("JOINTS_0", 4);
-        const auto weights = attr("WEIGHTS_0", 4);
-        // Per-vertex attributes stay aligned with positions across
-        // primitives: a primitive without one pads it when another has it.
-        if (!uv.empty() || !obj.texcoords.empty()) {
-          obj.texcoords.resize(base, glm::vec2(0.0f));
-          for (size_t v = 0; v < nv; ++v)
-            obj.texcoords.push_back(uv.empty() ? glm::vec2(0.0f)
-                                               : glm::vec2(float(uv[2 * v]), float(uv[2 * v + 1])));
-        }
-        if (!joints.empty() || !weights.empty() || !obj.joints.empty()) {
-          obj.joints.resize(base, glm::u16vec4(0));
-          obj.weights.resize(base, glm::vec4(0.0f));
-          for (size_t v = 0; v < nv; ++v) {
-            obj.joints.push_back(
-                joints.empty()
-                    ? glm::u16vec4(0)
-                    : glm::u16vec4(uint16_t(joints[4 * v]), uint16_t(joints[4 * v + 1]),
-                                   uint16_t(joints[4 * v + 2]), uint16_t(joints[4 * v + 3])));
-            obj.weights.push_back(
-                weights.empty() ? glm::vec4(0.0f)
+  // Geometry: depth-first, pre-order, children in order, on an explicit
+  // stack, over the default scene (or every root when there is none); world
+  // transforms in double, one object per mesh instance.
+  void walkNodes(const std::vector<int>& roots) {
+    struct Visit {
+      int node;
+      glm::dmat4 parent;
+      bool animatedAbove;
+    };
+    std::vector<Visit> stack;
+    for (auto r = roots.rbegin(); r != roots.rend(); ++r)
+      stack.push_back({*r, glm::dmat4(1.0), false});
+    std::vector<uint8_t> visited(model_.nodes.size(), 0);
+    while (!stack.empty()) {
+      const Visit top = stack.back();
+      stack.pop_back();
+      const int ni = top.node;
+      if (ni < 0 || size_t(ni) >= model_.nodes.size())
+        throwInputError("{}: scene refers to node {} which does not exist", file_, ni);
+      if (visited[size_t(ni)])
+        throwInputError("{}: node {} is reached twice (cycle or shared child)", file_, ni);
+      visited[size_t(ni)] = 1;
+      const auto& node = model_.nodes[size_t(ni)];
+      const glm::dmat4 world = top.parent * localMatrix(node);
+      const bool animated = top.animatedAbove || animatedNode_[size_t(ni)];
+      if (node.mesh >= 0) buildMeshInstance(ni, world, animated);
+      for (auto c = node.children.rbegin(); c != node.children.rend(); ++c)
+        stack.push_back({*c, world, animated});
+    }
+    if (pending_.empty()) throwInputError("{}: no triangle geometry in the scene", file_);
+  }
+
+  // The local origin, the float range check, and the objects with face IDs
+  // in file order.
+  Scene finish() {
+    Box3d bounds;
+    for (const auto& p : pending_)
+      for (const auto& v : p.positions) bounds.extend(v);
+    scene_.origin = glm::floor(bounds.center());
+    checkFloatRange();
+    uint32_t faceId = 0;
+    for (auto& p : pending_) {
+      Object obj;
+      obj.name = p.name;
+      obj.dynamic = p.dynamic;
+      obj.skin = p.skin;
+      for (const auto& v : p.positions) obj.mesh.positions.push_back(glm::vec3(v - scene_.origin));
+      obj.mesh.triangles = std::move(p.triangles);
+      obj.mesh.materials = std::move(p.materials);
+      obj.mesh.texcoords = std::move(p.texcoords);
+      obj.mesh.joints = std::move(p.joints);
+      obj.mesh.weights = std::move(p.weights);
+      for (size_t t = 0; t < obj.mesh.triangles.size(); ++t) obj.mesh.faceIds.push_back(faceId++);
+      scene_.objects.push_back(std::move(obj));
+    }
+    scene_.faceCount = faceId;
+    finalizeScene(scene_);
+    return std::move(scene_);
+  }
+
+ private:
+  // One channel of animation `a`; false for channels that are not used
+  // (morph weights, targets that do not exist).
+  bool readChannel(const tinygltf::Animation& an, size_t a, size_t c, const std::string& name,
+                   AnimationChannel& out) const {
+    const auto& ch = an.channels[c];
+    if (ch.sampler < 0 || size_t(ch.sampler) >= an.samplers.size())
+      throwInputError("{}: animation {} channel {} uses sampler {} which does not exist", file_, a,
+                      c, ch.sampler);
+    if (ch.target_node < 0 || size_t(ch.target_node) >= model_.nodes.size()) return false;
+    out.node = ch.target_node;
+    int comps = 3;
+    if (ch.target_path == "translation") {
+      out.path = AnimationChannel::Path::Translation;
+    } else if (ch.target_path == "rotation") {
+      out.path = AnimationChannel::Path::Rotation;
+      comps = 4;
+    } else if (ch.target_path == "scale") {
+      out.path = AnimationChannel::Path::Scale;
+    } else {
+      return false;
+    }
+    const auto& sampler = an.samplers[size_t(ch.sampler)];
+    if (sampler.interpolation == "STEP")
+      out.interpolation = AnimationChannel::Interpolation::Step;
+    else if (sampler.interpolation == "CUBICSPLINE")
+      out.interpolation = AnimationChannel::Interpolation::CubicSpline;
+    const std::string what = fmt::format("animation '{}' channel {}", name, c);
+    for (double t : reader_.read(sampler.input, 1, what + " times")) out.times.push_back(float(t));
+    const auto values = reader_.read(sampler.output, comps, what + " values");
+    for (size_t k = 0; k + size_t(comps) <= values.size(); k += size_t(comps))
+      out.values.emplace_back(float(values[k]), float(values[k + 1]), float(values[k + 2]),
+                              comps == 4 ? float(values[k + 3]) : 0.0f);
+    return true;
+  }
+
+  void buildMeshInstance(int ni, const glm::dmat4& world, bool animated) {
+    const auto& node = model_.nodes[size_t(ni)];
+    if (size_t(node.mesh) >= model_.meshes.size())
+      throwInputError("{}: node {} uses mesh {} which does not exist", file_, ni, node.mesh);
+    const auto& mesh = model_.meshes[size_t(node.mesh)];
+    PendingObject obj;
+    obj.name = !node.name.empty() ? node.name
+                                  : (!mesh.name.empty() ? mesh.name : fmt::format("node_{}", ni));
+    obj.skin = node.skin >= 0 && size_t(node.skin) < model_.skins.size() ? node.skin : -1;
+    obj.dynamic = obj.skin >= 0 || animated;
+    // Skinned vertices live in the skin's bind space: the mesh node's own
+    // transform is ignored, as the glTF specification requires.
+    const glm::dmat4 xf = obj.skin >= 0 ? glm::dmat4(1.0) : world;
+    for (size_t p = 0; p < mesh.primitives.size(); ++p)
+      readPrimitive(mesh.primitives[p], fmt::format("mesh '{}' primitive {}", mesh.name, p), xf,
+                    obj);
+    if (!obj.triangles.empty()) pending_.push_back(std::move(obj));
+  }
+
+  // A per-vertex attribute, empty when the primitive has none; it must
+  // have one element per position.
+  std::vector<double> readAttribute(const tinygltf::Primitive& prim, const char* key, int comps,
+                                    size_t nv, const std::string& what) const {
+    const auto it = prim.attributes.find(key);
+    if (it == prim.attributes.end()) return {};
+    auto values = reader_.read(it->second, comps, what + " " + key);
+    if (values.size() != nv * size_t(comps))
+      throwInputError("{}: {} {} has {} elements, POSITION has {}", file_, what, key,
+                      values.size() / size_t(comps), nv);
+    return values;
+  }
+
+  void readPrimitive(const tinygltf::Primitive& prim, const std::string& what, const glm::dmat4& xf,
+                     PendingObject& obj) const {
+    if (prim.mode != kTriangles && prim.mode != kTriangleStrip && prim.mode != kTriangleFan &&
+        prim.mode != -1) {
+      spdlog::warn("{}: {} has mode {} (not triangles); skipped", file_, what, prim.mode);
+      return;
+    }
+    const auto posIt = prim.attributes.find("POSITION");
+    if (posIt == prim.attributes.end())
+      throwInputError("{}: {} has no POSITION attribute", file_, what);
+    const auto pos = reader_.read(posIt->second, 3, what + " POSITION");
+    const size_t nv = pos.size() / 3;
+    const uint32_t base = uint32_t(obj.positions.size());
+    for (size_t v = 0; v < nv; ++v)
+      obj.positions.push_back(
+          glm::dvec3(xf * glm::dvec4(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2], 1.0)));
+    appendVertexAttributes(prim, what, base, nv, obj);
+    const uint32_t mat = prim.material >= 0 && size_t(prim.material) < defaultMaterial_
+                             ? uint32_t(prim.material)
+                             : defaultMaterial_;
+    appendTriangles(prim, what, readIndices(prim, what, nv), base, mat, obj);
+  }
+
+  // Per-vertex attributes stay aligned with positions across primitives: a
+  // primitive without one pads it when another has it.
+  void appendVertexAttributes(const tinygltf::Primitive& prim, const std::string& what,
+                              uint32_t base, size_t nv, PendingObject& obj) const {
+    const auto uv = readAttribute(prim, "TEXCOORD_0", 2, nv, what);
+    const auto joints = readAttribute(prim, "JOINTS_0", 4, nv, what);
+    const auto weights = readAttribute(prim, "WEIGHTS_0", 4, nv, what);
+    if (!uv.empty() || !obj.texcoords.empty()) {
+      obj.texcoords.resize(base, glm::vec2(0.0f));
+      for (size_t v = 0; v < nv; ++v)
+        obj.texcoords.push_back(uv.empty() ? glm::vec2(0.0f)
+                                           : glm::vec2(float(uv[2 * v]), float(uv[2 * v + 1])));
+    }
+    if (joints.empty() && weights.empty() && obj.joints.empty()) return;
+    obj.joints.resize(base, glm::u16vec4(0));
+    obj.weights.resize(base, glm::vec4(0.0f));
+    for (size_t v = 0; v < nv; ++v) {
+      obj.joints.push_back(
+          joints.empty() ? glm::u16vec4(0)
+                         : glm::u16vec4(uint16_t(joints[4 * v]), uint16_t(joints[4 * v + 1]),
+                                        uint16_t(joints[4 * v + 2]), uint16_t(joints[4 * v + 3])));
+      obj.weights.push_back(weights.empty()
+                                ? glm::vec4(0.0f)
                                 : glm::vec4(float(weights[4 * v]), float(weights[4 * v + 1]),
                                             float(weights[4 * v + 2]), float(weights[4 * v + 3])));
-          }
-        }
-        std::vector<uint32_t> idx;
-        if (prim.indices >= 0) {
-          for (double d : reader.read(prim.indices, 1, what + " indices")) {
-            if (d >= double(nv))
-              throwInputError("{}: {}: index {} is out of range ({} vertices)", file, what,
-                              uint64_t(d), nv);
-            idx.push_back(uint32_t(d));
-          }
-        } else {
-          for (size_t v = 0; v < nv; ++v) idx.push_back(uint32_t(v));
-        }
-        const uint32_t mat = prim.material >= 0 && size_t(prim.material) < defaultMaterial
-                                 ? uint32_t(prim.material)
-                                 : defaultMaterial;
-        auto emit = [&](uint32_t a, uint32_t b, uint32_t c) {
-          obj.triangles.emplace_back(base + a, base + b, base + c);
-          obj.materials.push_back(mat);
-        };
-        if (prim.mode == kTriangleStrip) {
-          for (size_t k = 0; k + 2 < idx.size(); ++k)
-            k % 2 == 0 ? emit(idx[k], idx[k + 1], idx[k + 2])
-                       : emit(idx[k + 1], idx[k], idx[k + 2]);
-        } else if (prim.mode == kTriangleFan) {
-          for (size_t k = 1; k + 1 < idx.size(); ++k) emit(idx[0], idx[k], idx[k + 1]);
-        } else {
-          if (idx.size() % 3 != 0)
-            spdlog::warn("{}: {}: {} indices is not a multiple of 3; the last {} are ignored", file,
-                         what, idx.size(), idx.size() % 3);
-          for (size_t k = 0; k + 2 < idx.size(); k += 3) emit(idx[k], idx[k + 1], idx[k + 2]);
-        }
-      }
-      if (!obj.triangles.empty()) pending.push_back(std::move(obj));
     }
-    for (auto c = node.children.rbegin(); c != node.children.rend(); ++c)
-      stack.push_back({*c, world, animated});
   }
-  if (pending.empty()) throwInputError("{}: no triangle geometry in the scene", file);
 
-  Box3d bounds;
-  for (const auto& p : pending)
-    for (const auto& v : p.positions) bounds.extend(v);
-  scene.origin = glm::floor(bounds.center());
+  // The primitive's indices (0..nv-1 without an index accessor), each checked
+  // against the vertex count.
+  std::vector<uint32_t> readIndices(const tinygltf::Primitive& prim, const std::string& what,
+                                    size_t nv) const {
+    std::vector<uint32_t> idx;
+    if (prim.indices < 0) {
+      for (size_t v = 0; v < nv; ++v) idx.push_back(uint32_t(v));
+      return idx;
+    }
+    for (double d : reader_.read(prim.indices, 1, what + " indices")) {
+      if (d >= double(nv))
+        throwInputError("{}: {}: index {} is out of range ({} vertices)", file_, what, uint64_t(d),
+                        nv);
+      idx.push_back(uint32_t(d));
+    }
+    return idx;
+  }
+
+  // Triangles from a list, strip (alternate windings) or fan.
+  void appendTriangles(const tinygltf::Primitive& prim, const std::string& what,
+                       const std::vector<uint32_t>& idx, uint32_t base, uint32_t mat,
+                       PendingObject& obj) const {
+    auto emit = [&](uint32_t a, uint32_t b, uint32_t c) {
+      obj.triangles.emplace_back(base + a, base + b, base + c);
+      obj.materials.push_back(mat);
+    };
+    if (prim.mode == kTriangleStrip) {
+      for (size_t k = 0; k + 2 < idx.size(); ++k)
+        k % 2 == 0 ? emit(idx[k], idx[k + 1], idx[k + 2]) : emit(idx[k + 1], idx[k], idx[k + 2]);
+    } else if (prim.mode == kTriangleFan) {
+      for (size_t k = 1; k + 1 < idx.size(); ++k) emit(idx[0], idx[k], idx[k + 1]);
+    } else {
+      if (idx.size() % 3 != 0)
+        spdlog::warn("{}: {}: {} indices is not a multiple of 3; the last {} are ignored", file_,
+                     what, idx.size(), idx.size() % 3);
+      for (size_t k = 0; k + 2 < idx.size(); k += 3) emit(idx[k], idx[k + 1], idx[k + 2]);
+    }
+  }
+
   // Finite POSITION floats can still overflow: node transforms are applied
   // in double, and the result is stored as float relative to the origin. One
   // far vertex moves the origin so that others fail too: blame the failing
   // vertex farthest from zero.
-  {
-    const Pending* worstObject = nullptr;
+  void checkFloatRange() const {
+    const PendingObject* worstObject = nullptr;
     size_t worstVertex = 0;
     double worstMagnitude = -1.0;
-    for (const auto& p : pending)
+    for (const auto& p : pending_)
       for (size_t k = 0; k < p.positions.size(); ++k) {
         const glm::dvec3 v = p.positions[k];
-        const glm::vec3 local(v - scene.origin);
+        const glm::vec3 local(v - scene_.origin);
         if (std::isfinite(local.x) && std::isfinite(local.y) && std::isfinite(local.z)) continue;
         const double magnitude = std::max({std::abs(v.x), std::abs(v.y), std::abs(v.z)});
         if (!(magnitude <= worstMagnitude)) {  // NaN (from inf - inf) counts as farthest
@@ -626,33 +700,37 @@ Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits) {
           worstMagnitude = magnitude;
         }
       }
-    if (worstObject) {
-      const glm::dvec3 v = worstObject->positions[worstVertex];
-      throwInputError(
-          "{}: object '{}' vertex {} ({}, {}, {}) is too far from the scene's local origin "
-          "({}, {}, {}) to store in single precision",
-          file, worstObject->name, worstVertex, v.x, v.y, v.z, scene.origin.x, scene.origin.y,
-          scene.origin.z);
-    }
+    if (!worstObject) return;
+    const glm::dvec3 v = worstObject->positions[worstVertex];
+    const glm::dvec3& o = scene_.origin;
+    throwInputError(
+        "{}: object '{}' vertex {} ({}, {}, {}) is too far from the scene's local origin "
+        "({}, {}, {}) to store in single precision",
+        file_, worstObject->name, worstVertex, v.x, v.y, v.z, o.x, o.y, o.z);
   }
-  uint32_t faceId = 0;
-  for (auto& p : pending) {
-    Object obj;
-    obj.name = p.name;
-    obj.dynamic = p.dynamic;
-    obj.skin = p.skin;
-    for (const auto& v : p.positions) obj.mesh.positions.push_back(glm::vec3(v - scene.origin));
-    obj.mesh.triangles = std::move(p.triangles);
-    obj.mesh.materials = std::move(p.materials);
-    obj.mesh.texcoords = std::move(p.texcoords);
-    obj.mesh.joints = std::move(p.joints);
-    obj.mesh.weights = std::move(p.weights);
-    for (size_t t = 0; t < obj.mesh.triangles.size(); ++t) obj.mesh.faceIds.push_back(faceId++);
-    scene.objects.push_back(std::move(obj));
-  }
-  scene.faceCount = faceId;
-  finalizeScene(scene);
-  return scene;
+
+  const tinygltf::Model& model_;
+  std::string file_;
+  AccessorReader reader_;
+  Scene scene_;
+  uint32_t defaultMaterial_ = 0;
+  std::vector<uint8_t> animatedNode_;
+  std::vector<PendingObject> pending_;
+};
+
+}  // namespace
+
+Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits) {
+  const tinygltf::Model model = parseGltf(path, limits);
+  const std::vector<int> roots = rootNodes(model);
+  checkGeometryLimits(model, roots, path.string(), limits);
+  GltfSceneBuilder builder(model, path);
+  builder.readMaterials();
+  builder.readNodes();
+  builder.readSkins();
+  builder.readAnimations();
+  builder.walkNodes(roots);
+  return builder.finish();
 }
 
 }  // namespace vistream

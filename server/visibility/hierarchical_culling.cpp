@@ -9,6 +9,7 @@
 #include <glm/gtc/matrix_transform.hpp>
 #include <map>
 #include <numeric>
+#include <optional>
 
 #include "common/core/error.h"
 #include "common/core/timer.h"
@@ -344,52 +345,69 @@ CullingViewer::Fact CullingViewer::faceFact(int32_t node, KdFace face, const Box
   return subtreeFact(u, faceBox);
 }
 
-FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pitchDeg) {
-  Stopwatch clock;
-  FrameResult result;
-  ++frame_;
-  const KdTree& tree = scene_.tree();
+// One frame of culling (Figure 4 and its variants), as named steps over the
+// viewer's per-node state. Built and run by CullingViewer::frame.
+struct CullingFrame {
+  using Fact = CullingViewer::Fact;
+  using NodeState = CullingViewer::NodeState;
 
-  // View frustum: |d.r| <= th (d.f) and |d.u| <= tv (d.f).
-  const glm::dvec3 f = viewDirection(yawDeg, pitchDeg);
-  glm::dvec3 r = glm::cross(f, glm::dvec3(0, 1, 0));
-  if (glm::length(r) < 1e-9) r = glm::dvec3(1, 0, 0);
-  r = glm::normalize(r);
-  const glm::dvec3 u = glm::cross(r, f);
-  const double th = std::tan(options_.fovDeg * 0.5 * 3.14159265358979323846 / 180.0),
-               tv = th / options_.aspect;
-  const Frustum frustum{eye, {th * f - r, th * f + r, tv * f - u, tv * f + u}};
-
-  // The occlusion tree of the k best occluders for this viewpoint.
-  const auto& candidates = scene_.occluderCandidates();
-  const std::vector<size_t> chosen = scene_.bestOccluders(eye, options_.occluders);
+  CullingViewer& viewer;
+  const KdTree& tree;
+  const glm::dvec3 eye;
+  const CullingMethod method;
+  const bool updating;     // hierarchy updating (every method but the classical one)
+  const bool propagating;  // visibility propagation (C, D, adaptive)
+  const bool adaptive;
+  Frustum frustum;
   std::vector<OccluderPolygon> occluders;
   std::vector<Box3f> occluderBoxes;  // for propagation's "no occluder reaches into the box"
-  occluders.reserve(chosen.size());
-  for (size_t i : chosen) {
-    occluders.push_back(candidates[i]);
-    Box3f b;
-    for (const glm::dvec3& v : candidates[i].vertices) {
-      // Rounded outward, and widened by far more than the rounding of float boxes.
-      const glm::vec3 lo(v - glm::dvec3(1e-4 * (1.0 + glm::length(v)))),
-          hi(v + glm::dvec3(1e-4 * (1.0 + glm::length(v))));
-      b.extend(lo);
-      b.extend(hi);
-    }
-    occluderBoxes.push_back(b);
+  std::optional<OcclusionTree> occlusion;
+  std::uniform_real_distribution<double> uniform{0.0, 1.0};
+  FrameResult result;
+
+  CullingFrame(CullingViewer& v, const glm::dvec3& e)
+      : viewer(v),
+        tree(v.scene_.tree()),
+        eye(e),
+        method(v.options_.method),
+        updating(method != CullingMethod::Classical),
+        propagating(method == CullingMethod::Propagation || method == CullingMethod::Conservative ||
+                    method == CullingMethod::Adaptive),
+        adaptive(method == CullingMethod::Adaptive) {}
+
+  // View frustum: |d.r| <= th (d.f) and |d.u| <= tv (d.f).
+  void setUpFrustum(double yawDeg, double pitchDeg) {
+    const glm::dvec3 f = viewDirection(yawDeg, pitchDeg);
+    glm::dvec3 r = glm::cross(f, glm::dvec3(0, 1, 0));
+    if (glm::length(r) < 1e-9) r = glm::dvec3(1, 0, 0);
+    r = glm::normalize(r);
+    const glm::dvec3 u = glm::cross(r, f);
+    const double th = std::tan(viewer.options_.fovDeg * 0.5 * 3.14159265358979323846 / 180.0),
+                 tv = th / viewer.options_.aspect;
+    frustum = Frustum{eye, {th * f - r, th * f + r, tv * f - u, tv * f + u}};
   }
-  const OcclusionTree occlusion(eye, occluders);
 
-  const CullingMethod method = options_.method;
-  const bool updating = method != CullingMethod::Classical;
-  const bool propagating = method == CullingMethod::Propagation ||
-                           method == CullingMethod::Conservative ||
-                           method == CullingMethod::Adaptive;
-  const bool adaptive = method == CullingMethod::Adaptive;
-  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  // The occlusion tree of the k best occluders for this viewpoint.
+  void buildOcclusionTree() {
+    const auto& candidates = viewer.scene_.occluderCandidates();
+    const std::vector<size_t> chosen = viewer.scene_.bestOccluders(eye, viewer.options_.occluders);
+    occluders.reserve(chosen.size());
+    for (size_t i : chosen) {
+      occluders.push_back(candidates[i]);
+      Box3f b;
+      for (const glm::dvec3& v : candidates[i].vertices) {
+        // Rounded outward, and widened by far more than the rounding of float boxes.
+        const glm::vec3 lo(v - glm::dvec3(1e-4 * (1.0 + glm::length(v)))),
+            hi(v + glm::dvec3(1e-4 * (1.0 + glm::length(v))));
+        b.extend(lo);
+        b.extend(hi);
+      }
+      occluderBoxes.push_back(b);
+    }
+    occlusion.emplace(eye, occluders);
+  }
 
-  result.leafVisible.assign(tree.nodes().size(), 0);
-  auto markSubtree = [&](int32_t node) {
+  void markSubtree(int32_t node) {
     std::vector<int32_t> stack{node};
     while (!stack.empty()) {
       const int32_t n = stack.back();
@@ -400,10 +418,10 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
       else
         stack.insert(stack.end(), {kn.children[0], kn.children[1]});
     }
-  };
+  }
 
   // Visibility propagation for node n (see the proof above); Unknown when it fails.
-  auto propagate = [&](int32_t n) {
+  Fact propagate(int32_t n) const {
     const Box3f& b = tree.node(n).box;
     Fact combined = Fact::Unknown;
     bool anyFace = false;
@@ -419,7 +437,7 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
       anyFace = true;
       Box3f faceBox = b;
       faceBox.lo[axis] = faceBox.hi[axis] = high ? b.hi[axis] : b.lo[axis];
-      const Fact fact = faceFact(n, KdFace(kdFace(axis, high)), faceBox);
+      const Fact fact = viewer.faceFact(n, KdFace(kdFace(axis, high)), faceBox);
       if (fact == Fact::Unknown || (combined != Fact::Unknown && fact != combined))
         return Fact::Unknown;
       combined = fact;
@@ -429,126 +447,143 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
       for (const Box3f& ob : occluderBoxes)
         if (closedBoxesMeet(ob, b)) return Fact::Unknown;
     return combined;
-  };
+  }
 
   // Adaptive: after a test or a propagation, count whether the node turned
   // less visible since its last classification, and over how many frames.
-  auto learn = [&](NodeState& s, NodeVisibility previous, bool wasTermination) {
+  void learn(NodeState& s, NodeVisibility previous, bool wasTermination) {
+    const int64_t frame = viewer.frame_;
     if (adaptive && wasTermination && s.classifiedFrame > 0) {
       const double changed = s.visibility < previous ? 1.0 : 0.0,
-                   frames = double(frame_ - s.classifiedFrame);
+                   frames = double(frame - s.classifiedFrame);
       s.changes = 0.8f * s.changes + float(changed);
       s.span = 0.8f * s.span + float(frames);
-      changes_ = 0.995 * changes_ + changed;
-      span_ = 0.995 * span_ + frames;
+      viewer.changes_ = 0.995 * viewer.changes_ + changed;
+      viewer.span_ = 0.995 * viewer.span_ + frames;
     }
-    s.classifiedFrame = frame_;
-  };
+    s.classifiedFrame = frame;
+  }
+
+  // A node only partly in the frustum is at most partially visible, so that
+  // its children get frustum-culled whichever node the traversal classifies.
+  static NodeVisibility demote(NodeVisibility v, int inFrustum, const KdNode& kn) {
+    return v == NodeVisibility::Visible && inFrustum == 1 && !kn.isLeaf()
+               ? NodeVisibility::PartiallyVisible
+               : v;
+  }
+
+  // Propagation, tried with probability pVp (always after a success last
+  // frame); true when it classified the node.
+  bool tryPropagation(int32_t n, NodeState& s, NodeVisibility previous, bool wasTermination,
+                      int inFrustum) {
+    if (!propagating || previous == NodeVisibility::PartiallyVisible) return false;
+    const int64_t frame = viewer.frame_;
+    const bool succeededLastFrame = s.propagatedFrame == frame - 1;
+    const double p =
+        adaptive ? std::clamp(double(s.propagationRate), 0.05, 1.0) : viewer.options_.pVp;
+    if (!succeededLastFrame && !(uniform(viewer.rng_) < p)) return false;
+    ++result.propagationTries;
+    const Fact fact = propagate(n);
+    if (adaptive)
+      s.propagationRate = 0.7f * s.propagationRate + (fact != Fact::Unknown ? 0.3f : 0.0f);
+    if (fact == Fact::Unknown) return false;
+    ++result.propagated;
+    s.propagatedFrame = frame;
+    s.fact = fact;
+    s.visibility =
+        demote(fact == Fact::Hidden ? NodeVisibility::Invisible : NodeVisibility::Visible,
+               inFrustum, tree.node(n));
+    learn(s, previous, wasTermination);
+    return true;
+  }
+
+  // Conservative hierarchy updating: a node visible last frame (or a
+  // partially visible leaf) is assumed to stay visible; true when skipped.
+  bool trySkip(int32_t n, NodeState& s, NodeVisibility previous, bool wasTermination) {
+    const KdNode& kn = tree.node(n);
+    if (!(method == CullingMethod::Conservative || adaptive) || !wasTermination ||
+        previous == NodeVisibility::Invisible ||
+        !(kn.isLeaf() || previous == NodeVisibility::Visible))
+      return false;
+    double p = viewer.options_.pSkip;
+    if (adaptive) {
+      // Skip while the expected cost of drawing the node in vain is below
+      // a test's: the chance it turned less visible in the frames since
+      // its last classification, from its rate blended with all nodes'.
+      const int64_t sinceClassified = viewer.frame_ - s.classifiedFrame;
+      const double prior = (viewer.changes_ + 0.01) / (viewer.span_ + 0.1);
+      const double rate = (double(s.changes) + 2.0 * prior) / (double(s.span) + 2.0);
+      const double chance = std::min(1.0, rate * double(sinceClassified));
+      const double waste = chance * viewer.scene_.faceShare(n) * viewer.scene_.drawMsPerFace();
+      // A node is retested at least every kMaxSkipFrames frames, whatever the estimates say.
+      p = viewer.testMs_ > 0.0 && waste < viewer.testMs_ && sinceClassified < kMaxSkipFrames ? 1.0
+                                                                                             : 0.0;
+    }
+    if (!(uniform(viewer.rng_) < p)) return false;
+    s.visibility = NodeVisibility::Visible;
+    ++result.skipped;
+    return true;
+  }
+
+  // The occlusion-tree test; adaptive culling times every 8th one.
+  NodeVisibility testOcclusion(const KdNode& kn) {
+    ++result.nodeTests;
+    if (!adaptive || (result.nodeTests & 7) != 1) return occlusion->classify(kn.box);
+    Stopwatch testClock;
+    const NodeVisibility v = occlusion->classify(kn.box);
+    // Winsorized: a test the scheduler interrupted must not make every
+    // later skip look cheap.
+    double& testMs = viewer.testMs_;
+    const double ms = testMs > 0.0 ? std::min(testClock.ms(), 2.0 * testMs) : testClock.ms();
+    testMs = testMs > 0.0 ? 0.95 * testMs + 0.05 * ms : ms;
+    return v;
+  }
 
   // Classifies termination node n: frustum, small-node rule, propagation,
-  // conservative skipping, occlusion-tree test. A node only partly in the
-  // frustum is at most partially visible, so that its children get
-  // frustum-culled whichever node the traversal classifies.
-  auto classify = [&](int32_t n, NodeState& s) {
+  // conservative skipping, occlusion-tree test.
+  void classify(int32_t n, NodeState& s) {
     const KdNode& kn = tree.node(n);
     const NodeVisibility previous = s.visibility;
-    const bool wasTermination = s.frame == frame_ - 1;
+    const bool wasTermination = s.frame == viewer.frame_ - 1;
     s.fact = Fact::Unknown;
     const int inFrustum = frustum.classify(kn.box);
     if (inFrustum == 0) {
       s.visibility = NodeVisibility::Invisible;
       return;
     }
-    auto demote = [&](NodeVisibility v) {
-      return v == NodeVisibility::Visible && inFrustum == 1 && !kn.isLeaf()
-                 ? NodeVisibility::PartiallyVisible
-                 : v;
-    };
-    if (scene_.nodeFaces(n) <= options_.smallNodeFaces) {
+    if (viewer.scene_.nodeFaces(n) <= viewer.options_.smallNodeFaces) {
       s.visibility = inFrustum == 2 || kn.isLeaf() ? NodeVisibility::Visible
                                                    : NodeVisibility::PartiallyVisible;
       return;
     }
-    if (propagating && previous != NodeVisibility::PartiallyVisible) {
-      const bool succeededLastFrame = s.propagatedFrame == frame_ - 1;
-      const double p = adaptive ? std::clamp(double(s.propagationRate), 0.05, 1.0) : options_.pVp;
-      if (succeededLastFrame || uniform(rng_) < p) {
-        ++result.propagationTries;
-        const Fact fact = propagate(n);
-        if (adaptive)
-          s.propagationRate = 0.7f * s.propagationRate + (fact != Fact::Unknown ? 0.3f : 0.0f);
-        if (fact != Fact::Unknown) {
-          ++result.propagated;
-          s.propagatedFrame = frame_;
-          s.fact = fact;
-          s.visibility =
-              demote(fact == Fact::Hidden ? NodeVisibility::Invisible : NodeVisibility::Visible);
-          learn(s, previous, wasTermination);
-          return;
-        }
-      }
-    }
-    // Conservative hierarchy updating: a node visible last frame (or a
-    // partially visible leaf) is assumed to stay visible.
-    if ((method == CullingMethod::Conservative || adaptive) && wasTermination &&
-        previous != NodeVisibility::Invisible &&
-        (kn.isLeaf() || previous == NodeVisibility::Visible)) {
-      double p = options_.pSkip;
-      if (adaptive) {
-        // Skip while the expected cost of drawing the node in vain is below
-        // a test's: the chance it turned less visible in the frames since
-        // its last classification, from its rate blended with all nodes'.
-        const double prior = (changes_ + 0.01) / (span_ + 0.1);
-        const double rate = (double(s.changes) + 2.0 * prior) / (double(s.span) + 2.0);
-        const double chance = std::min(1.0, rate * double(frame_ - s.classifiedFrame));
-        const double waste = chance * scene_.faceShare(n) * scene_.drawMsPerFace();
-        // A node is retested at least every kMaxSkipFrames frames, whatever the estimates say.
-        p = testMs_ > 0.0 && waste < testMs_ && frame_ - s.classifiedFrame < kMaxSkipFrames ? 1.0
-                                                                                            : 0.0;
-      }
-      if (uniform(rng_) < p) {
-        s.visibility = NodeVisibility::Visible;
-        ++result.skipped;
-        return;
-      }
-    }
-    ++result.nodeTests;
-    NodeVisibility v;
-    if (adaptive && (result.nodeTests & 7) == 1) {  // time every 8th test
-      Stopwatch testClock;
-      v = occlusion.classify(kn.box);
-      // Winsorized: a test the scheduler interrupted must not make every
-      // later skip look cheap.
-      const double ms = testMs_ > 0.0 ? std::min(testClock.ms(), 2.0 * testMs_) : testClock.ms();
-      testMs_ = testMs_ > 0.0 ? 0.95 * testMs_ + 0.05 * ms : ms;
-    } else {
-      v = occlusion.classify(kn.box);
-    }
+    if (tryPropagation(n, s, previous, wasTermination, inFrustum)) return;
+    if (trySkip(n, s, previous, wasTermination)) return;
+    const NodeVisibility v = testOcclusion(kn);
     s.fact = v == NodeVisibility::Invisible ? Fact::Hidden
              : v == NodeVisibility::Visible ? Fact::Lit
                                             : Fact::Unknown;
-    s.visibility = demote(v);
+    s.visibility = demote(v, inFrustum, kn);
     learn(s, previous, wasTermination);
-  };
+  }
 
   // Figure 4 (hierarchy updating); with `updating` false it is the classical
   // algorithm, which classifies every node it reaches.
-  auto visit = [&](auto&& self, int32_t n) -> void {
-    NodeState& s = state_[size_t(n)];
+  void visit(int32_t n) {
+    NodeState& s = viewer.state_[size_t(n)];
     const KdNode& kn = tree.node(n);
+    const size_t smallNode = viewer.options_.smallNodeFaces;
     // A node with a small child is never skipped: the small child would be
     // drawn without a test, which is only right while this node really is
     // partially visible, and only a test of this node can tell.
-    const bool smallChild =
-        !kn.isLeaf() && (scene_.nodeFaces(kn.children[0]) <= options_.smallNodeFaces ||
-                         scene_.nodeFaces(kn.children[1]) <= options_.smallNodeFaces);
+    const bool smallChild = !kn.isLeaf() && (viewer.scene_.nodeFaces(kn.children[0]) <= smallNode ||
+                                             viewer.scene_.nodeFaces(kn.children[1]) <= smallNode);
     const bool termination = kn.isLeaf() || s.visibility != NodeVisibility::PartiallyVisible ||
-                             s.frame < frame_ - 1 || smallChild;
+                             s.frame < viewer.frame_ - 1 || smallChild;
     if (!updating || termination)
       classify(n, s);
     else
       s.fact = Fact::Unknown;  // opened node: its fact is pulled up from its children
-    s.frame = frame_;
+    s.frame = viewer.frame_;
     switch (s.visibility) {
       case NodeVisibility::Visible:
         markSubtree(n);
@@ -559,10 +594,10 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
         } else {
           // Front to back: the child on the eye's side of the split first.
           const int first = eye[kn.axis] > double(kn.split) ? 1 : 0;
-          self(self, kn.children[size_t(first)]);
-          self(self, kn.children[size_t(1 - first)]);
-          const NodeState& a = state_[size_t(kn.children[0])];
-          const NodeState& b = state_[size_t(kn.children[1])];
+          visit(kn.children[size_t(first)]);
+          visit(kn.children[size_t(1 - first)]);
+          const NodeState& a = viewer.state_[size_t(kn.children[0])];
+          const NodeState& b = viewer.state_[size_t(kn.children[1])];
           if (updating && a.visibility == b.visibility) s.visibility = a.visibility;  // pull-up
           if (s.fact == Fact::Unknown && a.fact == b.fact) s.fact = a.fact;
         }
@@ -570,27 +605,42 @@ FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pi
       case NodeVisibility::Invisible:
         break;
     }
-  };
-  visit(visit, KdTree::root());
-  // Culling ends here; gathering the faces to draw is the renderer's work.
-  result.cullingMs = clock.ms();
-
-  std::vector<uint8_t> objectSeen(scene_.scene().objects.size(), 0);
-  for (size_t n = 0; n < result.leafVisible.size(); ++n) {
-    if (!result.leafVisible[n]) continue;
-    ++result.visibleLeaves;
-    for (uint32_t item : tree.items(int32_t(n))) objectSeen[item] = 1;
   }
-  std::vector<uint32_t> faces;
-  for (size_t o = 0; o < objectSeen.size(); ++o)
-    if (objectSeen[o])
-      faces.insert(faces.end(), scene_.scene().objects[o].mesh.faceIds.begin(),
-                   scene_.scene().objects[o].mesh.faceIds.end());
-  std::sort(faces.begin(), faces.end());
-  faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
-  result.visibleFaces = faces.size();
-  if (options_.collectFaces) result.faces = std::move(faces);
-  return result;
+
+  // The faces of every object in a visible leaf (the renderer's work, not
+  // timed as culling).
+  void gatherFaces(bool keepFaces) {
+    const Scene& scene = viewer.scene_.scene();
+    std::vector<uint8_t> objectSeen(scene.objects.size(), 0);
+    for (size_t n = 0; n < result.leafVisible.size(); ++n) {
+      if (!result.leafVisible[n]) continue;
+      ++result.visibleLeaves;
+      for (uint32_t item : tree.items(int32_t(n))) objectSeen[item] = 1;
+    }
+    std::vector<uint32_t> faces;
+    for (size_t o = 0; o < objectSeen.size(); ++o)
+      if (objectSeen[o])
+        faces.insert(faces.end(), scene.objects[o].mesh.faceIds.begin(),
+                     scene.objects[o].mesh.faceIds.end());
+    std::sort(faces.begin(), faces.end());
+    faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
+    result.visibleFaces = faces.size();
+    if (keepFaces) result.faces = std::move(faces);
+  }
+};
+
+FrameResult CullingViewer::frame(const glm::dvec3& eye, double yawDeg, double pitchDeg) {
+  Stopwatch clock;
+  ++frame_;
+  CullingFrame f(*this, eye);
+  f.setUpFrustum(yawDeg, pitchDeg);
+  f.buildOcclusionTree();
+  f.result.leafVisible.assign(scene_.tree().nodes().size(), 0);
+  f.visit(KdTree::root());
+  // Culling ends here; gathering the faces to draw is the renderer's work.
+  f.result.cullingMs = clock.ms();
+  f.gatherFaces(options_.collectFaces);
+  return std::move(f.result);
 }
 
 }  // namespace vistream

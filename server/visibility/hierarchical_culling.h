@@ -157,6 +157,7 @@ class CullingViewer {
           span = 0.0f;  // adaptive: decayed counts of turning less visible, and of frames
     float propagationRate = 0.5f;  // adaptive: recent rate of successful propagation
   };
+  friend struct CullingFrame;  // one frame's steps (hierarchical_culling.cpp)
   Fact faceFact(int32_t node, KdFace face, const Box3f& faceBox) const;
   Fact subtreeFact(int32_t node, const Box3f& faceBox) const;
 
