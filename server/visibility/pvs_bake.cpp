@@ -2,8 +2,6 @@
 
 #include <fcntl.h>
 #include <spdlog/spdlog.h>
-#include <sys/mman.h>
-#include <sys/stat.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for_each.h>
 #include <unistd.h>
@@ -16,6 +14,7 @@
 
 #include "common/core/check.h"
 #include "common/core/error.h"
+#include "common/core/mapped_file.h"
 #include "common/core/timer.h"
 
 namespace vistream {
@@ -176,21 +175,9 @@ class Journal {
   void readExisting(uint64_t fingerprint, uint64_t cellLimit, uint32_t faceLimit,
                     std::map<uint32_t, std::vector<uint32_t>>& done) {
     const std::string name = path_.string();
-    const int fd = ::open(path_.c_str(), O_RDONLY);
-    if (fd < 0) throwInputError("{}: cannot read bake journal: {}", name, std::strerror(errno));
-    struct stat st {};
-    if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
-      ::close(fd);
-      throwInputError("{}: bake journal is not a regular file", name);
-    }
-    const size_t size = size_t(st.st_size);
-    void* map = size ? ::mmap(nullptr, size, PROT_READ, MAP_PRIVATE, fd, 0) : nullptr;
-    ::close(fd);
-    if (map == MAP_FAILED)
-      throwInputError("{}: cannot map bake journal: {}", name, std::strerror(errno));
-    const std::unique_ptr<void, std::function<void(void*)>> unmap(
-        map, [size](void* m) { ::munmap(m, size); });
-    const auto* data = static_cast<const uint8_t*>(map);
+    const MappedFile file = MappedFile::open(path_, "bake journal");
+    const size_t size = file.size();
+    const uint8_t* data = file.data();
     size_t valid = 0;
     if (size < kJournalHeaderBytes) {
       spdlog::warn("{}: bake journal is only {} bytes, less than its header; starting over", name,

@@ -2,8 +2,6 @@
 
 #include <fcntl.h>
 #include <spdlog/spdlog.h>
-#include <sys/mman.h>
-#include <sys/stat.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_invoke.h>
 #include <tbb/parallel_reduce.h>
@@ -216,48 +214,14 @@ void writePvsDatabase(const std::filesystem::path& path, const PvsDatabaseHeader
   if (ec) throwInputError("{}: cannot rename into place: {}", path.string(), ec.message());
 }
 
-PvsDatabase::PvsDatabase(PvsDatabase&& o) noexcept {
-  *this = std::move(o);
-}
-
-PvsDatabase& PvsDatabase::operator=(PvsDatabase&& o) noexcept {
-  if (this != &o) {
-    if (map_) ::munmap(const_cast<uint8_t*>(map_), mapSize_);
-    path_ = std::move(o.path_);
-    map_ = std::exchange(o.map_, nullptr);
-    mapSize_ = std::exchange(o.mapSize_, 0);
-    root_ = std::exchange(o.root_, nullptr);
-    header_ = std::move(o.header_);
-  }
-  return *this;
-}
-
-PvsDatabase::~PvsDatabase() {
-  if (map_) ::munmap(const_cast<uint8_t*>(map_), mapSize_);
-}
-
 PvsDatabase PvsDatabase::open(const std::filesystem::path& path) {
-  const std::string name = path.string();
-  const int fd = ::open(path.c_str(), O_RDONLY);
-  if (fd < 0) throwInputError("{}: cannot open PVS database: {}", name, std::strerror(errno));
-  struct stat st {};
-  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
-    ::close(fd);
-    throwInputError("{}: not a regular file", name);
-  }
-  const size_t size = size_t(st.st_size);
-  if (size < kHeaderBytes) {
-    ::close(fd);
-    throwInputError("{}: not a PVS database (only {} bytes)", name, size);
-  }
-  void* map = ::mmap(nullptr, size, PROT_READ, MAP_PRIVATE, fd, 0);
-  ::close(fd);
-  if (map == MAP_FAILED) throwInputError("{}: cannot map: {}", name, std::strerror(errno));
   PvsDatabase db;
+  db.file_ = MappedFile::open(path, "PVS database");
+  const std::string name = path.string();
+  const size_t size = db.file_.size();
+  if (size < kHeaderBytes) throwInputError("{}: not a PVS database (only {} bytes)", name, size);
   db.path_ = path;
-  db.map_ = static_cast<const uint8_t*>(map);
-  db.mapSize_ = size;
-  const uint8_t* p = db.map_;
+  const uint8_t* p = db.file_.data();
   if (std::memcmp(p, kMagic, 8) != 0) throwInputError("{}: not a PVS database (bad magic)", name);
   const uint32_t version = getU32(p + 8);
   if (version != kPvsDbVersion)
@@ -292,8 +256,8 @@ PvsDatabase PvsDatabase::open(const std::filesystem::path& path) {
 
 void PvsDatabase::readPayload() {
   const std::string name = path_.string();
-  const uint8_t* payload = map_ + kHeaderBytes;
-  const size_t payloadBytes = mapSize_ - kHeaderBytes;
+  const uint8_t* payload = file_.data() + kHeaderBytes;
+  const size_t payloadBytes = file_.size() - kHeaderBytes;
   // The verifier's default cap of 10^6 tables would refuse big bakes (one
   // table per cell); every table takes at least 4 bytes, so this cap still
   // bounds verification by the file's size.

@@ -43,6 +43,7 @@
 #include <string>
 #include <vector>
 
+#include "common/core/mapped_file.h"
 #include "common/scene/scene.h"
 #include "server/visibility/view_cell_grid.h"
 
@@ -92,9 +93,8 @@ class PvsDatabase {
   // Memory-maps and validates the whole file (see the top of this header).
   // Throws InputError naming the file (and the cell, for a bad face list).
   static PvsDatabase open(const std::filesystem::path& path);
-  PvsDatabase(PvsDatabase&&) noexcept;
-  PvsDatabase& operator=(PvsDatabase&&) noexcept;
-  ~PvsDatabase();
+  PvsDatabase(PvsDatabase&&) noexcept = default;
+  PvsDatabase& operator=(PvsDatabase&&) noexcept = default;
 
   const PvsDatabaseHeader& header() const { return header_; }
   size_t cellCount() const;
@@ -114,8 +114,7 @@ class PvsDatabase {
   // (throws InputError).
   void readPayload();
   std::filesystem::path path_;
-  const uint8_t* map_ = nullptr;
-  size_t mapSize_ = 0;
+  MappedFile file_;
   const void* root_ = nullptr;  // const pvsdb::Database*
   PvsDatabaseHeader header_;
 };
