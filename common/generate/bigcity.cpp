@@ -46,10 +46,7 @@
 namespace vistream {
 namespace {
 
-using generate_detail::addBox;
-using generate_detail::addQuad;
-using generate_detail::makeObject;
-using generate_detail::SceneRandom;
+using namespace generate_detail;  // NOLINT(google-build-using-namespace)
 
 constexpr double kExtent = 2000.0;  // metres, the city is kExtent x kExtent
 constexpr int kBlocksPerSide = 18;
@@ -67,19 +64,15 @@ enum BigCityMaterial : uint32_t {
   kStone,
   kFirstFacade,
 };
-constexpr int kFacadeMaterials = 5;
 
 std::vector<Material> bigCityMaterials() {
   const auto material = &Material::diffuseColour;
-  return {material("asphalt", {0.20f, 0.20f, 0.21f}),
-          material("pavement", {0.45f, 0.44f, 0.41f}),
-          material("glass", {0.16f, 0.22f, 0.30f}),
-          material("stone", {0.62f, 0.60f, 0.55f}),
-          material("facade_sand", {0.76f, 0.70f, 0.58f}),
-          material("facade_brick", {0.62f, 0.36f, 0.28f}),
-          material("facade_grey", {0.58f, 0.59f, 0.62f}),
-          material("facade_white", {0.85f, 0.84f, 0.80f}),
-          material("facade_ochre", {0.80f, 0.62f, 0.35f})};
+  std::vector<Material> materials{
+      material("asphalt", {0.20f, 0.20f, 0.21f}), material("pavement", {0.45f, 0.44f, 0.41f}),
+      material("glass", {0.16f, 0.22f, 0.30f}), material("stone", {0.62f, 0.60f, 0.55f})};
+  const auto facades = facadeMaterials();
+  materials.insert(materials.end(), facades.begin(), facades.end());
+  return materials;
 }
 
 struct Interval {

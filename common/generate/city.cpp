@@ -39,10 +39,7 @@
 namespace vistream {
 namespace {
 
-using generate_detail::addBox;
-using generate_detail::addQuad;
-using generate_detail::makeObject;
-using generate_detail::SceneRandom;
+using namespace generate_detail;  // NOLINT(google-build-using-namespace)
 
 constexpr int kLotColumns = 56;  // along x
 constexpr int kLotRows = 38;     // along z
@@ -62,16 +59,13 @@ constexpr CityLayout kDense{24.0, 8.0, 0.7 * 24.0, 24.0};
 constexpr CityLayout kSparse{38.0, 10.0, 14.0, 22.0};
 
 enum CityMaterial : uint32_t { kGround, kFirstFacade };
-constexpr int kFacadeMaterials = 5;
 
 std::vector<Material> cityMaterials() {
   const auto material = &Material::diffuseColour;
-  return {material("ground", {0.32f, 0.34f, 0.30f}),
-          material("facade_sand", {0.76f, 0.70f, 0.58f}),
-          material("facade_brick", {0.62f, 0.36f, 0.28f}),
-          material("facade_grey", {0.58f, 0.59f, 0.62f}),
-          material("facade_white", {0.85f, 0.84f, 0.80f}),
-          material("facade_ochre", {0.80f, 0.62f, 0.35f})};
+  std::vector<Material> materials{material("ground", {0.32f, 0.34f, 0.30f})};
+  const auto facades = facadeMaterials();
+  materials.insert(materials.end(), facades.begin(), facades.end());
+  return materials;
 }
 
 }  // namespace

@@ -54,10 +54,7 @@
 namespace vistream {
 namespace {
 
-using generate_detail::addBox;
-using generate_detail::addQuad;
-using generate_detail::makeObject;
-using generate_detail::SceneRandom;
+using namespace generate_detail;  // NOLINT(google-build-using-namespace)
 
 constexpr double kHalfSize = 20.0;  // outer wall centre lines at +-20 m
 constexpr double kHalfWall = 0.1;   // walls are 0.2 m thick

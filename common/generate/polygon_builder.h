@@ -16,11 +16,23 @@
 #include <glm/glm.hpp>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "common/core/check.h"
 #include "common/generate/generate.h"
 
 namespace vistream::generate_detail {
+
+// The facade colours the city generators draw from, in this order.
+constexpr int kFacadeMaterials = 5;
+inline std::vector<Material> facadeMaterials() {
+  const auto material = &Material::diffuseColour;
+  return {material("facade_sand", {0.76f, 0.70f, 0.58f}),
+          material("facade_brick", {0.62f, 0.36f, 0.28f}),
+          material("facade_grey", {0.58f, 0.59f, 0.62f}),
+          material("facade_white", {0.85f, 0.84f, 0.80f}),
+          material("facade_ochre", {0.80f, 0.62f, 0.35f})};
+}
 
 inline PolygonObject makeObject(std::string name, uint32_t material) {
   PolygonObject object;

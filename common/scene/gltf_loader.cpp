@@ -24,6 +24,7 @@
 #include <glm/gtc/type_ptr.hpp>
 #include <limits>
 #include <string_view>
+#include <type_traits>
 
 #include "common/core/error.h"
 #include "common/scene/scene_loader.h"
@@ -99,6 +100,46 @@ bool keepImageUndecoded(tinygltf::Image*, const int, std::string*, std::string*,
   return true;
 }
 
+// One component read from `q` (little-endian, any alignment), normalized
+// integers mapped to [0, 1] or [-1, 1] as the glTF specification says.
+template <typename T>
+T readUnaligned(const unsigned char* q) {
+  T v;
+  std::memcpy(&v, q, sizeof(T));
+  return v;
+}
+
+template <typename T>
+double normalizedValue(const unsigned char* q, bool normalized) {
+  const T v = readUnaligned<T>(q);
+  if (!normalized) return double(v);
+  constexpr double kMax = double(std::numeric_limits<T>::max());
+  return std::is_signed_v<T> ? std::max(double(v) / kMax, -1.0) : double(v) / kMax;
+}
+
+double componentValue(const unsigned char* q, int componentType, bool normalized) {
+  switch (componentType) {
+    case TINYGLTF_COMPONENT_TYPE_FLOAT:
+      return readUnaligned<float>(q);
+    case TINYGLTF_COMPONENT_TYPE_DOUBLE:
+      return readUnaligned<double>(q);
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+      return normalizedValue<uint8_t>(q, normalized);
+    case TINYGLTF_COMPONENT_TYPE_BYTE:
+      return normalizedValue<int8_t>(q, normalized);
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
+      return normalizedValue<uint16_t>(q, normalized);
+    case TINYGLTF_COMPONENT_TYPE_SHORT:
+      return normalizedValue<int16_t>(q, normalized);
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
+      return double(readUnaligned<uint32_t>(q));  // never normalized in glTF
+    case TINYGLTF_COMPONENT_TYPE_INT:
+      return double(readUnaligned<int32_t>(q));
+    default:
+      return 0.0;
+  }
+}
+
 class AccessorReader {
  public:
   AccessorReader(const tinygltf::Model& model, std::string file)
@@ -158,55 +199,7 @@ class AccessorReader {
       const unsigned char* p = data.data() + begin + i * stride;
       for (int c = 0; c < components; ++c) {
         const unsigned char* q = p + size_t(c) * size_t(compSize);
-        double v = 0.0;
-        switch (acc.componentType) {
-          case TINYGLTF_COMPONENT_TYPE_FLOAT: {
-            float f;
-            std::memcpy(&f, q, 4);
-            v = f;
-            break;
-          }
-          case TINYGLTF_COMPONENT_TYPE_DOUBLE: {
-            double d;
-            std::memcpy(&d, q, 8);
-            v = d;
-            break;
-          }
-          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
-            v = acc.normalized ? *q / 255.0 : *q;
-            break;
-          case TINYGLTF_COMPONENT_TYPE_BYTE: {
-            const auto b = int8_t(*q);
-            v = acc.normalized ? std::max(b / 127.0, -1.0) : b;
-            break;
-          }
-          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
-            uint16_t s;
-            std::memcpy(&s, q, 2);
-            v = acc.normalized ? s / 65535.0 : s;
-            break;
-          }
-          case TINYGLTF_COMPONENT_TYPE_SHORT: {
-            int16_t s;
-            std::memcpy(&s, q, 2);
-            v = acc.normalized ? std::max(s / 32767.0, -1.0) : s;
-            break;
-          }
-          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: {
-            uint32_t u;
-            std::memcpy(&u, q, 4);
-            v = u;
-            break;
-          }
-          case TINYGLTF_COMPONENT_TYPE_INT: {
-            int32_t s;
-            std::memcpy(&s, q, 4);
-            v = s;
-            break;
-          }
-          default:
-            break;
-        }
+        const double v = componentValue(q, acc.componentType, acc.normalized);
         if (!std::isfinite(v))
           throwInputError("{}: {}: accessor {} element {} is not a finite number", file_, what,
                           accessorIndex, i);

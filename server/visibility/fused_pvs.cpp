@@ -8,6 +8,7 @@
 #include <limits>
 
 #include "common/core/timer.h"
+#include "common/spatial/convex_hull.h"
 
 namespace vistream {
 namespace {
@@ -132,26 +133,7 @@ std::vector<glm::dvec2> projectedHull(const std::vector<glm::dvec3>& points, con
     if (w <= 0.0) return {};
     q.emplace_back(d[cf.b] / w, d[cf.c] / w);
   }
-  std::sort(q.begin(), q.end(), [](const glm::dvec2& a, const glm::dvec2& b) {
-    return a.x < b.x || (a.x == b.x && a.y < b.y);
-  });
-  q.erase(std::unique(q.begin(), q.end()), q.end());
-  if (q.size() < 3) return q;
-  auto cross = [](const glm::dvec2& o, const glm::dvec2& a, const glm::dvec2& b) {
-    return (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x);
-  };
-  std::vector<glm::dvec2> h(2 * q.size());
-  size_t k = 0;
-  for (size_t i = 0; i < q.size(); ++i) {
-    while (k >= 2 && cross(h[k - 2], h[k - 1], q[i]) <= 0.0) --k;
-    h[k++] = q[i];
-  }
-  for (size_t i = q.size() - 1, t = k + 1; i-- > 0;) {
-    while (k >= t && cross(h[k - 2], h[k - 1], q[i]) <= 0.0) --k;
-    h[k++] = q[i];
-  }
-  h.resize(k - 1);
-  return h;
+  return convexHull2d(std::move(q));
 }
 
 // Can the pixel square [u0,u1] x [v0,v1] overlap the convex outline? False

@@ -8,6 +8,7 @@
 #include <unordered_map>
 
 #include "common/core/timer.h"
+#include "common/spatial/convex_hull.h"
 
 namespace vistream {
 namespace {
@@ -177,32 +178,6 @@ bool makeSolid(const WeldedMesh& m, const std::vector<uint32_t>& tris, uint32_t 
   return true;
 }
 
-// 2D cross product of (b - a) and (c - a).
-double cross2(const glm::dvec2& a, const glm::dvec2& b, const glm::dvec2& c) {
-  return (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
-}
-
-// Convex hull (counter-clockwise, no collinear points), Andrew's monotone chain.
-std::vector<glm::dvec2> convexHull(std::vector<glm::dvec2> pts) {
-  std::sort(pts.begin(), pts.end(), [](const glm::dvec2& a, const glm::dvec2& b) {
-    return a.x < b.x || (a.x == b.x && a.y < b.y);
-  });
-  pts.erase(std::unique(pts.begin(), pts.end()), pts.end());
-  if (pts.size() < 3) return pts;
-  std::vector<glm::dvec2> hull(2 * pts.size());
-  size_t k = 0;
-  for (size_t i = 0; i < pts.size(); ++i) {
-    while (k >= 2 && cross2(hull[k - 2], hull[k - 1], pts[i]) <= 0.0) --k;
-    hull[k++] = pts[i];
-  }
-  for (size_t i = pts.size() - 1, t = k + 1; i-- > 0;) {
-    while (k >= t && cross2(hull[k - 2], hull[k - 1], pts[i]) <= 0.0) --k;
-    hull[k++] = pts[i];
-  }
-  hull.resize(k - 1);
-  return hull;
-}
-
 // Makes a polygon occluder of coplanar, edge-connected triangles whose union
 // is convex up to float noise. False if the union is not convex.
 bool makePolygon(const WeldedMesh& m, const std::vector<uint32_t>& tris, uint32_t object,
@@ -251,7 +226,7 @@ bool makePolygon(const WeldedMesh& m, const std::vector<uint32_t>& tris, uint32_
     mag = std::max({mag, a.x, a.y, a.z});
     offPlane = std::max(offPlane, std::abs(glm::dot(normal, m.vertices[v]) - d));
   }
-  const std::vector<glm::dvec2> hull = convexHull(p2);
+  const std::vector<glm::dvec2> hull = convexHull2d(p2);
   if (hull.size() < 3) return false;
   double hullArea = 0.0;
   for (size_t i = 0; i < hull.size(); ++i) {
