@@ -5,6 +5,7 @@
 #include "server/visibility/hierarchical_culling.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <glm/gtc/matrix_transform.hpp>
 #include <map>
@@ -17,29 +18,19 @@
 
 namespace vistream {
 
+namespace {
+// Indexed by CullingMethod.
+constexpr std::array<const char*, 5> kCullingMethodNames{"A", "B", "C", "D", "adaptive"};
+}  // namespace
+
 CullingMethod parseCullingMethod(const std::string& name) {
-  if (name == "A") return CullingMethod::Classical;
-  if (name == "B") return CullingMethod::HierarchyUpdating;
-  if (name == "C") return CullingMethod::Propagation;
-  if (name == "D") return CullingMethod::Conservative;
-  if (name == "adaptive") return CullingMethod::Adaptive;
+  for (size_t i = 0; i < kCullingMethodNames.size(); ++i)
+    if (name == kCullingMethodNames[i]) return CullingMethod(i);
   throwInputError("--method: expected A, B, C, D or adaptive, got '{}'", name);
 }
 
 const char* cullingMethodName(CullingMethod m) {
-  switch (m) {
-    case CullingMethod::Classical:
-      return "A";
-    case CullingMethod::HierarchyUpdating:
-      return "B";
-    case CullingMethod::Propagation:
-      return "C";
-    case CullingMethod::Conservative:
-      return "D";
-    case CullingMethod::Adaptive:
-      return "adaptive";
-  }
-  return "?";
+  return size_t(m) < kCullingMethodNames.size() ? kCullingMethodNames[size_t(m)] : "?";
 }
 
 namespace {
