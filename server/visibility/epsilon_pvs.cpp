@@ -241,12 +241,11 @@ struct PvsQuery {
     stats.occluders = options.largeOccluders > 0 ? std::min(options.largeOccluders, n) : n;
   }
 
-  // Every allowed occluder blocking the segment a-b, found through the kD-tree.
-  void collect(const glm::dvec3& a, const glm::dvec3& b, uint64_t& tests,
-               std::vector<uint32_t>& out) {
-    out.clear();
+  // Calls f(i) for every allowed occluder i blocking the segment a-b, front
+  // to back through the kD-tree, each once; f returns false to stop.
+  template <typename F>
+  void forEachBlocker(const glm::dvec3& a, const glm::dvec3& b, uint64_t& tests, F&& f) {
     ++lineId;
-    ++stats.linesCast;
     const auto& occ = pvs.occluders_.occluders;
     pvs.occluderTree_.traverseRay(glm::vec3(a), glm::vec3(b - a), 0.0f, 1.0f,
                                   [&](int32_t leaf, float, float) {
@@ -254,10 +253,22 @@ struct PvsQuery {
                                       if (!allowed[i] || stamp[i] == lineId) continue;
                                       stamp[i] = lineId;
                                       ++tests;
-                                      if (occluderBlocksSegment(occ[i], a, b)) out.push_back(i);
+                                      if (occluderBlocksSegment(occ[i], a, b) && !f(i))
+                                        return false;
                                     }
                                     return true;
                                   });
+  }
+
+  // Every allowed occluder blocking the segment a-b.
+  void collect(const glm::dvec3& a, const glm::dvec3& b, uint64_t& tests,
+               std::vector<uint32_t>& out) {
+    out.clear();
+    ++stats.linesCast;
+    forEachBlocker(a, b, tests, [&](uint32_t i) {
+      out.push_back(i);
+      return true;
+    });
   }
 
   // True if one occluder blocks every listed line. `firstOnly` reports
@@ -296,23 +307,15 @@ struct PvsQuery {
       const glm::dvec3 a0 = lineEnds(lines[0]).first, b0 = lineEnds(lines[0]).second;
       ++stats.linesCast;
       stats.linesCast += lines.size() - 1;
-      ++lineId;
       uint32_t winner = kNone;
-      pvs.occluderTree_.traverseRay(glm::vec3(a0), glm::vec3(b0 - a0), 0.0f, 1.0f,
-                                    [&](int32_t leaf, float, float) {
-                                      for (uint32_t i : pvs.occluderTree_.items(leaf)) {
-                                        if (!allowed[i] || stamp[i] == lineId) continue;
-                                        stamp[i] = lineId;
-                                        ++tests;
-                                        if (!occluderBlocksSegment(occ[i], a0, b0)) continue;
-                                        if (blocksAll(i, 1)) {
-                                          winner = i;
-                                          return false;
-                                        }
-                                        first = false;
-                                      }
-                                      return true;
-                                    });
+      forEachBlocker(a0, b0, tests, [&](uint32_t i) {
+        if (blocksAll(i, 1)) {
+          winner = i;
+          return false;
+        }
+        first = false;
+        return true;
+      });
       if (winner == kNone) return false;
       markUsed(winner);
       if (byFirst) *byFirst = first;
