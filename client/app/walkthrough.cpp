@@ -7,6 +7,7 @@
 #include <map>
 #include <stdexcept>
 
+#include "common/core/check.h"
 #include "common/core/error.h"
 
 namespace vistream {
@@ -31,24 +32,29 @@ std::vector<Camera> camerasFromPath(const std::vector<PathSample>& path, const g
 glm::ivec2 parseImageSize(const std::string& text, const char* option) {
   const size_t x = text.find('x');
   int w = 0, h = 0;
+  bool whole = x != std::string::npos;  // both sides are whole numbers
   try {
     size_t used = 0;
-    if (x == std::string::npos) throw std::invalid_argument("no x");
-    w = std::stoi(text.substr(0, x), &used);
-    if (used != x) throw std::invalid_argument("width");
-    h = std::stoi(text.substr(x + 1), &used);
-    if (used != text.size() - x - 1) throw std::invalid_argument("height");
-  } catch (const std::exception&) {
-    throwInputError("{} {}: expected WIDTHxHEIGHT, e.g. 640x480", option, text);
+    if (whole) {
+      w = std::stoi(text.substr(0, x), &used);
+      whole = used == x;
+    }
+    if (whole) {
+      h = std::stoi(text.substr(x + 1), &used);
+      whole = used == text.size() - x - 1;
+    }
+  } catch (const std::exception&) {  // std::stoi: not a number, or beyond int
+    whole = false;
   }
+  if (!whole) throwInputError("{} {}: expected WIDTHxHEIGHT, e.g. 640x480", option, text);
   if (w < 16 || h < 16 || w > 8192 || h > 8192)
     throwInputError("{} {}: each side must lie in [16, 8192] pixels", option, text);
   return {w, h};
 }
 
 ImageDifference compareImages(const ImageRgb8& a, const ImageRgb8& b) {
-  if (a.width != b.width || a.height != b.height)
-    throw std::logic_error("compareImages: sizes differ");
+  VS_CHECK_EQ(a.width, b.width);  // the caller's contract: images of one camera
+  VS_CHECK_EQ(a.height, b.height);
   ImageDifference d;
   const size_t n = size_t(a.width) * size_t(a.height);
   size_t differing = 0;
@@ -75,36 +81,39 @@ ImageDifference compareImages(const ImageRgb8& a, const ImageRgb8& b) {
 
 namespace {
 
+// Sums over the frames; means are sums / frames (1 for no frames).
 struct Means {
-  double polygon = 0, horizon = 0, cache = 0, rayHit = 0, rayMiss = 0, background = 0, frameMs = 0;
-  StageTimes ms;
+  PixelCounts pixelSums;
+  StageTimes msSums;
+  double frames = 1.0;
   double differing = 0, colourError = 0;
   size_t compared = 0;
+
+  // f(field, mean) for every pixel class, in PixelCounts' list order.
+  template <class F>
+  void forEachPixelMean(F&& f) const {
+    pixelSums.forEachField(
+        [&](const StatField& field, size_t sum) { f(field, double(sum) / frames); });
+  }
+  template <class F>
+  void forEachStageMean(F&& f) const {
+    msSums.forEachField([&](const StatField& field, double sum) { f(field, sum / frames); });
+  }
+  double frameMs() const { return msSums.total / frames; }
 };
 
 Means means(const std::vector<FrameRecord>& frames) {
   Means m;
-  PixelCounts p;
   for (const FrameRecord& f : frames) {
-    p += f.report.pixels;
-    m.ms += f.report.ms;
+    m.pixelSums += f.report.pixels;
+    m.msSums += f.report.ms;
     if (f.compared) {
       ++m.compared;
       m.differing += f.difference.differingFraction;
       m.colourError += f.difference.meanColourError;
     }
   }
-  m.polygon = double(p.polygon);
-  m.horizon = double(p.horizon);
-  m.cache = double(p.cache);
-  m.rayHit = double(p.rayHit);
-  m.rayMiss = double(p.rayMiss);
-  m.background = double(p.background);
-  const double n = frames.empty() ? 1.0 : double(frames.size());
-  for (double* v : {&m.polygon, &m.horizon, &m.cache, &m.rayHit, &m.rayMiss, &m.background,
-                    &m.ms.nearSelect, &m.ms.nearDraw, &m.ms.opacity, &m.ms.horizon, &m.ms.cache,
-                    &m.ms.raycast, &m.ms.compose, &m.ms.total})
-    *v /= n;
+  m.frames = frames.empty() ? 1.0 : double(frames.size());
   if (m.compared) {
     m.differing /= double(m.compared);
     m.colourError /= double(m.compared);
@@ -145,24 +154,14 @@ nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const Pip
                                                                  : cacheRan},
                      {"reasons", r}};
   }
+  nlohmann::json pixels = nlohmann::json::object(), stageMs = nlohmann::json::object();
+  m.forEachPixelMean([&](const StatField& f, double v) { pixels[std::string(f.key)] = v; });
+  m.forEachStageMean([&](const StatField& f, double v) { stageMs[std::string(f.key)] = v; });
   nlohmann::json out = {
       {"frames", frames.size()},
-      {"mean_frame_ms", m.ms.total},
-      {"pixels",
-       {{"polygon", m.polygon},
-        {"horizon", m.horizon},
-        {"cache", m.cache},
-        {"ray_hit", m.rayHit},
-        {"ray_miss", m.rayMiss},
-        {"background", m.background}}},
-      {"mean_stage_ms",
-       {{"near_select", m.ms.nearSelect},
-        {"near_draw", m.ms.nearDraw},
-        {"opacity", m.ms.opacity},
-        {"horizon", m.ms.horizon},
-        {"cache", m.ms.cache},
-        {"raycast", m.ms.raycast},
-        {"compose", m.ms.compose}}},
+      {"mean_frame_ms", m.frameMs()},
+      {"pixels", pixels},
+      {"mean_stage_ms", stageMs},
       {"mode", renderModeName(o.mode)},
       {"size", {width, height}},
       {"options",
@@ -185,27 +184,18 @@ nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const Pip
 
 std::string walkthroughTable(const std::vector<FrameRecord>& frames, const PipelineOptions& o) {
   const Means m = means(frames);
-  const double total = m.polygon + m.horizon + m.cache + m.rayHit + m.rayMiss + m.background;
+  double total = 0;
+  m.forEachPixelMean([&](const StatField&, double v) { total += v; });
   auto pct = [&](double v) { return total > 0 ? 100.0 * v / total : 0.0; };
   std::string s = fmt::format("mode {}, {} frames, mean frame {:.2f} ms\n\n",
-                              renderModeName(o.mode), frames.size(), m.ms.total);
+                              renderModeName(o.mode), frames.size(), m.frameMs());
   s += fmt::format("{:<28} {:>12} {:>8}\n", "pixels (mean a frame)", "count", "share");
-  const std::pair<const char*, double> rows[] = {
-      {"covered by polygons", m.polygon}, {"culled by horizon", m.horizon},
-      {"taken from the cache", m.cache},  {"ray cast and hit", m.rayHit},
-      {"ray cast and missed", m.rayMiss}, {"background (no far field)", m.background}};
-  for (const auto& [name, v] : rows)
-    s += fmt::format("{:<28} {:>12.0f} {:>7.2f}%\n", name, v, pct(v));
+  m.forEachPixelMean([&](const StatField& f, double v) {
+    s += fmt::format("{:<28} {:>12.0f} {:>7.2f}%\n", f.label, v, pct(v));
+  });
   s += fmt::format("\n{:<28} {:>12}\n", "stage (mean)", "ms");
-  const std::pair<const char*, double> stages[] = {{"near-field selection", m.ms.nearSelect},
-                                                   {"near-field drawing", m.ms.nearDraw},
-                                                   {"opacity buffer", m.ms.opacity},
-                                                   {"horizon tracing", m.ms.horizon},
-                                                   {"cache planning", m.ms.cache},
-                                                   {"ray casting", m.ms.raycast},
-                                                   {"composition", m.ms.compose},
-                                                   {"frame", m.ms.total}};
-  for (const auto& [name, v] : stages) s += fmt::format("{:<28} {:>12.3f}\n", name, v);
+  m.forEachStageMean(
+      [&](const StatField& f, double v) { s += fmt::format("{:<28} {:>12.3f}\n", f.label, v); });
   if (m.compared)
     s += fmt::format("\nagainst raycast-all: {:.3f}% of pixels differ, mean colour error {:.5f}\n",
                      100.0 * m.differing, m.colourError);

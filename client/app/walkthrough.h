@@ -31,7 +31,7 @@ struct ImageDifference {
   // exact rays (or two rasterizers) may legitimately disagree.
   size_t interiorDiffering = 0;
 };
-// Throws std::logic_error if the sizes differ.
+// Both images must have the same size (a broken invariant otherwise: VS_CHECK).
 ImageDifference compareImages(const ImageRgb8& image, const ImageRgb8& reference);
 
 struct FrameRecord {

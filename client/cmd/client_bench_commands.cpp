@@ -30,6 +30,7 @@
 #include "common/core/error.h"
 #include "common/core/log.h"
 #include "common/core/progress.h"
+#include "common/core/stats_output.h"
 #include "common/core/timer.h"
 #include "common/generate/path.h"
 #include "common/generate/scene_spec.h"
@@ -121,13 +122,7 @@ json resultJson(const Result& r, double raycastMs, double geometryMs) {
           {"speedup_vs_geometry_all", geometryMs / r.frameMs},
           {"differing_fraction", r.differing},
           {"mean_colour_error", r.colourError},
-          {"pixels",
-           {{"polygon", r.meanPixels.polygon},
-            {"horizon", r.meanPixels.horizon},
-            {"cache", r.meanPixels.cache},
-            {"ray_hit", r.meanPixels.rayHit},
-            {"ray_miss", r.meanPixels.rayMiss},
-            {"background", r.meanPixels.background}}}};
+          {"pixels", statsJson(r.meanPixels)}};
 }
 
 // Table 4.1: min / average / max share of each pixel class over the frames.
@@ -233,8 +228,7 @@ void writePlots(const std::string& dir, const std::string& scene,
 
 int runBench(const BenchArgs& a) {
   const glm::ivec2 size = parseImageSize(a.size);
-  if (a.repeats < 1) throwInputError("--repeats {}: must be at least 1", a.repeats);
-  if (a.frames < 2) throwInputError("--frames {}: must be at least 2", a.frames);
+  // --repeats, --frames and --speed are range-checked at parse time.
   json out = json::array();
   for (const std::string& spec : splitCommaList(a.scenes)) {
     const Scene scene = openScene(spec);
@@ -374,19 +368,18 @@ int runClientBenchTool(int argc, char** argv) {
   CLI::App app{
       "vistream-client-bench: frame time against image error for the far-field pipeline "
       "(Wimmer 2001, Figures 4.8-4.9, Table 4.1) against raycast-all and geometry-all"};
-  app.add_option("--scenes", a.scenes, "comma-separated scenes (files or built-in names)")
-      ->capture_default_str();
+  showDefaultsInHelp(app);
+  app.add_option("--scenes", a.scenes, "comma-separated scenes (files or built-in names)");
   app.add_option("--frames", a.frames, "frames of the generated walkthrough")
-      ->capture_default_str();
-  app.add_option("--size", a.size, "image size WIDTHxHEIGHT")->capture_default_str();
+      ->check(atLeast<size_t>(2));
+  app.add_option("--size", a.size, "image size WIDTHxHEIGHT");
   app.add_option("--repeats", a.repeats, "runs per configuration (the median is reported)")
-      ->capture_default_str();
-  app.add_option("--speed", a.speed, "relative walking speed")->capture_default_str();
+      ->check(atLeast(1));
+  app.add_option("--speed", a.speed, "relative walking speed")->check(positive());
   app.add_option("--plot-dir", a.plotDir, "write .dat files and PNG plots (gnuplot) here");
   app.add_flag("--quick", a.quick, "fewer values per knob (for tests)");
   app.add_flag("--json", a.json, "print JSON instead of tables");
-  app.add_option("--log-level", a.logLevel, "trace, debug, info, warn, error, critical, off")
-      ->capture_default_str();
+  app.add_option("--log-level", a.logLevel, "trace, debug, info, warn, error, critical, off");
   return runFlatToolApp("vistream-client-bench", app, argc, argv, a.logLevel,
                         [&] { return runBench(a); });
 }

@@ -37,6 +37,7 @@ struct Args {
   std::string scene, host, pathFile, size = "640x480", outDir, mode = "pipeline", logLevel = "warn",
                                      token;
   SceneLimits sceneLimits;
+  GroundChoice ground;  // for --path auto
   uint16_t port = 7070;
   bool headless = false, json = false, noCache = false, compare = false;
   size_t frames = 0;
@@ -67,10 +68,13 @@ std::string frameName(size_t i) {
 std::vector<PathSample> loadPath(const Args& a, const Scene* scene, size_t frames) {
   if (a.pathFile != "auto") return readPath(a.pathFile);
   if (!scene)
-    throwInputError("--path auto needs --scene (the path is generated through its free space)");
+    throwInputError(
+        "--path auto needs --scene (the path is generated through its free space; with --host, "
+        "give the scene the server serves)");
   PathOptions po;
   po.frames = frames ? frames : 300;
   po.speed = a.pathSpeed;
+  po.ground = a.ground;
   return generatePath(*scene, po);
 }
 
@@ -93,12 +97,30 @@ PipelineOptions pipelineOptions(const Args& a, const Scene* scene, RenderMode mo
   return o;
 }
 
+// What a connected walk received and how long it waited for geometry.
+struct ConnectionFigures {
+  uint64_t bytesReceived = 0;
+  double waitMs = 0.0;  // in waitForCell: the first view cell and each frame's
+  size_t waits = 0;
+  size_t timeouts = 0;  // waits that ended without the cell complete
+};
+
 void printSummary(const Args& a, const std::vector<FrameRecord>& records, const PipelineOptions& o,
-                  glm::ivec2 size) {
+                  glm::ivec2 size, const ConnectionFigures* connection = nullptr) {
   if (a.json) {
-    std::printf("%s\n", walkthroughJson(records, o, size.x, size.y).dump(2).c_str());
+    nlohmann::json j = walkthroughJson(records, o, size.x, size.y);
+    if (connection)
+      j["connection"] = {{"bytes_received", connection->bytesReceived},
+                         {"wait_for_geometry_ms", connection->waitMs},
+                         {"waits", connection->waits},
+                         {"wait_timeouts", connection->timeouts}};
+    std::printf("%s\n", j.dump(2).c_str());
   } else {
     std::printf("%s", walkthroughTable(records, o).c_str());
+    if (connection)
+      std::printf("received %.2f MB; waited %.0f ms for geometry in %zu waits (%zu timed out)\n",
+                  double(connection->bytesReceived) / 1e6, connection->waitMs, connection->waits,
+                  connection->timeouts);
     if (!a.outDir.empty())
       std::printf("\nframes written to %s/frame_00000.png ...\n", a.outDir.c_str());
   }
@@ -146,7 +168,7 @@ struct LiveGeometry {
 
 // Headless: software near field, PNG frames, statistics.
 int runHeadless(const Args& a, LiveGeometry& live, const std::vector<Camera>& cameras,
-                glm::ivec2 size, StreamClient* net) {
+                glm::ivec2 size, StreamClient* net, ConnectionFigures& connection) {
   std::vector<FrameRecord> records;
   ImageRgb8 image, refImage;
   ProgressBar bar(
@@ -159,8 +181,12 @@ int runHeadless(const Args& a, LiveGeometry& live, const std::vector<Camera>& ca
       const glm::vec3 velocity =
           i > 0 ? (cameras[i].eye - cameras[i - 1].eye) * 30.0f : glm::vec3(0.0f);
       net->sendPose(cameras[i].eye, cameras[i].yawDeg, cameras[i].pitchDeg, velocity);
-      if (!net->waitForCell(a.waitS) && !net->error().empty())
-        throwInputError("connection lost: {}", net->error());
+      Stopwatch waited;
+      const bool complete = net->waitForCell(a.waitS);
+      connection.waitMs += waited.ms();
+      ++connection.waits;
+      if (!complete) ++connection.timeouts;
+      if (!complete && !net->error().empty()) throwInputError("connection lost: {}", net->error());
       live.refresh(*net, /*force=*/true);
     }
     FrameRecord r;
@@ -176,7 +202,8 @@ int runHeadless(const Args& a, LiveGeometry& live, const std::vector<Camera>& ca
     bar.advance();
   }
   bar.finish();
-  printSummary(a, records, live.options, size);
+  if (net) connection.bytesReceived = net->bytesReceived();
+  printSummary(a, records, live.options, size, net ? &connection : nullptr);
   return 0;
 }
 
@@ -262,22 +289,20 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
 }
 
 int run(const Args& a) {
-  const bool local = !a.scene.empty(), connected = !a.host.empty();
-  if (local == connected)
-    throwInputError("give either --scene (local) or --host (connected), not {}",
-                    local ? "both" : "neither");
+  // With --host, --scene only serves --path auto (the path is generated
+  // through the free space of the local copy; geometry still streams).
+  const bool connected = !a.host.empty(), local = !a.scene.empty() && !connected;
+  if (!local && !connected) throwInputError("give either --scene (local) or --host (connected)");
+  if (connected && !a.scene.empty() && a.pathFile != "auto")
+    throwInputError(
+        InputErrorCode::BadArgument,
+        "--scene with --host is used only to generate --path auto; give --path auto, or drop "
+        "--scene");
   if (a.headless && a.pathFile.empty())
     throwInputError("--headless needs --path (a path file, or auto)");
   const glm::ivec2 size = parseImageSize(a.size);
   const RenderMode mode = parseMode(a.mode);
-  if (a.horizonSubsample < 1)
-    throwInputError("--horizon-subsample {}: must be at least 1", a.horizonSubsample);
-  if (!(a.horizonCell > 0.0f))
-    throwInputError("--horizon-cell {}: must be positive", a.horizonCell);
-  if (!(a.maxStalePixels >= 0.0f))
-    throwInputError("--max-stale-px {}: must not be negative", a.maxStalePixels);
-  if (!(a.vfov > 1.0f && a.vfov < 170.0f))
-    throwInputError("--fov {}: must lie in (1, 170) degrees", a.vfov);
+  // Numbers are range-checked at parse time (see runClientTool).
   if (!a.outDir.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(a.outDir, ec);
@@ -288,11 +313,14 @@ int run(const Args& a) {
   std::unique_ptr<StreamClient> net;
   RenderGeometry geometry;
   glm::dvec3 origin(0.0);
+  ConnectionFigures connection;
+  std::optional<Scene> pathScene;  // connected: the local copy --path auto walks through
   if (local) {
     scene = openScene(a.scene, a.sceneLimits);
     geometry = renderGeometryFromScene(*scene);
     origin = scene->origin;
   } else {
+    if (!a.scene.empty()) pathScene = openScene(a.scene, a.sceneLimits);
     StreamClientOptions so;
     so.host = a.host;
     so.port = a.port;
@@ -303,7 +331,7 @@ int run(const Args& a) {
   }
   std::vector<PathSample> path;
   if (!a.pathFile.empty()) {
-    path = loadPath(a, scene ? &*scene : nullptr, a.frames);
+    path = loadPath(a, scene ? &*scene : (pathScene ? &*pathScene : nullptr), a.frames);
     if (path.empty()) throwInputError("--path {}: no rows", a.pathFile);
     if (a.frames > path.size())
       throwInputError("--frames {}: the path has only {} rows", a.frames, path.size());
@@ -316,7 +344,12 @@ int run(const Args& a) {
     Camera first;
     if (!cameras.empty()) first = cameras.front();
     net->sendPose(first.eye, first.yawDeg, first.pitchDeg);
-    if (!net->waitForCell(a.waitS))
+    Stopwatch waited;
+    const bool complete = net->waitForCell(a.waitS);
+    connection.waitMs += waited.ms();
+    ++connection.waits;
+    if (!complete) ++connection.timeouts;
+    if (!complete)
       spdlog::warn(
           "the server did not complete the first view cell within {:.0f} s; rendering what arrived",
           a.waitS);
@@ -330,7 +363,7 @@ int run(const Args& a) {
   live.compare = a.compare;
   live.set(std::move(geometry));
   if (net) live.version = net->version();
-  if (a.headless) return runHeadless(a, live, cameras, size, net.get());
+  if (a.headless) return runHeadless(a, live, cameras, size, net.get(), connection);
   Camera start;
   start.width = size.x;
   start.height = size.y;
@@ -354,52 +387,59 @@ int runClientTool(int argc, char** argv) {
       "vistream-client: renders a walkthrough; near field as polygons, far field by horizon "
       "tracing, a panoramic "
       "image cache and ray casting (Wimmer 2001, chapter 4)"};
-  app.add_option("--scene", a.scene, "local mode: a SCENE. " + sceneSpecHelp());
+  showDefaultsInHelp(app);
+  app.add_option(
+      "--scene", a.scene,
+      "local mode: a SCENE (with --host: used only to generate --path auto). " + sceneSpecHelp());
   addSceneLimitsOption(app, a.sceneLimits);
+  addGroundOption(app, a.ground);
   app.add_option("--host", a.host, "connected mode: the vistream-server to stream from");
-  app.add_option("--port", a.port, "the server's port")->capture_default_str();
+  app.add_option("--port", a.port, "the server's port")->check(tcpPort());
   app.add_option("--token", a.token, "the server's shared secret, if it asks for one");
   app.add_flag("--headless", a.headless,
                "no window: software near field, PNG frames and statistics");
   app.add_option("--path", a.pathFile, "path file (CSV t,x,y,z,yaw_deg,pitch_deg), or auto");
-  app.add_option("--frames", a.frames, "frames to render (default: every row of the path)");
-  app.add_option("--size", a.size, "image size WIDTHxHEIGHT")->capture_default_str();
-  app.add_option("--fov", a.vfov, "vertical field of view, degrees")->capture_default_str();
+  app.add_option("--frames", a.frames, "frames to render")
+      ->check(atLeast<size_t>(1))
+      ->default_str("every row of the path; 300 for auto");
+  app.add_option("--size", a.size, "image size WIDTHxHEIGHT");
+  app.add_option("--fov", a.vfov, "vertical field of view, degrees")->check(between(1.0, 170.0));
   app.add_option("--out", a.outDir, "write DIR/frame_00000.png, ...");
   app.add_flag("--json", a.json,
                "print one JSON object (frames, mean_frame_ms, pixels, per_frame, ...)");
-  app.add_option("--mode", a.mode, "pipeline | raycast-all | geometry-all")->capture_default_str();
-  app.add_option("--near-distance", a.nearDistance,
-                 "near-field distance d, metres (default: the scene's, or the server's)");
+  app.add_option("--mode", a.mode, "pipeline | raycast-all | geometry-all");
+  app.add_option("--near-distance", a.nearDistance, "near-field distance d, metres")
+      ->check(positive())
+      ->default_str("the scene's, or the server's");
   app.add_option("--stream-radius", a.streamRadius,
-                 "connected: radius the server streams within, metres (default: the server's); the "
-                 "far field is what "
-                 "arrives beyond --near-distance");
+                 "connected: radius the server streams within, metres; the far field is what "
+                 "arrives beyond --near-distance")
+      ->check(positive())
+      ->default_str("the server's");
   app.add_option("--pixel-budget", a.pixelBudget, "rays a frame for refreshing cached pixels")
-      ->capture_default_str();
+      ->check(atLeast<size_t>(0));
   app.add_option("--polygon-budget", a.polygonBudget,
                  "scenes with at most this many triangles are drawn whole, without a far field (0: "
                  "always split at d)")
-      ->capture_default_str();
+      ->check(atLeast<size_t>(0));
   app.add_flag("--no-cache", a.noCache,
                "switch the panoramic image cache off (trace every far-field pixel)");
   app.add_option(
          "--max-stale-px", a.maxStalePixels,
          "cached pixels expire when far-field geometry at d may have moved this many pixels")
-      ->capture_default_str();
+      ->check(nonNegative());
   app.add_option("--horizon-cell", a.horizonCell,
                  "height-field cell size for horizon tracing, metres")
-      ->capture_default_str();
+      ->check(positive());
   app.add_option("--horizon-subsample", a.horizonSubsample, "trace every k-th column while moving")
-      ->capture_default_str();
+      ->check(atLeast(1));
   app.add_option("--path-speed", a.pathSpeed, "relative walking speed of --path auto")
-      ->capture_default_str();
-  app.add_option("--wait", a.waitS, "connected: seconds to wait for the first view cell")
-      ->capture_default_str();
+      ->check(positive());
+  app.add_option("--wait", a.waitS, "connected: seconds to wait for each view cell")
+      ->check(nonNegative());
   app.add_flag("--compare", a.compare,
                "also render raycast-all and report the image error of every frame");
-  app.add_option("--log-level", a.logLevel, "trace, debug, info, warn, error, critical, off")
-      ->capture_default_str();
+  app.add_option("--log-level", a.logLevel, "trace, debug, info, warn, error, critical, off");
   return runFlatToolApp("vistream-client", app, argc, argv, a.logLevel, [&] { return run(a); });
 }
 

@@ -9,6 +9,8 @@
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/ip/tcp.hpp>
 #include <cstdio>
 #include <fstream>
 #include <iostream>
@@ -17,9 +19,23 @@
 #include "common/cmd/cli.h"
 #include "common/generate/scene_spec.h"
 #include "common/raycast/ray_query.h"
-#include "common/spatial/free_space.h"
+#include "common/world/free_space.h"
+#include "common/world/static_world.h"
 
 namespace vistream {
+namespace {
+
+void checkHostResolves(const std::string& host) {
+  boost::asio::io_context io;
+  boost::asio::ip::tcp::resolver resolver(io);
+  boost::system::error_code ec;
+  resolver.resolve(host, "", ec);
+  if (ec)
+    throwInputError(InputErrorCode::Unreachable, "--host {}: cannot resolve it: {}", host,
+                    ec.message());
+}
+
+}  // namespace
 
 int runLoadTestTool(int argc, char** argv) {
   CLI::App app{
@@ -29,37 +45,44 @@ int runLoadTestTool(int argc, char** argv) {
   std::string logLevel, pathFile, pathsMode, sceneSpec, tokenFile;
   bool asJson = false;
   LoadTestOptions o;
+  showDefaultsInHelp(app);
   app.add_option("--log-level", logLevel, "trace, debug, info, warn, error, critical, off");
-  app.add_option("--host", o.host, "server address (default 127.0.0.1)");
-  app.add_option("--port", o.port, "server port (default 7070)");
-  app.add_option("--clients", o.clients, "simulated clients (default 10)");
+  app.add_option("--host", o.host, "server address");
+  app.add_option("--port", o.port, "server port")->check(tcpPort());
+  app.add_option("--clients", o.clients, "simulated clients")->check(atLeast<size_t>(1));
   app.add_option("--path", pathFile,
                  "path CSV (t,x,y,z,yaw_deg,pitch_deg); clients start at different points of it");
   app.add_option("--paths", pathsMode,
                  "auto: a different generated path per client (needs --scene)");
-  app.add_option("--speed", o.speed, "relative walking speed (default 1.0)");
-  app.add_option("--duration", o.durationS, "seconds each client walks (default 10)");
-  app.add_option("--fps", o.fps, "poses per second per client (default 10)");
+  app.add_option("--speed", o.speed, "relative walking speed")->check(nonNegative());
+  app.add_option("--duration", o.durationS, "seconds each client walks")->check(positive());
+  app.add_option("--fps", o.fps, "poses per second per client")->check(positive());
   app.add_option("--scene", sceneSpec,
                  "the scene, locally: enables visibility-miss checks and --paths auto");
   SceneLimits sceneLimits;
   addSceneLimitsOption(app, sceneLimits);
-  app.add_option("--check-every", o.checkEvery,
-                 "frames between visibility checks (default 10; 0: none)");
-  app.add_option("--radius", o.radius, "near-field radius to ask for in metres (0: the server's)");
-  app.add_option("--memory-budget", o.memoryBudget, "client memory budget in bytes (0: unlimited)");
+  GroundChoice ground;
+  addGroundOption(app, ground);
+  app.add_option("--check-every", o.checkEvery, "frames between visibility checks (0: none)")
+      ->check(atLeast<size_t>(0));
+  app.add_option("--radius", o.radius, "near-field radius to ask for in metres (0: the server's)")
+      ->check(nonNegative());
+  app.add_option("--memory-budget", o.memoryBudget, "client memory budget in bytes (0: unlimited)")
+      ->check(atLeast<uint64_t>(0));
   app.add_option("--token-file", tokenFile, "auth token file (first line)");
   bool noAvatars = false;
   app.add_flag("--no-avatars", noAvatars, "do not ask for other users' avatars");
-  app.add_option("--threads", o.threads, "client I/O threads (default 1)");
+  app.add_option("--threads", o.threads, "client I/O threads")->check(atLeast<unsigned>(1));
   app.add_option("--connect-timeout", o.connectTimeoutS,
-                 "seconds for a client to connect and receive the Welcome (default 10)");
+                 "seconds for a client to connect and receive the Welcome")
+      ->check(positive());
   double grace = -1.0;
   auto* graceOption = app.add_option("--grace", grace,
-                                     fmt::format("seconds after --duration at which clients still "
-                                                 "open are cut off and the run ends (default: "
-                                                 "--connect-timeout + {:g})",
-                                                 kDefaultGraceBeyondConnectS));
+                                     "seconds after --duration at which clients still open are "
+                                     "cut off and the run ends")
+                          ->check(nonNegative());
+  // The sentinel -1 stands for a default that follows --connect-timeout.
+  graceOption->default_str(fmt::format("--connect-timeout + {:g}", kDefaultGraceBeyondConnectS));
   app.add_flag("--json", asJson, "one JSON object on stdout");
   return runToolApp("vistream-loadtest", app, argc, argv, logLevel, [&]() -> int {
     o.avatars = !noAvatars;
@@ -69,18 +92,20 @@ int runLoadTestTool(int argc, char** argv) {
     if (!pathsMode.empty() && pathsMode != "auto")
       throwInputError("--paths: expected 'auto', got '{}'", pathsMode);
     if (!tokenFile.empty()) o.token = readTokenFile(tokenFile);
+    if (!pathsMode.empty() && sceneSpec.empty()) throwInputError("--paths auto needs --scene");
+    // Numbers are range-checked at parse time; the host is resolved here,
+    // before a scene loads.
+    checkHostResolves(o.host);
+    if (!pathFile.empty()) o.paths.push_back(readPath(pathFile));
     Scene scene;
     if (!sceneSpec.empty()) {
       scene = openScene(sceneSpec, sceneLimits);
       o.scene = &scene;
     }
-    if (!pathFile.empty()) {
-      o.paths.push_back(readPath(pathFile));
-    } else {
-      if (!o.scene) throwInputError("--paths auto needs --scene");
-      const FlatTriangles tris = flattenScene(scene, true);
-      const auto rays = makeEmbreeRayQuery(tris);
-      const FreeSpace fs = FreeSpace::build(*rays, scene.bounds());
+    if (pathFile.empty()) {
+      StaticWorldOptions worldOptions;
+      worldOptions.ground = ground;
+      const FreeSpace fs = buildStaticWorld(scene, worldOptions).freeSpace;
       for (size_t i = 0; i < o.clients; ++i) {
         PathOptions po;
         po.seed = 1000 + i;
@@ -110,7 +135,10 @@ int runLoadTestTool(int argc, char** argv) {
       fmt::print("{:<34} {}\n", "initial load ms (p50 / p95 / p99)", pct(j["initial_load_ms"]));
       fmt::print("{:<34} {}\n", "CellReady latency ms (p50/p95/p99)",
                  pct(j["cell_ready_latency_ms"]));
-      fmt::print("{:<34} {}\n", "cell entries", j["cell_entries"].get<uint64_t>());
+      fmt::print("{:<34} {} ({} found the cell ready, {} waited)\n", "cell entries",
+                 j["cell_entries"].get<uint64_t>(), j["cell_entries_ready"].get<uint64_t>(),
+                 j["cell_entries_waited"].get<uint64_t>());
+      fmt::print("{:<34} {}\n", "CellReady wait ms (p50/p95/p99)", pct(j["cell_ready_wait_ms"]));
       fmt::print("{:<34} {} in {} checks\n", "visibility misses",
                  j["visibility_misses"].get<uint64_t>(), j["frames_checked"].get<uint64_t>());
       fmt::print("{:<34} {}{}\n", "errors", j["errors"].get<uint64_t>(),

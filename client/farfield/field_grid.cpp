@@ -10,48 +10,24 @@ namespace vistream {
 FieldGrid::FieldGrid(const RenderGeometry& g, float cellSize) {
   triangles_ = g.size();
   bounds_ = g.bounds;
-  if (g.size() == 0 || bounds_.empty()) {
-    dims_ = {0, 0};
-    cellStart_.assign(1, 0);
-    return;
-  }
-  const glm::vec2 lo(bounds_.lo.x, bounds_.lo.z), hi(bounds_.hi.x, bounds_.hi.z);
-  const glm::vec2 ext = glm::max(hi - lo, glm::vec2(1e-3f));
-  cell_ = cellSize > 0.0f ? cellSize : std::max(4.0f, std::max(ext.x, ext.y) / 64.0f);
-  lo_ = lo;
-  dims_ = glm::max(glm::ivec2(glm::ceil(ext / cell_)), glm::ivec2(1));
-  const size_t cells = size_t(dims_.x) * size_t(dims_.y);
-  auto cellRange = [&](const Box3f& box, glm::ivec2& a, glm::ivec2& b) {
-    a = glm::clamp(glm::ivec2(glm::floor((glm::vec2(box.lo.x, box.lo.z) - lo_) / cell_)),
-                   glm::ivec2(0), dims_ - 1);
-    b = glm::clamp(glm::ivec2(glm::floor((glm::vec2(box.hi.x, box.hi.z) - lo_) / cell_)),
-                   glm::ivec2(0), dims_ - 1);
-  };
-  std::vector<uint32_t> count(cells + 1, 0);
-  cellY_.assign(cells,
+  if (g.size() == 0 || bounds_.empty()) return;
+  const glm::vec2 ext = glm::max(
+      glm::vec2(bounds_.hi.x - bounds_.lo.x, bounds_.hi.z - bounds_.lo.z), glm::vec2(1e-3f));
+  const float cell = cellSize > 0.0f && std::isfinite(cellSize)
+                         ? cellSize
+                         : std::max(4.0f, std::max(ext.x, ext.y) / 64.0f);
+  std::vector<Box3f> boxes(g.size());
+  for (size_t t = 0; t < g.size(); ++t) boxes[t] = g.triangles.triangleBounds(t);
+  grid_ = XzGrid(bounds_, cell, boxes);
+  const glm::ivec2 dims = grid_.dims();
+  cellY_.assign(size_t(dims.x) * size_t(dims.y),
                 glm::vec2(std::numeric_limits<float>::max(), std::numeric_limits<float>::lowest()));
-  for (size_t t = 0; t < g.size(); ++t) {
-    glm::ivec2 a, b;
-    const Box3f box = g.triangles.triangleBounds(t);
-    cellRange(box, a, b);
-    for (int z = a.y; z <= b.y; ++z)
-      for (int x = a.x; x <= b.x; ++x) {
-        const size_t c = size_t(z) * size_t(dims_.x) + size_t(x);
-        ++count[c + 1];
-        cellY_[c] = {std::min(cellY_[c].x, box.lo.y), std::max(cellY_[c].y, box.hi.y)};
-      }
-  }
-  cellStart_.assign(cells + 1, 0);
-  for (size_t c = 0; c < cells; ++c) cellStart_[c + 1] = cellStart_[c] + count[c + 1];
-  items_.resize(cellStart_.back());
-  std::vector<uint32_t> fill(cellStart_.begin(), cellStart_.end() - 1);
-  for (size_t t = 0; t < g.size(); ++t) {
-    glm::ivec2 a, b;
-    cellRange(g.triangles.triangleBounds(t), a, b);
-    for (int z = a.y; z <= b.y; ++z)
-      for (int x = a.x; x <= b.x; ++x)
-        items_[fill[size_t(z) * size_t(dims_.x) + size_t(x)]++] = uint32_t(t);
-  }
+  for (int z = 0; z < dims.y; ++z)
+    for (int x = 0; x < dims.x; ++x) {
+      glm::vec2& y = cellY_[size_t(z) * size_t(dims.x) + size_t(x)];
+      for (uint32_t t : grid_.itemsIn({x, z}))
+        y = {std::min(y.x, boxes[t].lo.y), std::max(y.y, boxes[t].hi.y)};
+    }
 }
 
 namespace {
@@ -80,7 +56,7 @@ struct Frustum {
 void FieldGrid::nearField(const Camera& camera, float d, std::vector<uint32_t>& out,
                           std::vector<uint32_t>& stamp, uint32_t& stampValue) const {
   out.clear();
-  if (dims_.x == 0) return;
+  if (grid_.empty()) return;
   if (stamp.size() != triangles_) {
     stamp.assign(triangles_, 0);
     stampValue = 0;
@@ -91,26 +67,28 @@ void FieldGrid::nearField(const Camera& camera, float d, std::vector<uint32_t>& 
   }
   const Frustum frustum(camera);
   const glm::vec2 eye(camera.eye.x, camera.eye.z);
-  glm::ivec2 a(0), b = dims_ - 1;
+  const glm::ivec2 dims = grid_.dims();
+  const glm::vec2 lo = grid_.lo();
+  const float cell = grid_.cellSize();
+  XzGrid::CellRange range{glm::ivec2(0), dims - 1};
   if (std::isfinite(d)) {
-    a = glm::clamp(glm::ivec2(glm::floor((eye - d - lo_) / cell_)), glm::ivec2(0), dims_ - 1);
-    b = glm::clamp(glm::ivec2(glm::floor((eye + d - lo_) / cell_)), glm::ivec2(0), dims_ - 1);
-    if (eye.x + d < lo_.x || eye.y + d < lo_.y || eye.x - d > lo_.x + float(dims_.x) * cell_ ||
-        eye.y - d > lo_.y + float(dims_.y) * cell_)
+    range = grid_.cellsOverlapping(eye - d, eye + d);
+    if (eye.x + d < lo.x || eye.y + d < lo.y || eye.x - d > lo.x + float(dims.x) * cell ||
+        eye.y - d > lo.y + float(dims.y) * cell)
       return;
   }
-  for (int z = a.y; z <= b.y; ++z)
-    for (int x = a.x; x <= b.x; ++x) {
-      const size_t c = size_t(z) * size_t(dims_.x) + size_t(x);
-      if (cellStart_[c] == cellStart_[c + 1]) continue;
-      const glm::vec2 clo = lo_ + glm::vec2(x, z) * cell_, chi = clo + cell_;
+  for (int z = range.lo.y; z <= range.hi.y; ++z)
+    for (int x = range.lo.x; x <= range.hi.x; ++x) {
+      const std::span<const uint32_t> items = grid_.itemsIn({x, z});
+      if (items.empty()) continue;
+      const size_t c = size_t(z) * size_t(dims.x) + size_t(x);
+      const glm::vec2 clo = grid_.cellLo({x, z}), chi = clo + cell;
       if (std::isfinite(d)) {
         const glm::vec2 q = glm::clamp(eye, clo, chi);
         if (glm::length(q - eye) > d) continue;
       }
       if (frustum.outside({clo.x, cellY_[c].x, clo.y}, {chi.x, cellY_[c].y, chi.y})) continue;
-      for (uint32_t i = cellStart_[c]; i < cellStart_[c + 1]; ++i) {
-        const uint32_t t = items_[i];
+      for (const uint32_t t : items) {
         if (stamp[t] == stampValue) continue;
         stamp[t] = stampValue;
         out.push_back(t);
@@ -119,13 +97,13 @@ void FieldGrid::nearField(const Camera& camera, float d, std::vector<uint32_t>& 
 }
 
 bool FieldGrid::anythingBeyond(const glm::vec3& eye, float d) const {
-  if (dims_.x == 0) return false;
+  if (grid_.empty()) return false;
   const glm::vec2 e(eye.x, eye.z);
-  for (int z = 0; z < dims_.y; ++z)
-    for (int x = 0; x < dims_.x; ++x) {
-      const size_t c = size_t(z) * size_t(dims_.x) + size_t(x);
-      if (cellStart_[c] == cellStart_[c + 1]) continue;
-      const glm::vec2 clo = lo_ + glm::vec2(x, z) * cell_, chi = clo + cell_;
+  const glm::ivec2 dims = grid_.dims();
+  for (int z = 0; z < dims.y; ++z)
+    for (int x = 0; x < dims.x; ++x) {
+      if (grid_.itemsIn({x, z}).empty()) continue;
+      const glm::vec2 clo = grid_.cellLo({x, z}), chi = clo + grid_.cellSize();
       const glm::vec2 far = glm::max(glm::abs(clo - e), glm::abs(chi - e));
       if (glm::length(far) > d) return true;
     }

@@ -2,11 +2,12 @@
 // field (thesis section 4.3.1: "find objects in the near field using a
 // regular grid").
 //
-// The grid covers the geometry's bounds in X and Z with square cells; a
-// triangle is entered in every cell its X/Z bounding rectangle overlaps. The
-// near field of a viewer is every triangle entered in a cell that comes
-// within d of the viewer horizontally, so every triangle NOT in the near field
-// lies entirely farther than d from the viewer horizontally.
+// The grid (an XzGrid, common/spatial/xz_grid.h) covers the geometry's bounds
+// in X and Z with square cells; a triangle is entered in every cell its X/Z
+// bounding rectangle overlaps. The near field of a viewer is every triangle
+// entered in a cell that comes within d of the viewer horizontally, so every
+// triangle NOT in the near field lies entirely farther than d from the viewer
+// horizontally.
 //
 // Thread safety: const methods may run concurrently; nearField() uses a
 // caller-owned scratch buffer.
@@ -19,6 +20,7 @@
 
 #include "client/render/camera.h"
 #include "client/render/render_geometry.h"
+#include "common/spatial/xz_grid.h"
 
 namespace vistream {
 
@@ -28,8 +30,8 @@ class FieldGrid {
   // cellSize in metres; 0 picks one from the geometry (about 64 x 64 cells, at least 4 m).
   FieldGrid(const RenderGeometry& geometry, float cellSize = 0.0f);
 
-  float cellSize() const { return cell_; }
-  glm::ivec2 dims() const { return dims_; }
+  float cellSize() const { return grid_.cellSize(); }
+  glm::ivec2 dims() const { return grid_.dims(); }
 
   // Triangles of the near field of `camera` within horizontal distance d,
   // each once, in cell order, skipping cells wholly outside the view
@@ -42,13 +44,8 @@ class FieldGrid {
   bool anythingBeyond(const glm::vec3& eye, float d) const;
 
  private:
-  glm::vec2 lo_{0.0f};
-  float cell_ = 1.0f;
-  glm::ivec2 dims_{0, 0};
-  std::vector<uint32_t>
-      cellStart_;  // CSR: triangles of cell c are items_[cellStart_[c] .. cellStart_[c+1])
-  std::vector<uint32_t> items_;
-  std::vector<glm::vec2> cellY_;  // per cell: min and max Y of its triangles
+  XzGrid grid_;                   // triangles by X/Z cell
+  std::vector<glm::vec2> cellY_;  // per cell (row-major, X fastest): min and max Y of its triangles
   size_t triangles_ = 0;
   Box3f bounds_;
 };

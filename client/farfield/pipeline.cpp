@@ -4,8 +4,10 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
+#include "common/core/stats_output.h"
 #include "common/core/timer.h"
 
 namespace vistream {
@@ -28,35 +30,14 @@ void castRays(const RayQuery& query, const std::vector<Ray>& rays, std::vector<H
 }  // namespace
 
 const char* renderModeName(RenderMode m) {
-  switch (m) {
-    case RenderMode::Pipeline:
-      return "pipeline";
-    case RenderMode::RaycastAll:
-      return "raycast-all";
-    case RenderMode::GeometryAll:
-      return "geometry-all";
-  }
-  return "?";
+  constexpr std::array<const char*, 3> kNames{"pipeline", "raycast-all", "geometry-all"};
+  return size_t(m) < kNames.size() ? kNames[size_t(m)] : "?";
 }
 
 nlohmann::json FrameReport::toJson() const {
   return {
-      {"pixels",
-       {{"polygon", pixels.polygon},
-        {"horizon", pixels.horizon},
-        {"cache", pixels.cache},
-        {"ray_hit", pixels.rayHit},
-        {"ray_miss", pixels.rayMiss},
-        {"background", pixels.background}}},
-      {"ms",
-       {{"near_select", ms.nearSelect},
-        {"near_draw", ms.nearDraw},
-        {"opacity", ms.opacity},
-        {"horizon", ms.horizon},
-        {"cache", ms.cache},
-        {"raycast", ms.raycast},
-        {"compose", ms.compose},
-        {"total", ms.total}}},
+      {"pixels", statsJson(pixels)},
+      {"ms", statsJson(ms)},
       {"near_triangles", nearTriangles},
       {"moving", moving},
       {"stages",

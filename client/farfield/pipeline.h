@@ -39,6 +39,7 @@
 #include "client/render/image.h"
 #include "client/render/render_geometry.h"
 #include "client/render/soft_raster.h"
+#include "common/core/stats_fields.h"
 #include "common/raycast/ray_query.h"
 
 namespace vistream {
@@ -86,7 +87,20 @@ struct PixelCounts {
     background += o.background;
     return *this;
   }
+  // Every field above, once: FrameReport::toJson, walkthroughJson and
+  // walkthroughTable are generated from this list.
+  template <class F>
+  void forEachField(F&& f) const {
+    f(StatField{"polygon", "covered by polygons", ""}, polygon);
+    f(StatField{"horizon", "culled by horizon", ""}, horizon);
+    f(StatField{"cache", "taken from the cache", ""}, cache);
+    f(StatField{"ray_hit", "ray cast and hit", ""}, rayHit);
+    f(StatField{"ray_miss", "ray cast and missed", ""}, rayMiss);
+    f(StatField{"background", "background (no far field)", ""}, background);
+  }
 };
+static_assert(sizeof(PixelCounts) == 6 * sizeof(size_t),
+              "PixelCounts changed: update PixelCounts::forEachField");
 
 struct StageTimes {
   double nearSelect = 0, nearDraw = 0, opacity = 0, horizon = 0, cache = 0, raycast = 0,
@@ -103,7 +117,21 @@ struct StageTimes {
     total += o.total;
     return *this;
   }
+  // Every field above, once (see PixelCounts::forEachField).
+  template <class F>
+  void forEachField(F&& f) const {
+    f(StatField{"near_select", "near-field selection", "ms"}, nearSelect);
+    f(StatField{"near_draw", "near-field drawing", "ms"}, nearDraw);
+    f(StatField{"opacity", "opacity buffer", "ms"}, opacity);
+    f(StatField{"horizon", "horizon tracing", "ms"}, horizon);
+    f(StatField{"cache", "cache planning", "ms"}, cache);
+    f(StatField{"raycast", "ray casting", "ms"}, raycast);
+    f(StatField{"compose", "composition", "ms"}, compose);
+    f(StatField{"total", "frame", "ms"}, total);
+  }
 };
+static_assert(sizeof(StageTimes) == 8 * sizeof(double),
+              "StageTimes changed: update StageTimes::forEachField");
 
 struct FrameReport {
   PixelCounts pixels;

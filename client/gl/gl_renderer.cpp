@@ -11,6 +11,8 @@
 #include <cstddef>
 #include <cstring>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 #include "common/core/check.h"
 
@@ -19,10 +21,74 @@ namespace {
 
 // stb_easy_font's glyphs are about 7 px tall on a 12 px line; doubled, the
 // HUD reads at a normal viewing distance on a 640 x 480 window and up.
+// Smaller windows, or text that would cover half of one, get single size.
 constexpr float kHudScale = 2.0f;
+constexpr float kHudSmallScale = 1.0f;
 constexpr float kHudMarginPx = 4.0f;    // from the window corner to the box
 constexpr float kHudPaddingPx = 4.0f;   // from the box edge to the text
 constexpr float kHudLineUnits = 12.0f;  // stb_easy_font's line pitch, in font units
+
+// stb_easy_font only knows printable ASCII and takes a mutable string.
+std::string printable(std::string text) {
+  for (char& c : text)
+    if (c < 32 || c > 126) c = '?';
+  return text;
+}
+
+float fontWidthUnits(std::string text) {
+  return float(stb_easy_font_width(text.data()));
+}
+
+// Packs `parts` joined by `joiner` into lines no wider than `maxUnits`; a
+// part wider than that on its own gets a line of its own (and `fits` false).
+std::vector<std::string> packParts(const std::vector<std::string>& parts, const std::string& joiner,
+                                   float maxUnits, const std::string& indent, bool& fits) {
+  std::vector<std::string> out;
+  std::string line;
+  for (const std::string& part : parts) {
+    const std::string candidate =
+        line.empty() ? (out.empty() ? "" : indent) + part : line + joiner + part;
+    if (line.empty() || fontWidthUnits(candidate) <= maxUnits) {
+      line = candidate;
+    } else {
+      out.push_back(line);
+      line = indent + part;
+    }
+    if (fontWidthUnits(line) > maxUnits) fits = false;
+  }
+  if (!line.empty()) out.push_back(line);
+  return out;
+}
+
+std::vector<std::string> splitOn(const std::string& text, const std::string& separator) {
+  std::vector<std::string> parts;
+  for (size_t pos = 0;;) {
+    const size_t next = text.find(separator, pos);
+    std::string part = text.substr(pos, next == std::string::npos ? std::string::npos : next - pos);
+    if (!part.empty()) parts.push_back(part);
+    if (next == std::string::npos) break;
+    pos = next + separator.size();
+  }
+  return parts;
+}
+
+// Wraps one line: at field separators (two spaces) first; a field still too
+// wide is wrapped at single spaces.
+std::vector<std::string> wrapHudLine(const std::string& text, float maxUnits, bool& fits) {
+  if (fontWidthUnits(text) <= maxUnits) return {text};
+  std::vector<std::string> fields;
+  for (const std::string& field : splitOn(text, "  ")) {
+    if (fontWidthUnits("  " + field) <= maxUnits) {
+      fields.push_back(field);
+      continue;
+    }
+    bool wordsFit = true;
+    for (const std::string& piece : packParts(splitOn(field, " "), " ", maxUnits, "  ", wordsFit))
+      fields.push_back(piece.rfind("  ", 0) == 0 ? piece.substr(2) : piece);
+    if (!wordsFit) fits = false;
+  }
+  return packParts(fields, "  ", maxUnits, "  ", fits);
+}
 
 // The near field: each vertex carries its triangle's colour; `flat` and an
 // unorm8 attribute make the framebuffer byte equal to the byte on the CPU.
@@ -277,16 +343,12 @@ struct GlRenderer::Impl {
 
   void drawHud(const Camera& camera, std::span<const HudLine> hud) {
     if (hud.empty()) return;
+    const HudLayout layout = layoutHud(hud, camera.width, camera.height);
     // The box first (6 vertices), then the text as triangles.
     hudScratch.assign(6, glm::vec2(0.0f));
     std::vector<char> font;
-    float widthUnits = 0.0f;
-    for (size_t i = 0; i < hud.size(); ++i) {
-      // stb_easy_font only knows printable ASCII and takes a mutable string.
-      std::string text = hud[i].text;
-      for (char& c : text)
-        if (c < 32 || c > 126) c = '?';
-      widthUnits = std::max(widthUnits, float(stb_easy_font_width(text.data())));
+    for (size_t i = 0; i < layout.lines.size(); ++i) {
+      std::string text = layout.lines[i];
       font.resize(text.size() * 1024 + 64);  // 16 quads a character, more than any glyph needs
       const int quads = stb_easy_font_print(0.0f, float(i) * kHudLineUnits, text.data(), nullptr,
                                             font.data(), int(font.size()));
@@ -295,13 +357,10 @@ struct GlRenderer::Impl {
         std::memcpy(v, font.data() + size_t(q) * sizeof(v), sizeof(v));
         for (int k : {0, 1, 2, 0, 2, 3})
           hudScratch.push_back(kHudMarginPx + kHudPaddingPx +
-                               kHudScale * glm::vec2(v[k].x, v[k].y));
+                               layout.scale * glm::vec2(v[k].x, v[k].y));
       }
     }
-    const glm::vec2 lo(kHudMarginPx);
-    const glm::vec2 hi =
-        lo + 2.0f * kHudPaddingPx +
-        kHudScale * glm::vec2(widthUnits, float(hud.size()) * kHudLineUnits - 2.0f);
+    const glm::vec2 lo = layout.boxLo, hi = layout.boxHi;
     const glm::vec2 box[6] = {lo, {hi.x, lo.y}, hi, lo, hi, {lo.x, hi.y}};
     std::copy(std::begin(box), std::end(box), hudScratch.begin());
 
@@ -320,6 +379,30 @@ struct GlRenderer::Impl {
     glDrawArrays(GL_TRIANGLES, 6, GLsizei(hudScratch.size() - 6));
   }
 };
+
+HudLayout layoutHud(std::span<const HudLine> hud, int width, int height) {
+  HudLayout layout;
+  if (hud.empty()) return layout;
+  const float inner = std::max(0.0f, float(width) - 2.0f * (kHudMarginPx + kHudPaddingPx));
+  for (const float scale : {kHudScale, kHudSmallScale}) {
+    layout.scale = scale;
+    layout.lines.clear();
+    bool fits = true;
+    for (const HudLine& line : hud)
+      for (std::string& wrapped : wrapHudLine(printable(line.text), inner / scale, fits))
+        layout.lines.push_back(std::move(wrapped));
+    const float textHeight = scale * (float(layout.lines.size()) * kHudLineUnits - 2.0f);
+    if (fits && textHeight + 2.0f * (kHudMarginPx + kHudPaddingPx) <= 0.5f * float(height)) break;
+  }
+  float widthUnits = 0.0f;
+  for (const std::string& line : layout.lines)
+    widthUnits = std::max(widthUnits, fontWidthUnits(line));
+  layout.boxLo = glm::vec2(kHudMarginPx);
+  layout.boxHi =
+      layout.boxLo + 2.0f * kHudPaddingPx +
+      layout.scale * glm::vec2(widthUnits, float(layout.lines.size()) * kHudLineUnits - 2.0f);
+  return layout;
+}
 
 GlRenderer::GlRenderer() : impl_(std::make_unique<Impl>()) {}
 

@@ -34,6 +34,19 @@ struct HudLine {
   std::string text;
 };
 
+// Where the HUD's text goes in a window of `width` x `height` pixels: at
+// twice stb_easy_font's size (about 14 px glyphs), each line wrapped at its
+// field separators (two spaces, else one) so the box fits the width; at
+// single size when the wrapped text would cover more than half the height
+// or a single word is wider than the window. Printable ASCII only (others
+// become '?'). Pure: no GL context needed.
+struct HudLayout {
+  float scale = 2.0f;                  // pixels per font unit
+  std::vector<std::string> lines;      // after wrapping; continuations start with two spaces
+  glm::vec2 boxLo{0.0f}, boxHi{0.0f};  // the dark box, pixels from the top left
+};
+HudLayout layoutHud(std::span<const HudLine> hud, int width, int height);
+
 class GlRenderer {
  public:
   GlRenderer();  // compiles shaders; throws std::runtime_error with the GL log on failure

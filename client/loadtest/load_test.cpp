@@ -6,7 +6,6 @@
 #include <boost/asio.hpp>
 #include <chrono>
 #include <cmath>
-#include <deque>
 #include <map>
 #include <memory>
 #include <set>
@@ -16,7 +15,7 @@
 #include "common/core/ivec_less.h"
 #include "common/raycast/ray_query.h"
 #include "protocol/geometry/geometry_codec.h"
-#include "protocol/wire/messages.h"
+#include "protocol/wire/peer.h"
 
 namespace vistream {
 
@@ -84,16 +83,17 @@ PathPoint pointAt(const std::vector<PathSample>& path, double t) {
           a.yawDeg + u * dyaw + (back ? 180.0 : 0.0), glm::mix(a.pitchDeg, b.pitchDeg, u)};
 }
 
-class SimClient : public std::enable_shared_from_this<SimClient> {
+// One simulated client: a wire::Peer (protocol/wire/peer.h) for the
+// connection, a timer on the peer's strand for the walk. Every handler runs on
+// that strand.
+class SimClient : public PeerHandler, public std::enable_shared_from_this<SimClient> {
  public:
   SimClient(asio::io_context& io, Shared& shared, size_t index)
       : shared_(shared),
         opt_(shared.options),
         index_(index),
-        strand_(asio::make_strand(io)),
-        socket_(strand_),
-        timer_(strand_),
-        decoder_(64u << 20) {
+        peer_(Peer::create(asio::make_strand(io), {.maxFrameBytes = 64u << 20})),
+        timer_(peer_->strand()) {
     path_ = &opt_.paths[opt_.paths.size() == 1 ? 0 : index % opt_.paths.size()];
     const double span = path_->back().t - path_->front().t;
     offset_ = opt_.paths.size() == 1 && opt_.clients > 0
@@ -102,7 +102,7 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
   }
 
   void start() {
-    asio::dispatch(strand_, [self = shared_from_this()] {
+    asio::dispatch(peer_->strand(), [self = shared_from_this()] {
       self->connectStarted_ = Clock::now();
       // One timeout for the connect and the Welcome; tick() replaces it.
       self->timer_.expires_after(std::chrono::duration_cast<Clock::duration>(
@@ -116,13 +116,14 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
             fmt::format("no Welcome within {:g} s of connecting", self->opt_.connectTimeoutS),
             "handshake");
       });
-      self->socket_.async_connect(
+      self->peer_->socket().async_connect(
           self->shared_.endpoint, [self](const boost::system::error_code& ec) {
             if (self->done_) return;
             if (ec) return self->finish("connect: " + ec.message(), "connect");
             self->connected_ = true;
             boost::system::error_code ignored;
-            self->socket_.set_option(tcp::no_delay(true), ignored);
+            self->peer_->socket().set_option(tcp::no_delay(true), ignored);
+            self->peer_->start(self->weak_from_this());
             HelloT hello;
             hello.protocol_version = kProtocolVersion;
             hello.auth_token = self->opt_.token;
@@ -133,7 +134,6 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
             hello.capabilities->wants_avatars = self->opt_.avatars;
             self->helloSent_ = Clock::now();
             self->send(encodeMessage(std::move(hello)));
-            self->read();
           });
     });
   }
@@ -142,7 +142,7 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
   // connection; a client still connecting or walking is counted as cut off,
   // one already saying Bye finishes cleanly.
   void cutOffAtDeadline() {
-    asio::post(strand_, [self = shared_from_this()] {
+    asio::post(peer_->strand(), [self = shared_from_this()] {
       if (self->done_) return;
       if (self->walkEnded_) return self->finish("", "");
       self->cutOff = true;
@@ -154,12 +154,16 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
   }
 
   // Results, read after the io_context has stopped.
+  uint64_t bytesReceived() const { return peer_->bytesReceived(); }
   std::string errorReason;  // the first error's kind (a key of errors_by_reason); empty: none
   bool cutOff = false;
   uint64_t missesWhilePending = 0;
-  uint64_t bytes = 0, misses = 0, checks = 0, geometryFrames = 0, facesReceived = 0,
-           cellEntries = 0;
-  std::vector<double> latencies;
+  uint64_t misses = 0, checks = 0, geometryFrames = 0, facesReceived = 0, cellEntries = 0;
+  // Cell entries that found their cell ready, and the waits of those that
+  // did not (entry to CellReady, or to the end of the walk if it never came).
+  uint64_t cellEntriesReady = 0;
+  std::vector<double> waits;
+  std::vector<double> latencies;  // every entry: 0 for those found ready, then the waits
   double initialLoadMs = -1.0;
   std::vector<double> cpuPerClient;
   double walkedS = 0.0;
@@ -167,113 +171,94 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
 
  private:
   void send(std::vector<uint8_t> frame) {
-    auto buf = std::make_shared<std::vector<uint8_t>>(std::move(frame));
-    outbox_.push_back(buf);
-    if (outbox_.size() == 1) writeNext();
-  }
-  void writeNext() {
-    if (outbox_.empty() || done_) return;
-    asio::async_write(socket_, asio::buffer(*outbox_.front()),
-                      [self = shared_from_this()](const boost::system::error_code& ec, size_t) {
-                        if (self->done_) return;
-                        if (ec) return self->finish("write: " + ec.message(), "write");
-                        self->outbox_.pop_front();
-                        self->writeNext();
-                      });
-  }
-  void read() {
-    socket_.async_read_some(asio::buffer(buffer_), [self = shared_from_this()](
-                                                       const boost::system::error_code& ec,
-                                                       size_t n) {
-      if (self->done_) return;
-      if (ec)
-        return self->finish("connection closed by the server: " + ec.message(),
-                            self->walkEnded_ ? "" : "closed_by_server");
-      self->bytes += n;
-      if (!self->decoder_.feed(std::span<const uint8_t>(self->buffer_.data(), n)))
-        return self->finish("bad frame from the server: " + self->decoder_.error(), "bad_frame");
-      while (auto frame = self->decoder_.next()) {
-        self->onFrame(*envelopeOf(*frame));
-        if (self->done_) return;
-      }
-      if (self->decoder_.failed())
-        return self->finish("bad frame from the server: " + self->decoder_.error(), "bad_frame");
-      self->read();
-    });
+    if (!done_) peer_->send(std::move(frame));
   }
 
-  void onFrame(const Envelope& e) {
+  void onPeerEnd(PeerEnd why, const std::string& text) override {
+    switch (why) {
+      case PeerEnd::ConnectionLost:
+        return finish("connection closed by the server: " + text,
+                      walkEnded_ ? "" : "closed_by_server");
+      case PeerEnd::BadFrame:
+        return finish("bad frame from the server: " + text, "bad_frame");
+      case PeerEnd::WriteFailed:
+        return finish("write: " + text, "write");
+      case PeerEnd::OutboxFull:
+        return finish("the server is not reading: " + text, "write");
+    }
+  }
+
+  void onFrame(const Envelope& e) override {
+    if (done_) return;
+    dispatchPayload(
+        e,
+        Overloaded{
+            [this](const Welcome& w) { onWelcome(w); },
+            [this](const Geometry& g) { onGeometry(g); },
+            [this](const Evict& evict) { onEvict(evict); },
+            [this](const CellReady& r) { onCellReady(r); },
+            [this](const Stats& s) {
+              if (s.sessions() > 0)
+                cpuPerClient.push_back(s.server_cpu_ms_per_s() / double(s.sessions()));
+            },
+            [this](const Error& err) {
+              finish(fmt::format("server error {}: {}", EnumNameErrorCode(err.code()),
+                                 err.text() ? err.text()->str() : ""),
+                     "server_error");
+            },
+            [this](const Bye&) { finish("server said bye", walkEnded_ ? "" : "closed_by_server"); },
+            [](Payload) {},  // Avatar, PvsReply: not measured
+        });
+  }
+
+  void onWelcome(const Welcome& w) {
+    // A second Welcome would restart the walk (and so its end): refused.
+    if (welcomed_) return finish("a second Welcome", "protocol");
+    try {
+      grid_ = validateWelcome(w);
+    } catch (const InputError& error) {
+      return finish(std::string("Welcome without a usable grid: ") + error.what(), "handshake");
+    }
+    welcomed_ = true;
+    origin_ = grid_.localOrigin;
+    radius_ = grid_.radius;
+    held_.assign((size_t(grid_.faceCount) + 63) / 64, 0);
+    walkStarted_ = Clock::now();
+    tick();
+  }
+
+  void onGeometry(const Geometry& geometry) {
+    DecodedGeometry g;
+    std::string error;
+    if (!decodeGeometry(geometry, g, error)) return finish(error, "bad_frame");
+    ++geometryFrames;
+    for (uint32_t f : g.faces)
+      if ((f >> 6) < held_.size()) {
+        held_[f >> 6] |= uint64_t(1) << (f & 63);
+        ++facesReceived;
+      }
+  }
+
+  void onEvict(const Evict& evict) {
+    if (const auto* ids = evict.face_ids())
+      for (uint32_t f : *ids)
+        if ((f >> 6) < held_.size()) held_[f >> 6] &= ~(uint64_t(1) << (f & 63));
+    // Cells away from here may have lost faces; the server announces them again.
+    for (auto it = ready_.begin(); it != ready_.end();)
+      it = glm::all(glm::lessThanEqual(glm::abs(*it - cell_), glm::ivec3(1))) ? std::next(it)
+                                                                              : ready_.erase(it);
+  }
+
+  void onCellReady(const CellReady& r) {
+    if (!r.cell()) return;
     const auto now = Clock::now();
-    switch (e.payload_type()) {
-      case Payload::Welcome: {
-        // A second Welcome would restart the walk (and so its end): refused.
-        if (welcomed_) return finish("a second Welcome", "protocol");
-        const Welcome& w = *e.payload_as_Welcome();
-        if (!w.grid() || !w.grid()->cell_size() || !w.grid()->origin() || !w.grid()->dims() ||
-            !w.local_origin() || w.face_count() > (64u << 20))
-          return finish("Welcome without a usable grid", "handshake");
-        welcomed_ = true;
-        origin_ = fromWire(*w.local_origin());
-        gridOrigin_ = fromWire(*w.grid()->origin());
-        cellSize_ = fromWire(*w.grid()->cell_size());
-        dims_ = fromWire(*w.grid()->dims());
-        radius_ = w.near_field_radius_m();
-        held_.assign((size_t(w.face_count()) + 63) / 64, 0);
-        walkStarted_ = now;
-        tick();
-        return;
-      }
-      case Payload::Geometry: {
-        DecodedGeometry g;
-        std::string error;
-        if (!decodeGeometry(*e.payload_as_Geometry(), g, error)) return finish(error, "bad_frame");
-        ++geometryFrames;
-        for (uint32_t f : g.faces)
-          if ((f >> 6) < held_.size()) {
-            held_[f >> 6] |= uint64_t(1) << (f & 63);
-            ++facesReceived;
-          }
-        return;
-      }
-      case Payload::Evict: {
-        if (const auto* ids = e.payload_as_Evict()->face_ids())
-          for (uint32_t f : *ids)
-            if ((f >> 6) < held_.size()) held_[f >> 6] &= ~(uint64_t(1) << (f & 63));
-        // Cells away from here may have lost faces; the server announces them again.
-        for (auto it = ready_.begin(); it != ready_.end();)
-          it = glm::all(glm::lessThanEqual(glm::abs(*it - cell_), glm::ivec3(1)))
-                   ? std::next(it)
-                   : ready_.erase(it);
-        return;
-      }
-      case Payload::CellReady: {
-        const CellReady& r = *e.payload_as_CellReady();
-        if (!r.cell()) return;
-        const glm::ivec3 c = fromWire(*r.cell());
-        ready_.insert(c);
-        if (initialLoadMs < 0.0 && hasCell_ && c == cell_) initialLoadMs = msSince(helloSent_, now);
-        if (auto it = pending_.find(c); it != pending_.end()) {
-          latencies.push_back(msSince(it->second, now));
-          pending_.erase(it);
-        }
-        return;
-      }
-      case Payload::Stats: {
-        const Stats& s = *e.payload_as_Stats();
-        if (s.sessions() > 0)
-          cpuPerClient.push_back(s.server_cpu_ms_per_s() / double(s.sessions()));
-        return;
-      }
-      case Payload::Error: {
-        const Error& err = *e.payload_as_Error();
-        return finish(fmt::format("server error {}: {}", EnumNameErrorCode(err.code()),
-                                  err.text() ? err.text()->str() : ""),
-                      "server_error");
-      }
-      case Payload::Bye:
-        return finish("server said bye", walkEnded_ ? "" : "closed_by_server");
-      default:
-        return;  // Avatar, PvsReply: not measured
+    const glm::ivec3 c = fromWire(*r.cell());
+    ready_.insert(c);
+    if (initialLoadMs < 0.0 && hasCell_ && c == cell_) initialLoadMs = msSince(helloSent_, now);
+    if (auto it = pending_.find(c); it != pending_.end()) {
+      waits.push_back(msSince(it->second, now));
+      latencies.push_back(waits.back());
+      pending_.erase(it);
     }
   }
 
@@ -284,8 +269,10 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
     if (elapsed >= opt_.durationS) {
       walkEnded_ = true;
       walkedS = elapsed;
-      for (const auto& [c, t] : pending_)
-        latencies.push_back(msSince(t, now));  // still waiting: counted as such
+      for (const auto& [c, t] : pending_) {
+        waits.push_back(msSince(t, now));  // still waiting: counted as such
+        latencies.push_back(waits.back());
+      }
       pending_.clear();
       send(encodeBye("load test finished"));
       // Let the Bye go out, then close.
@@ -304,9 +291,7 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
     pose.client_time_s = elapsed;
     send(encodeMessage(std::move(pose)));
 
-    const glm::ivec3 cell =
-        glm::clamp(glm::ivec3(glm::floor((glm::vec3(local) - gridOrigin_) / cellSize_)),
-                   glm::ivec3(0), glm::max(dims_ - 1, glm::ivec3(0)));
+    const glm::ivec3 cell = grid_.cellOf(glm::vec3(local));
     if (!hasCell_ || cell != cell_) {
       cell_ = cell;
       const bool first = !hasCell_;
@@ -315,10 +300,13 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
         initialLoadMs = msSince(helloSent_, now);
       if (!first && initialLoadMs >= 0.0) {
         ++cellEntries;
-        if (ready_.count(cell))
+        if (ready_.count(cell)) {
+          ++cellEntriesReady;
           latencies.push_back(0.0);
-        else
+        } else {
+          // Re-entering a cell still awaited joins the first entry's wait.
           pending_.emplace(cell, now);
+        }
       }
     }
     ++frame_;
@@ -359,12 +347,12 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
           "[{:.3f},{:.3f},{:.3f} .. "
           "{:.3f},{:.3f},{:.3f}] ({})",
           index_, face, eye.x + origin_.x, eye.y + origin_.y, eye.z + origin_.z, cell_.x, cell_.y,
-          cell_.z, gridOrigin_.x + cellSize_.x * float(cell_.x) + origin_.x,
-          gridOrigin_.y + cellSize_.y * float(cell_.y) + origin_.y,
-          gridOrigin_.z + cellSize_.z * float(cell_.z) + origin_.z,
-          gridOrigin_.x + cellSize_.x * float(cell_.x + 1) + origin_.x,
-          gridOrigin_.y + cellSize_.y * float(cell_.y + 1) + origin_.y,
-          gridOrigin_.z + cellSize_.z * float(cell_.z + 1) + origin_.z,
+          cell_.z, grid_.gridOrigin.x + grid_.cellSize.x * float(cell_.x) + origin_.x,
+          grid_.gridOrigin.y + grid_.cellSize.y * float(cell_.y) + origin_.y,
+          grid_.gridOrigin.z + grid_.cellSize.z * float(cell_.z) + origin_.z,
+          grid_.gridOrigin.x + grid_.cellSize.x * float(cell_.x + 1) + origin_.x,
+          grid_.gridOrigin.y + grid_.cellSize.y * float(cell_.y + 1) + origin_.y,
+          grid_.gridOrigin.z + grid_.cellSize.z * float(cell_.z + 1) + origin_.z,
           ready_.count(cell_) ? "cell ready" : "cell not ready yet");
   }
 
@@ -380,27 +368,22 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
     }
     if (walkedS == 0.0 && walkStarted_ != Clock::time_point{})
       walkedS = std::chrono::duration<double>(Clock::now() - walkStarted_).count();
-    boost::system::error_code ignored;
-    socket_.close(ignored);
+    peer_->close();
     timer_.cancel();
   }
 
   Shared& shared_;
   const LoadTestOptions& opt_;
   size_t index_;
-  asio::strand<asio::io_context::executor_type> strand_;
-  tcp::socket socket_;
+  std::shared_ptr<Peer> peer_;
   asio::steady_timer timer_;
-  FrameDecoder decoder_;
-  std::array<uint8_t, 65536> buffer_{};
-  std::deque<std::shared_ptr<std::vector<uint8_t>>> outbox_;
   const std::vector<PathSample>* path_ = nullptr;
   double offset_ = 0.0;
   bool connected_ = false, welcomed_ = false, done_ = false, walkEnded_ = false, hasCell_ = false;
   Clock::time_point connectStarted_, helloSent_, walkStarted_;
+  WelcomeGrid grid_;
   glm::dvec3 origin_{0.0};
-  glm::vec3 gridOrigin_{0.0f}, cellSize_{1.0f};
-  glm::ivec3 dims_{1}, cell_{0};
+  glm::ivec3 cell_{0};
   float radius_ = 0.0f;
   std::vector<uint64_t> held_;
   std::set<glm::ivec3, IvecLess> ready_;
@@ -411,19 +394,21 @@ class SimClient : public std::enable_shared_from_this<SimClient> {
 }  // namespace
 
 LoadTestReport runLoadTest(const LoadTestOptions& options) {
-  if (options.clients == 0) throwInputError("--clients must be at least 1");
+  if (options.clients == 0)
+    throwInputError(InputErrorCode::BadArgument, "--clients must be at least 1");
   if (options.paths.empty() || std::any_of(options.paths.begin(), options.paths.end(),
                                            [](const auto& p) { return p.empty(); }))
-    throwInputError("no path to walk");
+    throwInputError(InputErrorCode::BadArgument, "no path to walk");
   if (!(options.durationS > 0.0) || !(options.fps > 0.0) || !(options.speed >= 0.0) ||
       !std::isfinite(options.durationS) || !std::isfinite(options.speed))
-    throwInputError("--duration and --fps must be positive and --speed non-negative");
+    throwInputError(InputErrorCode::BadArgument,
+                    "--duration and --fps must be positive and --speed non-negative");
   if (!(options.connectTimeoutS > 0.0) || !std::isfinite(options.connectTimeoutS))
-    throwInputError("--connect-timeout must be positive");
+    throwInputError(InputErrorCode::BadArgument, "--connect-timeout must be positive");
   const double graceS =
       options.graceS.value_or(options.connectTimeoutS + kDefaultGraceBeyondConnectS);
   if (!(graceS >= 0.0) || !std::isfinite(graceS))
-    throwInputError("--grace must be zero or positive");
+    throwInputError(InputErrorCode::BadArgument, "--grace must be zero or positive");
   Shared shared{options, nullptr, {}, {}};
   if (options.scene) {
     shared.triangles = flattenScene(*options.scene, true);
@@ -435,7 +420,8 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
     boost::system::error_code ec;
     auto results = resolver.resolve(options.host, std::to_string(options.port), ec);
     if (ec || results.empty())
-      throwInputError("--host {}: cannot resolve it: {}", options.host, ec.message());
+      throwInputError(InputErrorCode::Unreachable, "--host {}: cannot resolve it: {}", options.host,
+                      ec.message());
     shared.endpoint = *results.begin();
   }
   const auto started = Clock::now();
@@ -460,9 +446,9 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
   io.run_for(std::chrono::seconds(2));
   const double wall = std::chrono::duration<double>(Clock::now() - started).count();
 
-  std::vector<double> latencies, initial, cpu, bytesPerS;
-  uint64_t misses = 0, checks = 0, entries = 0, frames = 0, faces = 0, totalBytes = 0,
-           pendingMisses = 0;
+  std::vector<double> latencies, waits, initial, cpu, bytesPerS;
+  uint64_t misses = 0, checks = 0, entries = 0, entriesReady = 0, frames = 0, faces = 0,
+           totalBytes = 0, pendingMisses = 0;
   size_t loaded = 0, failed = 0;
   std::string firstError, firstFailure;
   auto failedClients = nlohmann::json::array(), cutOffClients = nlohmann::json::array();
@@ -470,6 +456,7 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
   for (size_t i = 0; i < clients.size(); ++i) {
     const SimClient* c = clients[i].get();
     latencies.insert(latencies.end(), c->latencies.begin(), c->latencies.end());
+    waits.insert(waits.end(), c->waits.begin(), c->waits.end());
     if (c->initialLoadMs >= 0.0) {
       initial.push_back(c->initialLoadMs);
       ++loaded;
@@ -493,14 +480,15 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
     }
     if (c->cutOff) cutOffClients.push_back(i);
     cpu.insert(cpu.end(), c->cpuPerClient.begin(), c->cpuPerClient.end());
-    bytesPerS.push_back(c->walkedS > 0.0 ? double(c->bytes) / c->walkedS : 0.0);
+    bytesPerS.push_back(c->walkedS > 0.0 ? double(c->bytesReceived()) / c->walkedS : 0.0);
     misses += c->misses;
     pendingMisses += c->missesWhilePending;
     checks += c->checks;
     entries += c->cellEntries;
+    entriesReady += c->cellEntriesReady;
     frames += c->geometryFrames;
     faces += c->facesReceived;
-    totalBytes += c->bytes;
+    totalBytes += c->bytesReceived();
   }
   double meanBytes = 0.0;
   for (double b : bytesPerS) meanBytes += b / double(bytesPerS.size());
@@ -514,6 +502,9 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
                  {"bytes_per_client_per_s", meanBytes},
                  {"cell_ready_latency_ms", percentiles(latencies)},
                  {"cell_entries", entries},
+                 {"cell_entries_ready", entriesReady},
+                 {"cell_entries_waited", entries - entriesReady},
+                 {"cell_ready_wait_ms", percentiles(waits)},
                  {"visibility_misses", misses},
                  {"visibility_misses_cell_not_ready", pendingMisses},
                  {"frames_checked", checks},

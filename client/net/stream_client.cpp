@@ -7,7 +7,6 @@
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
-#include <deque>
 #include <map>
 #include <mutex>
 #include <set>
@@ -17,7 +16,7 @@
 #include "common/core/error.h"
 #include "common/core/ivec_less.h"
 #include "protocol/geometry/geometry_codec.h"
-#include "protocol/wire/messages.h"
+#include "protocol/wire/peer.h"
 
 namespace vistream {
 
@@ -32,31 +31,26 @@ struct HeldFace {
 };
 }  // namespace
 
-// Handlers hold a plain pointer: StreamClient joins the io thread before the
-// Impl goes, and a shared pointer in a handler left queued would keep the
-// Impl (which owns the io_context holding that handler) alive forever.
-struct StreamClient::Impl {
+// The connection is a wire::Peer (protocol/wire/peer.h): its read loop,
+// outbox and Welcome checks are the load tester's too. The Peer holds the
+// Impl weakly; StreamClient joins the io thread before the Impl goes, and
+// drains the handlers left (drain()), so none outlives the io_context.
+struct StreamClient::Impl : PeerHandler {
   asio::io_context io;
-  tcp::socket socket{io};
+  std::shared_ptr<Peer> peer = Peer::create(asio::make_strand(io), {.maxFrameBytes = 64u << 20});
   std::thread thread;
-  FrameDecoder decoder{64u << 20};
-  std::array<uint8_t, 1 << 16> buffer{};
-  std::deque<std::shared_ptr<std::vector<uint8_t>>> outbox;
 
   mutable std::mutex mutex;
   std::condition_variable changed;
   bool welcomed = false, ended = false;
   std::string endReason;
-  glm::dvec3 origin{0.0};
-  float radius = 0.0f;
-  glm::vec3 gridOrigin{0.0f}, cellSize{1.0f};
-  glm::ivec3 dims{1};
+  WelcomeGrid grid;
   std::vector<glm::vec3> materials;
   glm::vec3 sky{0.55f, 0.7f, 0.9f};
   std::map<uint32_t, HeldFace> faces;
   std::set<glm::ivec3, IvecLess> ready;
   glm::ivec3 poseCell{0};
-  uint64_t version = 0, bytes = 0;
+  uint64_t version = 0;
   size_t trianglesHeld = 0, maxTriangles = 0;
 
   void finish(const std::string& why) {
@@ -67,73 +61,60 @@ struct StreamClient::Impl {
       endReason = why;
     }
     changed.notify_all();
-    boost::system::error_code ignored;
-    socket.close(ignored);
+    peer->close();
   }
   void send(std::vector<uint8_t> frame) {
     {
       std::lock_guard lock(mutex);
       if (ended) return;  // nothing would carry it, and the post would never run
     }
-    asio::post(io, [self = this, buf = std::make_shared<std::vector<uint8_t>>(std::move(frame))] {
-      self->outbox.push_back(buf);
-      if (self->outbox.size() == 1) self->writeNext();
-    });
+    peer->send(std::move(frame));
   }
-  void writeNext() {
-    if (outbox.empty()) return;
-    asio::async_write(socket, asio::buffer(*outbox.front()),
-                      [self = this](const boost::system::error_code& ec, size_t) {
-                        if (ec) return self->finish("write: " + ec.message());
-                        self->outbox.pop_front();
-                        self->writeNext();
-                      });
+  // Runs what is left on the io_context once its thread has gone: after
+  // close() every pending operation ends at once, releasing the Peer.
+  void drain() {
+    peer->close();
+    io.restart();
+    io.run();
   }
-  void read() {
-    socket.async_read_some(
-        asio::buffer(buffer), [self = this](const boost::system::error_code& ec, size_t n) {
-          if (ec) return self->finish("connection closed: " + ec.message());
-          {
-            std::lock_guard lock(self->mutex);
-            self->bytes += n;
-          }
-          if (!self->decoder.feed(std::span<const uint8_t>(self->buffer.data(), n)))
-            return self->finish("bad frame from the server: " + self->decoder.error());
-          while (auto frame = self->decoder.next())
-            if (!self->onFrame(*envelopeOf(*frame))) return;
-          if (self->decoder.failed())
-            return self->finish("bad frame from the server: " + self->decoder.error());
-          self->read();
-        });
+  void onPeerEnd(PeerEnd why, const std::string& text) override {
+    switch (why) {
+      case PeerEnd::ConnectionLost:
+        return finish("connection closed: " + text);
+      case PeerEnd::BadFrame:
+        return finish("bad frame from the server: " + text);
+      case PeerEnd::WriteFailed:
+        return finish("write: " + text);
+      case PeerEnd::OutboxFull:
+        return finish("the server is not reading: " + text);
+    }
   }
-  // False when the session ended.
-  bool onFrame(const Envelope& e) {
-    switch (e.payload_type()) {
-      case Payload::Welcome: {
-        const Welcome& w = *e.payload_as_Welcome();
-        if (!w.grid() || !isFinite(w.grid()->cell_size()) || !isFinite(w.grid()->origin()) ||
-            !w.grid()->dims() || !isFinite(w.local_origin()) ||
-            !(w.grid()->cell_size()->x() > 0.0f) || !(w.grid()->cell_size()->y() > 0.0f) ||
-            !(w.grid()->cell_size()->z() > 0.0f) ||
-            !(std::isfinite(w.near_field_radius_m()) && w.near_field_radius_m() >= 0.0f)) {
-          finish("the server's Welcome has no usable grid");
-          return false;
-        }
-        bool again;
-        {
-          std::lock_guard lock(mutex);
-          again = welcomed;
-        }
-        if (again) {
-          finish("the server sent a second Welcome");
-          return false;
-        }
-        std::lock_guard lock(mutex);
-        origin = fromWire(*w.local_origin());
-        radius = w.near_field_radius_m();
-        gridOrigin = fromWire(*w.grid()->origin());
-        cellSize = fromWire(*w.grid()->cell_size());
-        dims = fromWire(*w.grid()->dims());
+  void onFrame(const Envelope& e) override {
+    dispatchPayload(
+        e, Overloaded{
+               [this](const Welcome& w) { onWelcome(w); },
+               [this](const Geometry& g) { onGeometry(g); },
+               [this](const Evict& evict) { onEvict(evict); },
+               [this](const CellReady& r) { onCellReady(r); },
+               [this](const Error& err) {
+                 finish(fmt::format("the server refused: {}: {}", EnumNameErrorCode(err.code()),
+                                    err.text() ? err.text()->str() : ""));
+               },
+               [this](const Bye&) { finish("the server said bye"); },
+               [](Payload) {},  // Avatar, Stats, PvsReply: not used here
+           });
+  }
+  void onWelcome(const Welcome& w) {
+    WelcomeGrid checked;
+    try {
+      checked = validateWelcome(w);
+    } catch (const InputError& error) {
+      return finish(std::string("the server's Welcome has no usable grid: ") + error.what());
+    }
+    {
+      std::lock_guard lock(mutex);
+      if (!welcomed) {
+        grid = checked;
         if (isFinite(w.environment_colour()))
           sky = glm::clamp(fromWire(*w.environment_colour()), 0.0f, 1.0f);
         if (w.materials())
@@ -143,76 +124,55 @@ struct StreamClient::Impl {
                                     : glm::vec3(0.8f));
         welcomed = true;
         changed.notify_all();
-        return true;
+        return;
       }
-      case Payload::Geometry: {
-        DecodedGeometry g;
-        std::string error;
-        if (!decodeGeometry(*e.payload_as_Geometry(), g, error)) {
-          finish("bad geometry from the server: " + error);
-          return false;
-        }
-        for (const glm::vec3& p : g.positions)
-          if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
-            finish("the server sent geometry with non-finite positions");
-            return false;
-          }
-        bool tooMuch = false;
-        {
-          std::lock_guard lock(mutex);
-          size_t index = 0;
-          for (size_t f = 0; f < g.faces.size(); ++f) {
-            HeldFace& h = faces[g.faces[f]];
-            trianglesHeld -= h.corners.size() / 3;
-            h.material = g.materials[f];
-            h.corners.clear();
-            for (uint16_t t = 0; t < g.triangleCounts[f]; ++t, index += 3)
-              for (int k = 0; k < 3; ++k)
-                h.corners.push_back(g.positions[g.indices[index + size_t(k)]]);
-            trianglesHeld += h.corners.size() / 3;
-          }
-          tooMuch = trianglesHeld > maxTriangles;
-          ++version;
-        }
-        if (tooMuch) {
-          finish(fmt::format("the server sent more than {} triangles", maxTriangles));
-          return false;
-        }
-        changed.notify_all();
-        return true;
-      }
-      case Payload::Evict: {
-        std::lock_guard lock(mutex);
-        if (const auto* ids = e.payload_as_Evict()->face_ids())
-          for (uint32_t f : *ids)
-            if (auto it = faces.find(f); it != faces.end()) {
-              trianglesHeld -= it->second.corners.size() / 3;
-              faces.erase(it);
-            }
-        ready.clear();  // the server announces complete cells again
-        ++version;
-        return true;
-      }
-      case Payload::CellReady: {
-        const CellReady& r = *e.payload_as_CellReady();
-        if (!r.cell()) return true;
-        std::lock_guard lock(mutex);
-        ready.insert(fromWire(*r.cell()));
-        changed.notify_all();
-        return true;
-      }
-      case Payload::Error: {
-        const Error& err = *e.payload_as_Error();
-        finish(fmt::format("the server refused: {}: {}", EnumNameErrorCode(err.code()),
-                           err.text() ? err.text()->str() : ""));
-        return false;
-      }
-      case Payload::Bye:
-        finish("the server said bye");
-        return false;
-      default:
-        return true;
     }
+    finish("the server sent a second Welcome");
+  }
+  void onGeometry(const Geometry& geometry) {
+    DecodedGeometry g;
+    std::string error;
+    if (!decodeGeometry(geometry, g, error))
+      return finish("bad geometry from the server: " + error);
+    for (const glm::vec3& p : g.positions)
+      if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+        return finish("the server sent geometry with non-finite positions");
+    bool tooMuch = false;
+    {
+      std::lock_guard lock(mutex);
+      size_t index = 0;
+      for (size_t f = 0; f < g.faces.size(); ++f) {
+        HeldFace& h = faces[g.faces[f]];
+        trianglesHeld -= h.corners.size() / 3;
+        h.material = g.materials[f];
+        h.corners.clear();
+        for (uint16_t t = 0; t < g.triangleCounts[f]; ++t, index += 3)
+          for (int k = 0; k < 3; ++k)
+            h.corners.push_back(g.positions[g.indices[index + size_t(k)]]);
+        trianglesHeld += h.corners.size() / 3;
+      }
+      tooMuch = trianglesHeld > maxTriangles;
+      ++version;
+    }
+    if (tooMuch) return finish(fmt::format("the server sent more than {} triangles", maxTriangles));
+    changed.notify_all();
+  }
+  void onEvict(const Evict& evict) {
+    std::lock_guard lock(mutex);
+    if (const auto* ids = evict.face_ids())
+      for (uint32_t f : *ids)
+        if (auto it = faces.find(f); it != faces.end()) {
+          trianglesHeld -= it->second.corners.size() / 3;
+          faces.erase(it);
+        }
+    ready.clear();  // the server announces complete cells again
+    ++version;
+  }
+  void onCellReady(const CellReady& r) {
+    if (!r.cell()) return;
+    std::lock_guard lock(mutex);
+    ready.insert(fromWire(*r.cell()));
+    changed.notify_all();
   }
 };
 
@@ -225,12 +185,13 @@ StreamClient::StreamClient(const StreamClientOptions& o) : impl_(std::make_share
     tcp::resolver resolver(s.io);
     endpoints = resolver.resolve(o.host, std::to_string(o.port));
   } catch (const boost::system::system_error& e) {
-    throwInputError("cannot resolve {}: {}", where, e.code().message());
+    throwInputError(InputErrorCode::Unreachable, "cannot resolve {}: {}", where,
+                    e.code().message());
   }
   // Connect with a deadline: an unreachable host must not hang the client.
   boost::system::error_code connectError = asio::error::timed_out;
   bool connected = false;
-  asio::async_connect(s.socket, endpoints,
+  asio::async_connect(s.peer->socket(), endpoints,
                       [&](const boost::system::error_code& ec, const tcp::endpoint&) {
                         connectError = ec;
                         connected = !ec;
@@ -238,17 +199,16 @@ StreamClient::StreamClient(const StreamClientOptions& o) : impl_(std::make_share
   s.io.run_for(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
       std::chrono::duration<double>(o.timeoutS)));
   if (!connected) {
-    boost::system::error_code ignored;
-    s.socket.close(ignored);
+    s.drain();
     throwInputError(
-        "cannot connect to {}: {}", where,
+        InputErrorCode::Unreachable, "cannot connect to {}: {}", where,
         connectError == asio::error::timed_out || connectError == asio::error::operation_aborted
             ? fmt::format("no answer within {:.0f} s", o.timeoutS)
             : connectError.message());
   }
   s.io.restart();
   boost::system::error_code ignored;
-  s.socket.set_option(tcp::no_delay(true), ignored);
+  s.peer->socket().set_option(tcp::no_delay(true), ignored);
   HelloT hello;
   hello.protocol_version = kProtocolVersion;
   hello.auth_token = o.token;
@@ -256,8 +216,8 @@ StreamClient::StreamClient(const StreamClientOptions& o) : impl_(std::make_share
   hello.capabilities = std::make_unique<CapabilitiesT>();
   hello.capabilities->near_field_radius_m = o.radius;
   hello.capabilities->wants_avatars = false;
+  s.peer->start(impl_);
   s.send(encodeMessage(std::move(hello)));
-  s.read();
   // The io thread never owns the Impl: the StreamClient joins it first.
   s.thread = std::thread([&io = s.io] { io.run(); });
   std::unique_lock lock(s.mutex);
@@ -267,41 +227,42 @@ StreamClient::StreamClient(const StreamClientOptions& o) : impl_(std::make_share
     const std::string why =
         answered ? s.endReason : fmt::format("no Welcome within {:.0f} s", o.timeoutS);
     lock.unlock();
-    s.io.stop();  // the io thread must not touch the socket while finish() closes it
+    s.io.stop();  // the io thread must not touch the peer while finish() closes it
     s.thread.join();
     s.finish(why);
-    throwInputError("{}: {}", where, why);
+    s.drain();
+    throwInputError(InputErrorCode::Unreachable, "{}: {}", where, why);
   }
 }
 
 StreamClient::~StreamClient() {
   if (!impl_) return;
   impl_->send(encodeBye("client closed"));
-  asio::post(impl_->io, [self = impl_.get()] {
+  asio::post(impl_->peer->strand(), [self = impl_.get()] {
     // Let the Bye leave, then close.
-    auto timer = std::make_shared<asio::steady_timer>(self->io, std::chrono::milliseconds(100));
+    auto timer =
+        std::make_shared<asio::steady_timer>(self->peer->strand(), std::chrono::milliseconds(100));
     timer->async_wait([self, timer](const boost::system::error_code&) { self->finish("closed"); });
   });
   if (impl_->thread.joinable()) impl_->thread.join();
+  impl_->drain();
 }
 
 glm::dvec3 StreamClient::origin() const {
   std::lock_guard lock(impl_->mutex);
-  return impl_->origin;
+  return impl_->grid.localOrigin;
 }
 
 float StreamClient::radius() const {
   std::lock_guard lock(impl_->mutex);
-  return impl_->radius;
+  return impl_->grid.radius;
 }
 
 void StreamClient::sendPose(const glm::vec3& eye, float yawDeg, float pitchDeg,
                             const glm::vec3& velocity) {
   {
     std::lock_guard lock(impl_->mutex);
-    impl_->poseCell =
-        glm::clamp(glm::ivec3(glm::floor((eye - impl_->gridOrigin) / impl_->cellSize)),
-                   glm::ivec3(0), glm::max(impl_->dims - 1, glm::ivec3(0)));
+    impl_->poseCell = impl_->grid.cellOf(eye);
   }
   PoseT pose;
   pose.position = std::make_unique<Vec3d>(toWire(glm::dvec3(eye)));
@@ -344,8 +305,7 @@ uint64_t StreamClient::version() const {
 }
 
 uint64_t StreamClient::bytesReceived() const {
-  std::lock_guard lock(impl_->mutex);
-  return impl_->bytes;
+  return impl_->peer->bytesReceived();
 }
 
 size_t StreamClient::facesHeld() const {

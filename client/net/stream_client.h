@@ -1,7 +1,7 @@
 // The rendering client's connection to a vistream-server: Hello, then poses
 // out and geometry in, on a background thread. The renderer takes snapshots
 // of the triangles held so far. Everything from the server is checked: a
-// Welcome without a finite grid, a second Welcome, geometry that does not
+// Welcome that wire::validateWelcome refuses, a second Welcome, geometry that does not
 // decode or has non-finite positions, or more than maxTriangles held end the
 // session with a message in error(); once ended, poses are dropped.
 //
@@ -30,8 +30,9 @@ struct StreamClientOptions {
 
 class StreamClient {
  public:
-  // Connects and waits for the Welcome; throws InputError naming the server
-  // and the reason (refused, timed out, rejected with an Error message).
+  // Connects and waits for the Welcome; throws InputError (code Unreachable)
+  // naming the server and the reason (refused, timed out, rejected with an
+  // Error message, a Welcome that validateWelcome refuses).
   explicit StreamClient(const StreamClientOptions& options);
   ~StreamClient();  // says Bye and closes
   StreamClient(const StreamClient&) = delete;

@@ -47,7 +47,9 @@ void writePng(const ImageRgb8& image, const std::filesystem::path& path) {
 ImageRgb8 readPng(const std::filesystem::path& path) {
   int w = 0, h = 0, n = 0;
   unsigned char* data = stbi_load(path.string().c_str(), &w, &h, &n, 3);
-  if (!data) throwInputError("{}: cannot read image: {}", path.string(), stbi_failure_reason());
+  if (!data)
+    throwInputError(InputErrorCode::BadFile, "{}: cannot read image: {}", path.string(),
+                    stbi_failure_reason());
   ImageRgb8 img;
   img.width = w;
   img.height = h;

@@ -5,6 +5,7 @@
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <cstdio>
 #include <iostream>
 #include <nlohmann/json.hpp>
@@ -18,7 +19,9 @@
 #include "common/generate/scene_spec.h"
 #include "common/raycast/ray_query.h"
 #include "common/raycast/sampled_visibility.h"
-#include "common/scene/effects.h"
+#include "common/scene/manifest.h"
+#include "common/world/effects.h"
+#include "common/world/static_world.h"
 
 namespace vistream {
 namespace {
@@ -37,9 +40,13 @@ int cmdGenerate(const std::string& type, const std::string& preset, uint64_t see
                 const std::string& out, bool asJson) {
   std::string chosen = type;
   if (type == "city")
-    chosen = preset.empty() ? "city1" : preset;
+    chosen = preset.empty() ? "city1" : preset;  // --preset is checked at parse time
   else if (!preset.empty())
     throwInputError("--preset applies to 'city' only, not '{}'", type);
+  const auto& types = sceneTypes();
+  if (std::find(types.begin(), types.end(), chosen) == types.end())
+    throwInputError("generate: unknown scene type '{}': expected city or one of {}", chosen,
+                    fmt::join(types, ", "));
   Stopwatch clock;
   const PolygonScene polygons = generate(chosen, seed);
   const double genMs = clock.ms();
@@ -72,24 +79,32 @@ int cmdGenerate(const std::string& type, const std::string& preset, uint64_t see
   return 0;
 }
 
-struct StaticWorld {
-  FlatTriangles triangles;
-  std::unique_ptr<RayQuery> rays;
-};
-
-StaticWorld buildStaticWorld(const Scene& scene) {
-  StaticWorld w;
-  w.triangles = flattenScene(scene, /*staticOnly=*/true);
-  w.rays = makeEmbreeRayQuery(w.triangles);
-  return w;
+// The components of the static geometry by class (solids.h), for `info`.
+json solidsJson(const SolidCensus& c) {
+  json out = json::object();
+  for (size_t k = 0; k < kSolidClassCount; ++k)
+    out[solidClassName(SolidClass(k))] = {{"components", c.components[k]}, {"faces", c.faces[k]}};
+  return out;
 }
 
-int cmdInfo(const std::string& spec, const SceneLimits& limits, bool asJson) {
+std::string solidsRow(const SolidCensus& c) {
+  std::string out;
+  for (size_t k = 0; k < kSolidClassCount; ++k)
+    out += fmt::format("{}{} {} ({} faces)", k ? ", " : "", c.components[k],
+                       solidClassName(SolidClass(k)), c.faces[k]);
+  return out;
+}
+
+int cmdInfo(const std::string& spec, const SceneLimits& limits, const GroundChoice& ground,
+            bool asJson) {
   Stopwatch clock;
   const Scene scene = openScene(spec, limits);
   const double loadMs = clock.ms();
-  const StaticWorld world = buildStaticWorld(scene);
-  const FreeSpace fs = FreeSpace::build(*world.rays, scene.bounds());
+  StaticWorldOptions worldOptions;
+  worldOptions.ground = ground;
+  const StaticWorld world = buildStaticWorld(scene, worldOptions);
+  const FreeSpace& fs = world.freeSpace;
+  const SolidCensus solids = world.solids.census();
   const SceneEffects effects = decideEffects(scene, *world.rays, fs);
   const Box3d b = scene.fileBounds();
   size_t dynamicTris = 0;
@@ -118,7 +133,15 @@ int cmdInfo(const std::string& spec, const SceneLimits& limits, bool asJson) {
                       {"free_space",
                        {{"cell_size", fs.cellSize()},
                         {"walkable_columns", fs.walkableCount()},
-                        {"open_sky_fraction", effects.openSkyFraction}}},
+                        {"open_sky_fraction", effects.openSkyFraction},
+                        {"empty_reason", fs.emptyReason()}}},
+                      {"ground",
+                       {{"assumed", world.ground.y.has_value()},
+                        {"y", world.ground.y ? json(scene.origin.y + double(*world.ground.y))
+                                             : json(nullptr)},
+                        {"bare_footprint", world.ground.bareFootprint},
+                        {"why", world.ground.why}}},
+                      {"solids", solidsJson(solids)},
                       {"effects", decisions},
                       {"object_list", objects},
                       {"load_ms", loadMs}}
@@ -127,8 +150,12 @@ int cmdInfo(const std::string& spec, const SceneLimits& limits, bool asJson) {
     return 0;
   }
   fmt::print("scene {}\n", scene.name);
-  printRow("objects", fmt::format("{} ({} dynamic, {} triangles)", scene.objects.size(),
-                                  scene.dynamicObjectCount(), dynamicTris));
+  // Say what each count is: "0 dynamic, 0 triangles" read as an empty scene.
+  printRow("objects", fmt::format("{} ({} static, {} dynamic)", scene.objects.size(),
+                                  scene.objects.size() - scene.dynamicObjectCount(),
+                                  scene.dynamicObjectCount()));
+  if (scene.dynamicObjectCount() > 0)
+    printRow("triangles of dynamic objects", fmt::format("{}", dynamicTris));
   printRow("faces", fmt::format("{}", scene.faceCount));
   printRow("triangles", fmt::format("{}", scene.triangleCount()));
   printRow("degenerate triangles", fmt::format("{}", scene.diagnostics.degenerateTriangles));
@@ -139,6 +166,9 @@ int cmdInfo(const std::string& spec, const SceneLimits& limits, bool asJson) {
   printRow("materials / skins / anims", fmt::format("{} / {} / {}", scene.materials.size(),
                                                     scene.skins.size(), scene.animations.size()));
   printRow("free space", fmt::format("{} columns of {:.2f} m", fs.walkableCount(), fs.cellSize()));
+  if (fs.walkableCount() == 0) printRow("no free space because", fs.emptyReason());
+  printRow("ground", world.ground.why);
+  printRow("components", solidsRow(solids));
   printRow("load time (ms)", fmt::format("{:.1f}", loadMs));
   fmt::print("effects the scene calls for:\n");
   for (const auto& d : effects.decisions)
@@ -146,19 +176,19 @@ int cmdInfo(const std::string& spec, const SceneLimits& limits, bool asJson) {
   return 0;
 }
 
-int cmdPath(const std::string& spec, const SceneLimits& limits, double speed, size_t frames,
-            uint64_t seed, double fps, const std::string& out) {
-  if (frames == 0) throwInputError("--frames must be at least 1");
-  if (!(fps > 0.0)) throwInputError("--fps must be positive");
+int cmdPath(const std::string& spec, const SceneLimits& limits, const GroundChoice& ground,
+            double speed, size_t frames, uint64_t seed, double fps, const std::string& out) {
+  // --speed, --frames and --fps are range-checked at parse time.
   const Scene scene = openScene(spec, limits);
-  const StaticWorld world = buildStaticWorld(scene);
-  const FreeSpace fs = FreeSpace::build(*world.rays, scene.bounds());
+  StaticWorldOptions worldOptions;
+  worldOptions.ground = ground;
+  const StaticWorld world = buildStaticWorld(scene, worldOptions);
   PathOptions options;
   options.speed = speed;
   options.frames = frames;
   options.seed = seed;
   options.fps = fps;
-  const auto samples = generatePath(scene, fs, options);
+  const auto samples = generatePath(scene, world.freeSpace, options);
   writePath(samples, out);
   spdlog::info("wrote {} frames ({:.1f} s at {:.2f} m/s) to {}", samples.size(), samples.back().t,
                kWalkingSpeed * speed, out);
@@ -171,16 +201,17 @@ int cmdVisible(const std::string& spec, const SceneLimits& limits, const std::st
   if (v[0] > v[3] || v[1] > v[4] || v[2] > v[5])
     throwInputError("--cell: expected x0,y0,z0,x1,y1,z1 with x0<=x1, y0<=y1, z0<=z1, got '{}'",
                     cellText);
-  if (points == 0) throwInputError("--points must be at least 1");
-  if (res < 1 || res > 4096) throwInputError("--res must be in 1..4096, got {}", res);
+  // --points and --res are range-checked at parse time.
   const Scene scene = openScene(spec, limits);
-  const StaticWorld world = buildStaticWorld(scene);
+  StaticWorldOptions worldOptions;
+  worldOptions.withFreeSpace = false;
+  const StaticWorld world = buildStaticWorld(scene, worldOptions);
   const Box3f cell(scene.toLocal({v[0], v[1], v[2]}), scene.toLocal({v[3], v[4], v[5]}));
   SampledVisibilityOptions options;
   options.points = points;
   options.resolution = res;
   options.seed = seed;
-  const SampledVisibility vis = sampleVisibleFaces(*world.rays, world.triangles, cell, options);
+  const SampledVisibility vis = sampleVisibleFaces(*world.rays, *world.triangles, cell, options);
   if (asJson) {
     std::cout << json{{"faces", vis.faces},
                       {"stats",
@@ -214,34 +245,40 @@ int runSceneTool(int argc, char** argv) {
   std::string genType, preset, out;
   uint64_t seed = 1;
   bool asJson = false;
-  gen->add_option("type", genType, "city, city1, city2, bigcity, interior, interior2, terrain")
+  gen->add_option("type", genType, fmt::format("city or {}", fmt::join(sceneTypes(), ", ")))
       ->required();
-  gen->add_option("--preset", preset, "for 'city': city1 (dense) or city2 (sparse)");
-  gen->add_option("--seed", seed, "random seed (same seed, same scene)");
+  gen->add_option("--preset", preset, "for 'city': city1 (dense) or city2 (sparse)")
+      ->check(CLI::IsMember({"city1", "city2"}));
+  gen->add_option("--seed", seed, "random seed (same seed, same scene)")
+      ->check(atLeast<uint64_t>(0));
   gen->add_option("--out,-o", out, "output OBJ file")->required();
   gen->add_flag("--json", asJson, "print statistics as JSON");
 
   // Every subcommand that loads a scene file takes the triangle limit.
   SceneLimits limits;
   auto addSceneLimits = [&](CLI::App* sub) { addSceneLimitsOption(*sub, limits); };
+  GroundChoice ground;
 
   auto* info =
       app.add_subcommand("info", "objects, faces, bounds and the effects a scene calls for");
   std::string scene;
   info->add_option("scene", scene, "SCENE")->required();
+  info->footer(manifestFormatHelp());
   info->add_flag("--json", asJson, "one JSON object on stdout");
   addSceneLimits(info);
+  addGroundOption(*info, ground);
 
   auto* path = app.add_subcommand("path", "generate a walkthrough path through the free space");
   double speed = 1.0, fps = 30.0;
   size_t frames = 300;
   path->add_option("--scene", scene, "SCENE")->required();
-  path->add_option("--speed", speed, "relative speed, 1.0 = walking (1.4 m/s)");
-  path->add_option("--frames", frames, "number of frames");
-  path->add_option("--fps", fps, "frames per second (default 30)");
-  path->add_option("--seed", seed, "random seed");
+  path->add_option("--speed", speed, "relative speed, 1.0 = walking (1.4 m/s)")->check(positive());
+  path->add_option("--frames", frames, "number of frames")->check(atLeast<size_t>(1));
+  path->add_option("--fps", fps, "frames per second")->check(positive());
+  path->add_option("--seed", seed, "random seed")->check(atLeast<uint64_t>(0));
   path->add_option("--out,-o", out, "output CSV (t,x,y,z,yaw_deg,pitch_deg)")->required();
   addSceneLimits(path);
+  addGroundOption(*path, ground);
 
   auto* visible =
       app.add_subcommand("visible", "sampled ground truth: faces seen from a view cell");
@@ -250,17 +287,20 @@ int runSceneTool(int argc, char** argv) {
   int res = 128;
   visible->add_option("--scene", scene, "SCENE")->required();
   visible->add_option("--cell", cell, "x0,y0,z0,x1,y1,z1 in file coordinates")->required();
-  visible->add_option("--points", points,
-                      "viewpoints (8 corners, 6 face centres, centre, then random)");
-  visible->add_option("--res", res, "rays per cube-map face side");
-  visible->add_option("--seed", seed, "seed for the random viewpoints");
+  visible
+      ->add_option("--points", points,
+                   "viewpoints (8 corners, 6 face centres, centre, then random)")
+      ->check(atLeast<size_t>(1));
+  visible->add_option("--res", res, "rays per cube-map face side")->check(inRange(1, 4096));
+  visible->add_option("--seed", seed, "seed for the random viewpoints")
+      ->check(atLeast<uint64_t>(0));
   visible->add_flag("--json", asJson, "one JSON object on stdout: faces, stats");
   addSceneLimits(visible);
 
   return runToolApp("vistream-scene", app, argc, argv, logLevel, [&]() -> int {
     if (*gen) return cmdGenerate(genType, preset, seed, out, asJson);
-    if (*info) return cmdInfo(scene, limits, asJson);
-    if (*path) return cmdPath(scene, limits, speed, frames, seed, fps, out);
+    if (*info) return cmdInfo(scene, limits, ground, asJson);
+    if (*path) return cmdPath(scene, limits, ground, speed, frames, seed, fps, out);
     if (*visible) return cmdVisible(scene, limits, cell, points, res, seed, asJson);
     return 2;
   });

@@ -16,7 +16,9 @@ namespace vistream {
 MappedFile MappedFile::open(const std::filesystem::path& path, std::string_view what) {
   const std::string name = path.string();
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) throwInputError("{}: cannot open {}: {}", name, what, std::strerror(errno));
+  if (fd < 0)
+    throwInputError(InputErrorCode::BadFile, "{}: cannot open {}: {}", name, what,
+                    std::strerror(errno));
   struct stat st {};
   if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
     ::close(fd);

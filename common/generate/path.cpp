@@ -13,6 +13,7 @@
 
 #include "common/core/error.h"
 #include "common/raycast/ray_query.h"
+#include "common/world/static_world.h"
 
 namespace vistream {
 namespace {
@@ -74,7 +75,8 @@ bool lineOfSight(const FreeSpace& fs, glm::vec2 a, glm::vec2 b) {
 std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& fs,
                                      const PathOptions& options) {
   if (fs.walkableCount() == 0)
-    throwInputError("scene '{}' has no free space to walk through", scene.name);
+    throwInputError("scene '{}' has no free space to walk through: {}", scene.name,
+                    fs.emptyReason());
   if (!(options.speed > 0.0) || !std::isfinite(options.speed))
     throwInputError("speed must be a positive number, got {}", options.speed);
   const std::vector<glm::ivec2> columns = fs.walkableColumns();
@@ -231,9 +233,9 @@ void writePath(const std::vector<PathSample>& samples, const std::filesystem::pa
 }
 
 std::vector<PathSample> generatePath(const Scene& scene, const PathOptions& options) {
-  const FlatTriangles triangles = flattenScene(scene, /*staticOnly=*/true);
-  const auto rays = makeEmbreeRayQuery(triangles);
-  return generatePath(scene, FreeSpace::build(*rays, scene.bounds()), options);
+  StaticWorldOptions worldOptions;
+  worldOptions.ground = options.ground;
+  return generatePath(scene, buildStaticWorld(scene, worldOptions).freeSpace, options);
 }
 
 }  // namespace vistream

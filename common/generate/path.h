@@ -15,7 +15,8 @@
 
 #include "common/core/view.h"
 #include "common/scene/scene.h"
-#include "common/spatial/free_space.h"
+#include "common/world/free_space.h"
+#include "common/world/static_world.h"
 
 namespace vistream {
 
@@ -33,17 +34,21 @@ struct PathOptions {
   double eyeHeight = 1.7;         // metres above the floor under the viewer
   double maxTurnDegPerS = 120.0;  // how fast the gaze follows the walking direction
   uint64_t seed = 1;
+  // The ground decision when generatePath builds the free space itself
+  // (the overload without a FreeSpace); see static_world.h.
+  GroundChoice ground;
 };
 
 inline constexpr double kWalkingSpeed = 1.4;  // m/s at relative speed 1.0
 
 // Generates an upright path through the free space: random goals reached by
 // shortest grid paths, smoothed by line-of-sight shortcuts, walked at the
-// given speed. Throws InputError if the scene has no free space.
+// given speed. Throws InputError if the scene has no free space, saying why
+// (FreeSpace::emptyReason).
 std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& freeSpace,
                                      const PathOptions& options);
-// The same, building the free space of the scene's static geometry first
-// (for callers that need one path and no free space of their own).
+// The same, building the scene's static world first (buildStaticWorld with
+// options.ground; for callers that need one path and no free space of their own).
 std::vector<PathSample> generatePath(const Scene& scene, const PathOptions& options);
 
 // Reads a path file; throws InputError naming the file and line on a bad

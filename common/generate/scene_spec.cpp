@@ -8,6 +8,7 @@
 
 #include "common/core/error.h"
 #include "common/generate/generate.h"
+#include "common/scene/manifest.h"
 #include "common/scene/scene_loader.h"
 
 namespace vistream {
@@ -21,7 +22,13 @@ std::string sceneSpecHelp() {
 
 Scene openScene(const std::string& spec, const SceneLimits& limits) {
   std::error_code ec;
-  if (std::filesystem::exists(spec, ec)) return loadScene(spec, limits);
+  if (std::filesystem::exists(spec, ec)) {
+    Scene scene = loadScene(spec, limits);
+    // A manifest warns per entry, where the entry's "scale" is known.
+    if (std::filesystem::path(spec).extension() != ".json")
+      warnImplausiblyLargeDynamicObjects(scene, spec);
+    return scene;
+  }
   std::string type = spec;
   uint64_t seed = 1;
   if (const size_t at = spec.find('@'); at != std::string::npos) {

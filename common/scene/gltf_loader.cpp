@@ -53,7 +53,8 @@ std::string_view glbJsonChunk(const std::string& bytes, const std::string& file)
   if (readU32(bytes, 0) != kMagic)
     throwInputError("{}: not a binary glTF file (it does not start with 'glTF')", file);
   if (const uint32_t version = readU32(bytes, 4); version != 2)
-    throwInputError("{}: binary glTF version {} is not supported (expected 2)", file, version);
+    throwInputError(InputErrorCode::Unsupported,
+                    "{}: binary glTF version {} is not supported (expected 2)", file, version);
   const uint64_t length = readU32(bytes, 8);
   if (length > size)
     throwInputError("{}: the glb header declares {} bytes, but the file has only {}", file, length,
@@ -151,7 +152,8 @@ class AccessorReader {
       throwInputError("{}: {}: accessor {} does not exist", file_, what, accessorIndex);
     const tinygltf::Accessor& acc = model_.accessors[size_t(accessorIndex)];
     if (acc.sparse.isSparse)
-      throwInputError("{}: {}: sparse accessor {} is not supported", file_, what, accessorIndex);
+      throwInputError(InputErrorCode::Unsupported, "{}: {}: sparse accessor {} is not supported",
+                      file_, what, accessorIndex);
     const int have = tinygltf::GetNumComponentsInType(uint32_t(acc.type));
     if (have != components)
       throwInputError("{}: {}: accessor {} has {} components, expected {}", file_, what,
@@ -323,7 +325,8 @@ tinygltf::Model parseGltf(const std::filesystem::path& path, const SceneLimits& 
   const std::string bytes = readSceneFile(path, limits);
   if (bytes.empty()) throwInputError("{}: file is empty", file);
   if (bytes.size() > std::numeric_limits<uint32_t>::max())
-    throwInputError("{}: {} bytes; glTF files of 4 GiB or more are not supported", file,
+    throwInputError(InputErrorCode::TooLarge,
+                    "{}: {} bytes; glTF files of 4 GiB or more are not supported", file,
                     bytes.size());
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),

@@ -1,7 +1,10 @@
 #include "common/scene/manifest.h"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 #include <nlohmann/json.hpp>
 
 #include "common/core/error.h"
@@ -31,6 +34,59 @@ void rejectUnknownKeys(const json& j, std::initializer_list<const char*> known,
 }
 
 }  // namespace
+
+std::string manifestFormatHelp() {
+  return R"(Scene manifests: a SCENE may be a .json manifest naming what makes up a scene.
+  {
+    "name": "harbour walk",              optional; default: the file's stem
+    "geometry": [                        required, at least one entry, in face-ID order
+      "city.obj",                        a path relative to the manifest (.obj, .gltf, .glb)
+      {"file": "Fox.glb",                or an object with
+       "dynamic": true,                    every object of the file moves (avatars, animals)
+       "name": "fox",                      prefix of the file's object names
+       "translate": [0, 0, 5],             metres, applied after scale
+       "scale": 0.01}                      positive; 0.01 for a file modelled in centimetres
+    ],
+    "environment": {                     optional
+      "hdr": "sky.hdr",                    equirectangular Radiance HDR (#?RADIANCE header)
+      "sky": "auto",                       auto (from the geometry), open or none
+      "sky_color": [0.55, 0.7, 0.9]        linear RGB
+    },
+    "near_field_radius": 150             metres: the client's near-field distance d
+  }
+Unknown keys are rejected, so a typo cannot silently change a scene. Y is up, units are metres.)";
+}
+
+size_t warnImplausiblyLargeDynamicObjects(const Scene& scene, const std::string& where) {
+  size_t count = 0;
+  for (const Object& o : scene.objects) {
+    if (!o.dynamic || o.bounds.empty()) continue;
+    const double height = double(o.bounds.extent().y);
+    if (!(height > kMaxPlausibleDynamicHeight)) continue;
+    ++count;
+    spdlog::warn(
+        "{}: dynamic object '{}' is {:.1f} m tall, more than the {:.0f} m plausible for an avatar, "
+        "animal or vehicle; if the file is not in metres, give it a \"scale\" in a scene manifest "
+        "(e.g. \"scale\": 0.01 for centimetres; see vistream-scene info --help)",
+        where, o.name, height, kMaxPlausibleDynamicHeight);
+  }
+  return count;
+}
+
+void checkRadianceHeader(const std::filesystem::path& path, const std::string& where) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throwInputError(InputErrorCode::BadFile, "{}: {}: cannot open it", where, path.string());
+  std::string first(64, '\0');
+  in.read(first.data(), std::streamsize(first.size()));
+  first.resize(size_t(in.gcount()));
+  first = first.substr(0, first.find('\n'));
+  if (first.rfind("#?RADIANCE", 0) != 0 && first.rfind("#?RGBE", 0) != 0)
+    throwInputError(
+        InputErrorCode::Unsupported,
+        "{}: {} is not a Radiance HDR image (its first line must start with #?RADIANCE or "
+        "#?RGBE)",
+        where, path.string());
+}
 
 void appendScene(Scene& scene, Scene part) {
   if (scene.objects.empty() && scene.faceCount == 0) {
@@ -118,6 +174,7 @@ Scene loadManifest(const std::filesystem::path& path, const SceneLimits& limits)
       std::error_code ec;
       if (!std::filesystem::exists(scene.environment.hdrImage, ec))
         throwInputError("{}.hdr: {}: no such file", where, scene.environment.hdrImage.string());
+      checkRadianceHeader(scene.environment.hdrImage, where + ".hdr");
     }
     if (e.contains("sky")) {
       const std::string sky = e["sky"].is_string() ? e["sky"].get<std::string>() : "";
@@ -198,6 +255,7 @@ Scene loadManifest(const std::filesystem::path& path, const SceneLimits& limits)
       if (dynamic) o.dynamic = true;
       if (!name.empty()) o.name = name + "/" + o.name;
     }
+    warnImplausiblyLargeDynamicObjects(part, fmt::format("{} ({})", where, geomPath.string()));
     appendScene(scene, std::move(part));
     // Scaling, and re-expressing every part relative to one origin, can push
     // a position out of float range although each file was fine on its own.

@@ -22,6 +22,7 @@
 #pragma once
 
 #include <filesystem>
+#include <string>
 
 #include "common/scene/scene.h"
 #include "common/scene/scene_loader.h"
@@ -38,5 +39,25 @@ Scene loadManifest(const std::filesystem::path& path, const SceneLimits& limits 
 // Appends `part` to `scene`, offsetting face IDs by scene.faceCount and
 // re-expressing positions relative to a common local origin.
 void appendScene(Scene& scene, Scene part);
+
+// The manifest format for people: the text `vistream-scene info --help`
+// shows (README.md, "Scene manifests", says the same).
+std::string manifestFormatHelp();
+
+// A dynamic object taller than this (metres) is almost certainly in the
+// wrong unit: the dynamic objects a walkthrough shows are avatars, animals
+// and vehicles, and the tallest of those (a giraffe, about 6 m; a
+// double-decker bus, 4.4 m) stay below it, while a person or an animal
+// modelled in centimetres comes out at 50 m and more.
+constexpr double kMaxPlausibleDynamicHeight = 10.0;
+
+// Logs one warning per dynamic object of `scene` taller than
+// kMaxPlausibleDynamicHeight, naming `where` (the file, or the manifest
+// entry) and the manifest's "scale" key that fixes it. Returns how many.
+size_t warnImplausiblyLargeDynamicObjects(const Scene& scene, const std::string& where);
+
+// Throws InputError naming `path` unless the file starts like a Radiance
+// HDR image ("#?RADIANCE" or "#?RGBE" on its first line).
+void checkRadianceHeader(const std::filesystem::path& path, const std::string& where);
 
 }  // namespace vistream

@@ -31,12 +31,13 @@ std::string readSceneFile(const std::filesystem::path& path, const SceneLimits& 
   // A FIFO or a device such as /dev/zero has no size to check and may never end.
   if (!fs::is_regular_file(status)) throwInputError("{}: is not a regular file", file);
   const uintmax_t size = fs::file_size(path, ec);
-  if (ec) throwInputError("{}: cannot read its size: {}", file, ec.message());
+  if (ec)
+    throwInputError(InputErrorCode::BadFile, "{}: cannot read its size: {}", file, ec.message());
   if (size > limits.maxFileBytes)
     throwInputError("{}: the file has {} bytes, more than the limit of {} bytes for a scene file",
                     file, size, limits.maxFileBytes);
   std::ifstream in(path, std::ios::binary);
-  if (!in) throwInputError("{}: cannot open for reading", file);
+  if (!in) throwInputError(InputErrorCode::BadFile, "{}: cannot open for reading", file);
   std::string bytes(size_t(size), '\0');
   in.read(bytes.data(), std::streamsize(size));
   if (in.gcount() != std::streamsize(size))

@@ -55,7 +55,7 @@ struct SceneLimits {
 class SceneLimitError : public InputError {
  public:
   SceneLimitError(const std::string& message, uint64_t foundCount, uint64_t limitCount)
-      : InputError(message), found(foundCount), limit(limitCount) {}
+      : InputError(InputErrorCode::TooLarge, message), found(foundCount), limit(limitCount) {}
   uint64_t found;  // triangles (or vertices) in the file, or at least this many
   uint64_t limit;  // the limit they exceed, in the same unit
 };

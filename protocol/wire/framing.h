@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "common/core/error.h"
 #include "vistream_generated.h"
 
 namespace vistream::wire {
@@ -51,6 +52,12 @@ class FrameDecoder {
   const std::string& error() const { return error_; }
   // The same kind for the same bytes, however they were split into reads.
   FrameError errorKind() const { return kind_; }
+  // The same as an InputError code: TooLarge or BadFrame (Invalid while none).
+  InputErrorCode errorCode() const {
+    return kind_ == FrameError::TooLarge    ? InputErrorCode::TooLarge
+           : kind_ == FrameError::Malformed ? InputErrorCode::BadFrame
+                                            : InputErrorCode::Invalid;
+  }
   size_t buffered() const { return buffer_.size() - start_; }
 
  private:

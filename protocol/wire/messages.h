@@ -57,4 +57,8 @@ inline bool isFinite(const Vec3f* v) {
 // The payload's name, for logs and errors ("Hello", "Pose", ...).
 const char* payloadName(Payload p);
 
+// The one mapping from InputError codes (common/core/error.h) to the wire's
+// ErrorCode: a peer that refuses input it received sends this code.
+ErrorCode wireErrorCode(InputErrorCode code);
+
 }  // namespace vistream::wire

@@ -20,7 +20,8 @@
 #include "common/generate/scene_spec.h"
 #include "common/raycast/ray_query.h"
 #include "common/raycast/sampled_visibility.h"
-#include "common/spatial/free_space.h"
+#include "common/world/free_space.h"
+#include "common/world/static_world.h"
 #include "server/visibility/epsilon_pvs.h"
 #include "server/visibility/fused_pvs.h"
 
@@ -43,7 +44,7 @@ double mean(const std::vector<double>& v) {
 
 struct World {
   Scene scene;
-  FlatTriangles triangles;
+  std::unique_ptr<const FlatTriangles> triangles;  // static world (static_world.h)
   std::unique_ptr<RayQuery> rays;
   FreeSpace freeSpace;
   std::unique_ptr<EpsilonPvs> pvs;
@@ -53,9 +54,10 @@ struct World {
 World makeWorld(const std::string& spec) {
   World w;
   w.scene = openScene(spec);
-  w.triangles = flattenScene(w.scene, true);
-  w.rays = makeEmbreeRayQuery(w.triangles);
-  w.freeSpace = FreeSpace::build(*w.rays, w.scene.bounds());
+  StaticWorld world = buildStaticWorld(w.scene);
+  w.triangles = std::move(world.triangles);
+  w.rays = std::move(world.rays);
+  w.freeSpace = std::move(world.freeSpace);
   Stopwatch sw;
   w.pvs = std::make_unique<EpsilonPvs>(w.scene);
   spdlog::info("{}: {} occluders ({} solids, {} polygons), prepared in {:.0f} ms", spec,
@@ -262,7 +264,7 @@ int runPvsBench(const PvsBenchOptions& options) {
         SampledVisibilityOptions gt;
         gt.points = options.groundTruthPoints;
         gt.resolution = options.groundTruthRes;
-        const SampledVisibility truth = sampleVisibleFaces(*w.rays, w.triangles, cell, gt);
+        const SampledVisibility truth = sampleVisibleFaces(*w.rays, *w.triangles, cell, gt);
         seen.push_back(double(truth.faces.size()));
         for (Method& m : methods) {
           const PvsResult r = m.fused ? m.fused->compute(cell) : w.pvs->compute(cell);

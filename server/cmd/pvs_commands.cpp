@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 #include <fmt/ranges.h>
+#include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
 #include <charconv>
@@ -10,15 +11,18 @@
 #include <iostream>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <optional>
 
 #include "common/cmd/cli.h"
 #include "common/core/error.h"
 #include "common/core/parse.h"
 #include "common/core/progress.h"
+#include "common/core/stats_output.h"
 #include "common/generate/path.h"
 #include "common/generate/scene_spec.h"
 #include "common/raycast/ray_query.h"
-#include "common/spatial/free_space.h"
+#include "common/world/free_space.h"
+#include "common/world/static_world.h"
 #include "server/cmd/pvs_bench.h"
 #include "server/cmd/walk_bench.h"
 #include "server/visibility/epsilon_pvs.h"
@@ -32,41 +36,43 @@ namespace {
 
 using nlohmann::json;
 
-Box3f parseCell(const Scene& scene, const std::string& text) {
-  const auto v = parseNumberList(text, 6, "--cell");
+// A box "x0,y0,z0,x1,y1,z1" in file coordinates, given as `option` (--cell,
+// --region); checked before any scene loads.
+Box3d parseFileBox(const std::string& text, const char* option) {
+  const auto v = parseNumberList(text, 6, option);
   if (v[0] > v[3] || v[1] > v[4] || v[2] > v[5])
-    throwInputError("--cell: expected x0,y0,z0,x1,y1,z1 with x0<=x1, y0<=y1, z0<=z1, got '{}'",
+    throwInputError(InputErrorCode::BadArgument,
+                    "{}: expected x0,y0,z0,x1,y1,z1 with x0<=x1, y0<=y1, z0<=z1, got '{}'", option,
                     text);
-  return Box3f(scene.toLocal({v[0], v[1], v[2]}), scene.toLocal({v[3], v[4], v[5]}));
+  return Box3d({v[0], v[1], v[2]}, {v[3], v[4], v[5]});
 }
 
-json statsJson(const PvsStats& s) {
-  return json{{"time_ms", s.timeMs},
-              {"box_stage_ms", s.boxStageMs},
-              {"face_stage_ms", s.faceStageMs},
-              {"occluders", s.occluders},
-              {"occluders_used", s.occludersUsed},
-              {"lines_cast", s.linesCast},
-              {"line_box_tests", s.lineBoxTests},
-              {"line_polygon_tests", s.linePolygonTests},
-              {"boxes", s.boxes},
-              {"boxes_occluded", s.boxesOccluded},
-              {"boxes_occluded_by_first_occluder", s.boxesOccludedByFirst},
-              {"faces_total", s.faces},
-              {"faces_occluded", s.facesOccluded},
-              {"faces_culled_by_box_stage", s.facesCulledByBoxStage}};
+Box3f toLocal(const Scene& scene, const Box3d& fileBox) {
+  return Box3f(scene.toLocal(fileBox.lo), scene.toLocal(fileBox.hi));
+}
+
+// A box that misses the scene's bounds sees nothing of it, or only its
+// outside: worth a word, since a typo in one coordinate does that.
+void warnIfOutsideScene(const Scene& scene, const Box3d& fileBox, const char* option,
+                        const std::string& text) {
+  const Box3d b = scene.fileBounds();
+  if (b.empty() || fileBox.overlaps(b)) return;
+  spdlog::warn(
+      "{} {} lies outside the scene's bounds ({:.3f},{:.3f},{:.3f} .. {:.3f},{:.3f},{:.3f}, file "
+      "coordinates)",
+      option, text, b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z);
 }
 
 int cmdCell(const std::string& spec, const SceneLimits& limits, const std::string& cellText,
             const std::string& method, const PvsOptions& options,
             const FusedPvsOptions& fusedOptions, bool asJson) {
-  if (!(fusedOptions.epsilon > 0.0) || fusedOptions.resolution < 4 ||
-      fusedOptions.resolution > 2048)
-    throwInputError("--epsilon must be positive and --fused-res in 4..2048");
+  // --epsilon and --fused-res are range-checked at parse time.
   if (method != "paper" && method != "fused")
     throwInputError("--method: expected 'paper' or 'fused', got '{}'", method);
+  const Box3d fileCell = parseFileBox(cellText, "--cell");
   const Scene scene = openScene(spec, limits);
-  const Box3f cell = parseCell(scene, cellText);
+  warnIfOutsideScene(scene, fileCell, "--cell", cellText);
+  const Box3f cell = toLocal(scene, fileCell);
   const EpsilonPvs pvs(scene);
   FusedPvsStats fusedStats;
   const PvsResult r = method == "fused"
@@ -77,13 +83,12 @@ int cmdCell(const std::string& spec, const SceneLimits& limits, const std::strin
     for (uint32_t o : r.objects) objects.push_back(scene.objects[o].name);
     json stats = statsJson(r.stats);
     stats["method"] = method;
-    if (method == "fused")
-      stats["fused"] = {{"epsilon", fusedOptions.epsilon},
-                        {"resolution", fusedOptions.resolution},
-                        {"samples", fusedStats.samples},
-                        {"eroded_occluders", fusedStats.erodedOccluders},
-                        {"candidate_faces", fusedStats.candidateFaces},
-                        {"fused_culled", fusedStats.fusedCulled}};
+    if (method == "fused") {
+      json fused = statsJson(fusedStats);
+      fused["epsilon"] = fusedOptions.epsilon;
+      fused["resolution"] = fusedOptions.resolution;
+      stats["fused"] = fused;
+    }
     std::cout << json{{"faces", r.faces}, {"objects", objects}, {"stats", stats}}.dump() << "\n";
     return 0;
   }
@@ -92,27 +97,17 @@ int cmdCell(const std::string& spec, const SceneLimits& limits, const std::strin
              r.faces.size(), scene.faceCount,
              100.0 * double(s.facesOccluded) / double(std::max<size_t>(1, s.faces)),
              r.objects.size());
-  fmt::print("  {:<34} {:>12.3f}\n", "time (ms)", s.timeMs);
-  fmt::print("  {:<34} {:>12.3f}\n", "  box stage (ms)", s.boxStageMs);
-  fmt::print("  {:<34} {:>12.3f}\n", "  face stage (ms)", s.faceStageMs);
-  fmt::print("  {:<34} {:>12}\n", "occluders (available / used)",
-             fmt::format("{} / {}", s.occluders, s.occludersUsed));
-  fmt::print("  {:<34} {:>12}\n", "lines cast", s.linesCast);
-  fmt::print("  {:<34} {:>12}\n", "line/box tests", s.lineBoxTests);
-  fmt::print("  {:<34} {:>12}\n", "line/polygon tests", s.linePolygonTests);
-  fmt::print("  {:<34} {:>12}\n", "boxes (occluded / total)",
-             fmt::format("{} / {}", s.boxesOccluded, s.boxes));
-  fmt::print("  {:<34} {:>12}\n", "faces culled by box stage", s.facesCulledByBoxStage);
+  fmt::print("{}", statsTable(s));
   if (method == "fused")
-    fmt::print("  {:<34} {:>12}\n", "culled by fused occluders",
-               fmt::format("{} ({} samples, eps {} m)", fusedStats.fusedCulled, fusedStats.samples,
-                           fusedOptions.epsilon));
+    fmt::print("  fused occluders (eps {} m, {} pixels per cube side):\n{}", fusedOptions.epsilon,
+               fusedOptions.resolution, statsTable(fusedStats, "    "));
   return 0;
 }
 
-int cmdBake(const std::string& spec, const SceneLimits& limits, const std::string& cellSizeText,
-            const std::string& regionText, unsigned threads, const std::string& shardText,
-            bool coarseToFine, const PvsOptions& pvsOptions, const std::string& out, bool asJson) {
+int cmdBake(const std::string& spec, const SceneLimits& limits, const GroundChoice& ground,
+            const std::string& cellSizeText, const std::string& regionText, unsigned threads,
+            const std::string& shardText, bool coarseToFine, const PvsOptions& pvsOptions,
+            const std::string& out, bool asJson) {
   BakeOptions options;
   options.pvs = pvsOptions;
   options.threads = threads;
@@ -141,11 +136,16 @@ int cmdBake(const std::string& spec, const SceneLimits& limits, const std::strin
     options.shardIndex = i;
     options.shardCount = n;
   }
+  std::optional<Box3d> fileRegion;
+  if (!regionText.empty()) fileRegion = parseFileBox(regionText, "--region");
   const Scene scene = openScene(spec, limits);
-  if (!regionText.empty()) options.region = parseCell(scene, regionText);
-  const FlatTriangles tris = flattenScene(scene, true);
-  const auto rays = makeEmbreeRayQuery(tris);
-  const FreeSpace fs = FreeSpace::build(*rays, scene.bounds());
+  if (fileRegion) {
+    warnIfOutsideScene(scene, *fileRegion, "--region", regionText);
+    options.region = toLocal(scene, *fileRegion);
+  }
+  StaticWorldOptions worldOptions;
+  worldOptions.ground = ground;
+  const FreeSpace fs = buildStaticWorld(scene, worldOptions).freeSpace;
   const EpsilonPvs pvs(scene);
   std::unique_ptr<ProgressBar> bar;
   std::mutex barMutex;  // guards creation of the bar from the first progress call
@@ -189,7 +189,7 @@ int cmdBake(const std::string& spec, const SceneLimits& limits, const std::strin
 }
 
 int cmdQuery(const std::string& dbPath, const std::string& pointText, const std::string& cellText,
-             bool asJson) {
+             bool asJson, bool withFaces) {
   if (pointText.empty() == cellText.empty())
     throwInputError("give exactly one of --point x,y,z or --cell i,j,k");
   const PvsDatabase db = PvsDatabase::open(dbPath);
@@ -230,9 +230,18 @@ int cmdQuery(const std::string& dbPath, const std::string& pointText, const std:
                      .dump()
               << "\n";
   } else {
+    // A PVS holds thousands of face IDs: a summary by default, the IDs on request.
     fmt::print("cell {},{},{} [{:.3f},{:.3f},{:.3f} .. {:.3f},{:.3f},{:.3f}]: {} faces\n", ijk.x,
                ijk.y, ijk.z, lo.x, lo.y, lo.z, hi.x, hi.y, hi.z, faces->size());
-    fmt::print("{}\n", fmt::join(*faces, " "));
+    fmt::print("  {:<28} {}\n", "scene", db.header().sceneName);
+    fmt::print("  {:<28} {}\n", "method", db.header().method);
+    if (!faces->empty())
+      fmt::print("  {:<28} {} .. {}\n", "face IDs", *std::min_element(faces->begin(), faces->end()),
+                 *std::max_element(faces->begin(), faces->end()));
+    if (withFaces)
+      fmt::print("{}\n", fmt::join(*faces, " "));
+    else
+      fmt::print("(--faces lists the face IDs, --json prints them with the rest)\n");
   }
   return 0;
 }
@@ -242,12 +251,7 @@ int cmdWalk(const std::string& spec, const SceneLimits& limits, const std::strin
   CullingOptions options = base;
   options.method = parseCullingMethod(method);
   options.collectFaces = withFaces;
-  if (!(options.pSkip >= 0.0 && options.pSkip <= 1.0))
-    throwInputError("--p-skip must be in [0, 1]");
-  if (!(options.pVp >= 0.0 && options.pVp <= 1.0)) throwInputError("--p-vp must be in [0, 1]");
-  if (!(options.fovDeg > 0.0 && options.fovDeg < 180.0))
-    throwInputError("--fov must be in (0, 180) degrees");
-  if (options.occluders == 0) throwInputError("--occluders must be at least 1");
+  // --p-skip, --p-vp, --fov and --occluders are range-checked at parse time.
   const auto path = readPath(pathFile);
   const Scene scene = openScene(spec, limits);
   const CullingScene culling(scene);
@@ -327,6 +331,7 @@ int runPvsTool(int argc, char** argv) {
   // Every subcommand that loads a scene file takes the triangle limit.
   SceneLimits limits;
   auto addSceneLimits = [&](CLI::App* sub) { addSceneLimitsOption(*sub, limits); };
+  GroundChoice ground;
 
   auto* cell = app.add_subcommand("cell", "the PVS of one view cell");
   std::string scene, cellText, method = "paper";
@@ -342,13 +347,16 @@ int runPvsTool(int argc, char** argv) {
                  "keep occluded objects as occluders");
   cell->add_flag("--no-redundant-rays", noRedundantRays, "cast every corner-vertex line");
   cell->add_option("--large-occluders", largeOccluders,
-                   "use only the K largest occluders by solid angle (0: all)");
+                   "use only the K largest occluders by solid angle (0: all)")
+      ->check(atLeast<size_t>(0));
   cell->add_flag("--json", asJson, "one JSON object on stdout: faces, objects, stats");
   FusedPvsOptions fusedOptions;
   cell->add_option("--epsilon", fusedOptions.epsilon,
-                   "fused: occluder erosion and sample spacing bound (m)");
+                   "fused: occluder erosion and sample spacing bound (m)")
+      ->check(positive());
   cell->add_option("--fused-res", fusedOptions.resolution,
-                   "fused: occlusion cube-map pixels per side");
+                   "fused: occlusion cube-map pixels per side")
+      ->check(inRange(4, 2048));
   addSceneLimits(cell);
 
   auto* bake =
@@ -359,7 +367,8 @@ int runPvsTool(int argc, char** argv) {
   bake->add_option("--scene", scene, "SCENE")->required();
   bake->add_option("--cell-size", cellSize, "X or X,Y,Z in metres")->required();
   bake->add_option("--region", region, "x0,y0,z0,x1,y1,z1: bake only this box (file coordinates)");
-  bake->add_option("--threads", threads, "worker threads (default: all cores)");
+  bake->add_option("--threads", threads, "worker threads (0: all cores)")
+      ->check(atLeast<unsigned>(0));
   bake->add_option("--shard", shard, "i/n: bake only shard i of n (merge shards with 'merge')");
   bake->add_option("--out,-o", out, "output database")->required();
   bake->add_flag("--no-coarse-to-fine", noCoarse, "bake every cell from scratch");
@@ -370,14 +379,17 @@ int runPvsTool(int argc, char** argv) {
   bake->add_flag("--no-redundant-rays", noRedundantRays, "cast every corner-vertex line");
   bake->add_flag("--json", asJson, "statistics as JSON");
   addSceneLimits(bake);
+  addGroundOption(*bake, ground);
 
   auto* query =
       app.add_subcommand("query", "the PVS of the cell holding a point, from a baked database");
   std::string db, point, cellIndex;
+  bool queryFaces = false;
   query->add_option("--db", db, "baked database")->required();
   query->add_option("--point", point, "x,y,z in file coordinates");
   query->add_option("--cell", cellIndex, "i,j,k grid cell");
-  query->add_flag("--json", asJson, "one JSON object on stdout");
+  query->add_flag("--faces", queryFaces, "list every face ID of the PVS, not only a summary");
+  query->add_flag("--json", asJson, "one JSON object on stdout, face IDs included");
 
   auto* merge = app.add_subcommand("merge", "merge shard databases of one scene and grid");
   std::vector<std::string> inputs;
@@ -387,19 +399,25 @@ int runPvsTool(int argc, char** argv) {
   auto* bench =
       app.add_subcommand("bench", "Tables 1 and 2 of the paper, and PVS accuracy against time");
   PvsBenchOptions benchOptions;
-  std::string benchScenes;
-  bench->add_option("--scenes", benchScenes,
-                    "comma-separated SCENEs (default city1,city2,interior,bigcity)");
-  bench->add_option("--cells", benchOptions.cells, "street cells per city for Tables 1 and 2");
-  bench->add_option("--accuracy-cells", benchOptions.accuracyCells,
-                    "cells per scene and cell size for the accuracy table");
-  bench->add_option("--gt-res", benchOptions.groundTruthRes,
-                    "ground-truth rays per cube face side");
-  bench->add_option("--gt-points", benchOptions.groundTruthPoints,
-                    "ground-truth viewpoints per cell");
-  bench->add_option("--seed", benchOptions.seed, "seed for cell placement");
+  std::string benchScenes = fmt::format("{}", fmt::join(benchOptions.scenes, ","));
+  bench->add_option("--scenes", benchScenes, "comma-separated SCENEs");
+  bench->add_option("--cells", benchOptions.cells, "street cells per city for Tables 1 and 2")
+      ->check(atLeast<size_t>(1));
+  bench
+      ->add_option("--accuracy-cells", benchOptions.accuracyCells,
+                   "cells per scene and cell size for the accuracy table")
+      ->check(atLeast<size_t>(1));
+  bench->add_option("--gt-res", benchOptions.groundTruthRes, "ground-truth rays per cube face side")
+      ->check(inRange(1, 4096));
+  bench
+      ->add_option("--gt-points", benchOptions.groundTruthPoints,
+                   "ground-truth viewpoints per cell")
+      ->check(atLeast<size_t>(1));
+  bench->add_option("--seed", benchOptions.seed, "seed for cell placement")
+      ->check(atLeast<uint64_t>(0));
   bench->add_option("--fused-eps", benchOptions.fusedEpsilons, "fused epsilons to compare (metres)")
-      ->delimiter(',');
+      ->delimiter(',')
+      ->check(positive());
   bool noFused = false;
   bench->add_flag("--no-fused", noFused, "measure the paper's method only");
   bench->add_option("--plot", benchOptions.plotDir, "directory for accuracy.dat/.png (gnuplot)");
@@ -415,14 +433,17 @@ int runPvsTool(int argc, char** argv) {
   walk->add_option("--method", walkMethod,
                    "A (classical), B (hierarchy updating), C (B + visibility propagation), "
                    "D (C + conservative updating), adaptive (D with learnt probabilities)");
-  walk->add_option("--occluders", cullOptions.occluders, "occluders per viewpoint (default 16)");
+  walk->add_option("--occluders", cullOptions.occluders, "occluders per viewpoint")
+      ->check(atLeast<size_t>(1));
   walk->add_option("--p-skip", cullOptions.pSkip,
-                   "method D: probability of skipping a visible node's test");
+                   "method D: probability of skipping a visible node's test")
+      ->check(inRange(0.0, 1.0));
   walk->add_option("--p-vp", cullOptions.pVp,
-                   "methods C and D: probability of trying visibility propagation");
-  walk->add_option("--seed", cullOptions.seed, "random seed for D");
-  walk->add_option("--fov", cullOptions.fovDeg,
-                   "horizontal field of view in degrees (4:3 frustum)");
+                   "methods C and D: probability of trying visibility propagation")
+      ->check(inRange(0.0, 1.0));
+  walk->add_option("--seed", cullOptions.seed, "random seed for D")->check(atLeast<uint64_t>(0));
+  walk->add_option("--fov", cullOptions.fovDeg, "horizontal field of view in degrees (4:3 frustum)")
+      ->check(between(0.0, 180.0));
   walk->add_flag("--json", asJson, "one JSON object: summary and frames");
   walk->add_flag("--with-faces", withFaces, "list the faces of visible leaves per frame");
   addSceneLimits(walk);
@@ -430,14 +451,18 @@ int runPvsTool(int argc, char** argv) {
   auto* walkBench = app.add_subcommand(
       "walk-bench", "Figures 8-11 of Bittner and Havran 2001: methods against speed and p_skip");
   WalkBenchOptions walkBenchOptions;
-  std::string walkScenes;
-  walkBench->add_option("--scenes", walkScenes,
-                        "comma-separated SCENEs (default interior,interior2)");
-  walkBench->add_option("--frames", walkBenchOptions.frames, "frames per path");
-  walkBench->add_option("--occluders", walkBenchOptions.occluders,
-                        "occluders per viewpoint (default: 32 for interior2, else 16)");
-  walkBench->add_option("--repeats", walkBenchOptions.repeats,
-                        "runs per configuration; times are medians");
+  std::string walkScenes = fmt::format("{}", fmt::join(walkBenchOptions.scenes, ","));
+  walkBench->add_option("--scenes", walkScenes, "comma-separated SCENEs");
+  walkBench->add_option("--frames", walkBenchOptions.frames, "frames per path")
+      ->check(atLeast<size_t>(1));
+  walkBench
+      ->add_option("--occluders", walkBenchOptions.occluders,
+                   "occluders per viewpoint (0: the paper's, 32 for interior2, else 16)")
+      ->check(atLeast<size_t>(0));
+  walkBench
+      ->add_option("--repeats", walkBenchOptions.repeats,
+                   "runs per configuration; times are medians")
+      ->check(atLeast<size_t>(1));
   walkBench->add_option("--plot-dir", walkBenchOptions.plotDir,
                         "write .dat files and a PNG of Figures 8-11 per scene here");
   walkBench->add_flag("--json", walkBenchOptions.json, "one JSON array on stdout");
@@ -459,19 +484,17 @@ int runPvsTool(int argc, char** argv) {
     }
     if (*bake) {
       const PvsOptions options = pvsOptionsFromFlags();
-      return cmdBake(scene, limits, cellSize, region, threads, shard, !noCoarse, options, out,
-                     asJson);
+      return cmdBake(scene, limits, ground, cellSize, region, threads, shard, !noCoarse, options,
+                     out, asJson);
     }
-    if (*query) return cmdQuery(db, point, cellIndex, asJson);
+    if (*query) return cmdQuery(db, point, cellIndex, asJson, queryFaces);
     if (*walk) return cmdWalk(scene, limits, pathFile, walkMethod, cullOptions, asJson, withFaces);
     if (*walkBench) {
-      if (!walkScenes.empty()) walkBenchOptions.scenes = splitCommaList(walkScenes);
-      if (walkBenchOptions.frames == 0 || walkBenchOptions.repeats == 0)
-        throwInputError("--frames and --repeats must be at least 1");
+      walkBenchOptions.scenes = splitCommaList(walkScenes);
       return runWalkBench(walkBenchOptions);
     }
     if (*bench) {
-      if (!benchScenes.empty()) benchOptions.scenes = splitCommaList(benchScenes);
+      benchOptions.scenes = splitCommaList(benchScenes);
       if (noFused) benchOptions.fusedEpsilons.clear();
       return runPvsBench(benchOptions);
     }

@@ -14,7 +14,8 @@
 #include "common/generate/path.h"
 #include "common/generate/scene_spec.h"
 #include "common/raycast/ray_query.h"
-#include "common/spatial/free_space.h"
+#include "common/world/free_space.h"
+#include "common/world/static_world.h"
 #include "server/visibility/hierarchical_culling.h"
 
 namespace vistream {
@@ -118,9 +119,7 @@ int runWalkBench(const WalkBenchOptions& options) {
     const CullingScene culling(scene);
     const size_t occluders =
         options.occluders ? options.occluders : (spec.rfind("interior2", 0) == 0 ? 32 : 16);
-    const FlatTriangles tris = flattenScene(scene, true);
-    const auto rays = makeEmbreeRayQuery(tris);
-    const FreeSpace fs = FreeSpace::build(*rays, scene.bounds());
+    const FreeSpace fs = buildStaticWorld(scene).freeSpace;
     auto walkPath = [&](double speed) {
       PathOptions po;
       po.speed = speed;

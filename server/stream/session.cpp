@@ -37,7 +37,8 @@ Session::Session(StreamServer& server, asio::ip::tcp::socket socket, uint32_t id
       socket_(std::move(socket)),
       housekeepingTimer_(strand_),
       id_(id),
-      decoder_(server.config().maxInboundFrameBytes) {}
+      decoder_(server.config().maxInboundFrameBytes),
+      outbox_(server.config().sendQueueLimitBytes) {}
 
 Session::~Session() = default;
 
@@ -66,7 +67,7 @@ void Session::shutdown(const std::string& reason) {
     self->state_ = State::Closing;
     self->closingSince_ = Clock::now();
     self->send(std::make_shared<const std::vector<uint8_t>>(encodeBye(reason)));
-    if (self->state_ == State::Closing && self->queue_.empty()) self->close("shutdown");
+    if (self->state_ == State::Closing && self->outbox_.empty()) self->close("shutdown");
   });
 }
 
@@ -101,10 +102,7 @@ void Session::read() {
 }
 
 void Session::onBytes(std::span<const uint8_t> bytes) {
-  const auto errorCode = [this] {
-    return decoder_.errorKind() == FrameError::TooLarge ? ErrorCode::FrameTooLarge
-                                                        : ErrorCode::MalformedFrame;
-  };
+  const auto errorCode = [this] { return wireErrorCode(decoder_.errorCode()); };
   if (!decoder_.feed(bytes)) return fail(errorCode(), decoder_.error());
   const auto now = Clock::now();
   unsigned frames = 0;
@@ -132,31 +130,37 @@ void Session::onBytes(std::span<const uint8_t> bytes) {
 }
 
 void Session::onFrame(const Envelope& envelope) {
-  switch (envelope.payload_type()) {
-    case Payload::Hello:
-      return onHello(*envelope.payload_as_Hello());
-    case Payload::Pose:
-      if (state_ != State::Active) return fail(ErrorCode::OutOfOrder, "Pose before Hello");
-      return onPose(*envelope.payload_as_Pose());
-    case Payload::PvsRequest:
-      if (state_ != State::Active) return fail(ErrorCode::OutOfOrder, "PvsRequest before Hello");
-      return onPvsRequest(*envelope.payload_as_PvsRequest());
-    case Payload::Bye:
-      spdlog::debug("session {}: client said bye", id_);
-      return close("bye");
-    case Payload::Error: {
-      const auto* e = envelope.payload_as_Error();
-      server_.peerWarnings().warn("session {}: client reported error {}: {}", id_, int(e->code()),
-                                  e->text() ? e->text()->str() : std::string());
-      return close("client error");
-    }
-    default:
-      if (envelope.payload_type() > Payload::MAX || envelope.payload_type() == Payload::NONE)
-        return fail(ErrorCode::MalformedFrame,
-                    fmt::format("unknown payload type {}", unsigned(envelope.payload_type())));
-      return fail(ErrorCode::OutOfOrder, fmt::format("{} is a server-to-client message",
-                                                     payloadName(envelope.payload_type())));
-  }
+  dispatchPayload(envelope,
+                  Overloaded{
+                      [this](const Hello& hello) { onHello(hello); },
+                      [this](const Pose& pose) {
+                        if (state_ != State::Active)
+                          return fail(ErrorCode::OutOfOrder, "Pose before Hello");
+                        onPose(pose);
+                      },
+                      [this](const PvsRequest& request) {
+                        if (state_ != State::Active)
+                          return fail(ErrorCode::OutOfOrder, "PvsRequest before Hello");
+                        onPvsRequest(request);
+                      },
+                      [this](const Bye&) {
+                        spdlog::debug("session {}: client said bye", id_);
+                        close("bye");
+                      },
+                      [this](const Error& e) {
+                        server_.peerWarnings().warn("session {}: client reported error {}: {}", id_,
+                                                    int(e.code()),
+                                                    e.text() ? e.text()->str() : std::string());
+                        close("client error");
+                      },
+                      [this](Payload type) {
+                        if (type > Payload::MAX || type == Payload::NONE)
+                          return fail(ErrorCode::MalformedFrame,
+                                      fmt::format("unknown payload type {}", unsigned(type)));
+                        fail(ErrorCode::OutOfOrder,
+                             fmt::format("{} is a server-to-client message", payloadName(type)));
+                      },
+                  });
 }
 
 void Session::onHello(const Hello& hello) {
@@ -350,8 +354,7 @@ void Session::close(const char* why) {
   socket_.close(ignored);
   housekeepingTimer_.cancel();
   cancelWork();
-  queue_.clear();
-  queued_ = 0;
+  outbox_.clear();
   queuedAtomic_ = 0;
   {
     std::lock_guard lock(snapshotMutex_);
@@ -362,12 +365,11 @@ void Session::close(const char* why) {
 
 void Session::send(std::shared_ptr<const std::vector<uint8_t>> frame) {
   if (state_ == State::Closed) return;
-  queued_ += frame->size();
-  queuedAtomic_ = queued_;
-  queue_.push_back(std::move(frame));
-  if (queued_ > server_.config().sendQueueLimitBytes) {
+  const bool withinLimit = outbox_.push(std::move(frame));
+  queuedAtomic_ = outbox_.queuedBytes();
+  if (!withinLimit) {
     server_.peerWarnings().warn("session {}: client is not reading ({} bytes queued); closing it",
-                                id_, queued_);
+                                id_, outbox_.queuedBytes());
     close("not reading");
     return;
   }
@@ -375,24 +377,27 @@ void Session::send(std::shared_ptr<const std::vector<uint8_t>> frame) {
 }
 
 void Session::writeNext() {
-  if (writing_ || queue_.empty() || state_ == State::Closed) return;
-  writing_ = true;
+  if (state_ == State::Closed) return;
+  Outbox::Frame frame = outbox_.startWrite();
+  if (!frame) return;
   writeStarted_ = Clock::now();
   // The handler holds the frame: close() may clear the queue while the
   // write is still in flight.
   asio::async_write(
-      socket_, asio::buffer(*queue_.front()),
-      asio::bind_executor(strand_, [self = shared_from_this(), frame = queue_.front()](
+      socket_, asio::buffer(*frame),
+      asio::bind_executor(strand_, [self = shared_from_this(), frame](
                                        const boost::system::error_code& ec, size_t n) {
-        self->writing_ = false;
-        if (self->state_ == State::Closed || self->queue_.empty()) return;
-        if (ec) return self->close("write error");
+        if (self->state_ == State::Closed || self->outbox_.empty())
+          return self->outbox_.abandonWrite();
+        if (ec) {
+          self->outbox_.abandonWrite();
+          return self->close("write error");
+        }
         self->bytesSent_ += n;
         self->server_.countSent(n);
-        self->queued_ -= self->queue_.front()->size();
-        self->queuedAtomic_ = self->queued_;
-        self->queue_.pop_front();
-        if (self->state_ == State::Closing && self->queue_.empty()) return self->close("closing");
+        self->outbox_.finishWrite();
+        self->queuedAtomic_ = self->outbox_.queuedBytes();
+        if (self->state_ == State::Closing && self->outbox_.empty()) return self->close("closing");
         self->writeNext();
         self->pump();
       }));
@@ -414,7 +419,7 @@ void Session::housekeeping() {
     return fail(ErrorCode::Timeout,
                 fmt::format("a frame begun {:.1f} s ago is still incomplete ({} bytes buffered)",
                             seconds(now - frameStarted_), decoder_.buffered()));
-  if (writing_ && seconds(now - writeStarted_) > cfg.writeStallTimeoutS) {
+  if (outbox_.writing() && seconds(now - writeStarted_) > cfg.writeStallTimeoutS) {
     server_.peerWarnings().warn("session {}: a write has not finished in {:.1f} s; closing it", id_,
                                 cfg.writeStallTimeoutS);
     return close("write stalled");
@@ -427,7 +432,7 @@ void Session::housekeeping() {
     s.bytes_sent = bytesSent_;
     s.faces_held = scheduler_->heldCount();
     s.cells_ready = scheduler_->cellsReady();
-    s.queue_bytes = uint32_t(std::min<size_t>(queued_, UINT32_MAX));
+    s.queue_bytes = uint32_t(std::min<size_t>(outbox_.queuedBytes(), UINT32_MAX));
     s.server_cpu_ms_per_s = server_.cpuMsPerSecond();
     send(std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(s))));
   }
@@ -505,7 +510,7 @@ void Session::pump() {
     return;
   requestFaceSets();
   maybeCull();
-  if (produceInFlight_ || queued_ > cfg.geometryWatermarkBytes) return;
+  if (produceInFlight_ || outbox_.queuedBytes() > cfg.geometryWatermarkBytes) return;
   // Nothing goes before the current cell's face set is known, and under the
   // visibility policy before its culling: what the client sees from its pose
   // goes first. (maybeCull starts the culling of a new current cell at once;

@@ -13,10 +13,12 @@
 // captures a shared_ptr to the session and posts its result back.
 //
 // The session is the transport: it reads and checks frames, holds the
-// conversation's state and moves bytes. What the client gets next is
-// decided by its StreamScheduler (stream_scheduler.h); the session runs the
-// visibility work the scheduler asks for on the worker pool and sends what it
-// emits.
+// conversation's state and moves bytes. It is built from the protocol peer
+// core's parts (protocol/wire/peer.h): FrameDecoder, dispatchPayload, the
+// Outbox's queue rules and wireErrorCode; its read loop is a Peer's plus an
+// inbound rate limit and per-frame deadlines, which is why it is not a Peer. What the client gets
+// next is decided by its StreamScheduler (stream_scheduler.h); the session runs the visibility work
+// the scheduler asks for on the worker pool and sends what it emits.
 //
 // What a client can make the server do is bounded: every loop driven by a
 // client's values has a fixed number of steps (the scheduler samples at most
@@ -41,7 +43,7 @@
 #include <string>
 #include <vector>
 
-#include "protocol/wire/messages.h"
+#include "protocol/wire/peer.h"
 #include "server/stream/stream_scheduler.h"
 #include "server/stream/stream_world.h"
 
@@ -111,10 +113,8 @@ class Session : public std::enable_shared_from_this<Session> {
   bool midFrame_ = false;           // part of a frame is buffered
   Clock::time_point frameStarted_;  // when its first byte arrived
 
-  std::deque<std::shared_ptr<const std::vector<uint8_t>>> queue_;
-  size_t queued_ = 0;
-  std::atomic<size_t> queuedAtomic_{0};
-  bool writing_ = false;
+  wire::Outbox outbox_;  // the send queue (protocol/wire/peer.h): one write in flight
+  std::atomic<size_t> queuedAtomic_{0};  // outbox_.queuedBytes(), for other threads
   Clock::time_point writeStarted_, lastInbound_, started_, closingSince_, lastClientStats_,
       windowStart_;
   unsigned framesInWindow_ = 0;

@@ -8,7 +8,8 @@
 #include "common/core/error.h"
 #include "common/core/timer.h"
 #include "common/raycast/ray_query.h"
-#include "common/spatial/free_space.h"
+#include "common/world/free_space.h"
+#include "common/world/static_world.h"
 #include "server/visibility/pvs_bake.h"
 
 namespace vistream {
@@ -49,9 +50,9 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
     grid_ = h.grid();
   } else {
     if (!(options.cellSize > 0.0f)) throwInputError("--cell-size must be positive");
-    const FlatTriangles tris = flattenScene(scene_, true);
-    const auto rays = makeEmbreeRayQuery(tris);
-    const FreeSpace fs = FreeSpace::build(*rays, scene_.bounds());
+    StaticWorldOptions worldOptions;
+    worldOptions.ground = options.ground;
+    const FreeSpace fs = buildStaticWorld(scene_, worldOptions).freeSpace;
     BakeOptions bo;
     bo.cellSize = glm::vec3(options.cellSize);
     grid_ = bakeGrid(scene_, fs, bo);
@@ -76,26 +77,11 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
       }
     }
   }
-  // Buckets over x and z.
+  // Faces by X/Z cell: at least 8 m cells, at most about 512 along the longer side.
   const Box3f b = scene_.bounds();
-  if (!b.empty()) {
-    bucketSize_ = std::max(8.0f, std::max(b.hi.x - b.lo.x, b.hi.z - b.lo.z) / 512.0f);
-    bucketLo_ = {b.lo.x, b.lo.z};
-    buckets_ = glm::ivec2(int((b.hi.x - b.lo.x) / bucketSize_) + 1,
-                          int((b.hi.z - b.lo.z) / bucketSize_) + 1);
-    bucketFaces_.resize(size_t(buckets_.x) * size_t(buckets_.y));
-    for (uint32_t id = 0; id < faceBoxes_.size(); ++id) {
-      const Box3f& fb = faceBoxes_[id];
-      if (fb.empty()) continue;
-      const int x0 = std::clamp(int((fb.lo.x - bucketLo_.x) / bucketSize_), 0, buckets_.x - 1);
-      const int x1 = std::clamp(int((fb.hi.x - bucketLo_.x) / bucketSize_), 0, buckets_.x - 1);
-      const int z0 = std::clamp(int((fb.lo.z - bucketLo_.y) / bucketSize_), 0, buckets_.y - 1);
-      const int z1 = std::clamp(int((fb.hi.z - bucketLo_.y) / bucketSize_), 0, buckets_.y - 1);
-      for (int z = z0; z <= z1; ++z)
-        for (int x = x0; x <= x1; ++x)
-          bucketFaces_[size_t(z) * size_t(buckets_.x) + size_t(x)].push_back(id);
-    }
-  }
+  if (!b.empty())
+    faceGrid_ =
+        XzGrid(b, std::max(8.0f, std::max(b.hi.x - b.lo.x, b.hi.z - b.lo.z) / 512.0f), faceBoxes_);
   pvsCache_ = std::make_unique<AsyncCache<uint32_t, FaceList>>(
       options.pvsCacheCells, [this](const uint32_t& c) { return computePvs(c); },
       [this](const uint32_t& c, const char* what) {
@@ -203,22 +189,10 @@ void StreamWorld::cellFaceSet(const glm::ivec3& cell, StreamPolicy policy, float
 
 FaceList StreamWorld::facesWithin(const Box3f& box, float radius) const {
   FaceList out;
-  if (bucketFaces_.empty()) return out;
-  const int x0 =
-      std::clamp(int((box.lo.x - radius - bucketLo_.x) / bucketSize_), 0, buckets_.x - 1);
-  const int x1 =
-      std::clamp(int((box.hi.x + radius - bucketLo_.x) / bucketSize_), 0, buckets_.x - 1);
-  const int z0 =
-      std::clamp(int((box.lo.z - radius - bucketLo_.y) / bucketSize_), 0, buckets_.y - 1);
-  const int z1 =
-      std::clamp(int((box.hi.z + radius - bucketLo_.y) / bucketSize_), 0, buckets_.y - 1);
-  for (int z = z0; z <= z1; ++z)
-    for (int x = x0; x <= x1; ++x)
-      for (uint32_t id : bucketFaces_[size_t(z) * size_t(buckets_.x) + size_t(x)])
-        if (boxDistance(faceBoxes_[id], box) <= radius) out.push_back(id);
-  std::sort(out.begin(), out.end());
-  out.erase(std::unique(out.begin(), out.end()), out.end());
-  return out;
+  for (uint32_t id : faceGrid_.itemsNear({box.lo.x - radius, box.lo.z - radius},
+                                         {box.hi.x + radius, box.hi.z + radius}))
+    if (boxDistance(faceBoxes_[id], box) <= radius) out.push_back(id);
+  return out;  // ascending: itemsNear lists each face once, in order
 }
 
 bool StreamWorld::cellSeesCell(const glm::ivec3& viewerCell, const glm::ivec3& avatarCell) {

@@ -22,6 +22,8 @@
 #include <vector>
 
 #include "common/scene/scene.h"
+#include "common/spatial/xz_grid.h"
+#include "common/world/static_world.h"
 #include "protocol/geometry/geometry_codec.h"
 #include "server/stream/async_cache.h"
 #include "server/visibility/epsilon_pvs.h"
@@ -38,6 +40,7 @@ const char* streamPolicyName(StreamPolicy p);
 struct StreamWorldOptions {
   std::filesystem::path pvsDatabase;  // empty: compute every PVS on demand
   float cellSize = 4.0f;              // without a database (metres), the paper's scale
+  GroundChoice ground;  // without a database: the free space's ground (static_world.h)
   size_t pvsCacheCells = 4096;
   size_t faceSetCacheEntries = 4096;
   // Memory bounds of the two caches (face IDs at 4 bytes each). Clients pick
@@ -124,11 +127,8 @@ class StreamWorld {
   std::unique_ptr<EpsilonPvs> pvs_;
   std::vector<wire::FaceTriangles> faces_;
   std::vector<Box3f> faceBoxes_;
-  // Faces by 2D bucket (x, z) of their bounding boxes.
-  float bucketSize_ = 16.0f;
-  glm::vec2 bucketLo_{0.0f};
-  glm::ivec2 buckets_{0};
-  std::vector<std::vector<uint32_t>> bucketFaces_;
+  // Faces by X/Z cell of their bounding boxes (no cells for an empty scene).
+  XzGrid faceGrid_;
   std::unique_ptr<AsyncCache<uint32_t, FaceList>> pvsCache_;
   std::unique_ptr<AsyncCache<FaceSetKey, FaceList, FaceSetKeyHash>> faceSetCache_;
   std::atomic<uint64_t> pvsFromDatabase_{0};

@@ -41,6 +41,7 @@
 #include <vector>
 
 #include "common/core/box.h"
+#include "common/core/stats_fields.h"
 #include "common/scene/scene.h"
 #include "common/spatial/kdtree.h"
 #include "server/visibility/occluders.h"
@@ -77,7 +78,36 @@ struct PvsStats {
   size_t faces = 0;          // faces considered
   size_t facesOccluded = 0;  // culled in total (box stage included)
   size_t facesCulledByBoxStage = 0;
+
+  // Every field above, once: `vistream-pvs cell` prints its JSON and its
+  // table from this list (common/core/stats_output.h).
+  template <class F>
+  void forEachField(F&& f) const {
+    f(StatField{"time_ms", "time", "ms"}, timeMs);
+    f(StatField{"box_stage_ms", "box stage", "ms"}, boxStageMs);
+    f(StatField{"face_stage_ms", "face stage", "ms"}, faceStageMs);
+    f(StatField{"occluders", "occluders available", ""}, occluders);
+    f(StatField{"occluders_used", "occluders used", ""}, occludersUsed);
+    f(StatField{"lines_cast", "lines cast", ""}, linesCast);
+    f(StatField{"line_box_tests", "line/box tests", ""}, lineBoxTests);
+    f(StatField{"line_polygon_tests", "line/polygon tests", ""}, linePolygonTests);
+    f(StatField{"boxes", "boxes tested", ""}, boxes);
+    f(StatField{"boxes_occluded", "boxes occluded", ""}, boxesOccluded);
+    f(StatField{"boxes_occluded_by_first_occluder", "boxes occluded by the first occluder", ""},
+      boxesOccludedByFirst);
+    f(StatField{"object_boxes", "object boxes tested", ""}, objectBoxes);
+    f(StatField{"object_boxes_occluded", "object boxes occluded", ""}, objectBoxesOccluded);
+    f(StatField{"object_boxes_occluded_by_first_occluder",
+                "object boxes occluded by the first occluder", ""},
+      objectBoxesOccludedByFirst);
+    f(StatField{"faces_total", "faces considered", ""}, faces);
+    f(StatField{"faces_occluded", "faces occluded", ""}, facesOccluded);
+    f(StatField{"faces_culled_by_box_stage", "faces culled by box stage", ""},
+      facesCulledByBoxStage);
+  }
 };
+// 17 fields of 8 bytes: a field added above must be added to forEachField too.
+static_assert(sizeof(PvsStats) == 17 * 8, "PvsStats changed: update PvsStats::forEachField");
 
 struct PvsResult {
   std::vector<uint32_t> faces;    // sorted face IDs of the PVS

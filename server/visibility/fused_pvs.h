@@ -43,7 +43,19 @@ struct FusedPvsStats {
   size_t candidateFaces = 0;  // faces of the single-occluder PVS tested
   size_t fusedCulled = 0;     // of those, hidden by fused occluders
   double timeMs = 0.0;
+
+  // Every field above, once (common/core/stats_fields.h).
+  template <class F>
+  void forEachField(F&& f) const {
+    f(StatField{"samples", "samples", ""}, samples);
+    f(StatField{"eroded_occluders", "eroded occluders", ""}, erodedOccluders);
+    f(StatField{"candidate_faces", "candidate faces", ""}, candidateFaces);
+    f(StatField{"fused_culled", "culled by fused occluders", ""}, fusedCulled);
+    f(StatField{"time_ms", "time", "ms"}, timeMs);
+  }
 };
+static_assert(sizeof(FusedPvsStats) == 5 * 8,
+              "FusedPvsStats changed: update FusedPvsStats::forEachField");
 
 class FusedPvs {
  public:

@@ -270,7 +270,9 @@ ViewCellGrid bakeGrid(const Scene& scene, const FreeSpace& fs, const BakeOptions
       lo = std::min(lo, fs.floorHeight(c.x, c.y));
       hi = std::max(hi, fs.floorHeight(c.x, c.y));
     }
-    if (lo > hi) throwInputError("scene '{}' has no free space to bake cells over", scene.name);
+    if (lo > hi)
+      throwInputError("scene '{}' has no free space to bake cells over: {}", scene.name,
+                      fs.emptyReason());
     region = Box3f({b.lo.x, lo + kEyeLow, b.lo.z}, {b.hi.x, hi + kEyeHigh, b.hi.z});
   }
   if (region.empty()) throwInputError("the bake region is empty");

@@ -33,7 +33,7 @@
 #include <string>
 #include <vector>
 
-#include "common/spatial/free_space.h"
+#include "common/world/free_space.h"
 #include "server/visibility/epsilon_pvs.h"
 #include "server/visibility/pvs_database.h"
 #include "server/visibility/view_cell_grid.h"

@@ -33,6 +33,7 @@
 #include "common/raycast/ray_query.h"
 #include "common/scene/scene.h"
 #include "common/spatial/kdtree.h"
+#include "tests/common/support/triangle_soups.h"
 
 namespace vistream {
 namespace {
@@ -70,13 +71,7 @@ const char* kindName(QueryKind kind) {
   return "?";
 }
 
-glm::vec3 randomDirection(std::mt19937& rng) {
-  std::normal_distribution<float> normal(0.0f, 1.0f);
-  glm::vec3 d;
-  do d = glm::vec3(normal(rng), normal(rng), normal(rng));
-  while (glm::length(d) < 1e-3f);
-  return glm::normalize(d);
-}
+using testing::randomDirection;
 
 // Eye-height rays from street points of a city with its ground at the
 // lowest y of the scene (see the file comment).

@@ -196,4 +196,76 @@ TEST(ClientTool, AServerThatSendsGarbageEndsTheClientWithAClearError) {
   EXPECT_NE(text.find("bad frame from the server"), std::string::npos) << text;
 }
 
+// Bad input and first use (issue 12).
+TEST(ClientTool, OutOfRangeNumbersFailAtParseTimeNamingTheOption) {
+  const std::string missing = "--scene /nonexistent/scene.obj --headless --path auto";
+  const std::pair<std::string, std::string> cases[] = {
+      {missing + " --frames -5", "--frames"},
+      {missing + " --frames 0", "--frames"},
+      {missing + " --near-distance -5", "--near-distance"},
+      {missing + " --stream-radius 0", "--stream-radius"},
+      {missing + " --fov 0", "--fov"},
+      {missing + " --horizon-cell -1", "--horizon-cell"},
+      {missing + " --pixel-budget -1", "--pixel-budget"},
+      {"--host 127.0.0.1 --port 99999 --headless --path auto", "--port"},
+  };
+  for (const auto& [args, option] : cases) {
+    const auto r = runTool("vistream-client", args);
+    EXPECT_EQ(r.status, 1) << args << "\n" << r.err;
+    EXPECT_EQ(r.err.rfind("vistream-client: error: " + option + ":", 0), 0u) << args << "\n"
+                                                                             << r.err;
+  }
+  for (const std::string args : {"--frames -5", "--frames 1", "--repeats 0", "--speed -1"}) {
+    const auto r = runTool("vistream-client-bench", args);
+    EXPECT_EQ(r.status, 1) << args << "\n" << r.err;
+    EXPECT_EQ(r.err.rfind("vistream-client-bench: error: " + args.substr(0, args.find(' ')), 0), 0u)
+        << args << "\n"
+        << r.err;
+  }
+}
+
+TEST(ClientTool, HelpShowsDefaultsCapturedFromTheCode) {
+  for (const char* tool : {"vistream-client", "vistream-client-bench"}) {
+    const auto help = runTool(tool, "--help");
+    EXPECT_EQ(help.status, 0) << tool;
+    EXPECT_EQ(help.out.find("(default"), std::string::npos) << tool << "\n" << help.out;
+    EXPECT_NE(help.out.find("=640x480"), std::string::npos) << tool << "\n" << help.out;
+  }
+}
+
+// Connected with --scene: the local copy only generates --path auto, the
+// geometry still streams, and --json says what arrived and how long the walk
+// waited for it.
+TEST(ClientTool, ConnectedHeadlessWalksPathAutoThroughALocalCopyAndReportsWhatItReceived) {
+  vistream::testing::TempDir dir;
+  const fs::path scene = dir.write("street.obj", streetObj());
+  const fs::path path = dir.write("walk.csv", kWalk);
+  const std::string bin = VISTREAM_BIN_DIR, d = dir.path().string();
+  const std::string script =
+      bin + "/vistream-server --scene " + scene.string() + " --port 0 --port-file " + d +
+      "/port --radius 400 --log-level warn > " + d + "/server.log 2>&1 & echo $! > " + d +
+      "/pid; for i in $(seq 1 300); do [ -s " + d + "/port ] && break; sleep 0.1; done; " + bin +
+      "/vistream-client --host 127.0.0.1 --port $(cat " + d + "/port) --scene " + scene.string() +
+      " --headless --path auto --frames 4 --size 160x120 --json > " + d + "/net.json 2> " + d +
+      "/client.err; echo $? > " + d + "/status; " + bin + "/vistream-client --host 127.0.0.1 " +
+      "--port $(cat " + d + "/port) --scene " + scene.string() + " --headless --path " +
+      path.string() + " > /dev/null 2> " + d + "/both.err; echo $? > " + d +
+      "/both.status; kill -TERM $(cat " + d + "/pid); wait $(cat " + d + "/pid) 2>/dev/null";
+  ASSERT_EQ(std::system(("bash -c '" + script + "'").c_str()), 0);
+  auto read = [&](const char* name) {
+    std::ifstream f(dir.path() / name);
+    return std::string((std::istreambuf_iterator<char>(f)), {});
+  };
+  ASSERT_EQ(std::stoi(read("status")), 0) << read("client.err");
+  const auto j = parseJson(read("net.json"));
+  EXPECT_EQ(j["frames"].get<int>(), 4);
+  ASSERT_TRUE(j.contains("connection")) << j.dump();
+  EXPECT_GT(j["connection"]["bytes_received"].get<uint64_t>(), 0u);
+  EXPECT_GE(j["connection"]["wait_for_geometry_ms"].get<double>(), 0.0);
+  EXPECT_EQ(j["connection"]["waits"].get<int>(), 5) << "the first view cell and one per frame";
+  // A path file with --host and --scene: the scene would be loaded for nothing.
+  EXPECT_EQ(std::stoi(read("both.status")), 1);
+  EXPECT_NE(read("both.err").find("--scene with --host"), std::string::npos) << read("both.err");
+}
+
 }  // namespace

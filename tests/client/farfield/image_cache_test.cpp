@@ -9,6 +9,7 @@
 #include <string>
 
 #include "client/render/camera.h"
+#include "tests/common/support/camera_at.h"
 
 // Oracles: exact direction geometry (azimuth and elevation of world
 // directions, cameras aimed along a known direction) and hand-built histories
@@ -20,13 +21,7 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 
 Camera makeCamera(glm::vec3 eye, float yaw, float pitch, int width = 160, int height = 120) {
-  Camera c;
-  c.eye = eye;
-  c.yawDeg = yaw;
-  c.pitchDeg = pitch;
-  c.width = width;
-  c.height = height;
-  return c;
+  return testing::cameraAt(eye, yaw, pitch, width, height);
 }
 
 // World direction from azimuth (the camera's yaw convention: 0 looks along -Z,
@@ -174,22 +169,34 @@ class CachePlan : public ::testing::Test {
   Camera cam = makeCamera({10, 2, 10}, 25, 5);
   PanoramicCache cache{cam.pixelAngle(), thesisOnly()};
   std::vector<uint8_t> trace;
+
+  // Plans the first frame of `cam` with no budget and stores every texel it
+  // traces; returns the texels it sees.
+  std::vector<int64_t> storeTheFirstView() {
+    const std::vector<int64_t> texels = texelsSeenBy(cache, cam);
+    cache.plan(cam.eye, texels, 0, kMaxStale, trace);
+    storeTraced(cache, texels, trace);
+    return texels;
+  }
+
+  // Expects a plan `s` over `n` texels that traces every one and reuses none.
+  void expectTracesAll(const CachePlanStats& s, size_t n) const {
+    EXPECT_EQ(s.mustTrace, n);
+    EXPECT_EQ(s.reused, 0u);
+    EXPECT_EQ(size_t(std::count(trace.begin(), trace.end(), uint8_t(1))), n);
+  }
 };
 
 TEST_F(CachePlan, TracesEveryCandidateOnTheFirstFrame) {
   const std::vector<int64_t> texels = texelsSeenBy(cache, cam);
   const CachePlanStats s = cache.plan(cam.eye, texels, 100, kMaxStale, trace);
   EXPECT_EQ(s.candidates, texels.size());
-  EXPECT_EQ(s.mustTrace, texels.size());
   EXPECT_EQ(s.budgeted, 0u);
-  EXPECT_EQ(s.reused, 0u);
-  EXPECT_EQ(size_t(std::count(trace.begin(), trace.end(), uint8_t(1))), texels.size());
+  expectTracesAll(s, texels.size());
 }
 
 TEST_F(CachePlan, ReusesEverythingFromTheSameEyeAndReturnsTheStoredColours) {
-  const std::vector<int64_t> texels = texelsSeenBy(cache, cam);
-  cache.plan(cam.eye, texels, 0, kMaxStale, trace);
-  storeTraced(cache, texels, trace);
+  const std::vector<int64_t> texels = storeTheFirstView();
   const CachePlanStats s = cache.plan(cam.eye, texels, 0, kMaxStale, trace);
   EXPECT_EQ(s.reused, texels.size());
   EXPECT_EQ(s.mustTrace + s.budgeted, 0u);
@@ -208,21 +215,14 @@ TEST_F(CachePlan, ReusesEverythingFromTheSameEyeAndReturnsTheStoredColours) {
 }
 
 TEST_F(CachePlan, RetracesEverythingAfterATeleportEvenWithoutBudget) {
-  const std::vector<int64_t> texels = texelsSeenBy(cache, cam);
-  cache.plan(cam.eye, texels, 0, kMaxStale, trace);
-  storeTraced(cache, texels, trace);
+  const std::vector<int64_t> texels = storeTheFirstView();
   const glm::vec3 away =
       cam.eye + glm::vec3(0.8f * kMaxStale, 0.0f, 0.8f * kMaxStale);  // 1.13 maxStale
-  const CachePlanStats s = cache.plan(away, texels, 0, kMaxStale, trace);
-  EXPECT_EQ(s.mustTrace, texels.size());
-  EXPECT_EQ(s.reused, 0u);
-  EXPECT_EQ(size_t(std::count(trace.begin(), trace.end(), uint8_t(1))), texels.size());
+  expectTracesAll(cache.plan(away, texels, 0, kMaxStale, trace), texels.size());
 }
 
 TEST_F(CachePlan, SpendsTheBudgetOnStaleButValidPixelsAfterASmallMove) {
-  const std::vector<int64_t> texels = texelsSeenBy(cache, cam);
-  cache.plan(cam.eye, texels, 0, kMaxStale, trace);
-  storeTraced(cache, texels, trace);
+  const std::vector<int64_t> texels = storeTheFirstView();
   const glm::vec3 moved = cam.eye + glm::vec3(0.3f, 0.0f, 0.0f);
   const size_t n = texels.size();
   for (size_t budget : {size_t(1), size_t(7), n / 3, n / 2 + 1, n - 1, n, 2 * n}) {

@@ -9,6 +9,7 @@
 #include "client/app/walkthrough.h"
 #include "common/generate/generate.h"
 #include "common/generate/path.h"
+#include "tests/common/support/camera_at.h"
 
 namespace vistream {
 namespace {
@@ -54,13 +55,7 @@ RenderGeometry streetScene(float length, glm::vec3 offset = glm::vec3(0.0f)) {
 }
 
 Camera cameraAt(glm::vec3 eye, float yaw, float pitch = 0.0f) {
-  Camera c;
-  c.eye = eye;
-  c.yawDeg = yaw;
-  c.pitchDeg = pitch;
-  c.width = 320;
-  c.height = 240;
-  return c;
+  return testing::cameraAt(eye, yaw, pitch, 320, 240);
 }
 
 struct Check {
@@ -88,6 +83,13 @@ struct Renderers {
   }
 };
 
+// The pipeline's image against the reference's: no pixel differs inside a
+// uniform patch (a hole or a stale pixel), and at most 0.5% differ in all.
+void expectMatchesReference(size_t interior, const ImageDifference& diff) {
+  EXPECT_EQ(interior, 0u) << "holes or stale pixels";
+  EXPECT_LT(diff.differingFraction, 0.005);
+}
+
 // The thesis's split at d, whatever the scene's size (these scenes are small
 // enough for the polygon budget, which would draw them whole).
 PipelineOptions optionsWithD(float d) {
@@ -98,6 +100,24 @@ PipelineOptions optionsWithD(float d) {
   return o;
 }
 
+// optionsWithD(60) with no pixel budget: only pixels the image cache must
+// refresh are traced.
+PipelineOptions cacheRefreshOnly() {
+  PipelineOptions o = optionsWithD(60.0f);
+  o.pixelBudget = 0;
+  return o;
+}
+
+// On the 1500 m street with cacheRefreshOnly(): five frames at eye height
+// creeping 5 cm at a time along -Z from z, looking along -Z (so the image
+// cache holds that view), then the frame of `next`.
+Check frameAfterLookingDownTheStreetFrom(float z, const Camera& next) {
+  const RenderGeometry g = streetScene(1500.0f);
+  Renderers r(g, cacheRefreshOnly());
+  for (int i = 0; i < 5; ++i) (void)r.frame(cameraAt({0.0f, 1.7f, z - 0.05f * float(i)}, 0.0f));
+  return r.frame(next);
+}
+
 TEST(Pipeline, LookingAlongAStreetToTheHorizonMatchesTheReference) {
   const RenderGeometry g = streetScene(1500.0f);
   Renderers r(g, optionsWithD(60.0f));
@@ -106,8 +126,7 @@ TEST(Pipeline, LookingAlongAStreetToTheHorizonMatchesTheReference) {
   EXPECT_TRUE(report.horizonRan) << report.horizonWhy;
   EXPECT_GT(report.pixels.rayHit, 0u) << "the far end of the street is ray cast";
   EXPECT_GT(report.pixels.horizon, 0u) << "the sky above the street is culled";
-  EXPECT_EQ(interior, 0u) << "holes or stale pixels";
-  EXPECT_LT(diff.differingFraction, 0.005);
+  expectMatchesReference(interior, diff);
 }
 
 TEST(Pipeline, StandingAtTheNearFieldBorderLeavesNoHole) {
@@ -125,43 +144,28 @@ TEST(Pipeline, StandingAtTheNearFieldBorderLeavesNoHole) {
 }
 
 TEST(Pipeline, TurningHalfwayRoundInOneFrameShowsNoStalePixels) {
-  const RenderGeometry g = streetScene(1500.0f);
-  PipelineOptions o = optionsWithD(60.0f);
-  o.pixelBudget = 0;  // only pixels the cache must refresh are traced
-  Renderers r(g, o);
-  for (int i = 0; i < 5; ++i)
-    (void)r.frame(cameraAt({0.0f, 1.7f, -100.0f - 0.05f * float(i)}, 0.0f));
-  const auto [report, diff, interior] = r.frame(cameraAt({0.0f, 1.7f, -100.3f}, 180.0f));
+  const auto [report, diff, interior] =
+      frameAfterLookingDownTheStreetFrom(-100.0f, cameraAt({0.0f, 1.7f, -100.3f}, 180.0f));
   EXPECT_GT(report.cachePlan.mustTrace, 0u) << "directions never seen are traced";
-  EXPECT_EQ(interior, 0u) << "holes or stale pixels";
-  EXPECT_LT(diff.differingFraction, 0.005);
+  expectMatchesReference(interior, diff);
 }
 
 TEST(Pipeline, TeleportingNeverShowsTheOldView) {
-  const RenderGeometry g = streetScene(1500.0f);
-  PipelineOptions o = optionsWithD(60.0f);
-  o.pixelBudget = 0;
-  Renderers r(g, o);
-  for (int i = 0; i < 5; ++i)
-    (void)r.frame(cameraAt({0.0f, 1.7f, -50.0f - 0.05f * float(i)}, 0.0f));
-  const auto [report, diff, interior] = r.frame(cameraAt({0.0f, 1.7f, -700.0f}, 0.0f));
+  const auto [report, diff, interior] =
+      frameAfterLookingDownTheStreetFrom(-50.0f, cameraAt({0.0f, 1.7f, -700.0f}, 0.0f));
   EXPECT_EQ(report.cachePlan.reused, 0u) << "nothing cached 650 m away is valid here";
-  EXPECT_EQ(interior, 0u) << "holes or stale pixels";
-  EXPECT_LT(diff.differingFraction, 0.005);
+  expectMatchesReference(interior, diff);
 }
 
 TEST(Pipeline, ReusesCachedPixelsWhenStandingStillAndStaysExact) {
   const RenderGeometry g = streetScene(1500.0f);
-  PipelineOptions o = optionsWithD(60.0f);
-  o.pixelBudget = 0;
-  Renderers r(g, o);
+  Renderers r(g, cacheRefreshOnly());
   (void)r.frame(cameraAt({0.0f, 1.7f, -5.0f}, 0.0f));
   const auto [report, diff, interior] = r.frame(cameraAt({0.0f, 1.7f, -5.0f}, 0.0f));
   EXPECT_GT(report.pixels.cache, 0u);
   EXPECT_EQ(report.pixels.rayHit + report.pixels.rayMiss, 0u)
       << "nothing moved, nothing to retrace";
-  EXPECT_EQ(interior, 0u) << "holes or stale pixels";
-  EXPECT_LT(diff.differingFraction, 0.005);
+  expectMatchesReference(interior, diff);
 }
 
 TEST(Pipeline, ASceneWithNoSkySkipsHorizonTracingAndStillMatches) {
@@ -179,8 +183,7 @@ TEST(Pipeline, ASceneWithNoSkySkipsHorizonTracingAndStillMatches) {
   EXPECT_FALSE(report.horizonRan);
   EXPECT_NE(report.horizonWhy.find("ceiling"), std::string::npos) << report.horizonWhy;
   EXPECT_TRUE(report.farFieldRan);
-  EXPECT_EQ(interior, 0u) << "holes or stale pixels";
-  EXPECT_LT(diff.differingFraction, 0.005);
+  expectMatchesReference(interior, diff);
 }
 
 TEST(Pipeline, ASceneEntirelyWithinDSwitchesTheFarFieldOff) {
@@ -196,8 +199,7 @@ TEST(Pipeline, ASceneEntirelyWithinDSwitchesTheFarFieldOff) {
   EXPECT_NE(report.farFieldWhy.find("within d"), std::string::npos) << report.farFieldWhy;
   EXPECT_EQ(report.pixels.rayHit + report.pixels.rayMiss, 0u);
   EXPECT_GT(report.pixels.background, 0u) << "the sky is background colour";
-  EXPECT_EQ(interior, 0u) << "holes or stale pixels";
-  EXPECT_LT(diff.differingFraction, 0.005);
+  expectMatchesReference(interior, diff);
 }
 
 TEST(Pipeline, ASceneWithinThePolygonBudgetIsDrawnWholeWithoutAFarField) {
@@ -209,8 +211,7 @@ TEST(Pipeline, ASceneWithinThePolygonBudgetIsDrawnWholeWithoutAFarField) {
   EXPECT_FALSE(report.farFieldRan);
   EXPECT_NE(report.farFieldWhy.find("polygon budget"), std::string::npos) << report.farFieldWhy;
   EXPECT_EQ(report.pixels.rayHit + report.pixels.rayMiss, 0u);
-  EXPECT_EQ(interior, 0u);
-  EXPECT_LT(diff.differingFraction, 0.005);
+  expectMatchesReference(interior, diff);
   // One triangle more than the budget allows, and the far field is back.
   o.polygonBudget = g.size() - 1;
   Renderers split(g, o);
@@ -224,8 +225,7 @@ TEST(Pipeline, FarFromTheOriginTheImageStillMatches) {
   const auto [report, diff, interior] =
       r.frame(cameraAt(offset + glm::vec3(0.0f, 1.7f, -5.0f), 0.0f));
   EXPECT_TRUE(report.farFieldRan);
-  EXPECT_EQ(interior, 0u);
-  EXPECT_LT(diff.differingFraction, 0.005);
+  expectMatchesReference(interior, diff);
 }
 
 TEST(Pipeline, GeometryAllDrawsEveryVisibleTriangleAsPolygons) {
@@ -236,8 +236,7 @@ TEST(Pipeline, GeometryAllDrawsEveryVisibleTriangleAsPolygons) {
   const auto [report, diff, interior] = r.frame(cameraAt({0.0f, 1.7f, -5.0f}, 10.0f));
   EXPECT_FALSE(report.farFieldRan);
   EXPECT_EQ(report.pixels.rayHit + report.pixels.rayMiss, 0u);
-  EXPECT_EQ(interior, 0u) << "holes or stale pixels";
-  EXPECT_LT(diff.differingFraction, 0.005);
+  expectMatchesReference(interior, diff);
 }
 
 // A walk through a generated city: with the cache and a budget the image

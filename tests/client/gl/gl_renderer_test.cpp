@@ -253,6 +253,81 @@ TEST_F(GlFrame, HudDarkensABoxAtTheTopLeftWritesWhiteInItAndLeavesTheRestAlone) 
   EXPECT_EQ(count, 0) << first;
 }
 
+// The HUD vistream-client shows, with numbers as wide as a big scene makes them.
+std::vector<HudLine> clientHud() {
+  return {{"frame 1234.5 ms (pipeline 1234.5 ms)  near 12345678 triangles  d = 150 m"},
+          {"pixels: polygon 307200  horizon 307200  cache 307200  ray hit 307200  ray miss 307200"},
+          {"faces held 1234567  received 1234.5 MB  far field off  horizon off  cache off"}};
+}
+
+std::string withoutSpaces(const std::string& text) {
+  std::string out;
+  for (char c : text)
+    if (c != ' ') out += c;
+  return out;
+}
+
+TEST(HudLayout, WrapsTheClientHudToTheDefaultWindowWithoutLosingText) {
+  const std::vector<HudLine> hud = clientHud();
+  const HudLayout layout = layoutHud(hud, 640, 480);
+  // The box lies inside the window and covers at most half of its height.
+  EXPECT_GE(layout.boxLo.x, 0.0f);
+  EXPECT_LE(layout.boxHi.x, 640.0f);
+  EXPECT_LE(layout.boxHi.y, 240.0f);
+  EXPECT_EQ(layout.scale, 2.0f);
+  // Every character of the input is still there, in order.
+  std::string in, out;
+  for (const HudLine& l : hud) in += withoutSpaces(l.text);
+  for (const std::string& l : layout.lines) out += withoutSpaces(l);
+  EXPECT_EQ(out, in);
+  EXPECT_GT(layout.lines.size(), hud.size()) << "these lines are wider than 640 px at 2x";
+}
+
+TEST(HudLayout, KeepsShortLinesWholeAndFallsBackToSingleSizeInATinyWindow) {
+  const std::vector<HudLine> hud = {{"frame 12"}, {"faces 3456"}};
+  const HudLayout wide = layoutHud(hud, 2000, 1000);
+  EXPECT_EQ(wide.scale, 2.0f);
+  EXPECT_EQ(wide.lines, (std::vector<std::string>{"frame 12", "faces 3456"}));
+  // 60 x 40: at 2x "faces 3456" alone is wider than the window.
+  const HudLayout tiny = layoutHud(hud, 60, 40);
+  EXPECT_EQ(tiny.scale, 1.0f);
+}
+
+// Draws the client's HUD in a 640 x 480 window (vistream-client's default)
+// over a uniform background: the box ends inside the window, so the last
+// columns keep the background on every row. VISTREAM_HUD_PNG=FILE writes
+// the frame to look at.
+TEST(GlHud, FitsTheDefaultWindowOfTheClient) {
+  std::unique_ptr<GlWindow> window;
+  try {
+    window = std::make_unique<GlWindow>(GlWindowOptions{640, 480, "hud_test", false, false});
+  } catch (const InputError& e) {
+    FAIL() << "cannot open an OpenGL window: " << e.what();
+  }
+  GlRenderer renderer;
+  Camera camera;
+  camera.width = window->framebufferWidth();
+  camera.height = window->framebufferHeight();
+  ASSERT_EQ(camera.width, 640);
+  const glm::u8vec3 background{200, 150, 100};
+  const RenderGeometry g;
+  renderer.upload(g);
+  const std::vector<HudLine> hud = clientHud();
+  renderer.draw(camera, ImageRgb8(640, 480, background), {}, std::numeric_limits<float>::infinity(),
+                hud);
+  const ImageRgb8 frame = renderer.readBack(640, 480);
+  if (const char* png = std::getenv("VISTREAM_HUD_PNG")) writePng(frame, png);
+  int white = 0;
+  for (int y = 0; y < 480; ++y)
+    for (int x = 0; x < 640; ++x) white += frame.at(x, y) == glm::u8vec3(255, 255, 255);
+  EXPECT_GT(white, 500);
+  const auto [count, first] = mismatches(frame, [&](int x, int) -> std::optional<glm::u8vec3> {
+    if (x < 640 - 2) return std::nullopt;
+    return background;
+  });
+  EXPECT_EQ(count, 0) << "the HUD reaches the right edge; first: " << first;
+}
+
 // Runs in a child process (gtest re-executes this binary), which drops the
 // display it inherited from xvfb-run.
 TEST(GlWindowDeathTest, ThrowsInputErrorNamingTheDisplayWhenThereIsNone) {

@@ -5,12 +5,14 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <memory>
 #include <numeric>
 #include <random>
 #include <sstream>
 #include <string>
 
 #include "common/raycast/ray_query.h"
+#include "tests/common/support/camera_at.h"
 
 // Oracles: a brute-force ray cast through each pixel centre (Camera::rayDirection
 // has a forward component of exactly 1, so the ray parameter t is view depth and
@@ -42,13 +44,7 @@ glm::vec3 onPixelRay(const Camera& c, glm::dvec2 w, float depth) {
 }
 
 Camera makeCamera(glm::vec3 eye, float yaw, float pitch) {
-  Camera c;
-  c.eye = eye;
-  c.yawDeg = yaw;
-  c.pitchDeg = pitch;
-  c.width = 160;
-  c.height = 120;
-  return c;
+  return testing::cameraAt(eye, yaw, pitch, 160, 120);
 }
 
 // Ray-cast questions about one pixel of one camera.
@@ -161,6 +157,32 @@ Camera randomCamera(uint32_t seed) {
   return makeCamera({U(-20, 20), U(0, 10), U(-20, 20)}, U(-180, 180), U(-30, 30));
 }
 
+// Triangles the rasterizer has drawn from one camera, with the brute-force
+// ray oracle over the same triangles. The oracle points into the object, so
+// it stays where it is built.
+struct DrawnTriangles {
+  const Camera cam;
+  const FlatTriangles soup;
+  const std::unique_ptr<RayQuery> rays;
+  const RayOracle oracle;
+  IdBuffer ids;
+
+  DrawnTriangles(SoftwareRasterizer& raster, const Camera& camera, FlatTriangles triangles)
+      : cam(camera),
+        soup(std::move(triangles)),
+        rays(makeBruteForceRayQuery(soup)),
+        oracle{cam, *rays} {
+    raster.draw(cam, soup, allOf(soup), ids);
+  }
+  // The random soup of `seed` (300 triangles) seen from the random camera of `seed`.
+  DrawnTriangles(SoftwareRasterizer& raster, uint32_t seed)
+      : DrawnTriangles(raster, randomCamera(seed), seed) {}
+  DrawnTriangles(SoftwareRasterizer& raster, const Camera& camera, uint32_t seed)
+      : DrawnTriangles(raster, camera, randomSoup(camera, seed, 300)) {}
+  DrawnTriangles(const DrawnTriangles&) = delete;
+  DrawnTriangles& operator=(const DrawnTriangles&) = delete;
+};
+
 // Exact window-space geometry: the signed distance (px) from p to the nearest
 // edge line of a convex polygon, positive inside.
 // True if p lies within `margin` of the polygon's bounding box.
@@ -196,26 +218,21 @@ TEST(SoftwareRasterizer, DrawsTheTriangleThatARayThroughEachPixelCentreHitsFirst
   SoftwareRasterizer raster;
   for (uint32_t seed = 1; seed <= 5; ++seed) {
     SCOPED_TRACE("seed " + std::to_string(seed));
-    const Camera cam = randomCamera(seed);
-    const FlatTriangles soup = randomSoup(cam, seed, 300);
-    const auto rays = makeBruteForceRayQuery(soup);
-    const RayOracle oracle{cam, *rays};
-    IdBuffer ids;
-    raster.draw(cam, soup, allOf(soup), ids);
+    const DrawnTriangles d(raster, seed);
     size_t mismatches = 0, unexplained = 0, holes = 0, drawn = 0;
     std::ostringstream examples;
-    for (int y = 0; y < cam.height; ++y)
-      for (int x = 0; x < cam.width; ++x) {
-        const uint32_t got = ids.at(x, y);
-        const uint32_t want = oracle.first(x + 0.5, y + 0.5).triangle;
+    for (int y = 0; y < d.cam.height; ++y)
+      for (int x = 0; x < d.cam.width; ++x) {
+        const uint32_t got = d.ids.at(x, y);
+        const uint32_t want = d.oracle.first(x + 0.5, y + 0.5).triangle;
         drawn += got != kNoTriangle;
         if (got == want) continue;
         ++mismatches;
         const bool nearEdge =
-            edgeNear(cam, soup, got, x, y, 0.5) || edgeNear(cam, soup, want, x, y, 0.5);
-        const bool tie = got != kNoTriangle && want != kNoHit && oracle.depthTie(got, want, x, y);
+            edgeNear(d.cam, d.soup, got, x, y, 0.5) || edgeNear(d.cam, d.soup, want, x, y, 0.5);
+        const bool tie = got != kNoTriangle && want != kNoHit && d.oracle.depthTie(got, want, x, y);
         const bool hole =
-            got == kNoTriangle && want != kNoHit && !edgeNear(cam, soup, want, x, y, 1.0);
+            got == kNoTriangle && want != kNoHit && !edgeNear(d.cam, d.soup, want, x, y, 1.0);
         holes += hole;
         if (hole || (!nearEdge && !tie)) {
           unexplained += !hole;
@@ -225,7 +242,7 @@ TEST(SoftwareRasterizer, DrawsTheTriangleThatARayThroughEachPixelCentreHitsFirst
                      << int64_t(want == kNoHit ? -1 : int64_t(want));
         }
       }
-    const size_t pixels = size_t(cam.width) * size_t(cam.height);
+    const size_t pixels = size_t(d.cam.width) * size_t(d.cam.height);
     EXPECT_GT(drawn, pixels / 4) << "the soup should cover a good part of the image";
     EXPECT_EQ(holes, 0u) << "empty pixels inside a triangle's interior:" << examples.str();
     EXPECT_EQ(unexplained, 0u) << "mismatches away from edges and depth ties:" << examples.str();
@@ -361,25 +378,20 @@ TEST(SoftwareRasterizer, CoverageWithAnInsetIsASubsetOfWhatDrawFills) {
   SoftwareRasterizer raster;
   for (uint32_t seed = 11; seed <= 13; ++seed) {
     SCOPED_TRACE("seed " + std::to_string(seed));
-    const Camera cam = randomCamera(seed);
-    const FlatTriangles soup = randomSoup(cam, seed, 300);
-    const auto rays = makeBruteForceRayQuery(soup);
-    const RayOracle oracle{cam, *rays};
-    IdBuffer ids;
-    raster.draw(cam, soup, allOf(soup), ids);
+    const DrawnTriangles d(raster, seed);
     std::vector<uint8_t> covered;
-    raster.coverage(cam, soup, allOf(soup), 0.25f, covered);
+    raster.coverage(d.cam, d.soup, allOf(d.soup), 0.25f, covered);
     size_t inset = 0, notDrawn = 0, noRayHit = 0;
-    for (int y = 0; y < cam.height; ++y)
-      for (int x = 0; x < cam.width; ++x) {
-        if (covered[size_t(y) * size_t(cam.width) + size_t(x)] != kCovered) continue;
+    for (int y = 0; y < d.cam.height; ++y)
+      for (int x = 0; x < d.cam.width; ++x) {
+        if (covered[size_t(y) * size_t(d.cam.width) + size_t(x)] != kCovered) continue;
         ++inset;
-        notDrawn += ids.at(x, y) == kNoTriangle;
-        noRayHit += !oracle.first(x + 0.5, y + 0.5).valid();
+        notDrawn += d.ids.at(x, y) == kNoTriangle;
+        noRayHit += !d.oracle.first(x + 0.5, y + 0.5).valid();
       }
     EXPECT_EQ(notDrawn, 0u);
     EXPECT_EQ(noRayHit, 0u);
-    EXPECT_GT(inset, size_t(cam.width * cam.height) / 5);
+    EXPECT_GT(inset, size_t(d.cam.width * d.cam.height) / 5);
   }
 }
 
@@ -472,16 +484,13 @@ TEST(SoftwareRasterizer, DrawsThePixelsARayCastSeesOfATriangleCrossingTheNearPla
     addTriangle(f, onPixelRay(cam, cases[i][0].w, cases[i][0].z),
                 onPixelRay(cam, cases[i][1].w, cases[i][1].z),
                 onPixelRay(cam, cases[i][2].w, cases[i][2].z));
-    const auto rays = makeBruteForceRayQuery(f);
-    const RayOracle oracle{cam, *rays};
-    IdBuffer ids;
-    raster.draw(cam, f, allOf(f), ids);
+    const DrawnTriangles d(raster, cam, std::move(f));
     size_t seen = 0, wrong = 0;
     for (int y = 0; y < cam.height; ++y)
       for (int x = 0; x < cam.width; ++x) {
-        const bool hit = oracle.first(x + 0.5, y + 0.5).valid();
+        const bool hit = d.oracle.first(x + 0.5, y + 0.5).valid();
         seen += hit;
-        if (hit != (ids.at(x, y) == 0u) && !edgeNear(cam, f, 0, x, y, 0.5)) ++wrong;
+        if (hit != (d.ids.at(x, y) == 0u) && !edgeNear(cam, d.soup, 0, x, y, 0.5)) ++wrong;
       }
     EXPECT_EQ(wrong, 0u);
     EXPECT_GT(seen, 100u) << "the case should show a good part of the triangle";

@@ -708,15 +708,26 @@ class WriteObj : public ::testing::Test {
     std::filesystem::create_directories(directory_);
   }
   void TearDown() override { std::filesystem::remove_all(directory_); }
+
+  // A generated scene and the OBJ file writeObj made of it.
+  struct Written {
+    PolygonScene polygons;
+    std::filesystem::path path;
+  };
+  // Generates `type` (seed 1) and writes it as <type>.obj in the test's directory.
+  Written generateAndWrite(const std::string& type) const {
+    Written w{generate(type, 1), directory_ / (type + ".obj")};
+    writeObj(w.polygons, w.path);
+    return w;
+  }
+
   std::filesystem::path directory_;
 };
 
 TEST_F(WriteObj, RoundTripsObjectsFacesAndVerticesThroughAMinimalReader) {
   for (const char* type : {"city1", "interior"}) {
     SCOPED_TRACE(type);
-    const PolygonScene polygons = generate(type, 1);
-    const std::filesystem::path path = directory_ / (std::string(type) + ".obj");
-    writeObj(polygons, path);
+    const auto [polygons, path] = generateAndWrite(type);
     const ObjContents obj = readObj(path);
 
     EXPECT_EQ(obj.mtllib, std::string(type) + ".mtl");
@@ -760,9 +771,7 @@ TEST_F(WriteObj, RoundTripsObjectsFacesAndVerticesThroughAMinimalReader) {
 TEST_F(WriteObj, LoadingTheWrittenFileGivesTheSameFacesAsToScene) {
   for (const char* type : {"city1", "interior"}) {
     SCOPED_TRACE(type);
-    const PolygonScene polygons = generate(type, 1);
-    const std::filesystem::path path = directory_ / (std::string(type) + ".obj");
-    writeObj(polygons, path);
+    const auto [polygons, path] = generateAndWrite(type);
     const Scene direct = toScene(polygons);
     const Scene loaded = loadObj(path);
     EXPECT_EQ(loaded.faceCount, direct.faceCount);

@@ -7,7 +7,9 @@
 #include <fstream>
 
 #include "common/core/error.h"
+#include "common/generate/scene_spec.h"
 #include "common/raycast/sampled_visibility.h"
+#include "common/world/static_world.h"
 #include "tests/common/support/box_scenes.h"
 
 namespace vistream {
@@ -40,7 +42,7 @@ struct Town {
     triangles = flattenScene(scene);
     rays = makeEmbreeRayQuery(triangles);
     oracle = makeBruteForceRayQuery(triangles);
-    freeSpace = FreeSpace::build(*rays, scene.bounds());
+    freeSpace = FreeSpace::build(*rays, Solids::build(triangles), scene.bounds());
   }
 };
 
@@ -68,6 +70,53 @@ TEST(WalkthroughPath, StaysAtEyeHeightAboveTheGroundInTheStreets) {
     EXPECT_GT(down.normal.y, 0.0f);  // standing on an upward-facing floor
     for (const Box3f& b : town().buildings)
       EXPECT_FALSE(p.x > b.lo.x && p.x < b.hi.x && p.z > b.lo.z && p.z < b.hi.z);
+  }
+}
+
+// Crossings of a ray with one object's triangles (Moller-Trumbore, two-sided),
+// written here so the oracle shares no code with common/world.
+int crossings(const Object& o, const glm::dvec3& org, const glm::dvec3& dir) {
+  int n = 0;
+  for (const glm::uvec3& t : o.mesh.triangles) {
+    const glm::dvec3 a(o.mesh.positions[t.x]), b(o.mesh.positions[t.y]), c(o.mesh.positions[t.z]);
+    const glm::dvec3 e1 = b - a, e2 = c - a, p = glm::cross(dir, e2);
+    const double det = glm::dot(e1, p);
+    if (std::abs(det) < 1e-12) continue;
+    const glm::dvec3 s = org - a;
+    const double u = glm::dot(s, p) / det;
+    const glm::dvec3 q = glm::cross(s, e1);
+    const double v = glm::dot(dir, q) / det, t2 = glm::dot(e2, q) / det;
+    if (u >= 0 && v >= 0 && u + v <= 1 && t2 > 0) ++n;
+  }
+  return n;
+}
+
+TEST(WalkthroughPath, WalksDelfshavensStreetsOnTheAssumedGroundOutsideEveryBuilding) {
+  // Buildings only, no terrain (../shared/data/README.md: ground at y = 0).
+  const Scene scene = openScene(std::string(VISTREAM_SHARED_DIR) + "/data/delfshaven.obj");
+  const StaticWorld world = buildStaticWorld(scene);
+  ASSERT_TRUE(world.ground.y.has_value()) << world.ground.why;
+  EXPECT_NEAR(scene.origin.y + double(*world.ground.y), 0.0, 1e-3);
+  PathOptions o;
+  o.frames = 300;
+  o.speed = 2.0;
+  const auto path = generatePath(scene, world.freeSpace, o);
+  const auto upRays = makeBruteForceRayQuery(*world.triangles);
+  // Two directions, neither along a wall of the city grid nor vertical.
+  const glm::dvec3 dirs[2] = {glm::normalize(glm::dvec3(0.8137, 0.0731, 0.5765)),
+                              glm::normalize(glm::dvec3(-0.3319, 0.1123, 0.9366))};
+  for (size_t i = 0; i < path.size(); i += 3) {
+    const glm::dvec3 file = path[i].position;
+    EXPECT_NEAR(file.y, 1.7, 1e-3) << "frame " << i << ": eye height above the ground";
+    const glm::vec3 local = scene.toLocal(file);
+    // In the street: nothing overhead (no roof, no upper floor).
+    EXPECT_FALSE(upRays->occluded(Ray{local, {0, 1, 0}, 0.0f, 1000.0f})) << "frame " << i;
+    // Outside every building: even crossings of each building's own mesh.
+    for (const Object& b : scene.objects) {
+      if (!b.bounds.contains(local)) continue;
+      for (const glm::dvec3& d : dirs)
+        EXPECT_EQ(crossings(b, glm::dvec3(local), d) % 2, 0) << "frame " << i << " in " << b.name;
+    }
   }
 }
 

@@ -23,22 +23,14 @@
 #include <vector>
 
 #include "common/raycast/embree_ray_query.h"
+#include "tests/common/support/triangle_soups.h"
 
 namespace vistream {
 namespace {
 
-using Triangle = std::array<glm::vec3, 3>;
-
-FlatTriangles makeTriangles(const std::vector<Triangle>& triangles) {
-  FlatTriangles flat;
-  for (const Triangle& t : triangles) {
-    flat.positions.insert(flat.positions.end(), t.begin(), t.end());
-    flat.faceIds.push_back(uint32_t(flat.faceIds.size()));
-    flat.objectIds.push_back(0);
-    flat.degenerate.push_back(isDegenerateTriangle(t[0], t[1], t[2]) ? 1 : 0);
-  }
-  return flat;
-}
+using testing::makeTriangles;
+using testing::randomDirection;
+using testing::Triangle;
 
 // Triangles with random vertices around random centres in [lo, hi]^3.
 FlatTriangles randomSoup(size_t count, uint32_t seed, glm::vec3 lo, glm::vec3 hi,
@@ -52,14 +44,6 @@ FlatTriangles randomSoup(size_t count, uint32_t seed, glm::vec3 lo, glm::vec3 hi
     for (glm::vec3& p : t) p = centre + glm::vec3(spread(rng), spread(rng), spread(rng));
   }
   return makeTriangles(triangles);
-}
-
-glm::vec3 randomDirection(std::mt19937& rng) {
-  std::normal_distribution<float> normal(0.0f, 1.0f);
-  glm::vec3 d;
-  do d = glm::vec3(normal(rng), normal(rng), normal(rng));
-  while (glm::length(d) < 1e-3f);
-  return glm::normalize(d);
 }
 
 std::vector<Ray> randomRays(size_t count, uint32_t seed, glm::vec3 lo, glm::vec3 hi) {

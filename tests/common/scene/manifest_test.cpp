@@ -20,11 +20,13 @@
 
 #include "common/core/error.h"
 #include "common/scene/scene_loader.h"
+#include "tests/common/support/scene_checks.h"
 #include "tests/common/support/temp_dir.h"
 
 namespace vistream {
 namespace {
 
+using testing::findObject;
 using ::testing::HasSubstr;
 using testing::inputErrorOf;
 using ::testing::StartsWith;
@@ -43,12 +45,6 @@ const char* const kA = "o A\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\nf 1 
 const char* const kB =
     "o B\nv 100 0 0\nv 101 0 0\nv 100 1 0\nv 100 0 1\nf 1 2 3\nf 1 3 4\nf 1 4 2\n";
 const std::vector<glm::dvec3> kBPositions{{100, 0, 0}, {101, 0, 0}, {100, 1, 0}, {100, 0, 1}};
-
-const Object* findObject(const Scene& scene, const std::string& name) {
-  for (const Object& o : scene.objects)
-    if (o.name == name) return &o;
-  return nullptr;
-}
 
 // Every vertex an object's triangles use, in file coordinates.
 std::vector<glm::dvec3> usedFilePositions(const Scene& scene, const Object& o) {
@@ -296,28 +292,29 @@ std::string manifestError(const TempDir& dir, const std::string& json) {
   return inputErrorOf([&] { loadManifest(m); });
 }
 
+// Checks that the manifest `json` is rejected with a message naming each of `words`.
+void expectRejectedNaming(const TempDir& dir, const std::string& json,
+                          std::initializer_list<const char*> words) {
+  const std::string msg = manifestError(dir, json);
+  for (const char* word : words) EXPECT_THAT(msg, HasSubstr(word));
+}
+
 TEST(Manifest, RejectsAnUnknownTopLevelKey) {
   const TempDir dir;
-  const std::string msg = manifestError(dir, R"({"geometry": ["a.obj"], "geometery": []})");
-  EXPECT_THAT(msg, HasSubstr("bad.json"));
-  EXPECT_THAT(msg, HasSubstr("geometery"));
+  expectRejectedNaming(dir, R"({"geometry": ["a.obj"], "geometery": []})",
+                       {"bad.json", "geometery"});
 }
 
 TEST(Manifest, RejectsAnUnknownKeyInTheEnvironment) {
   const TempDir dir;
-  const std::string msg =
-      manifestError(dir, R"({"geometry": ["a.obj"], "environment": {"skye": "open"}})");
-  EXPECT_THAT(msg, HasSubstr("bad.json"));
-  EXPECT_THAT(msg, HasSubstr("skye"));
+  expectRejectedNaming(dir, R"({"geometry": ["a.obj"], "environment": {"skye": "open"}})",
+                       {"bad.json", "skye"});
 }
 
 TEST(Manifest, RejectsAnUnknownKeyInAGeometryEntry) {
   const TempDir dir;
-  const std::string msg =
-      manifestError(dir, R"({"geometry": ["a.obj", {"file": "a.obj", "dynamc": true}]})");
-  EXPECT_THAT(msg, HasSubstr("bad.json"));
-  EXPECT_THAT(msg, HasSubstr("geometry[1]"));
-  EXPECT_THAT(msg, HasSubstr("dynamc"));
+  expectRejectedNaming(dir, R"({"geometry": ["a.obj", {"file": "a.obj", "dynamc": true}]})",
+                       {"bad.json", "geometry[1]", "dynamc"});
 }
 
 TEST(Manifest, RejectsMissingOrEmptyGeometry) {
@@ -325,9 +322,7 @@ TEST(Manifest, RejectsMissingOrEmptyGeometry) {
   for (const char* text :
        {R"({"name": "nothing"})", R"({"geometry": []})", R"({"geometry": "a.obj"})"}) {
     SCOPED_TRACE(text);
-    const std::string msg = manifestError(dir, text);
-    EXPECT_THAT(msg, HasSubstr("bad.json"));
-    EXPECT_THAT(msg, HasSubstr("geometry"));
+    expectRejectedNaming(dir, text, {"bad.json", "geometry"});
   }
 }
 
@@ -336,17 +331,13 @@ TEST(Manifest, RejectsAGeometryEntryThatIsNeitherAPathNorAnObject) {
   for (const char* text : {R"({"geometry": ["a.obj", 42]})", R"({"geometry": ["a.obj", null]})",
                            R"({"geometry": ["a.obj", ["a.obj"]]})"}) {
     SCOPED_TRACE(text);
-    const std::string msg = manifestError(dir, text);
-    EXPECT_THAT(msg, HasSubstr("bad.json"));
-    EXPECT_THAT(msg, HasSubstr("geometry[1]"));
+    expectRejectedNaming(dir, text, {"bad.json", "geometry[1]"});
   }
 }
 
 TEST(Manifest, RejectsAGeometryObjectWithoutAFile) {
   const TempDir dir;
-  const std::string msg = manifestError(dir, R"({"geometry": [{"dynamic": true}]})");
-  EXPECT_THAT(msg, HasSubstr("geometry[0]"));
-  EXPECT_THAT(msg, HasSubstr("file"));
+  expectRejectedNaming(dir, R"({"geometry": [{"dynamic": true}]})", {"geometry[0]", "file"});
 }
 
 TEST(Manifest, RejectsBadValuesInAGeometryEntry) {
@@ -361,9 +352,7 @@ TEST(Manifest, RejectsBadValuesInAGeometryEntry) {
   };
   for (const auto& [text, key] : cases) {
     SCOPED_TRACE(text);
-    const std::string msg = manifestError(dir, text);
-    EXPECT_THAT(msg, HasSubstr("geometry[0]"));
-    EXPECT_THAT(msg, HasSubstr(key));
+    expectRejectedNaming(dir, text, {"geometry[0]", key});
   }
 }
 
@@ -372,9 +361,7 @@ TEST(Manifest, RejectsABadSkyValue) {
   for (const char* text : {R"({"geometry": ["a.obj"], "environment": {"sky": "cloudy"}})",
                            R"({"geometry": ["a.obj"], "environment": {"sky": true}})"}) {
     SCOPED_TRACE(text);
-    const std::string msg = manifestError(dir, text);
-    EXPECT_THAT(msg, HasSubstr("bad.json"));
-    EXPECT_THAT(msg, HasSubstr("sky"));
+    expectRejectedNaming(dir, text, {"bad.json", "sky"});
   }
 }
 
@@ -389,9 +376,7 @@ TEST(Manifest, RejectsBadEnvironmentValues) {
   };
   for (const auto& [text, key] : cases) {
     SCOPED_TRACE(text);
-    const std::string msg = manifestError(dir, text);
-    EXPECT_THAT(msg, HasSubstr("bad.json"));
-    EXPECT_THAT(msg, HasSubstr(key));
+    expectRejectedNaming(dir, text, {"bad.json", key});
   }
 }
 
@@ -401,31 +386,24 @@ TEST(Manifest, RejectsASceneNameThatIsNotAString) {
   // entry's "name" included) is rejected; the header says a typo must not
   // silently change a scene.
   const TempDir dir;
-  const std::string msg = manifestError(dir, R"({"name": 7, "geometry": ["a.obj"]})");
-  EXPECT_THAT(msg, HasSubstr("bad.json"));
-  EXPECT_THAT(msg, HasSubstr("name"));
+  expectRejectedNaming(dir, R"({"name": 7, "geometry": ["a.obj"]})", {"bad.json", "name"});
 }
 
 TEST(Manifest, RejectsAMissingHdrFile) {
   const TempDir dir;
-  const std::string msg =
-      manifestError(dir, R"({"geometry": ["a.obj"], "environment": {"hdr": "nowhere.hdr"}})");
-  EXPECT_THAT(msg, HasSubstr("bad.json"));
-  EXPECT_THAT(msg, HasSubstr("hdr"));
-  EXPECT_THAT(msg, HasSubstr("nowhere.hdr"));
+  expectRejectedNaming(dir, R"({"geometry": ["a.obj"], "environment": {"hdr": "nowhere.hdr"}})",
+                       {"bad.json", "hdr", "nowhere.hdr"});
 }
 
 TEST(Manifest, RejectsAMissingGeometryFileNamingIt) {
   const TempDir dir;
-  const std::string msg = manifestError(dir, R"({"geometry": ["a.obj", "lost.obj"]})");
-  EXPECT_THAT(msg, HasSubstr("lost.obj"));
+  expectRejectedNaming(dir, R"({"geometry": ["a.obj", "lost.obj"]})", {"lost.obj"});
 }
 
 TEST(Manifest, PassesOnTheErrorOfABrokenGeometryFile) {
   const TempDir dir;
   dir.write("broken.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n");
-  const std::string msg = manifestError(dir, R"({"geometry": ["a.obj", "broken.obj"]})");
-  EXPECT_THAT(msg, HasSubstr("broken.obj:4:"));
+  expectRejectedNaming(dir, R"({"geometry": ["a.obj", "broken.obj"]})", {"broken.obj:4:"});
 }
 
 TEST(Manifest, RejectsInvalidJson) {
@@ -433,7 +411,7 @@ TEST(Manifest, RejectsInvalidJson) {
   for (const char* text :
        {R"({"geometry": ["a.obj",]})", "", "not json at all", R"({"geometry": ["a.obj"])"}) {
     SCOPED_TRACE(text);
-    EXPECT_THAT(manifestError(dir, text), HasSubstr("bad.json"));
+    expectRejectedNaming(dir, text, {"bad.json"});
   }
 }
 
@@ -441,7 +419,7 @@ TEST(Manifest, RejectsJsonThatIsNotAnObject) {
   const TempDir dir;
   for (const char* text : {R"(["a.obj"])", "42", R"("a.obj")"}) {
     SCOPED_TRACE(text);
-    EXPECT_THAT(manifestError(dir, text), HasSubstr("bad.json"));
+    expectRejectedNaming(dir, text, {"bad.json"});
   }
 }
 
@@ -452,9 +430,7 @@ TEST(Manifest, RejectsAManifestThatIncludesAManifest) {
   for (const char* text : {R"({"geometry": ["a.obj", "inner.json"]})",
                            R"({"geometry": ["a.obj", {"file": "inner.JSON"}]})"}) {
     SCOPED_TRACE(text);
-    const std::string msg = manifestError(dir, text);
-    EXPECT_THAT(msg, HasSubstr("bad.json"));
-    EXPECT_THAT(msg, HasSubstr("geometry[1]"));
+    expectRejectedNaming(dir, text, {"bad.json", "geometry[1]"});
   }
 }
 
@@ -485,20 +461,18 @@ TEST(Manifest, PassesTheLimitsOnThroughLoadScene) {
 
 TEST(Manifest, RejectsJsonNestedDeeperThanTheLimit) {
   const TempDir dir;
-  const std::string msg =
-      manifestError(dir, R"({"geometry": ["a.obj"], "name": )" + std::string(20000, '[') +
-                             std::string(20000, ']') + "}");
-  EXPECT_THAT(msg, HasSubstr("bad.json:1: JSON nesting depth exceeds the limit of 256"));
+  expectRejectedNaming(dir,
+                       R"({"geometry": ["a.obj"], "name": )" + std::string(20000, '[') +
+                           std::string(20000, ']') + "}",
+                       {"bad.json:1: JSON nesting depth exceeds the limit of 256"});
 }
 
 TEST(Manifest, RejectsAPlacementThatPushesPositionsBeyondFloatRange) {
   // Each file is fine on its own; scaled by 1e300 about the file origin, the
   // triangle spans 1e300 m and no float holds its corners' offsets.
   const TempDir dir;
-  const std::string msg =
-      manifestError(dir, R"({"geometry": [{"file": "a.obj", "name": "huge", "scale": 1e300}]})");
-  EXPECT_THAT(msg, HasSubstr("bad.json: geometry[0]: placing"));
-  EXPECT_THAT(msg, HasSubstr("single precision"));
+  expectRejectedNaming(dir, R"({"geometry": [{"file": "a.obj", "name": "huge", "scale": 1e300}]})",
+                       {"bad.json: geometry[0]: placing", "single precision"});
 }
 
 TEST(Manifest, RejectsAMissingManifest) {

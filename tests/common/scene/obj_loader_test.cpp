@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <fstream>
@@ -18,11 +19,13 @@
 
 #include "common/core/error.h"
 #include "common/scene/scene_loader.h"
+#include "tests/common/support/scene_checks.h"
 #include "tests/common/support/temp_dir.h"
 
 namespace vistream {
 namespace {
 
+using testing::expectNear;
 using ::testing::HasSubstr;
 using testing::inputErrorOf;
 
@@ -64,10 +67,19 @@ glm::dvec3 normal(const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c)
   return glm::normalize(glm::cross(b - a, c - a));
 }
 
-void expectNear(const glm::dvec3& actual, const glm::dvec3& expected, double tolerance) {
-  EXPECT_NEAR(actual.x, expected.x, tolerance);
-  EXPECT_NEAR(actual.y, expected.y, tolerance);
-  EXPECT_NEAR(actual.z, expected.z, tolerance);
+// Expects face f of the scene to be one triangle whose corners, in order, are
+// the vertices faces[f] lists by their 1-based position in `vertices` (the
+// file's `v` lines, with relative indices resolved by hand).
+void expectFacesUseVertices(const Scene& scene, const std::vector<glm::dvec3>& vertices,
+                            const std::vector<std::array<int, 3>>& faces) {
+  std::map<uint32_t, FileTriangle> byFace;
+  for (const FileTriangle& t : fileTriangles(scene)) byFace.emplace(t.faceId, t);
+  ASSERT_EQ(byFace.size(), faces.size());
+  for (uint32_t f = 0; f < faces.size(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      SCOPED_TRACE("face " + std::to_string(f) + " corner " + std::to_string(k));
+      expectNear(byFace.at(f).v[k], vertices.at(size_t(faces[f][size_t(k)] - 1)), 1e-9);
+    }
 }
 
 // ---- faces and face IDs -----------------------------------------------------
@@ -162,17 +174,8 @@ TEST(ObjLoader, ResolvesRelativeNegativeIndices) {
       "f -3 -2 -1\n"  // vertices 4 5 6
       "f -6 2 -1\n",  // vertices 1 2 6
       "relative.obj");
-  std::map<uint32_t, FileTriangle> byFace;
-  for (const FileTriangle& t : fileTriangles(scene)) byFace.emplace(t.faceId, t);
-  ASSERT_EQ(byFace.size(), 3u);
-  expectNear(byFace.at(0).v[0], {0, 0, 0}, 1e-9);
-  expectNear(byFace.at(0).v[2], {0, 1, 0}, 1e-9);
-  expectNear(byFace.at(1).v[0], {5, 0, 0}, 1e-9);
-  expectNear(byFace.at(1).v[1], {6, 0, 0}, 1e-9);
-  expectNear(byFace.at(1).v[2], {5, 1, 0}, 1e-9);
-  expectNear(byFace.at(2).v[0], {0, 0, 0}, 1e-9);
-  expectNear(byFace.at(2).v[1], {1, 0, 0}, 1e-9);
-  expectNear(byFace.at(2).v[2], {5, 1, 0}, 1e-9);
+  expectFacesUseVertices(scene, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {5, 0, 0}, {6, 0, 0}, {5, 1, 0}},
+                         {{{1, 2, 3}}, {{4, 5, 6}}, {{1, 2, 6}}});
 }
 
 TEST(ObjLoader, ReadsEveryVertexIndexForm) {
@@ -185,15 +188,8 @@ TEST(ObjLoader, ReadsEveryVertexIndexForm) {
       "f 1/1/1 2/2/1 4/4/1\n"
       "f 2 3 4\n",
       "forms.obj");
-  std::map<uint32_t, FileTriangle> byFace;
-  for (const FileTriangle& t : fileTriangles(scene)) byFace.emplace(t.faceId, t);
-  ASSERT_EQ(byFace.size(), 4u);
-  expectNear(byFace.at(0).v[2], {1, 1, 0}, 1e-9);
-  expectNear(byFace.at(1).v[1], {1, 1, 0}, 1e-9);
-  expectNear(byFace.at(1).v[2], {0, 1, 0}, 1e-9);
-  expectNear(byFace.at(2).v[1], {1, 0, 0}, 1e-9);
-  expectNear(byFace.at(2).v[2], {0, 1, 0}, 1e-9);
-  expectNear(byFace.at(3).v[0], {1, 0, 0}, 1e-9);
+  expectFacesUseVertices(scene, {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}},
+                         {{{1, 2, 3}}, {{1, 3, 4}}, {{1, 2, 4}}, {{2, 3, 4}}});
 }
 
 TEST(ObjLoader, IgnoresCommentsBlankLinesAndCarriageReturns) {
@@ -235,10 +231,8 @@ TEST(ObjLoader, AcceptsVertexColoursAndWeightsAfterTheCoordinates) {
   const Scene scene = loadObjFromMemory(
       "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 1\nv 0 0 1 1.0\nf 1 2 3\nf 1 2 4\n", "extra.obj");
   ASSERT_EQ(scene.triangleCount(), 2u);
-  std::map<uint32_t, FileTriangle> byFace;
-  for (const FileTriangle& t : fileTriangles(scene)) byFace.emplace(t.faceId, t);
-  expectNear(byFace.at(0).v[2], {0, 1, 0}, 1e-9);
-  expectNear(byFace.at(1).v[2], {0, 0, 1}, 1e-9);
+  expectFacesUseVertices(scene, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}},
+                         {{{1, 2, 3}}, {{1, 2, 4}}});
 }
 
 TEST(ObjLoader, KeepsTexcoordsPerVertexWhenTheFileHasThem) {
@@ -247,14 +241,8 @@ TEST(ObjLoader, KeepsTexcoordsPerVertexWhenTheFileHasThem) {
   // the OBJ loader never reads `vt`, so texcoords stay empty.
   const Scene scene = loadObjFromMemory(
       "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n", "uv.obj");
-  const TriangleMesh& m = scene.objects.at(0).mesh;
-  ASSERT_EQ(m.texcoords.size(), m.positions.size());
   // Here every vertex's uv equals its xy.
-  for (size_t v = 0; v < m.positions.size(); ++v) {
-    const glm::dvec3 p = scene.toFile(m.positions[v]);
-    EXPECT_NEAR(m.texcoords[v].x, p.x, 1e-6);
-    EXPECT_NEAR(m.texcoords[v].y, p.y, 1e-6);
-  }
+  testing::expectTexcoordsEqualFileXy(scene, scene.objects.at(0).mesh);
 }
 
 // ---- errors: the message names the file and the line to blame ----------------

@@ -18,6 +18,7 @@
 
 #include "common/raycast/ray_query.h"
 #include "common/raycast/triangle_intersect.h"
+#include "tests/common/support/triangle_soups.h"
 
 namespace vistream {
 namespace {
@@ -59,16 +60,7 @@ std::vector<Box3f> randomBoxes(size_t count, uint32_t seed, float maxSize = 12.0
   return boxes;
 }
 
-FlatTriangles makeTriangles(const std::vector<std::array<glm::vec3, 3>>& tris) {
-  FlatTriangles flat;
-  for (const auto& t : tris) {
-    flat.positions.insert(flat.positions.end(), t.begin(), t.end());
-    flat.faceIds.push_back(uint32_t(flat.faceIds.size()));
-    flat.objectIds.push_back(0);
-    flat.degenerate.push_back(isDegenerateTriangle(t[0], t[1], t[2]) ? 1 : 0);
-  }
-  return flat;
-}
+using testing::makeTriangles;
 
 FlatTriangles randomTriangleSoup(size_t count, uint32_t seed) {
   std::mt19937 rng(seed);

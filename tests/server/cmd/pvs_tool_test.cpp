@@ -150,4 +150,65 @@ TEST(PvsTool, WalkPrintsTheSummaryAndOneRecordPerFrame) {
   EXPECT_NE(badP.err.find("--p-vp"), std::string::npos) << badP.err;
 }
 
+TEST(PvsTool, OutOfRangeNumbersAndBadBoxesFailBeforeTheSceneLoadsNamingTheOption) {
+  const std::string missing = "/nonexistent/scene.obj";
+  const std::pair<std::string, std::string> cases[] = {
+      {"cell --scene " + missing + " --cell 0,0,0,1,1,1 --fused-res 1", "--fused-res"},
+      {"cell --scene " + missing + " --cell 0,0,0,1,1,1 --epsilon -1", "--epsilon"},
+      {"cell --scene " + missing + " --cell 0,0,0,1,1,1 --large-occluders -2", "--large-occluders"},
+      {"cell --scene " + missing + " --cell 1,2,3", "--cell"},
+      {"bake --scene " + missing + " --cell-size 4 --threads -1 --out /tmp/never.db", "--threads"},
+      {"bake --scene " + missing + " --cell-size 4 --region 1,2,3 --out /tmp/never.db", "--region"},
+      {"bake --scene " + missing + " --cell-size 4 --region 5,0,0,1,1,1 --out /tmp/never.db",
+       "--region"},
+      {"walk --scene " + missing + " --path p.csv --p-skip 2", "--p-skip"},
+      {"walk --scene " + missing + " --path p.csv --fov 180", "--fov"},
+      {"walk --scene " + missing + " --path p.csv --occluders 0", "--occluders"},
+      {"walk-bench --frames 0", "--frames"},
+      {"bench --fused-eps 1,-0.5", "--fused-eps"},
+  };
+  for (const auto& [args, option] : cases) {
+    const ToolRun r = runPvs(args);
+    EXPECT_EQ(r.status, 1) << args << "\n" << r.err;
+    EXPECT_EQ(r.err.rfind("vistream-pvs: error: " + option, 0), 0u) << args << "\n" << r.err;
+    EXPECT_EQ(r.err.find(missing), std::string::npos) << "checked after loading: " << r.err;
+  }
+}
+
+TEST(PvsTool, ACellFarOutsideTheSceneGetsAWarningAndStillItsPvs) {
+  vistream::testing::TempDir dir;
+  const fs::path scene = dir.write("wall.obj", wallScene());  // within x, z in [-50, 50]
+  ToolRun r = runPvs("cell --scene " + scene.string() + " --cell 5000,1,5000,5004,2,5004 --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("--cell 5000,1,5000,5004,2,5004 lies outside the scene's bounds"),
+            std::string::npos)
+      << r.err;
+  EXPECT_FALSE(nlohmann::json::parse(r.out)["faces"].empty());
+  r = runPvs("cell --scene " + scene.string() + " --cell -1,1,1,1,2,3 --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(r.err.find("outside the scene's bounds"), std::string::npos) << r.err;
+}
+
+TEST(PvsTool, QueryPrintsASummaryAndTheFaceIdsOnlyWhenAsked) {
+  vistream::testing::TempDir dir;
+  const fs::path scene = dir.write("wall.obj", wallScene());
+  const std::string db = (dir / "w.db").string();
+  ASSERT_EQ(runPvs("bake --scene " + scene.string() + " --cell-size 4,2,4 --out " + db).status, 0);
+  ToolRun r = runPvs("query --db " + db + " --point 0,1.5,1 --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  const auto faces = nlohmann::json::parse(r.out)["faces"].get<std::vector<uint32_t>>();
+  ASSERT_FALSE(faces.empty());
+  std::string ids;
+  for (uint32_t f : faces) ids += (ids.empty() ? "" : " ") + std::to_string(f);
+
+  r = runPvs("query --db " + db + " --point 0,1.5,1");
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find(std::to_string(faces.size()) + " faces"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find(ids + "\n"), std::string::npos) << "IDs without --faces: " << r.out;
+  EXPECT_NE(r.out.find("--faces"), std::string::npos) << r.out;
+  r = runPvs("query --db " + db + " --point 0,1.5,1 --faces");
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("\n" + ids + "\n"), std::string::npos) << r.out;
+}
+
 }  // namespace

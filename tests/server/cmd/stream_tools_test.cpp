@@ -350,4 +350,114 @@ TEST(StreamTools, HelpAndBadArgumentsGiveClearExits) {
   EXPECT_NE(r.err.find("--connect-timeout"), std::string::npos) << r.err;
 }
 
+// CellReady latency counts only what it names: entries that found their cell
+// ready are counted apart from those that waited. Without prefetch
+// (--prefetch-s 0), 2 m cells and one pose per second at 9 m/s, every pose
+// lands about 4 cells past the last one, beyond the neighbours the server
+// prepares around a client (stream_scheduler.h), so some entries must wait.
+TEST(StreamTools, ALoadTestReportsCellEntriesFoundReadyApartFromThoseThatWaited) {
+  vistream::testing::TempDir dir;
+  const fs::path scene = dir.write("street.obj", streetObj());
+  const fs::path path =
+      dir.write("walk.csv", "t,x,y,z,yaw_deg,pitch_deg\n0,0,1.7,30,0,0\n20,0,1.7,-30,0,0\n");
+  const std::string bin = VISTREAM_BIN_DIR;
+  const std::string d = dir.path().string();
+  const std::string loadtest = bin + "/vistream-loadtest --port $(cat " + d +
+                               "/port) --clients 2 --path " + path.string() +
+                               " --duration 4 --speed 3 --fps 1 --log-level warn";
+  sh(bin + "/vistream-server --scene " + scene.string() + " --port 0 --port-file " + d +
+     "/port --prefetch-s 0 --cell-size 2 --log-level warn > " + d +
+     "/server.log 2>&1 & echo $! > " + d + "/pid; for i in $(seq 1 200); do [ -s " + d +
+     "/port ] && break; sleep 0.1; done; " + loadtest + " --json > " + d + "/out.json; " +
+     loadtest + " > " + d + "/table.txt; kill -TERM $(cat " + d + "/pid); wait $(cat " + d +
+     "/pid) 2>/dev/null");
+  std::ifstream out(dir.path() / "out.json");
+  const auto j = nlohmann::json::parse(out, nullptr, false);
+  ASSERT_FALSE(j.is_discarded());
+  EXPECT_EQ(j["errors"], 0) << j.dump();
+  const uint64_t entries = j["cell_entries"], ready = j["cell_entries_ready"],
+                 waited = j["cell_entries_waited"];
+  EXPECT_EQ(ready + waited, entries);
+  EXPECT_GE(waited, 1u) << j.dump();
+  // Waits: one per entry that waited (a re-entry into a cell still awaited
+  // joins the first entry's wait), each strictly positive.
+  const auto& wait = j["cell_ready_wait_ms"];
+  const uint64_t waits = wait["count"];
+  EXPECT_GE(waits, 1u);
+  EXPECT_LE(waits, waited);
+  ASSERT_FALSE(wait["p50"].is_null());
+  EXPECT_GT(wait["p50"].get<double>(), 0.0);
+  EXPECT_LE(wait["p50"].get<double>(), wait["max"].get<double>());
+  // The old key keeps its meaning: every entry, those found ready as 0 ms.
+  const auto& all = j["cell_ready_latency_ms"];
+  EXPECT_EQ(all["count"].get<uint64_t>(), ready + waits);
+  EXPECT_EQ(all["max"].get<double>(), wait["max"].get<double>());
+  std::ifstream tableFile(dir.path() / "table.txt");
+  const std::string table((std::istreambuf_iterator<char>(tableFile)), {});
+  EXPECT_NE(table.find("found the cell ready"), std::string::npos) << table;
+  EXPECT_NE(table.find("CellReady wait ms (p50/p95/p99)"), std::string::npos) << table;
+}
+
+// Bad input and first use (issue 12). A scene that does not exist shows that
+// the option was checked before the scene was opened: the error names the
+// option, not the file.
+TEST(StreamTools, OutOfRangeNumbersAndAnAddressThatCannotBeUsedFailBeforeTheSceneLoads) {
+  const std::string missing = "/nonexistent/scene.obj";
+  const std::pair<std::string, std::string> server[] = {
+      {"--scene " + missing + " --port 99999", "--port: must be an integer in 0..65535"},
+      {"--scene " + missing + " --port -1", "--port"},
+      {"--scene " + missing + " --threads -1", "--threads"},
+      {"--scene " + missing + " --cell-size -4", "--cell-size"},
+      {"--scene " + missing + " --radius 0", "--radius"},
+      {"--scene " + missing + " --max-speed -3", "--max-speed"},
+      // 192.0.2.1 (TEST-NET-1, RFC 5737) is no address of this machine.
+      {"--scene " + missing + " --bind 192.0.2.1 --port 0", "--bind 192.0.2.1"},
+      {"--scene " + missing + " --bind not-an-address", "--bind not-an-address"},
+  };
+  for (const auto& [args, mention] : server) {
+    const ToolRun r = runTool("vistream-server", args);
+    EXPECT_EQ(r.status, 1) << args << "\n" << r.err;
+    EXPECT_NE(r.err.find("vistream-server: error: " + mention), std::string::npos) << args << "\n"
+                                                                                   << r.err;
+    EXPECT_EQ(r.err.find(missing), std::string::npos) << "checked after loading: " << r.err;
+  }
+  const std::string auto_ = "--paths auto --scene " + missing;
+  const std::pair<std::string, std::string> loadtest[] = {
+      {auto_ + " --clients -1", "--clients: must be an integer >= 1"},
+      {auto_ + " --clients 0", "--clients"},
+      {auto_ + " --duration -2", "--duration"},
+      {auto_ + " --speed -1", "--speed"},
+      {auto_ + " --fps 0", "--fps"},
+      {auto_ + " --port 99999", "--port: must be an integer in 1..65535"},
+      {auto_ + " --threads 0", "--threads"},
+      {auto_ + " --host no-such-host.invalid", "--host no-such-host.invalid"},
+  };
+  for (const auto& [args, mention] : loadtest) {
+    const ToolRun r = runTool("vistream-loadtest", args);
+    EXPECT_EQ(r.status, 1) << args << "\n" << r.err;
+    EXPECT_NE(r.err.find("vistream-loadtest: error: " + mention), std::string::npos) << args << "\n"
+                                                                                     << r.err;
+    EXPECT_EQ(r.err.find(missing), std::string::npos) << "checked after loading: " << r.err;
+  }
+}
+
+TEST(StreamTools, AServerWithoutADatabaseSaysPvssAreComputedOnDemandAndHowToBake) {
+  // The advice comes before the scene loads, so a missing scene still shows it.
+  const ToolRun r = runTool("vistream-server", "--scene /nonexistent/scene.obj --port 0");
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("no --pvs-db"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("computed on demand"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("vistream-pvs bake --scene /nonexistent/scene.obj"), std::string::npos)
+      << r.err;
+}
+
+TEST(StreamTools, HelpShowsDefaultsCapturedFromTheCodeNotTypedByHand) {
+  for (const char* tool : {"vistream-server", "vistream-loadtest"}) {
+    const ToolRun help = runTool(tool, "--help");
+    EXPECT_EQ(help.status, 0) << tool;
+    EXPECT_EQ(help.out.find("(default"), std::string::npos) << tool << "\n" << help.out;
+    EXPECT_NE(help.out.find("=7070"), std::string::npos) << tool << "\n" << help.out;
+  }
+}
+
 }  // namespace

@@ -9,7 +9,7 @@
 
 #include "common/generate/path.h"
 #include "common/raycast/ray_query.h"
-#include "common/spatial/free_space.h"
+#include "common/world/free_space.h"
 #include "server/visibility/epsilon_pvs.h"
 #include "server/visibility/pvs_bake.h"
 #include "tests/common/support/temp_dir.h"

@@ -34,7 +34,7 @@
 #include "common/generate/generate.h"
 #include "common/raycast/ray_query.h"
 #include "common/raycast/sampled_visibility.h"
-#include "common/spatial/free_space.h"
+#include "common/world/free_space.h"
 #include "tests/common/support/box_scenes.h"
 
 namespace vistream {
@@ -123,6 +123,27 @@ class World {
   if (std::binary_search(r.faces.begin(), r.faces.end(), face))
     return ::testing::AssertionSuccess() << "face " << face << " is in the PVS";
   return ::testing::AssertionFailure() << "face " << face << " is not in the PVS";
+}
+
+// Whether each of the six faces of the box whose first face is `first`
+// (addBox's order) is in the PVS as `wanted` says; a failure lists the sides
+// that are not.
+::testing::AssertionResult boxFacesInPvs(const PvsResult& r, uint32_t first, bool wanted) {
+  std::vector<uint32_t> wrong;
+  for (uint32_t side = 0; side < 6; ++side)
+    if (bool(inPvs(r, first + side)) != wanted) wrong.push_back(side);
+  if (wrong.empty())
+    return ::testing::AssertionSuccess()
+           << (wanted ? "every" : "no") << " face of box " << first << " is in the PVS";
+  return ::testing::AssertionFailure()
+         << "sides of box " << first << (wanted ? " missing from" : " left in")
+         << " the PVS:" << list(wrong);
+}
+::testing::AssertionResult wholeBoxInPvs(const PvsResult& r, uint32_t first) {
+  return boxFacesInPvs(r, first, true);
+}
+::testing::AssertionResult wholeBoxCulled(const PvsResult& r, uint32_t first) {
+  return boxFacesInPvs(r, first, false);
 }
 
 ::testing::AssertionResult inSet(const std::vector<uint32_t>& set, uint32_t face) {
@@ -373,8 +394,7 @@ TEST(EpsilonPvs, WallHidesTheBoxBehindItAndKeepsItsOwnFrontFace) {
   // Target x in [-1,1], y in [0.5,2.5], z in [-3,-2]: every corner-vertex
   // segment stays inside x in [-1,1], y in [0.5,2.5] (convex combinations), so
   // it crosses the whole wall thickness strictly inside the wall.
-  for (uint32_t side = 0; side < 6; ++side)
-    EXPECT_FALSE(inPvs(r, id.at("target") + side)) << "target side " << side;
+  EXPECT_TRUE(wholeBoxCulled(r, id.at("target")));
   // The wall's front face faces the cell.
   EXPECT_TRUE(inPvs(r, id.at("wall") + kPlusZ));
   // Its back face is hidden by the wall itself: each segment from a corner
@@ -454,7 +474,7 @@ TEST(EpsilonPvs, CellTouchingTheWallsPlaneStillSeesNothingBehindIt) {
   const Ids id = wallHidingABox(w.scene(), glm::vec3(0));
   const Box3f cell({-1, 1, 0.25f}, {1, 2.25f, 1.25f});
   const PvsResult r = w.compute(cell);
-  for (uint32_t side = 0; side < 6; ++side) EXPECT_FALSE(inPvs(r, id.at("target") + side)) << side;
+  EXPECT_TRUE(wholeBoxCulled(r, id.at("target")));
   EXPECT_TRUE(inPvs(r, id.at("wall") + kPlusZ));
   EXPECT_TRUE(holdsGroundTruth(w, cell, r));
 }
@@ -476,7 +496,7 @@ TEST(EpsilonPvs, CellLyingInAPolygonWallsPlaneCullsNothingBehindIt) {
   // strictly inside it (x in [-1,1], y in [0.5,2.5]): the target is culled.
   const Box3f lifted({-1, 1, 0.5f}, {1, 2.25f, 1.5f});
   const PvsResult r2 = w.compute(lifted);
-  for (uint32_t side = 0; side < 6; ++side) EXPECT_FALSE(inPvs(r2, id.at("target") + side)) << side;
+  EXPECT_TRUE(wholeBoxCulled(r2, id.at("target")));
   EXPECT_TRUE(holdsGroundTruth(w, lifted, r2));
 }
 
@@ -492,7 +512,7 @@ TEST(EpsilonPvs, CellStandingOnTheGroundPolygon) {
   // Raised target (y in [0.5,1.5]) behind the wall: from a corner at y >= 0
   // to a vertex at y >= 0.5 the segment is at y > 0 inside the wall's
   // thickness, so it crosses the interior. Culled.
-  for (uint32_t side = 0; side < 6; ++side) EXPECT_FALSE(inPvs(r, id.at("raised") + side)) << side;
+  EXPECT_TRUE(wholeBoxCulled(r, id.at("raised")));
   // Target standing on the ground behind the wall: a segment from a corner at
   // y = 0 to one of its bottom vertices (y = 0) runs along the ground plane,
   // under the wall's bottom face, touching nothing's interior. So every face
@@ -510,8 +530,7 @@ TEST(EpsilonPvs, CellStandingOnTheGroundPolygon) {
   // x in [-1,1], z in [3.5,5], well inside the ground: all of it is culled.
   const Box3f lifted({-1, 0.5f, 4}, {1, 1.75f, 5});
   const PvsResult r2 = w.compute(lifted);
-  for (uint32_t side = 0; side < 6; ++side)
-    EXPECT_FALSE(inPvs(r2, id.at("basement") + side)) << side;
+  EXPECT_TRUE(wholeBoxCulled(r2, id.at("basement")));
   EXPECT_TRUE(inPvs(r2, id.at("ground")));
   EXPECT_TRUE(holdsGroundTruth(w, lifted, r2));
 }
@@ -531,12 +550,10 @@ TEST(EpsilonPvs, CellPartlyInsideABuilding) {
   // The walls meeting the +x wall: their edge at x = 5 is reached from outside.
   for (uint32_t side : {kMinusY, kPlusY, kMinusZ, kPlusZ})
     EXPECT_TRUE(inPvs(r, id.at("building") + side)) << side;
-  for (uint32_t side = 0; side < 6; ++side) {
-    EXPECT_FALSE(inPvs(r, id.at("behind") + side)) << "behind, side " << side;
-    // Inside the closed building: only viewpoints inside solid geometry could
-    // see it, and the contract does not cover those.
-    EXPECT_FALSE(inPvs(r, id.at("inside") + side)) << "inside, side " << side;
-  }
+  EXPECT_TRUE(wholeBoxCulled(r, id.at("behind"))) << "behind";
+  // Inside the closed building: only viewpoints inside solid geometry could
+  // see it, and the contract does not cover those.
+  EXPECT_TRUE(wholeBoxCulled(r, id.at("inside"))) << "inside";
   EXPECT_TRUE(holdsGroundTruth(w, cell, r));
 }
 
@@ -564,8 +581,7 @@ TEST(EpsilonPvs, BoxFlushAgainstTheWallsBackIsHiddenAndOnItsFrontIsVisible) {
   const PvsResult r = w.compute(kCell);
   // Back box x in [-1,1], y in [0.5,2], z in [-1.25,-0.25]: its front face
   // lies on the wall's back face, strictly inside it. All culled.
-  for (uint32_t side = 0; side < 6; ++side)
-    EXPECT_FALSE(inPvs(r, id.at("back box") + side)) << side;
+  EXPECT_TRUE(wholeBoxCulled(r, id.at("back box")));
   // Front box x in [2,3], y in [0.5,2], z in [0.25,1.25], resting against
   // the wall's front face: its front, top and -x side face the cell.
   for (uint32_t side : {kPlusZ, kPlusY, kMinusX})
@@ -595,6 +611,18 @@ TEST(EpsilonPvs, SliverTrianglesAreCulledBehindAWallAndKeptBesideIt) {
   }
 }
 
+// The known answers of a grazing set-up (grazingPastASolidEdge and the
+// others with faces "grazed", "hidden" and "visible"): the PVS `r` of `cell`
+// keeps the face seen only along a grazing line and the one 1/8 m out of the
+// shadow, culls the one 1/8 m into it, and holds the sampled ground truth.
+void expectGrazedAndVisibleKeptHiddenCulled(World& w, const Ids& id, const Box3f& cell,
+                                            const PvsResult& r) {
+  EXPECT_TRUE(inPvs(r, id.at("grazed")));
+  EXPECT_FALSE(inPvs(r, id.at("hidden")));
+  EXPECT_TRUE(inPvs(r, id.at("visible")));
+  EXPECT_TRUE(holdsGroundTruth(w, cell, r));
+}
+
 TEST(EpsilonPvs, GrazingLineThroughASolidsEdgeKeepsTheFace) {
   // Wall x in [-4,4], y in [0,6], z in [-0.25,0.25]; cell x in [-2,0],
   // y in [1,2.25], z in [4.25,5.25]. The segment from the corner
@@ -604,17 +632,13 @@ TEST(EpsilonPvs, GrazingLineThroughASolidsEdgeKeepsTheFace) {
   // line of that quad crosses the wall's interior.
   World w;
   const Ids id = grazingPastASolidEdge(w.scene(), glm::vec3(0));
-  const PvsResult r = w.compute(kGrazeCell);
-  EXPECT_TRUE(inPvs(r, id.at("grazed")));
-  // 1/8 m further into the shadow (x up to 7.875), the same corner's
+  // Hidden: 1/8 m further into the shadow (x up to 7.875), the same corner's
   // segment crosses z = 0.25 at x = 7.875 / 2 < 4 and runs inside the wall
   // until x = 4: culled. (The three quads differ in height, which only moves
   // the crossing point up the wall, whose top is at y = 6.)
-  EXPECT_FALSE(inPvs(r, id.at("hidden")));
-  // 1/8 m out of it (x up to 8.125), it crosses at x = 8.125 / 2 > 4 and
-  // never enters the wall: kept.
-  EXPECT_TRUE(inPvs(r, id.at("visible")));
-  EXPECT_TRUE(holdsGroundTruth(w, kGrazeCell, r));
+  // Visible: 1/8 m out of it (x up to 8.125), it crosses at x = 8.125 / 2 > 4
+  // and never enters the wall: kept.
+  expectGrazedAndVisibleKeptHiddenCulled(w, id, kGrazeCell, w.compute(kGrazeCell));
 }
 
 TEST(EpsilonPvs, GrazingLineThroughAPolygonsEdgeKeepsTheFace) {
@@ -623,11 +647,8 @@ TEST(EpsilonPvs, GrazingLineThroughAPolygonsEdgeKeepsTheFace) {
   // x = 4: exactly on the polygon's edge.
   World w;
   const Ids id = grazingPastAPolygonEdge(w.scene(), glm::vec3(0));
-  const PvsResult r = w.compute(kPolygonGrazeCell);
-  EXPECT_TRUE(inPvs(r, id.at("grazed")));
-  EXPECT_FALSE(inPvs(r, id.at("hidden")));  // crosses z = 0 at x = 7.875 / 2 < 4
-  EXPECT_TRUE(inPvs(r, id.at("visible")));  // crosses z = 0 at x = 8.125 / 2 > 4
-  EXPECT_TRUE(holdsGroundTruth(w, kPolygonGrazeCell, r));
+  // Hidden crosses z = 0 at x = 7.875 / 2 < 4, visible at x = 8.125 / 2 > 4.
+  expectGrazedAndVisibleKeptHiddenCulled(w, id, kPolygonGrazeCell, w.compute(kPolygonGrazeCell));
 }
 
 TEST(EpsilonPvs, GrazingLineFromOneCellCornerPastASlantedEdgeKeepsTheFace) {
@@ -664,14 +685,13 @@ TEST(EpsilonPvs, GrazingLineFromOneCellCornerPastASlantedEdgeKeepsTheFace) {
                               (k & 4) ? c.cell.hi.z : c.cell.lo.z);
       EXPECT_EQ(occluderBlocksSegment(occluders[0], corner, tip), k != 7) << "corner " << k;
     }
+    // From c the hidden tip's segment crosses at x + y = 5.875 (inside), the
+    // visible one's at x + y = 6.125 (outside).
     const PvsResult r = w.compute(c.cell);
-    EXPECT_TRUE(inPvs(r, id.at("grazed")));
-    EXPECT_FALSE(inPvs(r, id.at("hidden")));  // from c the tip's segment crosses at x + y = 5.875
-    EXPECT_TRUE(inPvs(r, id.at("visible")));  // ... at x + y = 6.125: outside
+    expectGrazedAndVisibleKeptHiddenCulled(w, id, c.cell, r);
     PvsOptions all;
     all.removeRedundantLines = false;
     EXPECT_EQ(w.compute(c.cell, all).faces, r.faces);
-    EXPECT_TRUE(holdsGroundTruth(w, c.cell, r));
   }
 }
 
@@ -691,9 +711,8 @@ TEST(EpsilonPvs, DynamicObjectsAreAlwaysInThePvsAndNeverOcclude) {
     if (dynamic) {
       EXPECT_TRUE(inPvs(r, id.at("target") + kPlusZ));
       // The car behind the wall: in the PVS whatever hides it.
-      for (uint32_t side = 0; side < 6; ++side)
-        EXPECT_TRUE(inPvs(r, id.at("car behind") + side)) << side;
-      for (uint32_t side = 0; side < 6; ++side) EXPECT_TRUE(inPvs(r, id.at("bus") + side)) << side;
+      EXPECT_TRUE(wholeBoxInPvs(r, id.at("car behind")));
+      EXPECT_TRUE(wholeBoxInPvs(r, id.at("bus")));
     } else {
       EXPECT_FALSE(inPvs(r, id.at("target") + kPlusZ));
       EXPECT_FALSE(inPvs(r, id.at("car behind") + kPlusZ));

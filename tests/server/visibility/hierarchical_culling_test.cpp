@@ -6,7 +6,7 @@
 #include "common/generate/generate.h"
 #include "common/generate/path.h"
 #include "common/raycast/ray_query.h"
-#include "common/spatial/free_space.h"
+#include "common/world/free_space.h"
 #include "tests/common/support/box_scenes.h"
 
 namespace vistream {

@@ -298,12 +298,18 @@ glm::dvec3 uniform3(std::mt19937& rng) {
 // A random convex quad roughly facing the viewpoint: four points at sorted
 // random angles on an ellipse in a plane tilted up to ~45 degrees away from
 // facing the viewpoint.
+// A random unit direction within ~50 degrees (0.9 rad) of -z.
+glm::dvec3 randomDirectionNearMinusZ(std::mt19937& rng) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const double azimuth = 2.0 * std::numbers::pi * u(rng), polar = 0.9 * u(rng);
+  return {std::sin(polar) * std::cos(azimuth), std::sin(polar) * std::sin(azimuth),
+          -std::cos(polar)};
+}
+
 OccluderPolygon randomQuad(std::mt19937& rng, const glm::dvec3& viewpoint) {
   std::uniform_real_distribution<double> u(0.0, 1.0);
-  // Directions within ~50 degrees of -z, so that occluders overlap.
-  const double azimuth = 2.0 * std::numbers::pi * u(rng), polar = 0.9 * u(rng);
-  const glm::dvec3 dir(std::sin(polar) * std::cos(azimuth), std::sin(polar) * std::sin(azimuth),
-                       -std::cos(polar));
+  // Directions near -z, so that occluders overlap.
+  const glm::dvec3 dir = randomDirectionNearMinusZ(rng);
   const glm::dvec3 centre = viewpoint + (3.0 + 5.0 * u(rng)) * dir;
   glm::dvec3 normal = glm::normalize(-dir + 0.8 * (uniform3(rng) - 0.5));
   const glm::dvec3 e1 = glm::normalize(glm::cross(normal, glm::dvec3(0.3, 1, 0.2)));
@@ -318,26 +324,35 @@ OccluderPolygon randomQuad(std::mt19937& rng, const glm::dvec3& viewpoint) {
   return q;
 }
 
+// A random viewpoint at eye height (y = 1.7) over x, z in [-5, 5].
+glm::dvec3 randomViewpoint(std::mt19937& rng) {
+  const glm::dvec3 spot = uniform3(rng);
+  return {10.0 * spot.x - 5.0, 1.7, 10.0 * spot.z - 5.0};
+}
+
+// A random box 2 to 20 m from the viewpoint in a direction near -z (among
+// randomQuad's occluders), with half-sizes from 0.05 to 1.25 m.
+Box3f randomQueryBox(std::mt19937& rng, const glm::dvec3& viewpoint) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const glm::dvec3 dir = randomDirectionNearMinusZ(rng);
+  const glm::dvec3 centre = viewpoint + (2.0 + 18.0 * u(rng)) * dir;
+  const glm::dvec3 half = glm::dvec3(0.05) + 1.2 * uniform3(rng);
+  return Box3f(glm::vec3(centre - half), glm::vec3(centre + half));
+}
+
 TEST(OcclusionTree, AgreesWithTheSegmentCrossingOracleOnRandomScenes) {
   std::mt19937 rng(20010523);
-  std::uniform_real_distribution<double> u(0.0, 1.0);
   std::array<size_t, 3> counts{};
   size_t pointsChecked = 0, pointDisagreements = 0;
   for (int scene = 0; scene < 10; ++scene) {
-    const glm::dvec3 spot = uniform3(rng);
-    const glm::dvec3 viewpoint(10.0 * spot.x - 5.0, 1.7, 10.0 * spot.z - 5.0);
+    const glm::dvec3 viewpoint = randomViewpoint(rng);
     std::vector<OccluderPolygon> occluders;
     for (int i = 0; i < 16; ++i) occluders.push_back(randomQuad(rng, viewpoint));
     const OcclusionTree tree(viewpoint, occluders);
     ASSERT_EQ(tree.occluderCount(), occluders.size());
 
     for (int b = 0; b < 150; ++b) {
-      const double azimuth = 2.0 * std::numbers::pi * u(rng), polar = 0.9 * u(rng);
-      const glm::dvec3 dir(std::sin(polar) * std::cos(azimuth), std::sin(polar) * std::sin(azimuth),
-                           -std::cos(polar));
-      const glm::dvec3 centre = viewpoint + (2.0 + 18.0 * u(rng)) * dir;
-      const glm::dvec3 half = glm::dvec3(0.05) + 1.2 * uniform3(rng);
-      const Box3f query(glm::vec3(centre - half), glm::vec3(centre + half));
+      const Box3f query = randomQueryBox(rng, viewpoint);
       const NodeVisibility v = tree.classify(query);
       ++counts[size_t(v)];
 
@@ -421,8 +436,7 @@ TEST(OcclusionTree, OccludersCutIntoPiecesFuseBackIntoTheWhole) {
   std::array<size_t, 3> counts{};
   size_t differences = 0, total = 0, invisibleWhole = 0;
   for (int scene = 0; scene < 6; ++scene) {
-    const glm::dvec3 spot = uniform3(rng);
-    const glm::dvec3 viewpoint(10.0 * spot.x - 5.0, 1.7, 10.0 * spot.z - 5.0);
+    const glm::dvec3 viewpoint = randomViewpoint(rng);
     std::vector<OccluderPolygon> whole, pieces;
     for (int i = 0; i < 10; ++i) {
       whole.push_back(randomQuad(rng, viewpoint));
@@ -438,12 +452,7 @@ TEST(OcclusionTree, OccludersCutIntoPiecesFuseBackIntoTheWhole) {
     std::shuffle(pieces.begin(), pieces.end(), rng);
     const OcclusionTree wholeTree(viewpoint, whole), piecesTree(viewpoint, pieces);
     for (int b = 0; b < 150; ++b) {
-      const double azimuth = 2.0 * std::numbers::pi * u(rng), polar = 0.9 * u(rng);
-      const glm::dvec3 dir(std::sin(polar) * std::cos(azimuth), std::sin(polar) * std::sin(azimuth),
-                           -std::cos(polar));
-      const glm::dvec3 centre = viewpoint + (2.0 + 18.0 * u(rng)) * dir;
-      const glm::dvec3 half = glm::dvec3(0.05) + 1.2 * uniform3(rng);
-      const Box3f query(glm::vec3(centre - half), glm::vec3(centre + half));
+      const Box3f query = randomQueryBox(rng, viewpoint);
       const NodeVisibility v = piecesTree.classify(query);
       ++counts[size_t(v)];
       ++total;

@@ -250,6 +250,18 @@ std::string openErrorWithCell7Bytes(const TempDir& dir, const std::string& name,
   return errorOf([&] { PvsDatabase::open(dir / name); });
 }
 
+// Expects open() to refuse the database whose cell 7 has the bytes `edited`,
+// saved as `name`, with a message naming the file, the cell with its grid
+// index, and `what`.
+void expectCell7Refused(const std::string& name, const std::string& edited,
+                        const std::string& what) {
+  TempDir dir;
+  const std::string error = openErrorWithCell7Bytes(dir, name, edited);
+  EXPECT_THAT(error, HasSubstr(name));
+  EXPECT_THAT(error, HasSubstr("cell 7 (i,j,k 2,0,1)"));
+  EXPECT_THAT(error, HasSubstr(what));
+}
+
 TEST(PvsDatabase, OpensTheUneditedCityDatabaseItsCorruptVariantsStartFrom) {
   TempDir dir;
   EXPECT_EQ(openErrorWithCell7Bytes(dir, "same.db", asString(encodeFaceList(kCell7))),
@@ -258,32 +270,20 @@ TEST(PvsDatabase, OpensTheUneditedCityDatabaseItsCorruptVariantsStartFrom) {
 }
 
 TEST(PvsDatabase, RefusesAtOpenACellListThatIsNotStrictlyIncreasingNamingTheFileAndCell) {
-  TempDir dir;
   // 100, 100, 21179: a zero delta, in as many bytes as the good list.
-  const std::string error =
-      openErrorWithCell7Bytes(dir, "repeated.db", asString(encodeFaceList({100, 100, 21179})));
-  EXPECT_THAT(error, HasSubstr("repeated.db"));
-  EXPECT_THAT(error, HasSubstr("cell 7 (i,j,k 2,0,1)"));
-  EXPECT_THAT(error, HasSubstr("not strictly increasing at entry 1"));
+  expectCell7Refused("repeated.db", asString(encodeFaceList({100, 100, 21179})),
+                     "not strictly increasing at entry 1");
 }
 
 TEST(PvsDatabase, RefusesAtOpenACellListingAFaceIdEqualToTheFaceCountNamingTheFileAndCell) {
-  TempDir dir;
-  const std::string error =
-      openErrorWithCell7Bytes(dir, "beyond.db", asString(encodeFaceList({100, 200, 21280})));
-  EXPECT_THAT(error, HasSubstr("beyond.db"));
-  EXPECT_THAT(error, HasSubstr("cell 7 (i,j,k 2,0,1)"));
-  EXPECT_THAT(error, HasSubstr("entry 2 is face 21280, not below the face count 21280"));
+  expectCell7Refused("beyond.db", asString(encodeFaceList({100, 200, 21280})),
+                     "entry 2 is face 21280, not below the face count 21280");
 }
 
 TEST(PvsDatabase, RefusesAtOpenACellListEndingInsideAVarintNamingTheFileAndCell) {
   std::string cut = asString(encodeFaceList(kCell7));
   cut.back() = char(0x81);  // a continuation bit on the last byte
-  TempDir dir;
-  const std::string error = openErrorWithCell7Bytes(dir, "cut.db", cut);
-  EXPECT_THAT(error, HasSubstr("cut.db"));
-  EXPECT_THAT(error, HasSubstr("cell 7 (i,j,k 2,0,1)"));
-  EXPECT_THAT(error, HasSubstr("malformed varint at byte 2"));
+  expectCell7Refused("cut.db", cut, "malformed varint at byte 2");
 }
 
 // A town of 3 x 3 buildings with streets, for bakes.

@@ -36,7 +36,7 @@
 #include "common/generate/generate.h"
 #include "common/raycast/ray_query.h"
 #include "common/raycast/sampled_visibility.h"
-#include "common/spatial/free_space.h"
+#include "common/world/free_space.h"
 #include "server/visibility/epsilon_pvs.h"
 
 namespace vistream {

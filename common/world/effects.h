@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "common/scene/scene.h"
-#include "common/spatial/free_space.h"
+#include "common/world/free_space.h"
 
 namespace vistream {
 

@@ -1,4 +1,4 @@
-#include "common/scene/effects.h"
+#include "common/world/effects.h"
 
 #include <gtest/gtest.h>
 

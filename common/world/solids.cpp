@@ -1,0 +1,285 @@
+#include "common/world/solids.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <numbers>
+#include <numeric>
+
+namespace vistream {
+namespace {
+
+// Upward directions for the parity test: one steep, eight alternating
+// between 18 and 42 degrees of elevation. Azimuths are offset from the axes
+// and elevations are not those of axis-aligned diagonals, so rays from the
+// grid points free space tests from do not run along the edges of
+// axis-aligned boxes.
+std::array<glm::vec3, kSolidTestDirections> testDirections() {
+  std::array<glm::vec3, kSolidTestDirections> d{};
+  auto dir = [](double elevationDeg, double azimuthDeg) {
+    const double e = elevationDeg * std::numbers::pi / 180.0;
+    const double a = azimuthDeg * std::numbers::pi / 180.0;
+    return glm::vec3(float(std::cos(e) * std::cos(a)), float(std::sin(e)),
+                     float(std::cos(e) * std::sin(a)));
+  };
+  d[0] = dir(72.0, 7.0);
+  for (int k = 0; k < kSolidTestDirections - 1; ++k)
+    d[size_t(k) + 1] = dir(k % 2 ? 42.0 : 18.0, 23.0 + 45.0 * k);
+  return d;
+}
+
+struct UnionFind {
+  std::vector<uint32_t> parent;
+  explicit UnionFind(size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0u); }
+  uint32_t find(uint32_t x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  }
+  void unite(uint32_t a, uint32_t b) {
+    a = find(a);
+    b = find(b);
+    if (a != b) parent[std::max(a, b)] = std::min(a, b);
+  }
+};
+
+// Distance along `dir` from `p` (inside `box`) to where the ray leaves the box.
+float exitDistance(const Box3f& box, const glm::vec3& p, const glm::vec3& dir) {
+  float t = std::numeric_limits<float>::infinity();
+  for (int a = 0; a < 3; ++a) {
+    if (dir[a] > 0.0f) t = std::min(t, (box.hi[a] - p[a]) / dir[a]);
+    if (dir[a] < 0.0f) t = std::min(t, (box.lo[a] - p[a]) / dir[a]);
+  }
+  return t;
+}
+
+}  // namespace
+
+const char* solidClassName(SolidClass c) {
+  switch (c) {
+    case SolidClass::ClosedOutward:
+      return "closed_outward";
+    case SolidClass::ClosedInward:
+      return "closed_inward";
+    case SolidClass::Open:
+      return "open";
+    case SolidClass::NonManifold:
+      return "non_manifold";
+    case SolidClass::Inconsistent:
+      return "inconsistent";
+  }
+  return "?";
+}
+
+Solids Solids::build(const FlatTriangles& tris) {
+  Solids s;
+  const size_t n = tris.size();
+  s.componentOf_.assign(n, kNoHit);
+
+  // Weld corners by exact position: equal floats are the same vertex.
+  struct Corner {
+    uint32_t key[3];
+    uint32_t index;  // 3 * triangle + k
+  };
+  std::vector<Corner> corners;
+  corners.reserve(3 * n);
+  for (size_t t = 0; t < n; ++t) {
+    if (tris.degenerate[t]) continue;
+    for (int k = 0; k < 3; ++k) {
+      Corner c{};
+      const glm::vec3 p = tris.vertex(t, k) + glm::vec3(0.0f);  // -0 and +0 weld
+      std::memcpy(c.key, &p, sizeof(c.key));
+      c.index = uint32_t(3 * t + size_t(k));
+      corners.push_back(c);
+    }
+  }
+  std::sort(corners.begin(), corners.end(), [](const Corner& a, const Corner& b) {
+    return std::lexicographical_compare(a.key, a.key + 3, b.key, b.key + 3);
+  });
+  std::vector<uint32_t> vertexOf(3 * n, kNoHit);
+  uint32_t vertices = 0;
+  for (size_t i = 0; i < corners.size(); ++i) {
+    if (i > 0 && !std::equal(corners[i].key, corners[i].key + 3, corners[i - 1].key)) ++vertices;
+    vertexOf[corners[i].index] = vertices;
+  }
+  if (!corners.empty()) ++vertices;
+
+  // Edges: how many triangles use each, and in which direction.
+  struct Edge {
+    uint64_t key;  // lower vertex << 32 | higher vertex
+    uint32_t triangle;
+    bool forward;  // walked from the lower vertex to the higher one
+  };
+  std::vector<Edge> edges;
+  edges.reserve(3 * n);
+  for (size_t t = 0; t < n; ++t) {
+    if (tris.degenerate[t]) continue;
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t a = vertexOf[3 * t + size_t(k)], b = vertexOf[3 * t + size_t((k + 1) % 3)];
+      if (a == b) continue;
+      edges.push_back({(uint64_t(std::min(a, b)) << 32) | std::max(a, b), uint32_t(t), a < b});
+    }
+  }
+  std::sort(edges.begin(), edges.end(), [](const Edge& x, const Edge& y) {
+    return x.key < y.key || (x.key == y.key && x.triangle < y.triangle);
+  });
+
+  // Components: triangles joined across manifold edges (used by exactly two
+  // triangles). A vertex or a non-manifold edge does not join, so a floor
+  // sheet stays apart from the wall boxes standing on it and two boxes
+  // sharing an edge stay two.
+  UnionFind uf(n);
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i;
+    while (j < edges.size() && edges[j].key == edges[i].key) ++j;
+    if (j - i == 2) uf.unite(edges[i].triangle, edges[i + 1].triangle);
+    i = j;
+  }
+  std::vector<uint32_t> componentOfRoot(n, kNoHit);
+  for (size_t t = 0; t < n; ++t) {
+    if (tris.degenerate[t]) continue;
+    const uint32_t root = uf.find(uint32_t(t));
+    if (componentOfRoot[root] == kNoHit) {
+      componentOfRoot[root] = uint32_t(s.components_.size());
+      s.components_.emplace_back();
+    }
+    const uint32_t c = componentOfRoot[root];
+    s.componentOf_[t] = c;
+    SolidComponent& comp = s.components_[c];
+    ++comp.triangles;
+    for (int k = 0; k < 3; ++k) comp.bounds.extend(tris.vertex(t, k));
+  }
+  std::vector<uint8_t> open(s.components_.size(), 0), nonManifold(s.components_.size(), 0),
+      inconsistent(s.components_.size(), 0);
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i, forward = 0;
+    while (j < edges.size() && edges[j].key == edges[i].key) forward += edges[j++].forward;
+    const size_t uses = j - i;
+    for (size_t e = i; e < j; ++e) {
+      const uint32_t c = s.componentOf_[edges[e].triangle];
+      if (uses == 1) open[c] = 1;
+      if (uses > 2) nonManifold[c] = 1;
+      if (uses == 2 && forward != 1) inconsistent[c] = 1;
+    }
+    i = j;
+  }
+
+  // Signed volume about each component's centre (precision far from the origin).
+  std::vector<double> volume(s.components_.size(), 0.0);
+  for (size_t t = 0; t < n; ++t) {
+    if (tris.degenerate[t]) continue;
+    const uint32_t c = s.componentOf_[t];
+    const glm::dvec3 o(s.components_[c].bounds.center());
+    const glm::dvec3 a = glm::dvec3(tris.vertex(t, 0)) - o, b = glm::dvec3(tris.vertex(t, 1)) - o,
+                     d = glm::dvec3(tris.vertex(t, 2)) - o;
+    volume[c] += glm::dot(a, glm::cross(b, d)) / 6.0;
+  }
+
+  // Distinct faces per component.
+  std::vector<uint64_t> faceKeys;
+  faceKeys.reserve(n);
+  for (size_t t = 0; t < n; ++t)
+    if (!tris.degenerate[t])
+      faceKeys.push_back((uint64_t(s.componentOf_[t]) << 32) | tris.faceIds[t]);
+  std::sort(faceKeys.begin(), faceKeys.end());
+  faceKeys.erase(std::unique(faceKeys.begin(), faceKeys.end()), faceKeys.end());
+  for (uint64_t k : faceKeys) ++s.components_[size_t(k >> 32)].faces;
+
+  for (size_t c = 0; c < s.components_.size(); ++c) {
+    SolidComponent& comp = s.components_[c];
+    comp.signedVolume = volume[c];
+    if (nonManifold[c])
+      comp.kind = SolidClass::NonManifold;
+    else if (open[c])
+      comp.kind = SolidClass::Open;
+    else if (inconsistent[c])
+      comp.kind = SolidClass::Inconsistent;
+    else
+      comp.kind = volume[c] > 0.0 ? SolidClass::ClosedOutward : SolidClass::ClosedInward;
+  }
+
+  // Parity groups: components joined at non-manifold edges. Two cubes
+  // sharing a face split into pieces at the shared square's edges; counted
+  // together, a ray leaving one cube through the shared face (two coincident
+  // faces) and then the other still crosses an odd number of times.
+  UnionFind groups(s.components_.size());
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i;
+    while (j < edges.size() && edges[j].key == edges[i].key) ++j;
+    if (j - i > 2)
+      for (size_t e = i + 1; e < j; ++e)
+        groups.unite(s.componentOf_[edges[i].triangle], s.componentOf_[edges[e].triangle]);
+    i = j;
+  }
+  s.groupOf_.assign(s.components_.size(), kNoHit);
+  for (size_t c = 0; c < s.components_.size(); ++c) {
+    const uint32_t root = groups.find(uint32_t(c));
+    if (s.groupOf_[root] == kNoHit) {
+      s.groupOf_[root] = uint32_t(s.groupBounds_.size());
+      s.groupBounds_.emplace_back();
+    }
+    s.groupOf_[c] = s.groupOf_[root];
+    s.groupBounds_[s.groupOf_[c]].extend(s.components_[c].bounds);
+  }
+
+  // Groups by X/Z cell of their bounds.
+  Box3f all;
+  for (const Box3f& b : s.groupBounds_) all.extend(b);
+  if (!all.empty())
+    s.grid_ = XzGrid(all, std::max({all.hi.x - all.lo.x, all.hi.z - all.lo.z, 1e-3f}) / 256.0f,
+                     s.groupBounds_);
+  return s;
+}
+
+SolidCensus Solids::census() const {
+  SolidCensus out;
+  for (const SolidComponent& c : components_) {
+    const size_t k = size_t(c.kind);
+    ++out.components[k];
+    out.triangles[k] += c.triangles;
+    out.faces[k] += c.faces;
+  }
+  return out;
+}
+
+bool Solids::inside(const RayQuery& rays, const glm::vec3& p) const {
+  if (grid_.empty()) return false;
+  const auto listed = grid_.itemsIn(grid_.cellOf({p.x, p.z}));
+  thread_local std::vector<uint32_t> candidates;
+  thread_local std::vector<int> odd;
+  thread_local std::vector<uint8_t> parity;
+  thread_local std::vector<Hit> hits;
+  candidates.clear();
+  for (uint32_t g : listed)
+    if (groupBounds_[g].contains(p)) candidates.push_back(g);
+  if (candidates.empty()) return false;
+  odd.assign(candidates.size(), 0);
+  parity.resize(candidates.size());
+
+  static const std::array<glm::vec3, kSolidTestDirections> dirs = testDirections();
+  for (int d = 0; d < kSolidTestDirections; ++d) {
+    const glm::vec3& dir = dirs[size_t(d)];
+    float tfar = 0.0f;
+    for (uint32_t g : candidates) tfar = std::max(tfar, exitDistance(groupBounds_[g], p, dir));
+    hits.clear();
+    rays.allHits(Ray{p, dir, 0.0f, tfar * 1.001f + 1e-3f}, hits);
+    std::fill(parity.begin(), parity.end(), uint8_t(0));
+    for (const Hit& h : hits) {
+      if (h.t == 0.0f) return false;  // on a surface: outside by convention
+      const uint32_t g = groupOf_[componentOf_[h.triangle]];
+      for (size_t i = 0; i < candidates.size(); ++i)
+        if (candidates[i] == g) parity[i] ^= 1;
+    }
+    // Decide as soon as the vote is settled for every candidate.
+    const int remaining = kSolidTestDirections - d - 1;
+    bool undecided = false;
+    for (size_t i = 0; i < candidates.size(); ++i) {
+      odd[i] += parity[i];
+      if (2 * odd[i] > kSolidTestDirections) return true;
+      if (2 * (odd[i] + remaining) > kSolidTestDirections) undecided = true;
+    }
+    if (!undecided) return false;
+  }
+  return false;
+}
+
+}  // namespace vistream

@@ -1,0 +1,94 @@
+// Which parts of the static geometry are solids, decided without trusting
+// face winding where it cannot be trusted.
+//
+// The triangles are welded by exact position and joined into components
+// across manifold edges (edges used by exactly two triangles): a sheet and
+// the boxes standing on it, or two boxes sharing an edge, stay apart. Each
+// component is classified from the edges of its triangles:
+//  - non-manifold: some edge is used by more than two triangles;
+//  - open: some edge is used by one triangle only (a sheet, a box without
+//    its bottom face, a wall with a door hole);
+//  - inconsistent: closed and manifold, but some edge is used twice in the
+//    same direction (part of the surface is wound the other way);
+//  - closed outward / closed inward: closed, manifold and consistently
+//    oriented, by the sign of the enclosed signed volume.
+// Orientation is trusted only where these hold, and there only to report
+// which way a closed mesh is wound (closed inward is usually a solid
+// exported inside out, e.g. through a mirroring transform). The inside test
+// uses no winding at all, so free space is the same whichever way any face
+// is wound: a point is inside a parity group (components joined at
+// non-manifold edges, so two boxes sharing a face count as one) when rays in
+// a strict majority of kSolidTestDirections upward-pointing directions cross
+// the group an odd number of times. For closed meshes parity is exact in
+// every direction; upward directions also make it exact for the common open
+// cases (boxes without a bottom face, buildings without a ground surface)
+// and never count a floor or terrain sheet below the point.
+//
+// Limitation: a room modelled as one closed box (floor, walls and ceiling
+// in one mesh) reads as a solid whichever way it is wound; model rooms as
+// wall boxes, or leave the mesh open (a door, a separate floor).
+//
+// Frames: local scene coordinates (metres, Y up), like FlatTriangles.
+// Thread safety: immutable after build; inside() may be called from any
+// number of threads.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <glm/glm.hpp>
+#include <string>
+#include <vector>
+
+#include "common/core/box.h"
+#include "common/raycast/ray_query.h"
+#include "common/scene/scene.h"
+#include "common/spatial/xz_grid.h"
+
+namespace vistream {
+
+enum class SolidClass : uint8_t { ClosedOutward, ClosedInward, Open, NonManifold, Inconsistent };
+inline constexpr size_t kSolidClassCount = 5;
+// "closed_outward", "closed_inward", "open", "non_manifold", "inconsistent".
+const char* solidClassName(SolidClass c);
+
+inline constexpr int kSolidTestDirections = 9;
+
+struct SolidComponent {
+  SolidClass kind = SolidClass::Open;
+  Box3f bounds;
+  size_t triangles = 0;
+  size_t faces = 0;           // distinct face IDs
+  double signedVolume = 0.0;  // m^3, positive when wound outward (meaningful when closed)
+};
+
+// Components, triangles and faces per class (indexed by SolidClass).
+struct SolidCensus {
+  std::array<size_t, kSolidClassCount> components{};
+  std::array<size_t, kSolidClassCount> triangles{};
+  std::array<size_t, kSolidClassCount> faces{};
+};
+
+class Solids {
+ public:
+  // Degenerate triangles take no part (they are never hit by rays).
+  static Solids build(const FlatTriangles& triangles);
+
+  const std::vector<SolidComponent>& components() const { return components_; }
+  // Component of a triangle (index into FlatTriangles); kNoHit for a degenerate one.
+  uint32_t componentOf(uint32_t triangle) const { return componentOf_[triangle]; }
+  SolidCensus census() const;
+
+  // True if `point` lies inside a solid component. `rays` must answer over
+  // the same triangles this was built from. A point on a surface is outside
+  // by convention.
+  bool inside(const RayQuery& rays, const glm::vec3& point) const;
+
+ private:
+  std::vector<uint32_t> componentOf_;
+  std::vector<SolidComponent> components_;
+  std::vector<uint32_t> groupOf_;   // parity group of each component
+  std::vector<Box3f> groupBounds_;  // by group
+  XzGrid grid_;                     // groups by X/Z cell of their bounds
+};
+
+}  // namespace vistream

@@ -1,0 +1,38 @@
+// Building blocks for tests and benchmarks of ray queries and spatial
+// structures: flat triangle lists from corner triples, and random directions.
+#pragma once
+
+#include <array>
+#include <random>
+#include <vector>
+
+#include "common/scene/scene.h"
+
+namespace vistream::testing {
+
+using Triangle = std::array<glm::vec3, 3>;
+
+// One face per triangle (face ID = index), all in object 0, each flagged
+// degenerate as isDegenerateTriangle decides.
+inline FlatTriangles makeTriangles(const std::vector<Triangle>& triangles) {
+  FlatTriangles flat;
+  for (const Triangle& t : triangles) {
+    flat.positions.insert(flat.positions.end(), t.begin(), t.end());
+    flat.faceIds.push_back(uint32_t(flat.faceIds.size()));
+    flat.objectIds.push_back(0);
+    flat.degenerate.push_back(isDegenerateTriangle(t[0], t[1], t[2]) ? 1 : 0);
+  }
+  return flat;
+}
+
+// A uniformly distributed unit direction: a normalised Gaussian vector,
+// redrawn while it is too short to normalise safely.
+inline glm::vec3 randomDirection(std::mt19937& rng) {
+  std::normal_distribution<float> normal(0.0f, 1.0f);
+  glm::vec3 d;
+  do d = glm::vec3(normal(rng), normal(rng), normal(rng));
+  while (glm::length(d) < 1e-3f);
+  return glm::normalize(d);
+}
+
+}  // namespace vistream::testing
