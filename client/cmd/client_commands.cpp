@@ -29,6 +29,8 @@
 #include "common/core/timer.h"
 #include "common/generate/path.h"
 #include "common/generate/scene_spec.h"
+#include "common/raycast/embree_ray_query.h"
+#include "common/world/static_world.h"
 
 namespace vistream {
 namespace {
@@ -318,6 +320,11 @@ int run(const Args& a) {
   if (local) {
     scene = openScene(a.scene, a.sceneLimits);
     geometry = renderGeometryFromScene(*scene);
+    // The server decides this for a connected client (Welcome.ground_y).
+    const GroundPlane ground =
+        decideGround(*scene, *makeEmbreeRayQuery(geometry.triangles), a.ground);
+    geometry.groundY = ground.y;
+    if (ground.y) spdlog::info("ground {}", ground.why);
     origin = scene->origin;
   } else {
     if (!a.scene.empty()) pathScene = openScene(a.scene, a.sceneLimits);

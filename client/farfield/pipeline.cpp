@@ -235,18 +235,18 @@ struct FrameRun {
           if (!glNear) out.set(x, y, r.geometry_.colours[r.ids_.ids[p]]);
           continue;
         }
+        const glm::vec3 dir = pixelRays.at(float(x) + 0.5f, float(y) + 0.5f);
         if (!rep.farFieldRan) {
           ++rep.pixels.background;
-          out.set(x, y, sky);
+          out.set(x, y, r.geometry_.background(camera.eye, dir));
           continue;
         }
-        const glm::vec3 dir = pixelRays.at(float(x) + 0.5f, float(y) + 0.5f);
         // Only pixels no polygon reaches can be sky: the horizon bounds the far
         // field, and a pixel with a polygon beyond d sees at least that.
         if (rep.horizonRan && covered[p] == kUncovered &&
             HorizonMap::raySlope(dir) > slopes[size_t(x)]) {
           ++rep.pixels.horizon;
-          out.set(x, y, sky);
+          out.set(x, y, r.geometry_.background(camera.eye, dir));
           continue;
         }
         candidates.push_back(uint32_t(p));
@@ -311,7 +311,8 @@ struct FrameRun {
     Stopwatch clock;
     for (size_t k = 0; k < rays.size(); ++k) {
       const size_t i = rayOf[k];
-      const glm::u8vec3 c = hits[k].valid() ? r.geometry_.colours[hits[k].triangle] : sky;
+      const glm::u8vec3 c = hits[k].valid() ? r.geometry_.colours[hits[k].triangle]
+                                            : r.geometry_.background(camera.eye, dirs[i]);
       hits[k].valid() ? ++rep.pixels.rayHit : ++rep.pixels.rayMiss;
       setPixel(candidates[i], c);
       if (useCache && texels[i] >= 0) r.cache_->store(texels[i], c);

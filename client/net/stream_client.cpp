@@ -9,6 +9,7 @@
 #include <condition_variable>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <thread>
 #include <utility>  // before Boost.Asio, whose awaitable.hpp uses std::exchange
@@ -47,6 +48,7 @@ struct StreamClient::Impl : PeerHandler {
   WelcomeGrid grid;
   std::vector<glm::vec3> materials;
   glm::vec3 sky{0.55f, 0.7f, 0.9f};
+  std::optional<float> groundY;  // local frame; an assumed ground plane (Welcome)
   std::map<uint32_t, HeldFace> faces;
   std::set<glm::ivec3, IvecLess> ready;
   glm::ivec3 poseCell{0};
@@ -117,6 +119,7 @@ struct StreamClient::Impl : PeerHandler {
         grid = checked;
         if (isFinite(w.environment_colour()))
           sky = glm::clamp(fromWire(*w.environment_colour()), 0.0f, 1.0f);
+        if (w.has_ground() && std::isfinite(w.ground_y())) groundY = w.ground_y();
         if (w.materials())
           for (const MaterialInfo* m : *w.materials())
             materials.push_back(m && isFinite(m->diffuse())
@@ -293,6 +296,7 @@ RenderGeometry StreamClient::snapshot() const {
       material.push_back(f.material);
     }
   g.sky = encodeColour(impl_->sky);
+  g.groundY = impl_->groundY;
   recolour(g, [&](size_t t) {
     return material[t] < impl_->materials.size() ? impl_->materials[material[t]] : glm::vec3(0.8f);
   });

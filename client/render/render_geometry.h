@@ -10,6 +10,7 @@
 
 #include <cstdint>
 #include <glm/glm.hpp>
+#include <optional>
 #include <vector>
 
 #include "common/core/box.h"
@@ -29,6 +30,14 @@ struct RenderGeometry {
   FlatTriangles triangles;           // local frame
   std::vector<glm::u8vec3> colours;  // per triangle
   glm::u8vec3 sky{140, 180, 230};    // background for pixels that see nothing
+  // An assumed ground plane (static_world.h) at this local height: pixels
+  // that see nothing below the horizon show `ground` instead of the sky.
+  std::optional<float> groundY;
+  glm::u8vec3 ground{118, 112, 100};
+  // The background a ray from `eye` along `dir` meets when it hits no triangle.
+  glm::u8vec3 background(const glm::vec3& eye, const glm::vec3& dir) const {
+    return groundY && dir.y < 0.0f && eye.y > *groundY ? ground : sky;
+  }
   Box3f bounds;
 
   size_t size() const { return triangles.size(); }

@@ -52,7 +52,7 @@ struct GroundPlane {
 struct StaticWorldOptions {
   GroundChoice ground;
   FreeSpaceOptions freeSpace;  // its groundY is overwritten by the ground decision
-  bool withFreeSpace = true;   // false: triangles, rays and solids only (no ground, no free space)
+  bool withFreeSpace = true;   // false: triangles, rays, solids and ground only (no free space)
 };
 
 struct StaticWorld {

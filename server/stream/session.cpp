@@ -223,6 +223,10 @@ void Session::onHello(const Hello& hello) {
   w.near_field_radius_m = radius_;
   w.pvs_only = cfg.pvsOnly;
   w.policy = streamPolicyName(cfg.policy);
+  if (const auto& g = world_.ground().y) {
+    w.has_ground = true;
+    w.ground_y = *g;
+  }
   send(std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(w))));
   spdlog::debug("session {}: welcome (radius {:.0f} m, budget {} bytes)", id_, radius_, budget_);
 }

@@ -48,14 +48,19 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
           "--pvs-db {}: baked for scene '{}' ({} faces), not for this scene '{}' ({} faces)",
           options.pvsDatabase.string(), h.sceneName, h.sceneFaces, scene_.name, scene_.faceCount);
     grid_ = h.grid();
+    StaticWorldOptions worldOptions;
+    worldOptions.ground = options.ground;
+    worldOptions.withFreeSpace = false;
+    ground_ = buildStaticWorld(scene_, worldOptions).ground;
   } else {
     if (!(options.cellSize > 0.0f)) throwInputError("--cell-size must be positive");
     StaticWorldOptions worldOptions;
     worldOptions.ground = options.ground;
-    const FreeSpace fs = buildStaticWorld(scene_, worldOptions).freeSpace;
+    const StaticWorld world = buildStaticWorld(scene_, worldOptions);
+    ground_ = world.ground;
     BakeOptions bo;
     bo.cellSize = glm::vec3(options.cellSize);
-    grid_ = bakeGrid(scene_, fs, bo);
+    grid_ = bakeGrid(scene_, world.freeSpace, bo);
   }
   culling_ = std::make_unique<CullingScene>(scene_);
 

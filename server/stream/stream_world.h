@@ -61,6 +61,9 @@ class StreamWorld {
 
   const Scene& scene() const { return scene_; }
   const ViewCellGrid& grid() const { return grid_; }
+  // The ground decision for the scene (static_world.h): clients draw an
+  // assumed plane below the horizon.
+  const GroundPlane& ground() const { return ground_; }
   const CullingScene& culling() const { return *culling_; }
   uint32_t faceCount() const { return scene_.faceCount; }
   const wire::FaceTriangles& face(uint32_t id) const { return faces_[id]; }
@@ -121,6 +124,7 @@ class StreamWorld {
 
   Scene scene_;
   ViewCellGrid grid_;
+  GroundPlane ground_;
   std::optional<PvsDatabase> database_;
   std::unique_ptr<CullingScene> culling_;
   std::once_flag pvsOnce_;

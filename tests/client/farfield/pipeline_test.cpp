@@ -5,6 +5,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <optional>
+#include <utility>
 
 #include "client/app/walkthrough.h"
 #include "common/generate/generate.h"
@@ -241,6 +243,56 @@ TEST(Pipeline, GeometryAllDrawsEveryVisibleTriangleAsPolygons) {
 
 // A walk through a generated city: with the cache and a budget the image
 // stays within 1% of the reference on every frame.
+// A city model without a surface of its own (static_world.h assumes a ground
+// plane): pixels that see nothing below the horizon show the ground colour,
+// above it the sky, in every mode and with the far field on or off. The
+// oracle is the sign of each pixel ray's Y, from the camera alone.
+TEST(Pipeline, AnAssumedGroundPlaneFillsEmptyPixelsBelowTheHorizon) {
+  RenderGeometry g;
+  addBox(g, {-10.0f, 0.0f, -300.0f}, {10.0f, 20.0f, -280.0f});  // one distant building
+  finish(g);
+  g.groundY = 0.0f;
+  const Camera c = cameraAt({0.0f, 1.7f, 0.0f}, 0.0f);
+  const Camera::PixelRays rays = c.pixelRays();
+  struct Case {
+    const char* name;
+    RenderMode mode;
+    float nearDistance;
+  };
+  for (const Case& k : {Case{"pipeline, far field", RenderMode::Pipeline, 50.0f},
+                        Case{"pipeline, all near", RenderMode::Pipeline, 1000.0f},
+                        Case{"raycast-all", RenderMode::RaycastAll, 50.0f},
+                        Case{"geometry-all", RenderMode::GeometryAll, 50.0f}}) {
+    SCOPED_TRACE(k.name);
+    PipelineOptions o;
+    o.mode = k.mode;
+    o.nearDistance = k.nearDistance;
+    o.polygonBudget = 0;  // never "the whole scene fits": the far field decides
+    FrameRenderer renderer(g, o);
+    ImageRgb8 image;
+    renderer.render(c, image);
+    size_t ground = 0, sky = 0;
+    for (int y : {0, 1, 2, c.height - 3, c.height - 2, c.height - 1})
+      for (int x = 0; x < c.width; ++x) {
+        const glm::vec3 dir = rays.at(float(x) + 0.5f, float(y) + 0.5f);
+        const glm::u8vec3 want = dir.y < 0.0f ? g.ground : g.sky;
+        ASSERT_EQ(image.at(x, y), want) << "pixel " << x << "," << y;
+        (dir.y < 0.0f ? ground : sky) += 1;
+      }
+    EXPECT_EQ(ground, 3u * size_t(c.width));
+    EXPECT_EQ(sky, 3u * size_t(c.width));
+  }
+  // Without a plane, or from below it, nothing is ground.
+  for (const auto& [groundY, eyeY] :
+       {std::pair{std::optional<float>{}, 1.7f}, std::pair{std::optional<float>{5.0f}, 1.7f}}) {
+    g.groundY = groundY;
+    FrameRenderer renderer(g, PipelineOptions{});
+    ImageRgb8 image;
+    renderer.render(cameraAt({0.0f, eyeY, 0.0f}, 0.0f), image);
+    for (int x = 0; x < c.width; ++x) EXPECT_EQ(image.at(x, c.height - 1), g.sky);
+  }
+}
+
 TEST(Pipeline, AWalkThroughCity1StaysWithinOnePercentOfTheReference) {
   const Scene scene = toScene(generate("city1"));
   const RenderGeometry g = renderGeometryFromScene(scene);

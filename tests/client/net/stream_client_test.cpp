@@ -6,6 +6,8 @@
 #include <gtest/gtest.h>
 
 #include <boost/asio.hpp>
+#include <limits>
+#include <optional>
 #include <thread>
 #include <utility>  // before Boost.Asio
 
@@ -117,6 +119,34 @@ TEST(StreamClient, HoldsWhatAWellBehavedServerSends) {
   const RenderGeometry g = client.snapshot();
   EXPECT_EQ(g.size(), 5u);
   EXPECT_TRUE(client.error().empty()) << client.error();
+}
+
+}  // namespace
+}  // namespace vistream
+
+namespace vistream {
+namespace {
+
+// Welcome.ground_y reaches the renderer's geometry only when the server says
+// a plane is assumed and the height is a finite number.
+TEST(StreamClient, TakesTheAssumedGroundPlaneFromTheWelcome) {
+  struct Case {
+    const char* name;
+    bool hasGround;
+    float groundY;
+    std::optional<float> expected;
+  };
+  for (const Case& k :
+       {Case{"assumed", true, -3.5f, -3.5f}, Case{"not assumed", false, -3.5f, std::nullopt},
+        Case{"not finite", true, std::numeric_limits<float>::quiet_NaN(), std::nullopt}}) {
+    SCOPED_TRACE(k.name);
+    WelcomeT w = goodWelcome();
+    w.has_ground = k.hasGround;
+    w.ground_y = k.groundY;
+    ScriptedServer server({encodeMessage(std::move(w))});
+    StreamClient client(to(server));
+    EXPECT_EQ(client.snapshot().groundY, k.expected);
+  }
 }
 
 }  // namespace
