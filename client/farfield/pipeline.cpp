@@ -197,14 +197,20 @@ struct FrameRun {
     }
   }
 
+  // Why horizon tracing and the cache cannot run in this frame at all (empty
+  // when they may): another mode, or no far field.
+  std::string farStagesOff() const {
+    if (mode != RenderMode::Pipeline) return fmt::format("{} mode", renderModeName(mode));
+    if (!rep.farFieldRan) return "no far field";
+    return {};
+  }
+
   // 3b. Horizon tracing, where there is open sky in reach.
   void traceHorizon() {
     Stopwatch clock;
     const PipelineOptions& options = r.options_;
-    if (mode != RenderMode::Pipeline) {
-      rep.horizonWhy = fmt::format("{} mode", renderModeName(mode));
-    } else if (!rep.farFieldRan) {
-      rep.horizonWhy = "no far field";
+    if (std::string why = farStagesOff(); !why.empty()) {
+      rep.horizonWhy = std::move(why);
     } else if (!options.horizonAllowed) {
       rep.horizonWhy = "the scene has no open sky";
     } else if (std::abs(camera.pitchDeg) + 0.5f * camera.vfovDeg >= 89.0f) {
@@ -262,10 +268,8 @@ struct FrameRun {
     Stopwatch clock;
     const PipelineOptions& options = r.options_;
     useCache = mode == RenderMode::Pipeline && options.cache && rep.farFieldRan;
-    if (mode != RenderMode::Pipeline) {
-      rep.cacheWhy = fmt::format("{} mode", renderModeName(mode));
-    } else if (!rep.farFieldRan) {
-      rep.cacheWhy = "no far field";
+    if (std::string why = farStagesOff(); !why.empty()) {
+      rep.cacheWhy = std::move(why);
     } else if (!options.cache) {
       rep.cacheWhy = "switched off";
     }

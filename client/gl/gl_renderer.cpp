@@ -151,29 +151,21 @@ out vec4 fragColour;
 void main() { fragColour = colour; }
 )";
 
-struct Buffer {
+// One OpenGL object name, made with `gen` (a glGen* function) and deleted
+// with `del` (the matching glDelete*) when this goes; needs a current context
+// for its whole life.
+template <auto& gen, auto& del>
+struct GlName {
   GLuint id = 0;
-  Buffer() { glGenBuffers(1, &id); }
-  ~Buffer() { glDeleteBuffers(1, &id); }
-  Buffer(const Buffer&) = delete;
-  Buffer& operator=(const Buffer&) = delete;
+  GlName() { gen(1, &id); }
+  ~GlName() { del(1, &id); }
+  GlName(const GlName&) = delete;
+  GlName& operator=(const GlName&) = delete;
 };
 
-struct VertexArray {
-  GLuint id = 0;
-  VertexArray() { glGenVertexArrays(1, &id); }
-  ~VertexArray() { glDeleteVertexArrays(1, &id); }
-  VertexArray(const VertexArray&) = delete;
-  VertexArray& operator=(const VertexArray&) = delete;
-};
-
-struct Texture {
-  GLuint id = 0;
-  Texture() { glGenTextures(1, &id); }
-  ~Texture() { glDeleteTextures(1, &id); }
-  Texture(const Texture&) = delete;
-  Texture& operator=(const Texture&) = delete;
-};
+using Buffer = GlName<glGenBuffers, glDeleteBuffers>;
+using VertexArray = GlName<glGenVertexArrays, glDeleteVertexArrays>;
+using Texture = GlName<glGenTextures, glDeleteTextures>;
 
 struct Shader {
   GLuint id = 0;

@@ -9,8 +9,6 @@
 #include <deque>
 #include <limits>
 
-#include "common/raycast/sampled_visibility.h"
-
 namespace vistream {
 
 glm::ivec2 FreeSpace::columnOf(const glm::vec2& xz) const {
@@ -34,61 +32,30 @@ std::vector<glm::ivec2> FreeSpace::walkableColumns() const {
 
 namespace {
 
-// The winding-independent rules (the default build): a floor is any
-// horizontal surface; a surface at the very same height counts as a ceiling
-// when it belongs to another component that rises above the floor (a box
-// resting on it), not when it is a coplanar sheet or the same mesh (a ray
-// through a shared edge); a floor whose point above lies inside a solid is
-// skipped and the next one up is tried.
-struct SolidRules {
-  const RayQuery& rays;
-  const Solids& solids;
-  float upwardNormalY;
-  bool isFloor(const Hit& h) const {
-    const float len = glm::length(h.normal);
-    return len > 0.0f && std::abs(h.normal.y) / len > upwardNormalY;
-  }
-  bool tieIsCeiling(const Hit& floor, const Hit& other, float y) const {
-    if (!other.valid()) return false;  // the assumed ground plane is a sheet
-    const uint32_t c = solids.componentOf(other.triangle);
-    if (c == kNoHit || (floor.valid() && solids.componentOf(floor.triangle) == c)) return false;
-    return solids.components()[c].bounds.hi.y > y;
-  }
-  bool inside(const glm::vec3& p) const { return solids.inside(rays, p); }
-  static constexpr bool kTryHigherFloors = true;
-};
+// The rules use no winding. A floor is any horizontal surface, whichever
+// way it faces.
+bool isFloor(const Hit& h, float upwardNormalY) {
+  const float len = glm::length(h.normal);
+  return len > 0.0f && std::abs(h.normal.y) / len > upwardNormalY;
+}
 
-// The rules before solids existed, kept for FreeSpace::build without them.
-struct LegacyRules {
-  const RayQuery& rays;
-  float upwardNormalY;
-  bool isFloor(const Hit& h) const {
-    const float len = glm::length(h.normal);
-    return len > 0.0f && h.normal.y / len > upwardNormalY;
-  }
-  bool tieIsCeiling(const Hit&, const Hit& other, float) const { return !(other.normal.y > 0.0f); }
-  bool inside(const glm::vec3& p) const { return insideSolid(rays, p); }
-  static constexpr bool kTryHigherFloors = false;
-};
+// A surface at the very same height as a floor counts as a ceiling when it
+// belongs to another component that rises above the floor (a box resting on
+// it), not when it is a coplanar sheet or the same mesh (a ray through a
+// shared edge).
+bool tieIsCeiling(const Solids& solids, const Hit& floor, const Hit& other, float y) {
+  if (!other.valid()) return false;  // the assumed ground plane is a sheet
+  const uint32_t c = solids.componentOf(other.triangle);
+  if (c == kNoHit || (floor.valid() && solids.componentOf(floor.triangle) == c)) return false;
+  return solids.components()[c].bounds.hi.y > y;
+}
 
 }  // namespace
 
 FreeSpace FreeSpace::build(const RayQuery& rays, const Solids& solids, const Box3f& bounds,
                            const FreeSpaceOptions& options) {
-  FreeSpace fs = buildWith(rays, bounds, options, SolidRules{rays, solids, options.upwardNormalY});
-  fs.stats_.solids = solids.census();
-  return fs;
-}
-
-FreeSpace FreeSpace::build(const RayQuery& rays, const Box3f& bounds,
-                           const FreeSpaceOptions& options) {
-  return buildWith(rays, bounds, options, LegacyRules{rays, options.upwardNormalY});
-}
-
-template <typename Rules>
-FreeSpace FreeSpace::buildWith(const RayQuery& rays, const Box3f& bounds,
-                               const FreeSpaceOptions& options, const Rules& rules) {
   FreeSpace fs;
+  fs.stats_.solids = solids.census();
   fs.headroom_ = options.headroom;
   fs.viewerRadius_ = options.viewerRadius;
   if (bounds.empty()) return fs;
@@ -126,13 +93,13 @@ FreeSpace FreeSpace::buildWith(const RayQuery& rays, const Box3f& bounds,
                                        [](const Hit& a, const Hit& b) { return a.t < b.t; }),
                       plane);
         }
-        // Walk bottom-up: the lowest floor with headroom (and, under the
-        // winding-independent rules, air above it) wins.
+        // Walk bottom-up: the lowest floor with headroom and air above it
+        // wins; a floor inside a solid is skipped and the next one up tried.
         std::optional<float> best;
         bool headroomSeen = false;
         for (size_t h = hits.size(); h-- > 0;) {
           const Hit& hit = hits[h];
-          if (!rules.isFloor(hit)) continue;
+          if (!isFloor(hit, options.upwardNormalY)) continue;
           const float y = top - hit.t;
           // The nearest surface above this floor. A solid resting on the
           // floor at the very same height leaves no headroom at all.
@@ -140,7 +107,7 @@ FreeSpace FreeSpace::buildWith(const RayQuery& rays, const Box3f& bounds,
           for (size_t a = 0; a < hits.size(); ++a) {
             if (a == h) continue;
             const float ya = top - hits[a].t;
-            if (ya > y || (ya == y && rules.tieIsCeiling(hit, hits[a], y)))
+            if (ya > y || (ya == y && tieIsCeiling(solids, hit, hits[a], y)))
               ceiling = std::min(ceiling, ya);
           }
           if (ceiling - y < options.headroom) continue;
@@ -149,11 +116,10 @@ FreeSpace FreeSpace::buildWith(const RayQuery& rays, const Box3f& bounds,
           // bottom face the vertical ray does not report apart from the
           // ground) is no place to stand: its walls are invisible to
           // vertical rays.
-          if (!rules.inside({c.x, y + 1.0f, c.y})) {
+          if (!solids.inside(rays, {c.x, y + 1.0f, c.y})) {
             best = y;
             break;
           }
-          if (!Rules::kTryHigherFloors) break;
         }
         if (best) {
           candidate[fs.index(i, k)] = 1;

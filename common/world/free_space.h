@@ -58,7 +58,7 @@ struct FreeSpaceStats {
   size_t floors = 0;        // columns with a floor to stand on
   size_t nearObstacle = 0;  // floors within the viewer radius of an obstacle or a step
   size_t disconnected = 0;  // floors outside the largest connected set
-  SolidCensus solids;       // the components the inside test used (empty: legacy build)
+  SolidCensus solids;       // the components the inside test used
 };
 
 class FreeSpace {
@@ -66,11 +66,6 @@ class FreeSpace {
   // `bounds` is the scene's local bounding box; `solids` and `rays` cover the
   // same triangles (normally the scene's static geometry).
   static FreeSpace build(const RayQuery& rays, const Solids& solids, const Box3f& bounds,
-                         const FreeSpaceOptions& options = {});
-  // Legacy form for callers that hold only a RayQuery: floors must face up
-  // and the inside test is the winding-dependent insideSolid
-  // (sampled_visibility.h). New code uses the form above (or StaticWorld).
-  static FreeSpace build(const RayQuery& rays, const Box3f& bounds,
                          const FreeSpaceOptions& options = {});
 
   int columnsX() const { return nx_; }
@@ -97,10 +92,6 @@ class FreeSpace {
   std::string emptyReason() const;
 
  private:
-  template <typename Rules>
-  static FreeSpace buildWith(const RayQuery& rays, const Box3f& bounds,
-                             const FreeSpaceOptions& options, const Rules& rules);
-
   size_t index(int i, int k) const { return size_t(k) * size_t(nx_) + size_t(i); }
 
   int nx_ = 0, nz_ = 0;

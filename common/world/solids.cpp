@@ -1,6 +1,7 @@
 #include "common/world/solids.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <numbers>
@@ -55,19 +56,9 @@ float exitDistance(const Box3f& box, const glm::vec3& p, const glm::vec3& dir) {
 }  // namespace
 
 const char* solidClassName(SolidClass c) {
-  switch (c) {
-    case SolidClass::ClosedOutward:
-      return "closed_outward";
-    case SolidClass::ClosedInward:
-      return "closed_inward";
-    case SolidClass::Open:
-      return "open";
-    case SolidClass::NonManifold:
-      return "non_manifold";
-    case SolidClass::Inconsistent:
-      return "inconsistent";
-  }
-  return "?";
+  constexpr std::array<const char*, 5> kNames{"closed_outward", "closed_inward", "open",
+                                              "non_manifold", "inconsistent"};  // by SolidClass
+  return size_t(c) < kNames.size() ? kNames[size_t(c)] : "?";
 }
 
 Solids Solids::build(const FlatTriangles& tris) {

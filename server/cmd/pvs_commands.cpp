@@ -318,6 +318,15 @@ int cmdWalk(const std::string& spec, const SceneLimits& limits, const std::strin
   return 0;
 }
 
+// Adds --scenes to `sub`: SCENEs as one comma-separated word, split into
+// `scenes` when given; help shows the list `scenes` holds now.
+void addScenesOption(CLI::App* sub, std::vector<std::string>& scenes) {
+  sub->add_option_function<std::string>(
+         "--scenes", [&scenes](const std::string& text) { scenes = splitCommaList(text); },
+         "comma-separated SCENEs")
+      ->default_str(fmt::format("{}", fmt::join(scenes, ",")));
+}
+
 }  // namespace
 
 int runPvsTool(int argc, char** argv) {
@@ -399,8 +408,7 @@ int runPvsTool(int argc, char** argv) {
   auto* bench =
       app.add_subcommand("bench", "Tables 1 and 2 of the paper, and PVS accuracy against time");
   PvsBenchOptions benchOptions;
-  std::string benchScenes = fmt::format("{}", fmt::join(benchOptions.scenes, ","));
-  bench->add_option("--scenes", benchScenes, "comma-separated SCENEs");
+  addScenesOption(bench, benchOptions.scenes);
   bench->add_option("--cells", benchOptions.cells, "street cells per city for Tables 1 and 2")
       ->check(atLeast<size_t>(1));
   bench
@@ -451,8 +459,7 @@ int runPvsTool(int argc, char** argv) {
   auto* walkBench = app.add_subcommand(
       "walk-bench", "Figures 8-11 of Bittner and Havran 2001: methods against speed and p_skip");
   WalkBenchOptions walkBenchOptions;
-  std::string walkScenes = fmt::format("{}", fmt::join(walkBenchOptions.scenes, ","));
-  walkBench->add_option("--scenes", walkScenes, "comma-separated SCENEs");
+  addScenesOption(walkBench, walkBenchOptions.scenes);
   walkBench->add_option("--frames", walkBenchOptions.frames, "frames per path")
       ->check(atLeast<size_t>(1));
   walkBench
@@ -489,12 +496,8 @@ int runPvsTool(int argc, char** argv) {
     }
     if (*query) return cmdQuery(db, point, cellIndex, asJson, queryFaces);
     if (*walk) return cmdWalk(scene, limits, pathFile, walkMethod, cullOptions, asJson, withFaces);
-    if (*walkBench) {
-      walkBenchOptions.scenes = splitCommaList(walkScenes);
-      return runWalkBench(walkBenchOptions);
-    }
+    if (*walkBench) return runWalkBench(walkBenchOptions);
     if (*bench) {
-      benchOptions.scenes = splitCommaList(benchScenes);
       if (noFused) benchOptions.fusedEpsilons.clear();
       return runPvsBench(benchOptions);
     }

@@ -15,6 +15,7 @@
 #include "tests/common/support/box_scenes.h"
 #include "tests/common/support/run_tool.h"
 #include "tests/common/support/temp_dir.h"
+#include "tests/common/support/tool_checks.h"
 
 namespace {
 
@@ -23,16 +24,12 @@ using vistream::testing::runTool;
 
 // A street 300 m long between boxes, open to the sky.
 std::string streetObj() {
-  std::string o = "o ground\nv -60 0 -320\nv -60 0 20\nv 60 0 20\nv 60 0 -320\nf 1 2 3 4\n";
-  int base = 5;
-  auto box = [&](const std::string& name, double x0, double z0, double x1, double z1, double h) {
-    vistream::testing::appendBoxObj(o, base, name, x0, z0, x1, z1, h);
-  };
+  vistream::testing::GroundAndBoxesObj o(-60, -320, 60, 20);
   for (int i = 0; i < 30; ++i) {
-    box("west_" + std::to_string(i), -20, -10.0 * i - 8, -6, -10.0 * i, 6 + (i * 7) % 13);
-    box("east_" + std::to_string(i), 6, -10.0 * i - 8, 20, -10.0 * i, 5 + (i * 5) % 11);
+    o.box("west_" + std::to_string(i), -20, -10.0 * i - 8, -6, -10.0 * i, 6 + (i * 7) % 13);
+    o.box("east_" + std::to_string(i), 6, -10.0 * i - 8, 20, -10.0 * i, 5 + (i * 5) % 11);
   }
-  return o;
+  return o.obj;
 }
 
 const char* kWalk =
@@ -40,6 +37,27 @@ const char* kWalk =
 
 nlohmann::json parseJson(const std::string& text) {
   return nlohmann::json::parse(text);
+}
+
+// Starts vistream-server on `scene` in `dir` (any free port, streaming within
+// 400 m, its log in server.log), runs the shell commands `clients` once the
+// port is known ($port in them), then stops the server with SIGTERM and
+// waits for it. Returns the shell's status.
+int withServer(const vistream::testing::TempDir& dir, const fs::path& scene,
+               const std::string& clients) {
+  const std::string bin = VISTREAM_BIN_DIR, d = dir.path().string();
+  const std::string script =
+      bin + "/vistream-server --scene " + scene.string() + " --port 0 --port-file " + d +
+      "/port --radius 400 --log-level warn > " + d + "/server.log 2>&1 & echo $! > " + d +
+      "/pid; for i in $(seq 1 300); do [ -s " + d + "/port ] && break; sleep 0.1; done; " +
+      "port=$(cat " + d + "/port); " + clients + "; kill -TERM $(cat " + d + "/pid); wait $(cat " +
+      d + "/pid) 2>/dev/null";
+  return std::system(("bash -c '" + script + "'").c_str());
+}
+
+// A vistream-client command line connected to withServer's server.
+std::string connectedClient(const std::string& args) {
+  return std::string(VISTREAM_BIN_DIR) + "/vistream-client --host 127.0.0.1 --port $port " + args;
 }
 
 TEST(ClientTool, AHeadlessWalkWritesFramesAndTheJsonContract) {
@@ -110,18 +128,15 @@ TEST(ClientTool, ConnectedHeadlessRendersWhatTheServerStreams) {
   vistream::testing::TempDir dir;
   const fs::path scene = dir.write("street.obj", streetObj());
   const fs::path path = dir.write("walk.csv", kWalk);
-  const std::string bin = VISTREAM_BIN_DIR, d = dir.path().string();
+  const std::string d = dir.path().string();
   // The server streams within 400 m, so it sends the whole street and the
   // connected frames must match the local ones.
-  const std::string script =
-      bin + "/vistream-server --scene " + scene.string() + " --port 0 --port-file " + d +
-      "/port --radius 400 --log-level warn > " + d + "/server.log 2>&1 & echo $! > " + d +
-      "/pid; for i in $(seq 1 300); do [ -s " + d + "/port ] && break; sleep 0.1; done; " + bin +
-      "/vistream-client --host 127.0.0.1 --port $(cat " + d + "/port) --headless --path " +
-      path.string() + " --size 160x120 --near-distance 40 --out " + d + "/net --json > " + d +
-      "/net.json 2> " + d + "/client.err; echo $? > " + d + "/status; kill -TERM $(cat " + d +
-      "/pid); wait $(cat " + d + "/pid) 2>/dev/null";
-  ASSERT_EQ(std::system(("bash -c '" + script + "'").c_str()), 0);
+  ASSERT_EQ(withServer(dir, scene,
+                       connectedClient("--headless --path " + path.string() +
+                                       " --size 160x120 --near-distance 40 --out " + d +
+                                       "/net --json > " + d + "/net.json 2> " + d +
+                                       "/client.err; echo $? > " + d + "/status")),
+            0);
   std::ifstream st(dir.path() / "status");
   int status = -1;
   st >> status;
@@ -198,39 +213,24 @@ TEST(ClientTool, AServerThatSendsGarbageEndsTheClientWithAClearError) {
 
 // Bad input and first use (issue 12).
 TEST(ClientTool, OutOfRangeNumbersFailAtParseTimeNamingTheOption) {
-  const std::string missing = "--scene /nonexistent/scene.obj --headless --path auto";
-  const std::pair<std::string, std::string> cases[] = {
-      {missing + " --frames -5", "--frames"},
-      {missing + " --frames 0", "--frames"},
-      {missing + " --near-distance -5", "--near-distance"},
-      {missing + " --stream-radius 0", "--stream-radius"},
-      {missing + " --fov 0", "--fov"},
-      {missing + " --horizon-cell -1", "--horizon-cell"},
-      {missing + " --pixel-budget -1", "--pixel-budget"},
-      {"--host 127.0.0.1 --port 99999 --headless --path auto", "--port"},
-  };
-  for (const auto& [args, option] : cases) {
-    const auto r = runTool("vistream-client", args);
-    EXPECT_EQ(r.status, 1) << args << "\n" << r.err;
-    EXPECT_EQ(r.err.rfind("vistream-client: error: " + option + ":", 0), 0u) << args << "\n"
-                                                                             << r.err;
-  }
-  for (const std::string args : {"--frames -5", "--frames 1", "--repeats 0", "--speed -1"}) {
-    const auto r = runTool("vistream-client-bench", args);
-    EXPECT_EQ(r.status, 1) << args << "\n" << r.err;
-    EXPECT_EQ(r.err.rfind("vistream-client-bench: error: " + args.substr(0, args.find(' ')), 0), 0u)
-        << args << "\n"
-        << r.err;
-  }
+  using vistream::testing::expectEachOptionNamed;
+  // Each error must begin with the option's name (and, for the client, a colon).
+  vistream::testing::RefusedCommand client{
+      .tool = "vistream-client",
+      .common = "--scene /nonexistent/scene.obj --headless --path auto",
+      .afterName = ":"};
+  expectEachOptionNamed(
+      client, {"--frames -5", "--frames 0", "--near-distance -5", "--stream-radius 0", "--fov 0",
+               "--horizon-cell -1", "--pixel-budget -1"});
+  client.common = "--host 127.0.0.1 --headless --path auto";
+  expectEachOptionNamed(client, {"--port 99999"});
+  const vistream::testing::RefusedCommand bench{.tool = "vistream-client-bench"};
+  expectEachOptionNamed(bench, {"--frames -5", "--frames 1", "--repeats 0", "--speed -1"});
 }
 
 TEST(ClientTool, HelpShowsDefaultsCapturedFromTheCode) {
-  for (const char* tool : {"vistream-client", "vistream-client-bench"}) {
-    const auto help = runTool(tool, "--help");
-    EXPECT_EQ(help.status, 0) << tool;
-    EXPECT_EQ(help.out.find("(default"), std::string::npos) << tool << "\n" << help.out;
-    EXPECT_NE(help.out.find("=640x480"), std::string::npos) << tool << "\n" << help.out;
-  }
+  for (const char* tool : {"vistream-client", "vistream-client-bench"})
+    vistream::testing::expectHelpShowsCapturedDefaults(tool, "=640x480");
 }
 
 // Connected with --scene: the local copy only generates --path auto, the
@@ -240,18 +240,16 @@ TEST(ClientTool, ConnectedHeadlessWalksPathAutoThroughALocalCopyAndReportsWhatIt
   vistream::testing::TempDir dir;
   const fs::path scene = dir.write("street.obj", streetObj());
   const fs::path path = dir.write("walk.csv", kWalk);
-  const std::string bin = VISTREAM_BIN_DIR, d = dir.path().string();
-  const std::string script =
-      bin + "/vistream-server --scene " + scene.string() + " --port 0 --port-file " + d +
-      "/port --radius 400 --log-level warn > " + d + "/server.log 2>&1 & echo $! > " + d +
-      "/pid; for i in $(seq 1 300); do [ -s " + d + "/port ] && break; sleep 0.1; done; " + bin +
-      "/vistream-client --host 127.0.0.1 --port $(cat " + d + "/port) --scene " + scene.string() +
-      " --headless --path auto --frames 4 --size 160x120 --json > " + d + "/net.json 2> " + d +
-      "/client.err; echo $? > " + d + "/status; " + bin + "/vistream-client --host 127.0.0.1 " +
-      "--port $(cat " + d + "/port) --scene " + scene.string() + " --headless --path " +
-      path.string() + " > /dev/null 2> " + d + "/both.err; echo $? > " + d +
-      "/both.status; kill -TERM $(cat " + d + "/pid); wait $(cat " + d + "/pid) 2>/dev/null";
-  ASSERT_EQ(std::system(("bash -c '" + script + "'").c_str()), 0);
+  const std::string d = dir.path().string();
+  ASSERT_EQ(withServer(
+                dir, scene,
+                connectedClient("--scene " + scene.string() +
+                                " --headless --path auto --frames 4 --size 160x120 --json > " + d +
+                                "/net.json 2> " + d + "/client.err; echo $? > " + d + "/status; ") +
+                    connectedClient("--scene " + scene.string() + " --headless --path " +
+                                    path.string() + " > /dev/null 2> " + d +
+                                    "/both.err; echo $? > " + d + "/both.status")),
+            0);
   auto read = [&](const char* name) {
     std::ifstream f(dir.path() / name);
     return std::string((std::istreambuf_iterator<char>(f)), {});

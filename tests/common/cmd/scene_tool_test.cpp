@@ -14,6 +14,7 @@
 
 #include "tests/common/support/run_tool.h"
 #include "tests/common/support/temp_dir.h"
+#include "tests/common/support/tool_checks.h"
 
 namespace {
 
@@ -21,9 +22,7 @@ namespace fs = std::filesystem;
 
 using vistream::testing::ToolRun;
 
-ToolRun runTool(const std::string& args) {
-  return vistream::testing::runTool("vistream-scene", args);
-}
+const vistream::testing::Tool runTool{"vistream-scene"};
 
 // A wall in front of a hidden box, 50 km from the origin, as OBJ quads.
 // Face IDs: 0 ground; wall faces 1..6 (-x,+x,-y,+y,-z,+z); hidden box 7..12.
@@ -72,6 +71,20 @@ fs::path writeWallScene() {
   return file;
 }
 
+// `vistream-scene info WALL --json` on the wall scene (removed after the
+// run): how the tool ended and its stdout parsed (null unless it succeeded).
+struct WallInfo {
+  ToolRun run;
+  nlohmann::json json;
+};
+WallInfo wallSceneInfo() {
+  const fs::path scene = writeWallScene();
+  WallInfo info{runTool("info " + scene.string() + " --json"), nullptr};
+  fs::remove_all(scene.parent_path());
+  if (info.run.status == 0) info.json = nlohmann::json::parse(info.run.out);
+  return info;
+}
+
 TEST(SceneTool, HelpListsTheSubcommandsAndExitsZero) {
   const ToolRun r = runTool("--help");
   EXPECT_EQ(r.status, 0);
@@ -91,10 +104,9 @@ TEST(SceneTool, VisibleSpeaksInFileCoordinatesAndFaceIdsFarFromTheOrigin) {
 }
 
 TEST(SceneTool, InfoReportsCountsBoundsAndEffectsAsJson) {
-  const fs::path scene = writeWallScene();
-  const ToolRun r = runTool("info " + scene.string() + " --json");
-  ASSERT_EQ(r.status, 0) << r.err;
-  const auto j = nlohmann::json::parse(r.out);
+  const WallInfo info = wallSceneInfo();
+  ASSERT_EQ(info.run.status, 0) << info.run.err;
+  const auto& j = info.json;
   EXPECT_EQ(j["objects"].get<int>(), 3);
   EXPECT_EQ(j["faces"].get<int>(), 13);
   EXPECT_EQ(j["triangles"].get<int>(), 26);
@@ -108,14 +120,12 @@ TEST(SceneTool, InfoReportsCountsBoundsAndEffectsAsJson) {
       EXPECT_TRUE(d["enabled"].get<bool>());
     }
   EXPECT_TRUE(sawHorizon);
-  fs::remove_all(scene.parent_path());
 }
 
 TEST(SceneTool, InfoReportsTheMeshComponentsAndTheGroundDecision) {
-  const fs::path scene = writeWallScene();
-  const ToolRun r = runTool("info " + scene.string() + " --json");
-  ASSERT_EQ(r.status, 0) << r.err;
-  const auto j = nlohmann::json::parse(r.out);
+  const WallInfo info = wallSceneInfo();
+  ASSERT_EQ(info.run.status, 0) << info.run.err;
+  const auto& j = info.json;
   // Two closed boxes of 6 faces each on one open ground quad.
   const auto& solids = j["solids"];
   EXPECT_EQ(solids["closed_outward"]["components"].get<int>() +
@@ -126,7 +136,6 @@ TEST(SceneTool, InfoReportsTheMeshComponentsAndTheGroundDecision) {
       12);
   EXPECT_EQ(solids["open"]["faces"].get<int>(), 1);
   EXPECT_FALSE(j["ground"]["assumed"].get<bool>());
-  fs::remove_all(scene.parent_path());
 
   // Buildings only: a plane at their lowest base (y = 0, data README),
   // said on stderr and in the JSON; --ground none leaves only roofs.
@@ -152,17 +161,13 @@ TEST(SceneTool, InfoReportsTheMeshComponentsAndTheGroundDecision) {
 TEST(SceneTool, BadArgumentsGiveAClearErrorAndANonZeroExit) {
   const fs::path scene = writeWallScene();
   ToolRun r = runTool("visible --scene " + scene.string() + " --cell 1,2,3");
-  EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("--cell: expected 6"), std::string::npos) << r.err;
+  vistream::testing::expectFailedSaying(r, 1, "--cell: expected 6");
   r = runTool("visible --scene " + scene.string() + " --cell 2,0,0,1,1,1");
-  EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("x0<=x1"), std::string::npos) << r.err;
+  vistream::testing::expectFailedSaying(r, 1, "x0<=x1");
   r = runTool("info /nonexistent/scene.obj");
-  EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("/nonexistent/scene.obj"), std::string::npos) << r.err;
+  vistream::testing::expectFailedSaying(r, 1, "/nonexistent/scene.obj");
   r = runTool("info nosuchscene");
-  EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("not a built-in scene"), std::string::npos) << r.err;
+  vistream::testing::expectFailedSaying(r, 1, "not a built-in scene");
   r = runTool("path --scene " + scene.string() + " --frames 0 --out /tmp/x.csv");
   EXPECT_EQ(r.status, 1);
   r = runTool("frobnicate");
@@ -230,46 +235,38 @@ TEST(SceneTool, GeneratesAPathFileThatStartsWithTheHeader) {
 // that an option is checked before any scene is opened: the error names the
 // option, not the file.
 TEST(SceneTool, OutOfRangeNumbersFailAtParseTimeNamingTheOption) {
+  using vistream::testing::expectEachOptionNamed;
   const std::string missing = "/nonexistent/scene.obj";
-  const std::pair<std::string, std::string> cases[] = {
-      {"path --scene " + missing + " --frames -5 --out /tmp/x.csv", "--frames"},
-      {"path --scene " + missing + " --frames 0 --out /tmp/x.csv", "--frames"},
-      {"path --scene " + missing + " --speed -1 --out /tmp/x.csv", "--speed"},
-      {"path --scene " + missing + " --fps 0 --out /tmp/x.csv", "--fps"},
-      {"path --scene " + missing + " --seed -1 --out /tmp/x.csv", "--seed"},
-      {"visible --scene " + missing + " --cell 0,0,0,1,1,1 --res 99999", "--res"},
-      {"visible --scene " + missing + " --cell 0,0,0,1,1,1 --points 0", "--points"},
-      {"info " + missing + " --max-scene-triangles -3", "--max-scene-triangles"},
-  };
-  for (const auto& [args, option] : cases) {
-    const ToolRun r = runTool(args);
-    EXPECT_EQ(r.status, 1) << args << "\n" << r.err;
-    EXPECT_EQ(r.err.rfind("vistream-scene: error: " + option + ":", 0), 0u) << args << "\n"
-                                                                            << r.err;
-    EXPECT_EQ(r.err.find(missing), std::string::npos) << "checked after opening: " << r.err;
-  }
+  // Each error must begin with the option's name and a colon.
+  const vistream::testing::RefusedCommand path{
+      .tool = "vistream-scene",
+      .common = "path --scene " + missing + " --out /tmp/x.csv",
+      .afterName = ":",
+      .unopened = missing};
+  expectEachOptionNamed(path, {"--frames -5", "--frames 0", "--speed -1", "--fps 0", "--seed -1"});
+  auto visible = path;
+  visible.common = "visible --scene " + missing + " --cell 0,0,0,1,1,1";
+  expectEachOptionNamed(visible, {"--res 99999", "--points 0"});
+  auto info = path;
+  info.common = "info " + missing;
+  expectEachOptionNamed(info, {"--max-scene-triangles -3"});
 }
 
 TEST(SceneTool, AnUnknownSubcommandIsNamedAndTheSubcommandsListed) {
   ToolRun r = runTool("bogus");
-  EXPECT_EQ(r.status, 2);
-  EXPECT_NE(r.err.find("unknown subcommand 'bogus'"), std::string::npos) << r.err;
+  vistream::testing::expectFailedSaying(r, 2, "unknown subcommand 'bogus'");
   EXPECT_NE(r.err.find("generate, info, path, visible"), std::string::npos) << r.err;
   r = runTool("");
-  EXPECT_EQ(r.status, 2);
-  EXPECT_NE(r.err.find("a subcommand is required: one of generate, info, path, visible"),
-            std::string::npos)
-      << r.err;
+  vistream::testing::expectFailedSaying(
+      r, 2, "a subcommand is required: one of generate, info, path, visible");
 }
 
 TEST(SceneTool, AnUnknownPresetOrSceneTypeIsNamedAsSuch) {
   ToolRun r = runTool("generate city --preset foo --out /tmp/never.obj");
-  EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("--preset: foo"), std::string::npos) << r.err;
+  vistream::testing::expectFailedSaying(r, 1, "--preset: foo");
   EXPECT_EQ(r.err.find("unknown scene type"), std::string::npos) << r.err;
   r = runTool("generate castle --out /tmp/never.obj");
-  EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("unknown scene type 'castle'"), std::string::npos) << r.err;
+  vistream::testing::expectFailedSaying(r, 1, "unknown scene type 'castle'");
 }
 
 TEST(SceneTool, InfoSaysWhatItsObjectCountsAre) {
@@ -311,8 +308,7 @@ TEST(SceneTool, AManifestWhoseEnvironmentIsNotAnHdrImageIsRejectedNamingTheFile)
                                    "\"], \"environment\": {\"hdr\": \"" + hdr + "\"}}");
   };
   ToolRun r = runTool("info " + manifest(fake.string()).string());
-  EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find(fake.string()), std::string::npos) << r.err;
+  vistream::testing::expectFailedSaying(r, 1, fake.string());
   EXPECT_NE(r.err.find("not a Radiance HDR image"), std::string::npos) << r.err;
   r = runTool("info " + manifest(sharedData("spiaggia_di_mondello_1k.hdr")).string());
   EXPECT_EQ(r.status, 0) << r.err;

@@ -94,4 +94,21 @@ inline void appendBoxObj(std::string& obj, int& base, const std::string& name, d
   base += 8;
 }
 
+// OBJ text of a ground quad at y = 0 (object "ground", face 0) with boxes
+// standing on it, added in order by box() (appendBoxObj).
+struct GroundAndBoxesObj {
+  GroundAndBoxesObj(double x0, double z0, double x1, double z1) {
+    obj = "o ground\n";
+    for (const auto& [x, z] : {std::array{x0, z0}, {x0, z1}, {x1, z1}, {x1, z0}})
+      obj += "v " + std::to_string(x) + " 0 " + std::to_string(z) + "\n";
+    obj += "f 1 2 3 4\n";
+  }
+  void box(const std::string& name, double x0, double z0, double x1, double z1, double h) {
+    appendBoxObj(obj, base, name, x0, z0, x1, z1, h);
+  }
+
+  std::string obj;
+  int base = 5;  // the OBJ index of the next box's first vertex
+};
+
 }  // namespace vistream::testing

@@ -41,4 +41,10 @@ inline ToolRun runTool(const std::string& tool, const std::string& args) {
   return r;
 }
 
+// One executable bound to its name: `tool(args)` is runTool(tool.name, args).
+struct Tool {
+  std::string name;
+  ToolRun operator()(const std::string& args) const { return runTool(name, args); }
+};
+
 }  // namespace vistream::testing

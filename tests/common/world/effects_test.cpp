@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "common/generate/generate.h"
+#include "common/world/static_world.h"
 #include "tests/common/support/box_scenes.h"
 
 namespace vistream {
@@ -12,10 +13,8 @@ using testing::addBox;
 using testing::addGround;
 
 SceneEffects effectsOf(const Scene& scene) {
-  const FlatTriangles tris = flattenScene(scene, /*staticOnly=*/true);
-  const auto rays = makeEmbreeRayQuery(tris);
-  const FreeSpace fs = FreeSpace::build(*rays, scene.bounds());
-  return decideEffects(scene, *rays, fs);
+  const StaticWorld world = buildStaticWorld(scene);
+  return decideEffects(scene, *world.rays, world.freeSpace);
 }
 
 const EffectDecision& decision(const SceneEffects& e, const std::string& name) {

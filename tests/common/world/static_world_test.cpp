@@ -45,11 +45,15 @@ TEST(StaticWorld, AssumesAGroundPlaneAtTheLowestBaseWhenObjectsStandOnNothing) {
   }
 }
 
-TEST(StaticWorld, WithoutTheGroundPlaneOnlyRoofsRemain) {
-  const Scene scene = buildingsWithoutGround();
+// The static world of `scene` with `--ground TEXT`.
+StaticWorld buildWithGround(const Scene& scene, const std::string& text) {
   StaticWorldOptions o;
-  o.ground = *parseGroundChoice("none");
-  const StaticWorld w = buildStaticWorld(scene, o);
+  o.ground = *parseGroundChoice(text);
+  return buildStaticWorld(scene, o);
+}
+
+TEST(StaticWorld, WithoutTheGroundPlaneOnlyRoofsRemain) {
+  const StaticWorld w = buildWithGround(buildingsWithoutGround(), "none");
   EXPECT_FALSE(w.ground.y.has_value());
   EXPECT_FALSE(w.freeSpace.floorAt({0, 0}).has_value());
   for (const glm::ivec2& c : w.freeSpace.walkableColumns())
@@ -57,10 +61,7 @@ TEST(StaticWorld, WithoutTheGroundPlaneOnlyRoofsRemain) {
 }
 
 TEST(StaticWorld, PutsAFixedGroundPlaneAtAHeightInFileCoordinates) {
-  const Scene scene = buildingsWithoutGround();
-  StaticWorldOptions o;
-  o.ground = *parseGroundChoice("100.25");
-  const StaticWorld w = buildStaticWorld(scene, o);
+  const StaticWorld w = buildWithGround(buildingsWithoutGround(), "100.25");
   ASSERT_TRUE(w.ground.y.has_value());
   EXPECT_FLOAT_EQ(*w.ground.y, 0.25f);
   EXPECT_FLOAT_EQ(*w.freeSpace.floorAt({0, 0}), 0.25f);

@@ -11,8 +11,10 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "tests/common/support/box_scenes.h"
 #include "tests/common/support/run_tool.h"
 #include "tests/common/support/temp_dir.h"
+#include "tests/common/support/tool_checks.h"
 
 namespace {
 
@@ -20,36 +22,15 @@ namespace fs = std::filesystem;
 
 using vistream::testing::ToolRun;
 
-ToolRun runPvs(const std::string& args) {
-  return vistream::testing::runTool("vistream-pvs", args);
-}
+const vistream::testing::Tool runPvs{"vistream-pvs"};
 
 // Ground, a wall and a box hidden behind it. Face IDs: 0 ground; wall 1..6
 // (-x,+x,-y,+y,-z,+z); hidden box 7..12.
 std::string wallScene() {
-  std::string o = "o ground\nv -50 0 -50\nv -50 0 50\nv 50 0 50\nv 50 0 -50\nf 1 2 3 4\n";
-  int base = 5;
-  auto box = [&](const char* name, double x0, double y0, double z0, double x1, double y1,
-                 double z1) {
-    o += std::string("o ") + name + "\n";
-    for (int k = 0; k < 8; ++k)
-      o += "v " + std::to_string((k & 1) ? x1 : x0) + " " + std::to_string((k & 2) ? y1 : y0) +
-           " " + std::to_string((k & 4) ? z1 : z0) + "\n";
-    auto f = [&](int a, int b, int c, int d) {
-      o += "f " + std::to_string(base + a) + " " + std::to_string(base + b) + " " +
-           std::to_string(base + c) + " " + std::to_string(base + d) + "\n";
-    };
-    f(0, 4, 6, 2);  // -x
-    f(1, 3, 7, 5);  // +x
-    f(0, 1, 5, 4);  // -y
-    f(2, 6, 7, 3);  // +y
-    f(0, 2, 3, 1);  // -z
-    f(4, 5, 7, 6);  // +z
-    base += 8;
-  };
-  box("wall", -10, 0, -5, 10, 10.3, -4.83);
-  box("hidden", -1, 0, -10, 1, 2, -8);
-  return o;
+  vistream::testing::GroundAndBoxesObj o(-50, -50, 50, 50);
+  o.box("wall", -10, -5, 10, -4.83, 10.3);  // x0, z0, x1, z1, height
+  o.box("hidden", -1, -10, 1, -8, 2);
+  return o.obj;
 }
 
 TEST(PvsTool, CellPrintsTheContractedJsonAndCullsTheHiddenBox) {
@@ -109,14 +90,11 @@ TEST(PvsTool, BakesQueriesAndMergesAndRejectsACorruptDatabase) {
 
   { std::ofstream(dir / "bad.db") << "not a database at all, just some text that is long enough"; }
   r = runPvs("query --db " + (dir / "bad.db").string() + " --cell 0,0,0");
-  EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("bad.db"), std::string::npos) << r.err;
+  vistream::testing::expectFailedSaying(r, 1, "bad.db");
   r = runPvs("query --db " + db + " --point 1,2");
-  EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("--point"), std::string::npos) << r.err;
+  vistream::testing::expectFailedSaying(r, 1, "--point");
   r = runPvs("bake --scene " + scene.string() + " --cell-size 0 --out " + (dir / "z.db").string());
-  EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("--cell-size"), std::string::npos) << r.err;
+  vistream::testing::expectFailedSaying(r, 1, "--cell-size");
 }
 
 TEST(PvsTool, WalkPrintsTheSummaryAndOneRecordPerFrame) {
@@ -142,37 +120,28 @@ TEST(PvsTool, WalkPrintsTheSummaryAndOneRecordPerFrame) {
   }
   const ToolRun bad =
       runPvs("walk --scene " + scene.string() + " --path " + path.string() + " --method Q");
-  EXPECT_EQ(bad.status, 1);
-  EXPECT_NE(bad.err.find("--method"), std::string::npos) << bad.err;
+  vistream::testing::expectFailedSaying(bad, 1, "--method");
   const ToolRun badP = runPvs("walk --scene " + scene.string() + " --path " + path.string() +
                               " --method C --p-vp 1.5");
-  EXPECT_EQ(badP.status, 1);
-  EXPECT_NE(badP.err.find("--p-vp"), std::string::npos) << badP.err;
+  vistream::testing::expectFailedSaying(badP, 1, "--p-vp");
 }
 
 TEST(PvsTool, OutOfRangeNumbersAndBadBoxesFailBeforeTheSceneLoadsNamingTheOption) {
+  using vistream::testing::expectEachOptionNamed;
   const std::string missing = "/nonexistent/scene.obj";
-  const std::pair<std::string, std::string> cases[] = {
-      {"cell --scene " + missing + " --cell 0,0,0,1,1,1 --fused-res 1", "--fused-res"},
-      {"cell --scene " + missing + " --cell 0,0,0,1,1,1 --epsilon -1", "--epsilon"},
-      {"cell --scene " + missing + " --cell 0,0,0,1,1,1 --large-occluders -2", "--large-occluders"},
-      {"cell --scene " + missing + " --cell 1,2,3", "--cell"},
-      {"bake --scene " + missing + " --cell-size 4 --threads -1 --out /tmp/never.db", "--threads"},
-      {"bake --scene " + missing + " --cell-size 4 --region 1,2,3 --out /tmp/never.db", "--region"},
-      {"bake --scene " + missing + " --cell-size 4 --region 5,0,0,1,1,1 --out /tmp/never.db",
-       "--region"},
-      {"walk --scene " + missing + " --path p.csv --p-skip 2", "--p-skip"},
-      {"walk --scene " + missing + " --path p.csv --fov 180", "--fov"},
-      {"walk --scene " + missing + " --path p.csv --occluders 0", "--occluders"},
-      {"walk-bench --frames 0", "--frames"},
-      {"bench --fused-eps 1,-0.5", "--fused-eps"},
-  };
-  for (const auto& [args, option] : cases) {
-    const ToolRun r = runPvs(args);
-    EXPECT_EQ(r.status, 1) << args << "\n" << r.err;
-    EXPECT_EQ(r.err.rfind("vistream-pvs: error: " + option, 0), 0u) << args << "\n" << r.err;
-    EXPECT_EQ(r.err.find(missing), std::string::npos) << "checked after loading: " << r.err;
-  }
+  vistream::testing::RefusedCommand pvs{
+      .tool = "vistream-pvs", .common = "cell --scene " + missing, .unopened = missing};
+  expectEachOptionNamed(pvs, {"--cell 1,2,3"});
+  pvs.common = "cell --scene " + missing + " --cell 0,0,0,1,1,1";
+  expectEachOptionNamed(pvs, {"--fused-res 1", "--epsilon -1", "--large-occluders -2"});
+  pvs.common = "bake --scene " + missing + " --cell-size 4 --out /tmp/never.db";
+  expectEachOptionNamed(pvs, {"--threads -1", "--region 1,2,3", "--region 5,0,0,1,1,1"});
+  pvs.common = "walk --scene " + missing + " --path p.csv";
+  expectEachOptionNamed(pvs, {"--p-skip 2", "--fov 180", "--occluders 0"});
+  pvs.common = "walk-bench";
+  expectEachOptionNamed(pvs, {"--frames 0"});
+  pvs.common = "bench";
+  expectEachOptionNamed(pvs, {"--fused-eps 1,-0.5"});
 }
 
 TEST(PvsTool, ACellFarOutsideTheSceneGetsAWarningAndStillItsPvs) {

@@ -23,6 +23,7 @@
 #include "tests/common/support/box_scenes.h"
 #include "tests/common/support/run_tool.h"
 #include "tests/common/support/temp_dir.h"
+#include "tests/common/support/tool_checks.h"
 
 namespace {
 
@@ -146,19 +147,49 @@ TimedRun timedLoadTest(const vistream::testing::TempDir& dir, const std::string&
   return t;
 }
 
+// A load test of kShortWalk against a StallingServer, run once at
+// construction. The server lives as long as this object, so a test can ask it
+// what it sent. The run may take --duration + --grace, plus kSlackS.
+struct StalledLoadTest {
+  StalledLoadTest(StallingServer::Behaviour behaviour, int clients, double durationS, double graceS,
+                  const std::string& options)
+      : server(behaviour), boundS(durationS + graceS + kSlackS) {
+    const fs::path path = dir.write("walk.csv", kShortWalk);
+    t = timedLoadTest(
+        dir,
+        fmt::format("--port {} --clients {} --path {} --duration {} --grace {} {}", server.port(),
+                    clients, path.string(), durationS, graceS, options),
+        boundS);
+  }
+
+  // Expects the run to have failed (status 1) before the bound, with a JSON
+  // summary on stdout in which no client loaded and `failed` clients failed,
+  // all for `reason`. Fatal if there is no JSON: call it in
+  // ASSERT_NO_FATAL_FAILURE.
+  void expectNoClientLoaded(int failed, const std::string& reason) const {
+    EXPECT_EQ(t.run.status, 1) << t.run.err;
+    EXPECT_LT(t.seconds, boundS);
+    ASSERT_FALSE(t.json.is_discarded()) << t.run.out;
+    EXPECT_EQ(t.json["clients_loaded"], 0);
+    EXPECT_EQ(t.json["errors"], failed);
+    EXPECT_EQ(t.json["errors_by_reason"], nlohmann::json({{reason, failed}}));
+  }
+
+  StallingServer server;
+  vistream::testing::TempDir dir;
+  double boundS;
+  TimedRun t;
+};
+
 // A street: ground, two rows of boxes, a wall at the end.
 std::string streetObj() {
-  std::string o = "o ground\nv -40 0 -40\nv -40 0 40\nv 40 0 40\nv 40 0 -40\nf 1 2 3 4\n";
-  int base = 5;
-  auto box = [&](const std::string& name, double x0, double z0, double x1, double z1, double h) {
-    vistream::testing::appendBoxObj(o, base, name, x0, z0, x1, z1, h);
-  };
+  vistream::testing::GroundAndBoxesObj o(-40, -40, 40, 40);
   for (int i = 0; i < 6; ++i) {
-    box("west_" + std::to_string(i), -12, -30 + 10 * i, -6, -24 + 10 * i, 8);
-    box("east_" + std::to_string(i), 6, -30 + 10 * i, 12, -24 + 10 * i, 8);
+    o.box("west_" + std::to_string(i), -12, -30 + 10 * i, -6, -24 + 10 * i, 8);
+    o.box("east_" + std::to_string(i), 6, -30 + 10 * i, 12, -24 + 10 * i, 8);
   }
-  box("end_wall", -20, -36, 20, -35, 12);
-  return o;
+  o.box("end_wall", -20, -36, 20, -35, 12);
+  return o.obj;
 }
 
 std::string sh(const std::string& script) {
@@ -219,27 +250,16 @@ TEST(StreamTools, AServerFromAConfigFileServesWalkingClientsAndStopsOnSigterm) {
 }
 
 TEST(StreamTools, ALoadTestAgainstAServerThatNeverAnswersFailsAndEndsAtTheDeadline) {
-  StallingServer server(StallingServer::Behaviour::Silent);
-  vistream::testing::TempDir dir;
-  const fs::path path = dir.write("walk.csv", kShortWalk);
   // The connect timeout (10 s) is longer than the run: the deadline
   // (duration 1 s + grace 2 s) must end it.
-  const double bound = 1.0 + 2.0 + kSlackS;  // --duration + --grace + slack
-  const TimedRun t =
-      timedLoadTest(dir,
-                    "--port " + std::to_string(server.port()) + " --clients 3 --path " +
-                        path.string() + " --duration 1 --grace 2 --connect-timeout 10 --json",
-                    bound);
-  EXPECT_EQ(t.run.status, 1) << t.run.err;
-  EXPECT_LT(t.seconds, bound);
+  const StalledLoadTest run(StallingServer::Behaviour::Silent, 3, 1.0, 2.0,
+                            "--connect-timeout 10 --json");
+  const TimedRun& t = run.t;
   EXPECT_NE(t.run.err.find("vistream-loadtest: error: 3 of 3 clients failed"), std::string::npos)
       << t.run.err;
-  ASSERT_FALSE(t.json.is_discarded()) << t.run.out;
+  ASSERT_NO_FATAL_FAILURE(run.expectNoClientLoaded(3, "cut_off"));
   const auto& j = t.json;
-  EXPECT_EQ(j["clients_loaded"], 0);
   EXPECT_EQ(j["clients_not_loaded"], 3);
-  EXPECT_EQ(j["errors"], 3);
-  EXPECT_EQ(j["errors_by_reason"], nlohmann::json({{"cut_off", 3}}));
   EXPECT_EQ(j["clients_cut_off"], 3);
   EXPECT_EQ(j["cut_off_clients"], nlohmann::json({0, 1, 2}));
   EXPECT_EQ(j["grace_s"], 2.0);
@@ -250,65 +270,36 @@ TEST(StreamTools, ALoadTestAgainstAServerThatNeverAnswersFailsAndEndsAtTheDeadli
 }
 
 TEST(StreamTools, ALoadTestClientWithoutAWelcomeWithinTheConnectTimeoutFails) {
-  StallingServer server(StallingServer::Behaviour::Silent);
-  vistream::testing::TempDir dir;
-  const fs::path path = dir.write("walk.csv", kShortWalk);
-  const double bound = 1.0 + 5.0 + kSlackS;  // --duration + --grace + slack
-  const TimedRun t =
-      timedLoadTest(dir,
-                    "--port " + std::to_string(server.port()) + " --clients 2 --path " +
-                        path.string() + " --duration 1 --grace 5 --connect-timeout 1 --json",
-                    bound);
-  EXPECT_EQ(t.run.status, 1) << t.run.err;
-  EXPECT_LT(t.seconds, bound);
+  const StalledLoadTest run(StallingServer::Behaviour::Silent, 2, 1.0, 5.0,
+                            "--connect-timeout 1 --json");
+  const TimedRun& t = run.t;
   EXPECT_NE(t.run.err.find("vistream-loadtest: error: "), std::string::npos) << t.run.err;
-  ASSERT_FALSE(t.json.is_discarded()) << t.run.out;
+  ASSERT_NO_FATAL_FAILURE(run.expectNoClientLoaded(2, "handshake"));
   const auto& j = t.json;
-  EXPECT_EQ(j["clients_loaded"], 0);
-  EXPECT_EQ(j["errors"], 2);
-  EXPECT_EQ(j["errors_by_reason"], nlohmann::json({{"handshake", 2}}));
   EXPECT_EQ(j["clients_cut_off"], 0);
   EXPECT_EQ(j["first_error"], "no Welcome within 1 s of connecting");
 }
 
 TEST(StreamTools, ALoadTestAgainstAServerThatWelcomesAndThenStallsFailsWithNoClientLoaded) {
-  StallingServer server(StallingServer::Behaviour::WelcomeThenSilent);
-  vistream::testing::TempDir dir;
-  const fs::path path = dir.write("walk.csv", kShortWalk);
-  const double bound = 1.0 + 2.0 + kSlackS;  // --duration + --grace + slack
-  const TimedRun t =
-      timedLoadTest(dir,
-                    "--port " + std::to_string(server.port()) + " --clients 3 --path " +
-                        path.string() + " --duration 1 --grace 2 --json",
-                    bound);
-  EXPECT_EQ(t.run.status, 1) << t.run.err;
-  EXPECT_LT(t.seconds, bound);
-  EXPECT_EQ(server.welcomesSent(), 3u);
+  const StalledLoadTest run(StallingServer::Behaviour::WelcomeThenSilent, 3, 1.0, 2.0, "--json");
+  const TimedRun& t = run.t;
+  EXPECT_EQ(run.server.welcomesSent(), 3u);
   EXPECT_NE(t.run.err.find("vistream-loadtest: error: 3 of 3 clients failed (not_loaded 3); 0 of 3 "
                            "got their initial load"),
             std::string::npos)
       << t.run.err;
-  ASSERT_FALSE(t.json.is_discarded()) << t.run.out;
+  ASSERT_NO_FATAL_FAILURE(run.expectNoClientLoaded(3, "not_loaded"));
   const auto& j = t.json;
-  EXPECT_EQ(j["clients_loaded"], 0);
   EXPECT_EQ(j["clients_not_loaded"], 3);
-  EXPECT_EQ(j["errors"], 3);
-  EXPECT_EQ(j["errors_by_reason"], nlohmann::json({{"not_loaded", 3}}));
   EXPECT_EQ(j["clients_cut_off"], 0);
   EXPECT_EQ(j["initial_load_ms"]["count"], 0);
   EXPECT_EQ(j["faces_received"], 0);
 }
 
 TEST(StreamTools, ALoadTestThatFailedStillPrintsItsTableOnStdout) {
-  StallingServer server(StallingServer::Behaviour::WelcomeThenSilent);
-  vistream::testing::TempDir dir;
-  const fs::path path = dir.write("walk.csv", kShortWalk);
-  const double bound = 1.0 + 2.0 + kSlackS;  // --duration + --grace + slack
-  const TimedRun t =
-      timedLoadTest(dir,
-                    "--port " + std::to_string(server.port()) + " --clients 1 --path " +
-                        path.string() + " --duration 1 --grace 2 --log-level error",
-                    bound);
+  const StalledLoadTest run(StallingServer::Behaviour::WelcomeThenSilent, 1, 1.0, 2.0,
+                            "--log-level error");
+  const TimedRun& t = run.t;
   EXPECT_EQ(t.run.status, 1) << t.run.err;
   EXPECT_NE(t.run.out.find("clients loaded"), std::string::npos) << t.run.out;
   EXPECT_NE(t.run.out.find("0 of 1"), std::string::npos) << t.run.out;
@@ -326,28 +317,22 @@ TEST(StreamTools, HelpAndBadArgumentsGiveClearExits) {
   vistream::testing::TempDir dir;
   const fs::path scene = dir.write("street.obj", streetObj());
   ToolRun r = runTool("vistream-server", "--scene " + scene.string() + " --policy nearest");
-  EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("--policy"), std::string::npos) << r.err;
+  vistream::testing::expectFailedSaying(r, 1, "--policy");
   r = runTool("vistream-server",
               "--scene " + scene.string() + " --token-file " + (dir.path() / "none").string());
-  EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("none"), std::string::npos) << r.err;
+  vistream::testing::expectFailedSaying(r, 1, "none");
   r = runTool("vistream-server", "--no-such-option");
   EXPECT_EQ(r.status, 2);
   r = runTool("vistream-loadtest", "--clients 2 --path a.csv --paths auto");
-  EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("--path"), std::string::npos) << r.err;
+  vistream::testing::expectFailedSaying(r, 1, "--path");
   r = runTool("vistream-loadtest",
               "--clients 0 --path " +
                   dir.write("p.csv", "t,x,y,z,yaw_deg,pitch_deg\n0,0,1.7,0,0,0\n").string());
-  EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("--clients"), std::string::npos) << r.err;
+  vistream::testing::expectFailedSaying(r, 1, "--clients");
   r = runTool("vistream-loadtest", "--grace -1 --path " + (dir.path() / "p.csv").string());
-  EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("--grace"), std::string::npos) << r.err;
+  vistream::testing::expectFailedSaying(r, 1, "--grace");
   r = runTool("vistream-loadtest", "--connect-timeout 0 --path " + (dir.path() / "p.csv").string());
-  EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("--connect-timeout"), std::string::npos) << r.err;
+  vistream::testing::expectFailedSaying(r, 1, "--connect-timeout");
 }
 
 // CellReady latency counts only what it names: entries that found their cell
@@ -402,62 +387,47 @@ TEST(StreamTools, ALoadTestReportsCellEntriesFoundReadyApartFromThoseThatWaited)
 // the option was checked before the scene was opened: the error names the
 // option, not the file.
 TEST(StreamTools, OutOfRangeNumbersAndAnAddressThatCannotBeUsedFailBeforeTheSceneLoads) {
+  using vistream::testing::expectEachOptionNamed;
+  using vistream::testing::expectEachRefused;
   const std::string missing = "/nonexistent/scene.obj";
-  const std::pair<std::string, std::string> server[] = {
-      {"--scene " + missing + " --port 99999", "--port: must be an integer in 0..65535"},
-      {"--scene " + missing + " --port -1", "--port"},
-      {"--scene " + missing + " --threads -1", "--threads"},
-      {"--scene " + missing + " --cell-size -4", "--cell-size"},
-      {"--scene " + missing + " --radius 0", "--radius"},
-      {"--scene " + missing + " --max-speed -3", "--max-speed"},
+  const vistream::testing::RefusedCommand server{.tool = "vistream-server",
+                                                 .common = "--scene " + missing,
+                                                 .at = vistream::testing::MentionAt::Anywhere,
+                                                 .unopened = missing};
+  expectEachOptionNamed(
+      server, {"--port -1", "--threads -1", "--cell-size -4", "--radius 0", "--max-speed -3"});
+  const vistream::testing::BadArguments serverSpecific[] = {
+      {"--port 99999", "--port: must be an integer in 0..65535"},
       // 192.0.2.1 (TEST-NET-1, RFC 5737) is no address of this machine.
-      {"--scene " + missing + " --bind 192.0.2.1 --port 0", "--bind 192.0.2.1"},
-      {"--scene " + missing + " --bind not-an-address", "--bind not-an-address"},
+      {"--bind 192.0.2.1 --port 0", "--bind 192.0.2.1"},
+      {"--bind not-an-address", "--bind not-an-address"},
   };
-  for (const auto& [args, mention] : server) {
-    const ToolRun r = runTool("vistream-server", args);
-    EXPECT_EQ(r.status, 1) << args << "\n" << r.err;
-    EXPECT_NE(r.err.find("vistream-server: error: " + mention), std::string::npos) << args << "\n"
-                                                                                   << r.err;
-    EXPECT_EQ(r.err.find(missing), std::string::npos) << "checked after loading: " << r.err;
-  }
-  const std::string auto_ = "--paths auto --scene " + missing;
-  const std::pair<std::string, std::string> loadtest[] = {
-      {auto_ + " --clients -1", "--clients: must be an integer >= 1"},
-      {auto_ + " --clients 0", "--clients"},
-      {auto_ + " --duration -2", "--duration"},
-      {auto_ + " --speed -1", "--speed"},
-      {auto_ + " --fps 0", "--fps"},
-      {auto_ + " --port 99999", "--port: must be an integer in 1..65535"},
-      {auto_ + " --threads 0", "--threads"},
-      {auto_ + " --host no-such-host.invalid", "--host no-such-host.invalid"},
+  expectEachRefused(server, serverSpecific);
+  auto loadtest = server;
+  loadtest.tool = "vistream-loadtest";
+  loadtest.common = "--paths auto --scene " + missing;
+  expectEachOptionNamed(loadtest,
+                        {"--clients 0", "--duration -2", "--speed -1", "--fps 0", "--threads 0"});
+  const vistream::testing::BadArguments loadtestSpecific[] = {
+      {"--clients -1", "--clients: must be an integer >= 1"},
+      {"--port 99999", "--port: must be an integer in 1..65535"},
+      {"--host no-such-host.invalid", "--host no-such-host.invalid"},
   };
-  for (const auto& [args, mention] : loadtest) {
-    const ToolRun r = runTool("vistream-loadtest", args);
-    EXPECT_EQ(r.status, 1) << args << "\n" << r.err;
-    EXPECT_NE(r.err.find("vistream-loadtest: error: " + mention), std::string::npos) << args << "\n"
-                                                                                     << r.err;
-    EXPECT_EQ(r.err.find(missing), std::string::npos) << "checked after loading: " << r.err;
-  }
+  expectEachRefused(loadtest, loadtestSpecific);
 }
 
 TEST(StreamTools, AServerWithoutADatabaseSaysPvssAreComputedOnDemandAndHowToBake) {
   // The advice comes before the scene loads, so a missing scene still shows it.
   const ToolRun r = runTool("vistream-server", "--scene /nonexistent/scene.obj --port 0");
-  EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("no --pvs-db"), std::string::npos) << r.err;
+  vistream::testing::expectFailedSaying(r, 1, "no --pvs-db");
   EXPECT_NE(r.err.find("computed on demand"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("vistream-pvs bake --scene /nonexistent/scene.obj"), std::string::npos)
       << r.err;
 }
 
 TEST(StreamTools, HelpShowsDefaultsCapturedFromTheCodeNotTypedByHand) {
-  for (const char* tool : {"vistream-server", "vistream-loadtest"}) {
-    const ToolRun help = runTool(tool, "--help");
-    EXPECT_EQ(help.status, 0) << tool;
-    EXPECT_EQ(help.out.find("(default"), std::string::npos) << tool << "\n" << help.out;
-    EXPECT_NE(help.out.find("=7070"), std::string::npos) << tool << "\n" << help.out;
-  }
+  for (const char* tool : {"vistream-server", "vistream-loadtest"})
+    vistream::testing::expectHelpShowsCapturedDefaults(tool, "=7070");
 }
 
 }  // namespace

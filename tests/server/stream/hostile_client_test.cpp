@@ -26,6 +26,16 @@ std::optional<std::pair<wire::ErrorCode, std::string>> nextError(TestClient& c,
   return std::make_pair(wire::envelopeOf(*f)->payload_as_Error()->code(), errorText(*f));
 }
 
+// Expects the next Error frame within the timeout to carry `code` and a text
+// naming `what`. Fatal if none comes: call it in ASSERT_NO_FATAL_FAILURE.
+void expectErrorNaming(TestClient& c, wire::ErrorCode code, const std::string& what,
+                       double timeoutS = 5.0) {
+  const auto e = nextError(c, timeoutS);
+  ASSERT_TRUE(e) << "no Error naming " << what;
+  EXPECT_EQ(e->first, code);
+  EXPECT_NE(e->second.find(what), std::string::npos) << e->second;
+}
+
 const glm::dvec3 kStreetPoint{0.0, 1.7, 8.0};
 
 TEST(HostileClient, AnAbsurdVelocityIsRefusedNamingTheFieldAndNoThreadHangs) {
@@ -39,10 +49,7 @@ TEST(HostileClient, AnAbsurdVelocityIsRefusedNamingTheFieldAndNoThreadHangs) {
     c->pose(kStreetPoint, 0.0f, glm::vec3(1e30f, 0.0f, 1e30f));
   }
   for (TestClient* c : {&a, &b}) {
-    const auto e = nextError(*c);
-    ASSERT_TRUE(e);
-    EXPECT_EQ(e->first, wire::ErrorCode::BadRequest);
-    EXPECT_NE(e->second.find("Pose.velocity"), std::string::npos) << e->second;
+    ASSERT_NO_FATAL_FAILURE(expectErrorNaming(*c, wire::ErrorCode::BadRequest, "Pose.velocity"));
     EXPECT_TRUE(c->closedWithin(5.0));
   }
   EXPECT_TRUE(honestClientLoads(server.port(), kStreetPoint, 10.0));
@@ -51,57 +58,39 @@ TEST(HostileClient, AnAbsurdVelocityIsRefusedNamingTheFieldAndNoThreadHangs) {
 TEST(HostileClient, APlausibleSpeedWithAHugePrefetchHorizonStaysBounded) {
   // The prefetch horizon is prefetch-s times the speed: with 1e9 s the old
   // loop took 1e11 steps on the I/O thread. Now it samples a fixed number.
-  StreamServerConfig cfg;
-  cfg.prefetchSeconds = 1e9;
-  ServerFixture server(cfg);
+  ServerFixture server(configWith([](StreamServerConfig& c) { c.prefetchSeconds = 1e9; }));
   TestClient fast(server.port());
-  fast.hello();
-  ASSERT_TRUE(fast.nextOf(wire::Payload::Welcome));
+  ASSERT_TRUE(fast.join());
   fast.pose(kStreetPoint, 0.0f, glm::vec3(90.0f, 0.0f, 0.0f));
   EXPECT_TRUE(fast.nextOf(wire::Payload::CellReady, 10.0));
   EXPECT_TRUE(honestClientLoads(server.port(), kStreetPoint, 10.0));
 }
 
 TEST(HostileClient, AVelocityJustOverTheLimitIsRefusedAndJustUnderIsServed) {
-  StreamServerConfig cfg;
-  cfg.maxSpeedMps = 50.0;
-  ServerFixture server(cfg);
+  ServerFixture server(configWith([](StreamServerConfig& c) { c.maxSpeedMps = 50.0; }));
   TestClient over(server.port()), under(server.port());
-  over.hello();
-  under.hello();
-  ASSERT_TRUE(over.nextOf(wire::Payload::Welcome));
-  ASSERT_TRUE(under.nextOf(wire::Payload::Welcome));
+  ASSERT_TRUE(over.join());
+  ASSERT_TRUE(under.join());
   over.pose(kStreetPoint, 0.0f, glm::vec3(30.0f, 0.0f, 40.5f));   // 50.3 m/s
   under.pose(kStreetPoint, 0.0f, glm::vec3(30.0f, 0.0f, 39.5f));  // 49.6 m/s
-  const auto e = nextError(over);
-  ASSERT_TRUE(e);
-  EXPECT_EQ(e->first, wire::ErrorCode::BadRequest);
-  EXPECT_NE(e->second.find("Pose.velocity"), std::string::npos) << e->second;
+  ASSERT_NO_FATAL_FAILURE(expectErrorNaming(over, wire::ErrorCode::BadRequest, "Pose.velocity"));
   EXPECT_TRUE(under.nextOf(wire::Payload::CellReady, 10.0));
 }
 
 TEST(HostileClient, APoseFarOutsideTheSceneIsRefusedNamingThePosition) {
-  StreamServerConfig cfg;
-  cfg.poseMarginM = 100.0;
-  ServerFixture server(cfg);  // the street scene spans -30..30 m
+  // The street scene spans -30..30 m.
+  ServerFixture server(configWith([](StreamServerConfig& c) { c.poseMarginM = 100.0; }));
   TestClient far(server.port()), near(server.port());
-  far.hello();
-  near.hello();
-  ASSERT_TRUE(far.nextOf(wire::Payload::Welcome));
-  ASSERT_TRUE(near.nextOf(wire::Payload::Welcome));
+  ASSERT_TRUE(far.join());
+  ASSERT_TRUE(near.join());
   far.pose({0.0, 1.7, 131.0});   // 101 m beyond the far edge
   near.pose({0.0, 1.7, 129.0});  // 99 m beyond it: allowed (clamped to the grid)
-  const auto e = nextError(far);
-  ASSERT_TRUE(e);
-  EXPECT_EQ(e->first, wire::ErrorCode::BadRequest);
-  EXPECT_NE(e->second.find("Pose.position"), std::string::npos) << e->second;
+  ASSERT_NO_FATAL_FAILURE(expectErrorNaming(far, wire::ErrorCode::BadRequest, "Pose.position"));
   EXPECT_FALSE(near.nextOf(wire::Payload::Error, 1.0));
 }
 
 TEST(HostileClient, PvsRequestsBeyondTheWaitingLimitAreRateLimitedAndPipelinedOnesAreAnswered) {
-  StreamServerConfig cfg;
-  cfg.maxPvsRequestsWaiting = 8;
-  ServerFixture server(cfg);
+  ServerFixture server(configWith([](StreamServerConfig& c) { c.maxPvsRequestsWaiting = 8; }));
   const ViewCellGrid& g = server.world().grid();
   auto request = [&](uint32_t id) {
     wire::PvsRequestT q;
@@ -112,8 +101,7 @@ TEST(HostileClient, PvsRequestsBeyondTheWaitingLimitAreRateLimitedAndPipelinedOn
     return wire::encodeMessage(std::move(q));
   };
   TestClient polite(server.port());
-  polite.hello();
-  ASSERT_TRUE(polite.nextOf(wire::Payload::Welcome));
+  ASSERT_TRUE(polite.join());
   for (uint32_t id = 0; id < 8; ++id) polite.sendRaw(request(id));
   std::set<uint32_t> answered;
   for (int i = 0; i < 8; ++i) {
@@ -124,28 +112,24 @@ TEST(HostileClient, PvsRequestsBeyondTheWaitingLimitAreRateLimitedAndPipelinedOn
   EXPECT_EQ(answered.size(), 8u);
 
   TestClient greedy(server.port());
-  greedy.hello();
-  ASSERT_TRUE(greedy.nextOf(wire::Payload::Welcome));
+  ASSERT_TRUE(greedy.join());
   std::vector<uint8_t> burst;
   for (uint32_t id = 0; id < 200; ++id) {
     const auto f = request(id);
     burst.insert(burst.end(), f.begin(), f.end());
   }
   greedy.sendRaw(burst);
-  const auto e = nextError(greedy, 10.0);
-  ASSERT_TRUE(e);
-  EXPECT_EQ(e->first, wire::ErrorCode::RateLimited);
-  EXPECT_NE(e->second.find("PvsRequest"), std::string::npos) << e->second;
+  ASSERT_NO_FATAL_FAILURE(
+      expectErrorNaming(greedy, wire::ErrorCode::RateLimited, "PvsRequest", 10.0));
 }
 
 TEST(HostileClient, AFrameTrickledOneByteAtATimeTimesOut) {
-  StreamServerConfig cfg;
-  cfg.frameTimeoutS = 1.0;
-  cfg.idleTimeoutS = 60.0;
-  ServerFixture server(cfg);
+  ServerFixture server(configWith([](StreamServerConfig& c) {
+    c.frameTimeoutS = 1.0;
+    c.idleTimeoutS = 60.0;
+  }));
   TestClient slow(server.port());
-  slow.hello();
-  ASSERT_TRUE(slow.nextOf(wire::Payload::Welcome));
+  ASSERT_TRUE(slow.join());
   // A Pose frame, one byte every 300 ms: each byte once reset the idle timer.
   wire::PoseT m;
   m.position = std::make_unique<wire::Vec3d>(wire::toWire(kStreetPoint));
@@ -164,9 +148,7 @@ TEST(HostileClient, AFrameTrickledOneByteAtATimeTimesOut) {
 }
 
 TEST(HostileClient, SessionsFromOneAddressAreLimitedWhenAsked) {
-  StreamServerConfig cfg;
-  cfg.maxClientsPerAddress = 2;
-  ServerFixture server(cfg);
+  ServerFixture server(configWith([](StreamServerConfig& c) { c.maxClientsPerAddress = 2; }));
   auto a = std::make_unique<TestClient>(server.port());
   TestClient b(server.port());
   a->hello();
@@ -174,10 +156,7 @@ TEST(HostileClient, SessionsFromOneAddressAreLimitedWhenAsked) {
   ASSERT_TRUE(a->nextOf(wire::Payload::Welcome));
   ASSERT_TRUE(b.nextOf(wire::Payload::Welcome));
   TestClient c(server.port());
-  const auto e = nextError(c);
-  ASSERT_TRUE(e);
-  EXPECT_EQ(e->first, wire::ErrorCode::TooManyClients);
-  EXPECT_NE(e->second.find("one address"), std::string::npos) << e->second;
+  ASSERT_NO_FATAL_FAILURE(expectErrorNaming(c, wire::ErrorCode::TooManyClients, "one address"));
   // A slot freed is a slot again.
   a.reset();
   for (int attempt = 0; attempt < 50; ++attempt) {
@@ -232,8 +211,7 @@ TEST(HostileClient, AMaximumBeyondTheOpenFileLimitIsLoweredToFitIt) {
 TEST(HostileClient, AnUnknownPayloadTypeIsCalledUnknown) {
   ServerFixture server;
   TestClient c(server.port());
-  c.hello();
-  ASSERT_TRUE(c.nextOf(wire::Payload::Welcome));
+  ASSERT_TRUE(c.join());
   // An Envelope whose payload type is beyond the schema's union, carrying a table.
   flatbuffers::FlatBufferBuilder b;
   const auto bye = wire::CreateByeDirect(b, "x");
@@ -248,9 +226,7 @@ TEST(HostileClient, AnUnknownPayloadTypeIsCalledUnknown) {
 }
 
 TEST(HostileClient, AnOversizedFrameIsFrameTooLargeWhereverItStartsInARead) {
-  StreamServerConfig cfg;
-  cfg.maxInboundFrameBytes = 1024;
-  ServerFixture server(cfg);
+  ServerFixture server(configWith([](StreamServerConfig& c) { c.maxInboundFrameBytes = 1024; }));
   const std::vector<uint8_t> oversized{0x00, 0x10, 0x00, 0x00};  // 4096 bytes announced
   // Alone, and after a whole Hello in the same write (the length is then
   // read by next(), not by feed()).

@@ -27,37 +27,28 @@ double envSeconds(const char* name, double fallback) {
   return v ? std::atof(v) : fallback;
 }
 
-// Values that have broken servers: extremes, non-finite, signed zero,
-// denormals, and numbers whose float square overflows.
-float nastyFloat(std::mt19937_64& rng) {
-  static const float values[] = {0.0f,
-                                 -0.0f,
-                                 1e30f,
-                                 -1e30f,
-                                 1e19f,
-                                 1e7f,
-                                 3.4e38f,
-                                 -3.4e38f,
-                                 1e-45f,
-                                 std::numeric_limits<float>::infinity(),
-                                 std::numeric_limits<float>::quiet_NaN(),
-                                 -std::numeric_limits<float>::infinity(),
-                                 65535.0f,
-                                 1e-7f};
-  return values[rng() % std::size(values)];
-}
-double nastyDouble(std::mt19937_64& rng) {
-  static const double values[] = {0.0,
-                                  -0.0,
-                                  1e308,
-                                  -1e308,
-                                  1e19,
-                                  9.3e18,
-                                  5e-324,
-                                  1e30,
-                                  2147483648.0,
-                                  std::numeric_limits<double>::infinity(),
-                                  std::numeric_limits<double>::quiet_NaN()};
+// Values that have broken servers, for float and double fields alike:
+// extremes, non-finite, signed zero, denormals, numbers whose float square
+// overflows (1e19 and up) and integers at the edge of 16 and 32 bits.
+template <class T>
+T nasty(std::mt19937_64& rng) {
+  using Limits = std::numeric_limits<T>;
+  static const T values[] = {T(0),
+                             -T(0),
+                             Limits::max(),
+                             Limits::lowest(),
+                             Limits::denorm_min(),
+                             Limits::infinity(),
+                             -Limits::infinity(),
+                             Limits::quiet_NaN(),
+                             T(1e30),
+                             T(-1e30),
+                             T(1e19),
+                             T(9.3e18),
+                             T(1e7),
+                             T(65535),
+                             T(2147483648.0),
+                             T(1e-7)};
   return values[rng() % std::size(values)];
 }
 
@@ -72,7 +63,7 @@ Bytes realSession(std::mt19937_64& rng, bool mutateFields) {
   wire::HelloT h;
   h.protocol_version = pick(0.05) ? uint32_t(rng()) : wire::kProtocolVersion;
   h.capabilities = std::make_unique<wire::CapabilitiesT>();
-  h.capabilities->near_field_radius_m = pick(0.2) ? nastyFloat(rng) : 60.0f;
+  h.capabilities->near_field_radius_m = pick(0.2) ? nasty<float>(rng) : 60.0f;
   h.capabilities->memory_budget_bytes = pick(0.2) ? rng() % 4096 : 0;
   h.capabilities->wants_avatars = true;
   h.client_name = "fuzz";
@@ -90,23 +81,23 @@ Bytes realSession(std::mt19937_64& rng, bool mutateFields) {
                                                    pick(0.3) ? -int(rng() % 100) : int(rng() % 16));
       else
         q.point = std::make_unique<wire::Vec3d>(
-            pick(0.3) ? nastyDouble(rng) : -25.0 + 50.0 * double(rng() % 100) / 100, 1.7,
-            pick(0.3) ? nastyDouble(rng) : 8.0);
+            pick(0.3) ? nasty<double>(rng) : -25.0 + 50.0 * double(rng() % 100) / 100, 1.7,
+            pick(0.3) ? nasty<double>(rng) : 8.0);
       append(wire::encodeMessage(std::move(q)));
       continue;
     }
     wire::PoseT p;
     glm::dvec3 pos(-25.0 + 1.4 * t, 1.7, 8.0);
-    if (pick(0.1)) pos.x = nastyDouble(rng);
-    if (pick(0.1)) pos.z = nastyDouble(rng);
+    if (pick(0.1)) pos.x = nasty<double>(rng);
+    if (pick(0.1)) pos.z = nasty<double>(rng);
     if (pick(0.05)) pos = glm::dvec3(rng() % 1000, 0.0, rng() % 1000);  // teleport
     p.position = std::make_unique<wire::Vec3d>(wire::toWire(pos));
-    p.yaw_deg = pick(0.1) ? nastyFloat(rng) : float(i * 7 % 360);
-    p.pitch_deg = pick(0.1) ? nastyFloat(rng) : 0.0f;
+    p.yaw_deg = pick(0.1) ? nasty<float>(rng) : float(i * 7 % 360);
+    p.pitch_deg = pick(0.1) ? nasty<float>(rng) : 0.0f;
     glm::vec3 v(1.4f, 0.0f, 0.0f);
-    if (pick(0.15)) v = glm::vec3(nastyFloat(rng), nastyFloat(rng), nastyFloat(rng));
+    if (pick(0.15)) v = glm::vec3(nasty<float>(rng), nasty<float>(rng), nasty<float>(rng));
     p.velocity = std::make_unique<wire::Vec3f>(wire::toWire(v));
-    p.client_time_s = pick(0.1) ? nastyDouble(rng) : t;
+    p.client_time_s = pick(0.1) ? nasty<double>(rng) : t;
     append(wire::encodeMessage(std::move(p)));
   }
   if (rng() % 2) append(wire::encodeBye("done"));
@@ -189,10 +180,10 @@ TEST(NetworkFuzz, MutatedRealSessionsNeverStopTheServerFromServingHonestClients)
                             ? std::strtoull(std::getenv("VISTREAM_FUZZ_SEED"), nullptr, 10)
                             : uint64_t(20261201);
   std::printf("network fuzz: seed %llu, %.0f s\n", static_cast<unsigned long long>(seed), seconds);
-  StreamServerConfig cfg;
-  cfg.helloTimeoutS = 2.0;
-  cfg.frameTimeoutS = 2.0;
-  ServerFixture server(cfg);
+  ServerFixture server(configWith([](StreamServerConfig& c) {
+    c.helloTimeoutS = 2.0;
+    c.frameTimeoutS = 2.0;
+  }));
   const uint16_t port = server.port();
   const auto end = Clock::now() + std::chrono::duration_cast<Clock::duration>(
                                       std::chrono::duration<double>(seconds));

@@ -9,7 +9,7 @@
 
 #include "common/generate/path.h"
 #include "common/raycast/ray_query.h"
-#include "common/world/free_space.h"
+#include "common/world/static_world.h"
 #include "server/visibility/epsilon_pvs.h"
 #include "server/visibility/pvs_bake.h"
 #include "tests/common/support/temp_dir.h"
@@ -18,6 +18,7 @@
 namespace vistream {
 namespace {
 
+using testing::configWith;
 using testing::nextErrorCode;
 using testing::ServerFixture;
 using testing::TestClient;
@@ -53,6 +54,16 @@ Received receiveUntilReady(TestClient& c, const glm::ivec3& cell, double timeout
     }
   }
   return r;
+}
+
+// A new client joins with a near-field radius of `radiusM`, stands at `eye`
+// looking along `yawDeg` and reads until the eye's cell is ready (`ready`
+// stays false if the Welcome or the CellReady never came).
+Received joinAndLoad(ServerFixture& fx, const glm::dvec3& eye, float radiusM, float yawDeg = 0.0f) {
+  TestClient c(fx.port());
+  EXPECT_TRUE(c.join("", wire::kProtocolVersion, radiusM));
+  c.pose(eye, yawDeg);
+  return receiveUntilReady(c, *fx.world().cellOf(glm::vec3(eye)));
 }
 
 // What the server should stream for a cell, computed here: the PVS of the
@@ -93,13 +104,24 @@ std::set<uint32_t> facesSeenFrom(const Scene& scene, const glm::vec3& eye, float
   return seen;
 }
 
+// A welcomed client that stands in the street gets geometry.
+void expectServed(TestClient& c) {
+  c.pose({0.0, 1.7, 8.0});
+  EXPECT_TRUE(c.nextOf(Payload::Geometry)) << "a session was not served";
+}
+
 // A fresh client can still connect, say Hello and get geometry.
 void expectOthersStillServed(ServerFixture& fx) {
   TestClient c(fx.port());
-  c.hello();
-  ASSERT_TRUE(c.nextOf(Payload::Welcome));
-  c.pose({0.0, 1.7, 8.0});
-  EXPECT_TRUE(c.nextOf(Payload::Geometry)) << "an innocent session was not served";
+  ASSERT_TRUE(c.join());
+  expectServed(c);
+}
+
+// Expects `bad` to get an Error with `code`, and a client that connects after
+// it to be served: the error ended only the session that caused it.
+void expectOnlyItsSessionRefused(ServerFixture& fx, TestClient& bad, ErrorCode code) {
+  EXPECT_EQ(nextErrorCode(bad), code);
+  expectOthersStillServed(fx);
 }
 
 TEST(StreamServer, GreetsAHelloWithTheSceneItsGridAndMaterials) {
@@ -120,13 +142,9 @@ TEST(StreamServer, GreetsAHelloWithTheSceneItsGridAndMaterials) {
 
 TEST(StreamServer, StreamsTheCellsPvsWithinTheRadiusOnceThenSaysCellReady) {
   ServerFixture fx;
-  TestClient c(fx.port());
-  c.hello("", wire::kProtocolVersion, 40.0f);
-  ASSERT_TRUE(c.nextOf(Payload::Welcome));
   const glm::dvec3 eye(0.5, 1.7, 8.5);
-  c.pose(eye);
   const glm::ivec3 cell = *fx.world().cellOf(glm::vec3(eye));
-  const Received r = receiveUntilReady(c, cell);
+  const Received r = joinAndLoad(fx, eye, 40.0f);
   ASSERT_TRUE(r.ready);
   const std::set<uint32_t> held = r.held();
   EXPECT_EQ(held.size(), r.faces.size()) << "a face was sent twice";
@@ -187,12 +205,8 @@ TEST(StreamServer, FacesSeenFromThePoseArriveBeforeFacesBehindTheViewer) {
   StreamServerConfig cfg;
   cfg.batchBytes = 400;  // about five faces a frame, so the order shows
   ServerFixture fx(cfg, std::move(scene));
-  TestClient c(fx.port());
-  c.hello("", wire::kProtocolVersion, 60.0f);
-  ASSERT_TRUE(c.nextOf(Payload::Welcome));
   const glm::dvec3 eye(0.5, 1.7, 5.5);
-  c.pose(eye, 0.0f);  // looking along -Z at the boxes ahead
-  const Received r = receiveUntilReady(c, *fx.world().cellOf(glm::vec3(eye)));
+  const Received r = joinAndLoad(fx, eye, 60.0f, 0.0f);  // looking along -Z at the boxes ahead
   ASSERT_TRUE(r.ready);
   // Faces that rays through the 60-degree frustum hit.
   const FlatTriangles tris = flattenScene(fx.world().scene(), true);
@@ -218,16 +232,10 @@ TEST(StreamServer, FacesSeenFromThePoseArriveBeforeFacesBehindTheViewer) {
 }
 
 TEST(StreamServer, RadiusPolicyStreamsEverythingWithinTheRadiusVisibleOrNot) {
-  StreamServerConfig cfg;
-  cfg.policy = StreamPolicy::Radius;
-  ServerFixture fx(cfg);
-  TestClient c(fx.port());
-  c.hello("", wire::kProtocolVersion, 40.0f);
-  ASSERT_TRUE(c.nextOf(Payload::Welcome));
+  ServerFixture fx(configWith([](StreamServerConfig& c) { c.policy = StreamPolicy::Radius; }));
   const glm::dvec3 eye(0.5, 1.7, 8.5);
-  c.pose(eye);
   const glm::ivec3 cell = *fx.world().cellOf(glm::vec3(eye));
-  const Received r = receiveUntilReady(c, cell);
+  const Received r = joinAndLoad(fx, eye, 40.0f);
   ASSERT_TRUE(r.ready);
   const std::set<uint32_t> held = r.held();
   const auto expected =
@@ -241,8 +249,7 @@ TEST(StreamServer, RadiusPolicyStreamsEverythingWithinTheRadiusVisibleOrNot) {
 TEST(StreamServer, PrefetchesTheCellsAheadSoTheyAreReadyBeforeTheClientArrives) {
   ServerFixture fx;
   TestClient c(fx.port());
-  c.hello("", wire::kProtocolVersion, 40.0f);
-  ASSERT_TRUE(c.nextOf(Payload::Welcome));
+  ASSERT_TRUE(c.join("", wire::kProtocolVersion, 40.0f));
   const glm::dvec3 eye(0.5, 1.7, 8.5);
   c.pose(eye, 90.0f, {-1.4f, 0.0f, 0.0f});  // walking west
   const glm::ivec3 cell = *fx.world().cellOf(glm::vec3(eye));
@@ -265,8 +272,7 @@ TEST(StreamServer, AClientOverItsMemoryBudgetGetsEvictionsAndStaysWithinIt) {
   ServerFixture fx;
   TestClient c(fx.port());
   const uint64_t budget = 2500;
-  c.hello("", wire::kProtocolVersion, 10.0f, budget);
-  ASSERT_TRUE(c.nextOf(Payload::Welcome));
+  ASSERT_TRUE(c.join("", wire::kProtocolVersion, 10.0f, budget));
   std::set<uint32_t> held;
   size_t evictions = 0;
   for (double x : {-24.0, -8.0, 8.0, 24.0}) {
@@ -295,8 +301,7 @@ TEST(StreamServer, BandwidthLimitBoundsTheBytesEachClientReceives) {
   cfg.batchBytes = 2048;
   ServerFixture fx(cfg);
   TestClient c(fx.port());
-  c.hello("", wire::kProtocolVersion, 60.0f);
-  ASSERT_TRUE(c.nextOf(Payload::Welcome));
+  ASSERT_TRUE(c.join("", wire::kProtocolVersion, 60.0f));
   c.pose({0.5, 1.7, 8.5});
   const auto start = std::chrono::steady_clock::now();
   while (std::chrono::steady_clock::now() - start < std::chrono::seconds(2)) c.next(0.1);
@@ -308,9 +313,7 @@ TEST(StreamServer, BandwidthLimitBoundsTheBytesEachClientReceives) {
 }
 
 TEST(StreamServer, PvsOnlyModeAnswersRequestsAndSendsNoGeometry) {
-  StreamServerConfig cfg;
-  cfg.pvsOnly = true;
-  ServerFixture fx(cfg);
+  ServerFixture fx(configWith([](StreamServerConfig& c) { c.pvsOnly = true; }));
   TestClient c(fx.port());
   c.hello();
   const auto w = c.nextOf(Payload::Welcome);
@@ -348,9 +351,8 @@ TEST(StreamServer, ServesPvsFromABakedDatabaseAndRejectsADatabaseOfAnotherScene)
   const auto db = dir.path() / "street.db";
   {
     const Scene scene = testing::streetScene();
-    const FlatTriangles tris = flattenScene(scene, true);
-    const auto rays = makeEmbreeRayQuery(tris);
-    const FreeSpace fs = FreeSpace::build(*rays, scene.bounds());
+    // The server's own recipe, so the bake covers the cells it serves.
+    const FreeSpace fs = buildStaticWorld(scene).freeSpace;
     BakeOptions bo;
     bo.cellSize = glm::vec3(4.0f, 2.0f, 4.0f);
     bo.threads = 1;
@@ -362,8 +364,7 @@ TEST(StreamServer, ServesPvsFromABakedDatabaseAndRejectsADatabaseOfAnotherScene)
   const PvsDatabase baked = PvsDatabase::open(db);
   EXPECT_EQ(fx.world().grid().dims(), baked.header().dims);
   TestClient c(fx.port());
-  c.hello();
-  ASSERT_TRUE(c.nextOf(Payload::Welcome));
+  ASSERT_TRUE(c.join());
   const uint32_t linear = baked.cellIndices().front();
   wire::PvsRequestT req;
   req.by_cell = true;
@@ -387,9 +388,7 @@ TEST(StreamServer, ServesPvsFromABakedDatabaseAndRejectsADatabaseOfAnotherScene)
 }
 
 TEST(StreamServer, AvatarsGoOnlyToClientsThatCanSeeThemAndWantThem) {
-  StreamServerConfig cfg;
-  cfg.avatarHz = 20.0;
-  ServerFixture fx(cfg);
+  ServerFixture fx(configWith([](StreamServerConfig& c) { c.avatarHz = 20.0; }));
   TestClient a(fx.port()), b(fx.port()), hidden(fx.port()), blind(fx.port());
   a.hello();
   b.hello();
@@ -427,19 +426,15 @@ TEST(StreamServer, WrongProtocolVersionGetsUnsupportedVersionAndIsClosed) {
   ServerFixture fx;
   TestClient bad(fx.port());
   bad.hello("", 99);
-  EXPECT_EQ(nextErrorCode(bad), ErrorCode::UnsupportedVersion);
-  EXPECT_TRUE(bad.closedWithin(3.0));
+  expectRefusedAndClosed(bad, ErrorCode::UnsupportedVersion);
   expectOthersStillServed(fx);
 }
 
 TEST(StreamServer, BadTokenGetsBadTokenAndTheRightOneGetsIn) {
-  StreamServerConfig cfg;
-  cfg.token = "s3cret";
-  ServerFixture fx(cfg);
+  ServerFixture fx(configWith([](StreamServerConfig& c) { c.token = "s3cret"; }));
   TestClient bad(fx.port());
   bad.hello("guess");
-  EXPECT_EQ(nextErrorCode(bad), ErrorCode::BadToken);
-  EXPECT_TRUE(bad.closedWithin(3.0));
+  expectRefusedAndClosed(bad, ErrorCode::BadToken);
   TestClient good(fx.port());
   good.hello("s3cret");
   EXPECT_TRUE(good.nextOf(Payload::Welcome));
@@ -448,22 +443,18 @@ TEST(StreamServer, BadTokenGetsBadTokenAndTheRightOneGetsIn) {
 TEST(StreamServer, MalformedFrameGetsMalformedFrameAndIsClosed) {
   ServerFixture fx;
   TestClient innocent(fx.port());
-  innocent.hello();
-  ASSERT_TRUE(innocent.nextOf(Payload::Welcome));
+  ASSERT_TRUE(innocent.join());
   TestClient bad(fx.port());
   bad.sendRaw({8, 0, 0, 0, 0xde, 0xad, 0xbe, 0xef, 0x01, 0x02, 0x03, 0x04});
-  EXPECT_EQ(nextErrorCode(bad), ErrorCode::MalformedFrame);
-  EXPECT_TRUE(bad.closedWithin(3.0));
-  innocent.pose({0.0, 1.7, 8.0});
-  EXPECT_TRUE(innocent.nextOf(Payload::Geometry));
+  expectRefusedAndClosed(bad, ErrorCode::MalformedFrame);
+  expectServed(innocent);
 }
 
 TEST(StreamServer, OversizedFrameGetsFrameTooLargeBeforeAnyBuffering) {
   ServerFixture fx;
   TestClient bad(fx.port());
   bad.sendRaw({0xff, 0xff, 0xff, 0x7f});
-  EXPECT_EQ(nextErrorCode(bad), ErrorCode::FrameTooLarge);
-  EXPECT_TRUE(bad.closedWithin(3.0));
+  expectRefusedAndClosed(bad, ErrorCode::FrameTooLarge);
   expectOthersStillServed(fx);
 }
 
@@ -472,13 +463,11 @@ TEST(StreamServer, OutOfOrderFramesGetOutOfOrder) {
   {
     TestClient bad(fx.port());
     bad.pose({0.0, 1.7, 8.0});  // before Hello
-    EXPECT_EQ(nextErrorCode(bad), ErrorCode::OutOfOrder);
-    EXPECT_TRUE(bad.closedWithin(3.0));
+    expectRefusedAndClosed(bad, ErrorCode::OutOfOrder);
   }
   {
     TestClient bad(fx.port());
-    bad.hello();
-    ASSERT_TRUE(bad.nextOf(Payload::Welcome));
+    ASSERT_TRUE(bad.join());
     bad.sendRaw(wire::encodeMessage(wire::WelcomeT{}));  // a server message
     EXPECT_EQ(nextErrorCode(bad), ErrorCode::OutOfOrder);
   }
@@ -494,22 +483,18 @@ TEST(StreamServer, OutOfOrderFramesGetOutOfOrder) {
 TEST(StreamServer, NonFinitePoseGetsBadRequest) {
   ServerFixture fx;
   TestClient bad(fx.port());
-  bad.hello();
-  ASSERT_TRUE(bad.nextOf(Payload::Welcome));
+  ASSERT_TRUE(bad.join());
   bad.pose({std::nan(""), 1.7, 8.0});
-  EXPECT_EQ(nextErrorCode(bad), ErrorCode::BadRequest);
-  expectOthersStillServed(fx);
+  expectOnlyItsSessionRefused(fx, bad, ErrorCode::BadRequest);
 }
 
 TEST(StreamServer, AClientVanishingMidFrameEndsOnlyItsSession) {
   ServerFixture fx;
   TestClient innocent(fx.port());
-  innocent.hello();
-  ASSERT_TRUE(innocent.nextOf(Payload::Welcome));
+  ASSERT_TRUE(innocent.join());
   {
     TestClient bad(fx.port());
-    bad.hello();
-    ASSERT_TRUE(bad.nextOf(Payload::Welcome));
+    ASSERT_TRUE(bad.join());
     auto frame = wire::encodeBye("x");
     frame.resize(frame.size() / 2);
     bad.sendRaw(frame);
@@ -517,28 +502,24 @@ TEST(StreamServer, AClientVanishingMidFrameEndsOnlyItsSession) {
   for (int i = 0; i < 50 && fx.server().sessionCount() > 1; ++i)
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
   EXPECT_EQ(fx.server().sessionCount(), 1u);
-  innocent.pose({0.0, 1.7, 8.0});
-  EXPECT_TRUE(innocent.nextOf(Payload::Geometry));
+  expectServed(innocent);
 }
 
 TEST(StreamServer, SilentClientsTimeOut) {
-  StreamServerConfig cfg;
-  cfg.helloTimeoutS = 0.3;
-  ServerFixture fx(cfg);
+  ServerFixture fx(configWith([](StreamServerConfig& c) { c.helloTimeoutS = 0.3; }));
   TestClient silent(fx.port());
   EXPECT_EQ(nextErrorCode(silent, 3.0), ErrorCode::Timeout);
   EXPECT_TRUE(silent.closedWithin(3.0));
 }
 
 TEST(StreamServer, AClientThatStopsReadingIsClosedWhileOthersAreServed) {
-  StreamServerConfig cfg;
-  cfg.sendQueueLimitBytes = 64u << 10;
-  cfg.writeStallTimeoutS = 1.0;
-  cfg.maxFramesPerSecond = 1u << 30;
-  ServerFixture fx(cfg);
+  ServerFixture fx(configWith([](StreamServerConfig& c) {
+    c.sendQueueLimitBytes = 64u << 10;
+    c.writeStallTimeoutS = 1.0;
+    c.maxFramesPerSecond = 1u << 30;
+  }));
   TestClient reader(fx.port());
-  reader.hello();
-  ASSERT_TRUE(reader.nextOf(Payload::Welcome));
+  ASSERT_TRUE(reader.join());
   TestClient stuck(fx.port(), 4096);
   stuck.hello();
   // Many requests, each answered with a face list; never read.
@@ -557,34 +538,24 @@ TEST(StreamServer, AClientThatStopsReadingIsClosedWhileOthersAreServed) {
     reader.next(0.05);
   }
   EXPECT_EQ(fx.server().sessionCount(), 1u) << "the session that stopped reading is still open";
-  reader.pose({0.0, 1.7, 8.0});
-  EXPECT_TRUE(reader.nextOf(Payload::Geometry));
+  expectServed(reader);
 }
 
 TEST(StreamServer, ClientsBeyondTheMaximumGetTooManyClients) {
-  StreamServerConfig cfg;
-  cfg.maxClients = 1;
-  ServerFixture fx(cfg);
+  ServerFixture fx(configWith([](StreamServerConfig& c) { c.maxClients = 1; }));
   TestClient first(fx.port());
-  first.hello();
-  ASSERT_TRUE(first.nextOf(Payload::Welcome));
+  ASSERT_TRUE(first.join());
   TestClient second(fx.port());
-  EXPECT_EQ(nextErrorCode(second), ErrorCode::TooManyClients);
-  EXPECT_TRUE(second.closedWithin(3.0));
-  first.pose({0.0, 1.7, 8.0});
-  EXPECT_TRUE(first.nextOf(Payload::Geometry));
+  expectRefusedAndClosed(second, ErrorCode::TooManyClients);
+  expectServed(first);
 }
 
 TEST(StreamServer, AFloodOfFramesGetsRateLimited) {
-  StreamServerConfig cfg;
-  cfg.maxFramesPerSecond = 50;
-  ServerFixture fx(cfg);
+  ServerFixture fx(configWith([](StreamServerConfig& c) { c.maxFramesPerSecond = 50; }));
   TestClient bad(fx.port());
-  bad.hello();
-  ASSERT_TRUE(bad.nextOf(Payload::Welcome));
+  ASSERT_TRUE(bad.join());
   for (int i = 0; i < 200; ++i) bad.pose({0.0, 1.7, 8.0});
-  EXPECT_EQ(nextErrorCode(bad), ErrorCode::RateLimited);
-  expectOthersStillServed(fx);
+  expectOnlyItsSessionRefused(fx, bad, ErrorCode::RateLimited);
 }
 
 TEST(StreamServer, StoppingSaysByeToEveryClient) {

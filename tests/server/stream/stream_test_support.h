@@ -3,6 +3,8 @@
 // with timeouts.
 #pragma once
 
+#include <gtest/gtest.h>
+
 #include <boost/asio.hpp>
 #include <chrono>
 #include <memory>
@@ -30,6 +32,16 @@ inline Scene streetScene() {
   finalizeScene(s);
   s.name = "street";
   return s;
+}
+
+// The default server configuration with `change` applied, for a fixture
+// that differs in a setting or two:
+// ServerFixture fx(configWith([](StreamServerConfig& c) { c.maxClients = 1; }));
+template <class Change>
+StreamServerConfig configWith(Change change) {
+  StreamServerConfig config;
+  change(config);
+  return config;
 }
 
 class ServerFixture {
@@ -83,6 +95,13 @@ class TestClient {
     h.capabilities->memory_budget_bytes = budget;
     h.capabilities->wants_avatars = avatars;
     sendRaw(wire::encodeMessage(std::move(h)));
+  }
+  // Sends a Hello (arguments as for hello) and waits for the Welcome: true if
+  // it came within 5 s.
+  bool join(const std::string& token = "", uint32_t version = wire::kProtocolVersion,
+            float radius = 0.0f, uint64_t budget = 0) {
+    hello(token, version, radius, budget);
+    return nextOf(wire::Payload::Welcome).has_value();
   }
   void pose(const glm::dvec3& p, float yaw = 0.0f, glm::vec3 velocity = glm::vec3(0.0f)) {
     wire::PoseT m;
@@ -172,6 +191,13 @@ inline std::optional<wire::ErrorCode> nextErrorCode(TestClient& c, double timeou
   const auto f = c.nextOf(wire::Payload::Error, timeoutS);
   if (!f) return std::nullopt;
   return wire::envelopeOf(*f)->payload_as_Error()->code();
+}
+
+// Expects the next Error frame to carry `code` and the server to close the
+// connection after it, within 3 s.
+inline void expectRefusedAndClosed(TestClient& c, wire::ErrorCode code) {
+  EXPECT_EQ(nextErrorCode(c), code);
+  EXPECT_TRUE(c.closedWithin(3.0));
 }
 
 // An honest client: Hello, then a pose; true once it holds its cell's whole

@@ -16,7 +16,7 @@ Scene buildingsOnly(bool withGround) {
   for (int i = 0; i < 3; ++i)
     for (int k = 0; k < 3; ++k) {
       const float x = float(i) * 40.0f, z = float(k) * 40.0f;
-      const float base = 2.0f - 0.5f * float(i + k);  // the lowest is -1 m (i = k = 2)
+      const float base = 2.0f - 0.75f * float(i + k);  // the lowest is -1 m (i = k = 2)
       testing::addBox(scene, "b", {x, base, z}, {x + 20.0f, 15.0f, z + 20.0f});
     }
   if (withGround) testing::addGround(scene, -10.0f, -10.0f, 110.0f, 110.0f, -1.0f);

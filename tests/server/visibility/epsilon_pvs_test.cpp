@@ -808,7 +808,8 @@ const City& city1() {
     c->rays = makeEmbreeRayQuery(c->triangles);
     FreeSpaceOptions fo;
     fo.maxColumns = 40'000;  // coarse columns are enough to place cells
-    const FreeSpace fs = FreeSpace::build(*c->rays, c->scene.bounds(), fo);
+    const FreeSpace fs =
+        FreeSpace::build(*c->rays, Solids::build(c->triangles), c->scene.bounds(), fo);
     c->pvs = std::make_unique<EpsilonPvs>(c->scene);
     const std::vector<glm::ivec2> columns = fs.walkableColumns();
     constexpr size_t kCells = 3;

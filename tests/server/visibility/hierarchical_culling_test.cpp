@@ -24,7 +24,7 @@ struct Walk {
     triangles = flattenScene(scene, true);
     rays = makeEmbreeRayQuery(triangles);
     culling = std::make_unique<CullingScene>(scene);
-    const FreeSpace fs = FreeSpace::build(*rays, scene.bounds());
+    const FreeSpace fs = FreeSpace::build(*rays, Solids::build(triangles), scene.bounds());
     PathOptions o;
     o.frames = frames;
     o.seed = 4;

@@ -304,7 +304,7 @@ struct Town {
     finalizeScene(scene);
     triangles = flattenScene(scene, true);
     rays = makeEmbreeRayQuery(triangles);
-    freeSpace = FreeSpace::build(*rays, scene.bounds());
+    freeSpace = FreeSpace::build(*rays, Solids::build(triangles), scene.bounds());
     pvs = std::make_unique<EpsilonPvs>(scene);
   }
 };

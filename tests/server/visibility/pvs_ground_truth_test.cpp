@@ -148,7 +148,7 @@ TEST_P(PvsGroundTruth, EveryFaceSampledVisibleFromACellIsInItsPvs) {
   const Scene scene = toScene(generate(c.type, 1));
   const FlatTriangles triangles = flattenScene(scene);
   const auto rays = makeEmbreeRayQuery(triangles);
-  const FreeSpace fs = FreeSpace::build(*rays, scene.bounds());
+  const FreeSpace fs = FreeSpace::build(*rays, Solids::build(triangles), scene.bounds());
   const EpsilonPvs pvs(scene);
   const double setupMs = clock.ms();
   ASSERT_GT(fs.walkableCount(), 0u) << c.type;
