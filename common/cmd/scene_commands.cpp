@@ -204,7 +204,7 @@ int cmdVisible(const std::string& spec, const SceneLimits& limits, const std::st
   // --points and --res are range-checked at parse time.
   const Scene scene = openScene(spec, limits);
   StaticWorldOptions worldOptions;
-  worldOptions.withFreeSpace = false;
+  worldOptions.parts = StaticWorldParts::Rays;
   const StaticWorld world = buildStaticWorld(scene, worldOptions);
   const Box3f cell(scene.toLocal({v[0], v[1], v[2]}), scene.toLocal({v[3], v[4], v[5]}));
   SampledVisibilityOptions options;

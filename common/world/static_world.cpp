@@ -65,10 +65,11 @@ StaticWorld buildStaticWorld(const Scene& scene, const StaticWorldOptions& optio
   StaticWorld w;
   w.triangles = std::make_unique<const FlatTriangles>(flattenScene(scene, /*staticOnly=*/true));
   w.rays = makeEmbreeRayQuery(*w.triangles);
-  w.solids = Solids::build(*w.triangles);
+  if (options.parts == StaticWorldParts::Rays) return w;
   w.ground = decideGround(scene, *w.rays, options.ground);
   if (w.ground.y) spdlog::info("scene '{}': ground {}", scene.name, w.ground.why);
-  if (!options.withFreeSpace) return w;
+  if (options.parts == StaticWorldParts::Ground) return w;
+  w.solids = Solids::build(*w.triangles);
   FreeSpaceOptions fo = options.freeSpace;
   fo.groundY = w.ground.y;
   w.freeSpace = FreeSpace::build(*w.rays, w.solids, scene.bounds(), fo);

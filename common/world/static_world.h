@@ -49,10 +49,17 @@ struct GroundPlane {
   std::string why;
 };
 
+// How much of the recipe to build; each part includes the ones before it.
+enum class StaticWorldParts : uint8_t {
+  Rays,       // triangles and the ray query
+  Ground,     // + the ground decision
+  FreeSpace,  // + solids and free space
+};
+
 struct StaticWorldOptions {
   GroundChoice ground;
   FreeSpaceOptions freeSpace;  // its groundY is overwritten by the ground decision
-  bool withFreeSpace = true;   // false: triangles, rays, solids and ground only (no free space)
+  StaticWorldParts parts = StaticWorldParts::FreeSpace;
 };
 
 struct StaticWorld {
@@ -60,9 +67,9 @@ struct StaticWorld {
   // stays valid when the StaticWorld moves.
   std::unique_ptr<const FlatTriangles> triangles;
   std::unique_ptr<RayQuery> rays;
-  Solids solids;
-  GroundPlane ground;
-  FreeSpace freeSpace;
+  Solids solids;        // empty unless parts == FreeSpace
+  GroundPlane ground;   // no plane unless parts >= Ground
+  FreeSpace freeSpace;  // empty unless parts == FreeSpace
 };
 
 // Builds the whole recipe and logs the ground decision (info when a plane is

@@ -50,7 +50,7 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
     grid_ = h.grid();
     StaticWorldOptions worldOptions;
     worldOptions.ground = options.ground;
-    worldOptions.withFreeSpace = false;
+    worldOptions.parts = StaticWorldParts::Ground;
     ground_ = buildStaticWorld(scene_, worldOptions).ground;
   } else {
     if (!(options.cellSize > 0.0f)) throwInputError("--cell-size must be positive");
