@@ -32,11 +32,27 @@ std::vector<glm::ivec2> FreeSpace::walkableColumns() const {
 
 namespace {
 
-// The rules use no winding. A floor is any horizontal surface, whichever
-// way it faces.
-bool isFloor(const Hit& h, float upwardNormalY) {
+// A floor is a horizontal surface a viewer can stand on. Winding is used
+// only where Solids trusts it: the face of a closed, consistently oriented
+// solid is a floor only when its outside is above it (an outward solid's
+// up-facing face, an inward solid's down-facing one); the underside of a
+// closed box has solid above it, whichever column grazes it. Every other
+// face (open sheets, non-manifold or inconsistently wound meshes, the
+// assumed ground plane) is two-sided.
+bool isFloor(const Hit& h, const Solids& solids, float upwardNormalY) {
   const float len = glm::length(h.normal);
-  return len > 0.0f && std::abs(h.normal.y) / len > upwardNormalY;
+  if (!(len > 0.0f) || std::abs(h.normal.y) / len <= upwardNormalY) return false;
+  if (!h.valid()) return true;
+  const uint32_t c = solids.componentOf(h.triangle);
+  if (c == kNoHit) return true;
+  switch (solids.components()[c].kind) {
+    case SolidClass::ClosedOutward:
+      return h.normal.y > 0.0f;
+    case SolidClass::ClosedInward:
+      return h.normal.y < 0.0f;
+    default:
+      return true;
+  }
 }
 
 // A surface at the very same height as a floor counts as a ceiling when it
@@ -99,7 +115,7 @@ FreeSpace FreeSpace::build(const RayQuery& rays, const Solids& solids, const Box
         bool headroomSeen = false;
         for (size_t h = hits.size(); h-- > 0;) {
           const Hit& hit = hits[h];
-          if (!isFloor(hit, options.upwardNormalY)) continue;
+          if (!isFloor(hit, solids, options.upwardNormalY)) continue;
           const float y = top - hit.t;
           // The nearest surface above this floor. A solid resting on the
           // floor at the very same height leaves no headroom at all.

@@ -2,9 +2,10 @@
 //
 // A regular grid over the scene's XZ extent. For each column a vertical ray
 // collects every surface; a column is walkable at the lowest horizontal
-// surface (|n.y| above `upwardNormalY`, either winding) with at least
-// `headroom` metres free above it whose point 1 m above it lies outside
-// every solid (Solids::inside, which uses no winding); a floor inside a
+// surface (|n.y| above `upwardNormalY`; either winding, except that a face
+// of a closed, consistently oriented solid counts only with its outside up)
+// with at least `headroom` metres free above it whose point 1 m above it
+// lies outside every solid (Solids::inside, which uses no winding); a floor inside a
 // solid is skipped and the next one up tried. A solid resting on a floor at
 // the same height leaves that floor no headroom. Columns closer than
 // `viewerRadius` to an unwalkable column are removed, then only the largest

@@ -74,6 +74,29 @@ TEST(FreeSpace, NoOneStandsUnderATableLowerThanTheHeadroom) {
   EXPECT_TRUE(fs.floorAt({5, 5}).has_value());
 }
 
+TEST(FreeSpace, NoOneStandsOnTheUndersideOfAClosedBoxWhoseSideGrazesAColumnCentre) {
+  // A shop-window box floating 0.4 m above the street, its +x side exactly
+  // on a line of column centres (1 m columns from x = -20: centres at
+  // n + 0.5). The vertical rays there graze the side and report the top and
+  // the underside; the point 1 m above the underside lies on the side, which
+  // the inside test calls outside. The underside faces into the solid, so it
+  // is no floor, whichever way the closed box is wound.
+  for (const Winding winding : {Winding::Outward, Winding::Inward}) {
+    World w;
+    addGround(w.scene, -20, -20, 20, 20);
+    addWoundBox(w.scene, "shop_window", {-3.5f, 0.4f, -3.5f}, {0.5f, 2.6f, 3.5f}, winding);
+    FreeSpaceOptions options;
+    options.maxColumns = 1600;
+    const FreeSpace fs = w.build(options);
+    ASSERT_FLOAT_EQ(fs.columnCentre(20, 0).x, 0.5f);
+    ASSERT_GT(fs.walkableCount(), 0u);
+    for (const glm::ivec2& c : fs.walkableColumns())
+      EXPECT_EQ(fs.floorHeight(c.x, c.y), 0.0f)
+          << "winding " << int(winding) << " at " << fs.columnCentre(c.x, c.y).x << ","
+          << fs.columnCentre(c.x, c.y).y;
+  }
+}
+
 TEST(FreeSpace, TwoRoomsJoinedByADoorFormOneFreeSpaceAndWithoutItTheLargerWins) {
   for (const bool door : {true, false}) {
     World w;
