@@ -204,13 +204,16 @@ int cmdVisible(const std::string& spec, const SceneLimits& limits, const std::st
   // --points and --res are range-checked at parse time.
   const Scene scene = openScene(spec, limits);
   StaticWorldOptions worldOptions;
-  worldOptions.parts = StaticWorldParts::Rays;
+  worldOptions.parts = StaticWorldParts::Solids;
   const StaticWorld world = buildStaticWorld(scene, worldOptions);
   const Box3f cell(scene.toLocal({v[0], v[1], v[2]}), scene.toLocal({v[3], v[4], v[5]}));
   SampledVisibilityOptions options;
   options.points = points;
   options.resolution = res;
   options.seed = seed;
+  options.skipViewpoint = [&](const glm::vec3& p) {
+    return world.solids.unservedViewpoint(*world.rays, p);
+  };
   const SampledVisibility vis = sampleVisibleFaces(*world.rays, *world.triangles, cell, options);
   if (asJson) {
     std::cout << json{{"faces", vis.faces},
@@ -226,7 +229,8 @@ int cmdVisible(const std::string& spec, const SceneLimits& limits, const std::st
               << "\n";
   } else {
     fmt::print(
-        "{} of {} faces visible from {} viewpoints ({} inside solid skipped), {} rays in {:.1f} "
+        "{} of {} faces visible from {} viewpoints ({} inside closed solids skipped), {} rays in "
+        "{:.1f} "
         "ms\n",
         vis.faces.size(), scene.faceCount, vis.viewpoints, vis.insideSolid, vis.rays, vis.timeMs);
     fmt::print("{}\n", fmt::join(vis.faces, " "));

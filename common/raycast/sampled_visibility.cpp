@@ -29,28 +29,32 @@ std::vector<glm::vec3> cellViewpoints(const Box3f& cell, size_t points, uint64_t
   return out;
 }
 
-bool insideSolid(const RayQuery& rays, const glm::vec3& p) {
-  // Two votes over the six axis rays. A point is inside when both rays of one
-  // axis leave through back faces (a thin wall: its floor and ceiling ties
-  // and crossing walls can outvote the two side rays), or when back faces win
-  // the majority (a box resting on the ground, whose bottom face ties with
-  // the ground under the downward ray).
-  static const glm::vec3 dirs[6] = {{1, 0, 0},  {-1, 0, 0}, {0, 1, 0},
-                                    {0, -1, 0}, {0, 0, 1},  {0, 0, -1}};
-  int back = 0, front = 0;
-  bool backFace[6] = {};
-  for (int i = 0; i < 6; ++i) {
-    const glm::vec3& d = dirs[i];
-    const Hit h = rays.firstHit(Ray{p, d, 0.0f, std::numeric_limits<float>::infinity()});
-    if (!h.valid()) continue;
-    if (h.t == 0.0f) return false;  // on a surface: outside by convention
-    backFace[i] = glm::dot(h.normal, d) > 0.0f;
-    (backFace[i] ? back : front) += 1;
-  }
-  for (int axis = 0; axis < 3; ++axis)
-    if (backFace[2 * axis] && backFace[2 * axis + 1]) return true;
-  return back > front;
+namespace {
+
+// The triangle a ray sees at its first hit, or kNoHit. When the first hit
+// faces away from the ray, a triangle facing the ray within the tie window
+// (ray_query.h resolves ties within float error to the smaller index, which
+// can credit the back of a roof over the wall that meets it at the rim) is
+// seen instead. Failing that, a hit on the triangle's boundary only grazes
+// its edge (over a roof's rim, through the corner of a box) and credits
+// nothing. Visibility is that of open faces: a face seen only along its
+// edges, from behind, is not counted.
+uint32_t seenTriangle(const RayQuery& rays, const Ray& ray, const Hit& h,
+                      std::vector<Hit>& tied) {
+  if (!(glm::dot(h.normal, ray.dir) > 0.0f)) return h.triangle;
+  const float window = 1e-5f * std::max(h.t, 1e-3f);
+  tied.clear();
+  rays.allHits(Ray{ray.org, ray.dir, std::max(ray.tnear, h.t - window), h.t + window}, tied);
+  uint32_t best = kNoHit;
+  for (const Hit& o : tied)
+    if (glm::dot(o.normal, ray.dir) < 0.0f && o.triangle < best) best = o.triangle;
+  if (best != kNoHit) return best;
+  constexpr float kEdge = 1e-4f;
+  const bool onBoundary = h.u <= kEdge || h.v <= kEdge || h.u + h.v >= 1.0f - kEdge;
+  return onBoundary ? kNoHit : h.triangle;
 }
+
+}  // namespace
 
 SampledVisibility sampleVisibleFaces(const RayQuery& rays, const FlatTriangles& triangles,
                                      const Box3f& cell, const SampledVisibilityOptions& options) {
@@ -63,7 +67,7 @@ SampledVisibility sampleVisibleFaces(const RayQuery& rays, const FlatTriangles& 
 
   tbb::parallel_for(size_t(0), points.size(), [&](size_t pi) {
     const glm::vec3 origin = points[pi];
-    if (insideSolid(rays, origin)) {
+    if (options.skipViewpoint && options.skipViewpoint(origin)) {
       std::lock_guard lock(merge);
       ++result.insideSolid;
       return;
@@ -71,6 +75,7 @@ SampledVisibility sampleVisibleFaces(const RayQuery& rays, const FlatTriangles& 
     std::vector<Ray> batch(size_t(res) * size_t(res));
     std::vector<Hit> hits(batch.size());
     std::vector<uint32_t> local;
+    std::vector<Hit> tied;
     uint64_t hitCount = 0;
     for (int face = 0; face < 6; ++face) {
       const int axis = face / 2;
@@ -87,10 +92,11 @@ SampledVisibility sampleVisibleFaces(const RayQuery& rays, const FlatTriangles& 
               Ray{origin, d, 0.0f, std::numeric_limits<float>::infinity()};
         }
       rays.firstHits(batch, hits);
-      for (const Hit& h : hits)
-        if (h.valid()) {
+      for (size_t r = 0; r < hits.size(); ++r)
+        if (hits[r].valid()) {
           ++hitCount;
-          local.push_back(h.triangle);
+          const uint32_t tri = seenTriangle(rays, batch[r], hits[r], tied);
+          if (tri != kNoHit) local.push_back(tri);
         }
     }
     std::sort(local.begin(), local.end());

@@ -4,15 +4,22 @@
 // face centres, its centre, then random interior points up to the requested
 // count. From each, R x R rays per cube-map face (through pixel centres) find
 // the first face hit. The union of those face IDs is a lower bound of the
-// exact visible set: every conservative PVS must contain it.
+// exact visible set: every conservative PVS must contain it. Faces count
+// as open sets: a ray whose first hit lies on the edge of a triangle turned
+// away from it only grazes that edge (over a roof's rim, through the corner
+// of a box) and credits a triangle turned towards it at the same distance,
+// or nothing.
 //
-// Viewpoints inside solid geometry (see insideSolid) are skipped and
-// counted: no one stands there.
+// Viewpoints for which SampledVisibilityOptions::skipViewpoint answers true
+// are skipped and counted. PVS checks pass the PVS contract's rule
+// (Solids::unservedViewpoint, common/world/solids.h): no one is served
+// inside solid geometry.
 //
 // Thread safety: sampleVisibleFaces may run concurrently; it uses TBB internally.
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "common/core/box.h"
@@ -24,24 +31,21 @@ struct SampledVisibilityOptions {
   size_t points = 32;    // viewpoints, including the 15 fixed ones
   int resolution = 128;  // rays per cube-map face side
   uint64_t seed = 1;
+  // Viewpoints to leave out (empty: none).
+  std::function<bool(const glm::vec3&)> skipViewpoint;
 };
 
 struct SampledVisibility {
   std::vector<uint32_t> faces;  // sorted, unique face IDs
   size_t viewpoints = 0;        // viewpoints used
-  size_t insideSolid = 0;       // viewpoints skipped because they lie inside solid geometry
+  size_t insideSolid = 0;       // viewpoints skipped by skipViewpoint
   uint64_t rays = 0;
   uint64_t hits = 0;
   double timeMs = 0.0;
 };
 
-// The viewpoints sampleVisibleFaces uses for a cell (before the inside-solid test).
+// The viewpoints sampleVisibleFaces uses for a cell (before skipViewpoint).
 std::vector<glm::vec3> cellViewpoints(const Box3f& cell, size_t points, uint64_t seed);
-
-// True if the point lies inside solid geometry: both rays of one axis, or
-// most of the six axis rays, hit back faces. A point on a surface counts as
-// outside.
-bool insideSolid(const RayQuery& rays, const glm::vec3& point);
 
 SampledVisibility sampleVisibleFaces(const RayQuery& rays, const FlatTriangles& triangles,
                                      const Box3f& cell,

@@ -211,6 +211,12 @@ Solids Solids::build(const FlatTriangles& tris) {
     s.groupOf_[c] = s.groupOf_[root];
     s.groupBounds_[s.groupOf_[c]].extend(s.components_[c].bounds);
   }
+  s.groupClosed_.assign(s.groupBounds_.size(), 1);
+  for (size_t c = 0; c < s.components_.size(); ++c) {
+    const SolidClass k = s.components_[c].kind;
+    if (k != SolidClass::ClosedOutward && k != SolidClass::ClosedInward)
+      s.groupClosed_[s.groupOf_[c]] = 0;
+  }
 
   // Groups by X/Z cell of their bounds.
   Box3f all;
@@ -233,6 +239,14 @@ SolidCensus Solids::census() const {
 }
 
 bool Solids::inside(const RayQuery& rays, const glm::vec3& p) const {
+  return insideGroup(rays, p, false);
+}
+
+bool Solids::insideClosed(const RayQuery& rays, const glm::vec3& p) const {
+  return insideGroup(rays, p, true);
+}
+
+bool Solids::insideGroup(const RayQuery& rays, const glm::vec3& p, bool closedOnly) const {
   if (grid_.empty()) return false;
   const auto listed = grid_.itemsIn(grid_.cellOf({p.x, p.z}));
   thread_local std::vector<uint32_t> candidates;
@@ -241,7 +255,7 @@ bool Solids::inside(const RayQuery& rays, const glm::vec3& p) const {
   thread_local std::vector<Hit> hits;
   candidates.clear();
   for (uint32_t g : listed)
-    if (groupBounds_[g].contains(p)) candidates.push_back(g);
+    if (groupBounds_[g].contains(p) && (!closedOnly || groupClosed_[g])) candidates.push_back(g);
   if (candidates.empty()) return false;
   odd.assign(candidates.size(), 0);
   parity.resize(candidates.size());
@@ -255,7 +269,9 @@ bool Solids::inside(const RayQuery& rays, const glm::vec3& p) const {
     rays.allHits(Ray{p, dir, 0.0f, tfar * 1.001f + 1e-3f}, hits);
     std::fill(parity.begin(), parity.end(), uint8_t(0));
     for (const Hit& h : hits) {
-      if (h.t == 0.0f) return false;  // on a surface: outside by convention
+      // On a surface: outside by convention, except on the surface of a
+      // closed solid for insideClosed (whose contract counts the surface in).
+      if (h.t == 0.0f) return closedOnly && groupClosed_[groupOf_[componentOf_[h.triangle]]];
       const uint32_t g = groupOf_[componentOf_[h.triangle]];
       for (size_t i = 0; i < candidates.size(); ++i)
         if (candidates[i] == g) parity[i] ^= 1;

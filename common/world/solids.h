@@ -82,13 +82,27 @@ class Solids {
   // the same triangles this was built from. A point on a surface is outside
   // by convention.
   bool inside(const RayQuery& rays, const glm::vec3& point) const;
+  // True if `point` lies inside or on the surface of a closed solid: a
+  // parity group whose components are all closed, manifold and consistently
+  // oriented (outward or inward); an eye on a wall's surface looks into the
+  // wall.
+  bool insideClosed(const RayQuery& rays, const glm::vec3& point) const;
+  // The viewpoint rule of the PVS contract (server/visibility/epsilon_pvs.h):
+  // a viewer inside any solid (inside()), or inside or on the surface of a
+  // closed one (insideClosed()), is not served.
+  bool unservedViewpoint(const RayQuery& rays, const glm::vec3& point) const {
+    return inside(rays, point) || insideClosed(rays, point);
+  }
 
  private:
   std::vector<uint32_t> componentOf_;
   std::vector<SolidComponent> components_;
-  std::vector<uint32_t> groupOf_;   // parity group of each component
-  std::vector<Box3f> groupBounds_;  // by group
-  XzGrid grid_;                     // groups by X/Z cell of their bounds
+  std::vector<uint32_t> groupOf_;     // parity group of each component
+  std::vector<Box3f> groupBounds_;    // by group
+  std::vector<uint8_t> groupClosed_;  // by group: every component closed and consistently oriented
+  XzGrid grid_;                       // groups by X/Z cell of their bounds
+
+  bool insideGroup(const RayQuery& rays, const glm::vec3& point, bool closedOnly) const;
 };
 
 }  // namespace vistream

@@ -70,6 +70,7 @@ StaticWorld buildStaticWorld(const Scene& scene, const StaticWorldOptions& optio
   if (w.ground.y) spdlog::info("scene '{}': ground {}", scene.name, w.ground.why);
   if (options.parts == StaticWorldParts::Ground) return w;
   w.solids = Solids::build(*w.triangles);
+  if (options.parts == StaticWorldParts::Solids) return w;
   FreeSpaceOptions fo = options.freeSpace;
   fo.groundY = w.ground.y;
   w.freeSpace = FreeSpace::build(*w.rays, w.solids, scene.bounds(), fo);

@@ -53,7 +53,8 @@ struct GroundPlane {
 enum class StaticWorldParts : uint8_t {
   Rays,       // triangles and the ray query
   Ground,     // + the ground decision
-  FreeSpace,  // + solids and free space
+  Solids,     // + solids
+  FreeSpace,  // + free space
 };
 
 struct StaticWorldOptions {
@@ -67,7 +68,7 @@ struct StaticWorld {
   // stays valid when the StaticWorld moves.
   std::unique_ptr<const FlatTriangles> triangles;
   std::unique_ptr<RayQuery> rays;
-  Solids solids;        // empty unless parts == FreeSpace
+  Solids solids;        // empty unless parts >= Solids
   GroundPlane ground;   // no plane unless parts >= Ground
   FreeSpace freeSpace;  // empty unless parts == FreeSpace
 };

@@ -345,16 +345,22 @@ int runPvsTool(int argc, char** argv) {
   auto* cell = app.add_subcommand("cell", "the PVS of one view cell");
   std::string scene, cellText, method = "paper";
   bool asJson = false, noBbox = false, noIncremental = false, noRedundantOccluders = false,
-       noRedundantRays = false;
+       noRedundantRays = false, noBackFaces = false;
   size_t largeOccluders = 0;
+  // The PVS stages every subcommand that computes a PVS can switch off.
+  auto addPvsStageFlags = [&](CLI::App* sub) {
+    sub->add_flag("--no-bbox", noBbox, "skip the bounding-box stage");
+    sub->add_flag("--no-incremental", noIncremental, "every line traverses the space on its own");
+    sub->add_flag("--no-redundant-occluders", noRedundantOccluders,
+                  "keep occluded objects as occluders");
+    sub->add_flag("--no-redundant-rays", noRedundantRays, "cast every corner-vertex line");
+    sub->add_flag("--no-back-faces", noBackFaces,
+                  "keep faces of closed outward solids that face away from the whole cell");
+  };
   cell->add_option("--scene", scene, "SCENE")->required();
   cell->add_option("--cell", cellText, "x0,y0,z0,x1,y1,z1 in file coordinates")->required();
   cell->add_option("--method", method, "paper (single convex occluders) or fused");
-  cell->add_flag("--no-bbox", noBbox, "skip the bounding-box stage");
-  cell->add_flag("--no-incremental", noIncremental, "every line traverses the space on its own");
-  cell->add_flag("--no-redundant-occluders", noRedundantOccluders,
-                 "keep occluded objects as occluders");
-  cell->add_flag("--no-redundant-rays", noRedundantRays, "cast every corner-vertex line");
+  addPvsStageFlags(cell);
   cell->add_option("--large-occluders", largeOccluders,
                    "use only the K largest occluders by solid angle (0: all)")
       ->check(atLeast<size_t>(0));
@@ -381,11 +387,7 @@ int runPvsTool(int argc, char** argv) {
   bake->add_option("--shard", shard, "i/n: bake only shard i of n (merge shards with 'merge')");
   bake->add_option("--out,-o", out, "output database")->required();
   bake->add_flag("--no-coarse-to-fine", noCoarse, "bake every cell from scratch");
-  bake->add_flag("--no-bbox", noBbox, "skip the bounding-box stage");
-  bake->add_flag("--no-incremental", noIncremental, "every line traverses the space on its own");
-  bake->add_flag("--no-redundant-occluders", noRedundantOccluders,
-                 "keep occluded objects as occluders");
-  bake->add_flag("--no-redundant-rays", noRedundantRays, "cast every corner-vertex line");
+  addPvsStageFlags(bake);
   bake->add_flag("--json", asJson, "statistics as JSON");
   addSceneLimits(bake);
   addGroundOption(*bake, ground);
@@ -481,6 +483,7 @@ int runPvsTool(int argc, char** argv) {
     options.incremental = !noIncremental;
     options.dropOccludedOccluders = !noRedundantOccluders;
     options.removeRedundantLines = !noRedundantRays;
+    options.backFaces = !noBackFaces;
     return options;
   };
   return runToolApp("vistream-pvs", app, argc, argv, logLevel, [&]() -> int {

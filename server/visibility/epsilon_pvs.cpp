@@ -24,6 +24,7 @@
 
 #include "common/core/check.h"
 #include "common/core/timer.h"
+#include "common/world/solids.h"
 
 namespace vistream {
 
@@ -31,6 +32,11 @@ struct EpsilonPvs::Face {
   uint32_t id = 0;
   std::vector<glm::dvec3> vertices;
   std::vector<std::pair<uint8_t, uint8_t>> keptLines;  // (cell corner pattern, vertex index)
+  // One-sided faces only (every non-degenerate triangle in a closed,
+  // consistently outward solid): the triangles as indices into `vertices`,
+  // wound as in the scene. Empty: the face is two-sided.
+  std::vector<std::array<uint8_t, 3>> oneSided;
+  uint32_t solid = kNoHit;  // one-sided faces: their component (EpsilonPvs::solidBounds_)
 };
 
 // A spatially compact group of one object's faces with its bounding box:
@@ -113,9 +119,44 @@ void splitGroups(std::vector<EpsilonPvs::Face>& faces, uint32_t first, uint32_t 
 
 }  // namespace
 
+namespace {
+
+// Which faces may be culled for facing away: those whose every
+// non-degenerate triangle lies in one closed, manifold, consistently outward
+// component (common/world/solids.h). Per face the component's index into
+// `bounds`, or kNoHit for a two-sided face.
+struct OneSidedFaces {
+  std::vector<uint32_t> solidOf;  // by face ID
+  std::vector<Box3f> bounds;      // by component
+};
+
+OneSidedFaces oneSidedFaces(const Scene& scene) {
+  const FlatTriangles flat = flattenScene(scene, /*staticOnly=*/true);
+  const Solids solids = Solids::build(flat);
+  constexpr uint32_t kUnseen = kNoHit - 1;
+  OneSidedFaces out;
+  out.solidOf.assign(scene.faceCount, kUnseen);
+  for (size_t t = 0; t < flat.size(); ++t) {
+    const uint32_t face = flat.faceIds[t];
+    if (face >= out.solidOf.size() || flat.degenerate[t]) continue;
+    const uint32_t c = solids.componentOf(uint32_t(t));
+    const bool outward = c != kNoHit && solids.components()[c].kind == SolidClass::ClosedOutward;
+    uint32_t& s = out.solidOf[face];
+    s = outward && (s == kUnseen || s == c) ? c : kNoHit;
+  }
+  for (uint32_t& s : out.solidOf)
+    if (s == kUnseen) s = kNoHit;
+  for (const SolidComponent& c : solids.components()) out.bounds.push_back(c.bounds);
+  return out;
+}
+
+}  // namespace
+
 EpsilonPvs::EpsilonPvs(const Scene& scene, const OccluderOptions& occluderOptions) : scene_(scene) {
   Stopwatch clock;
   occluders_ = extractOccluders(scene, occluderOptions);
+  OneSidedFaces oneSided = oneSidedFaces(scene);
+  solidBounds_ = std::move(oneSided.bounds);
   std::vector<Box3f> bounds;
   bounds.reserve(occluders_.occluders.size());
   for (const auto& o : occluders_.occluders) bounds.push_back(o.bounds);
@@ -128,20 +169,31 @@ EpsilonPvs::EpsilonPvs(const Scene& scene, const OccluderOptions& occluderOption
     e.object = oi;
     e.dynamic = o.dynamic;
     e.bounds = o.bounds;
-    std::map<uint32_t, std::vector<glm::dvec3>> byFace;
+    std::map<uint32_t, Face> byFace;
     for (size_t t = 0; t < o.mesh.triangles.size(); ++t) {
-      auto& verts = byFace[o.mesh.faceIds[t]];
+      Face& f = byFace[o.mesh.faceIds[t]];
+      std::array<size_t, 3> corner{};
       for (int k = 0; k < 3; ++k) {
         const glm::dvec3 v(o.mesh.positions[o.mesh.triangles[t][k]]);
-        if (std::find(verts.begin(), verts.end(), v) == verts.end()) verts.push_back(v);
+        const auto it = std::find(f.vertices.begin(), f.vertices.end(), v);
+        corner[size_t(k)] = size_t(it - f.vertices.begin());
+        if (it == f.vertices.end()) f.vertices.push_back(v);
       }
+      const bool distinct =
+          corner[0] != corner[1] && corner[1] != corner[2] && corner[0] != corner[2];
+      if (distinct && corner[0] < 255 && corner[1] < 255 && corner[2] < 255)
+        f.oneSided.push_back({uint8_t(corner[0]), uint8_t(corner[1]), uint8_t(corner[2])});
     }
-    for (auto& [id, verts] : byFace) {
-      Face f;
+    for (auto& [id, f] : byFace) {
       f.id = id;
-      f.vertices = std::move(verts);
       VS_CHECK_LE(f.vertices.size(), 255u * 3u);
       if (f.vertices.size() <= 255) f.keptLines = keptLinesFor(f.vertices);
+      f.solid = id < oneSided.solidOf.size() ? oneSided.solidOf[id] : kNoHit;
+      if (f.vertices.size() > 255 || f.solid == kNoHit) {
+        f.oneSided.clear();
+        f.solid = kNoHit;
+      }
+      f.oneSided.shrink_to_fit();
       e.faces.push_back(std::move(f));
     }
     splitGroups(e.faces, 0, uint32_t(e.faces.size()), e.groups);
@@ -189,6 +241,30 @@ void splitGroups(std::vector<EpsilonPvs::Face>& faces, uint32_t first, uint32_t 
   });
   splitGroups(faces, first, count / 2, out);
   splitGroups(faces, first + count / 2, count - count / 2, out);
+}
+
+// True if the closed cell lies strictly behind the plane of every triangle
+// of a one-sided face, by more than the rounding margin, and does not meet
+// the face's solid (`solid`, its bounds): no point of the cell sees the
+// face's front, and none lies inside the solid or on its surface (a point
+// on the surface would look into the solid past the surface it stands on).
+// In double from float inputs: the cross product and the box support are
+// exact to a few ulps, far below the margin.
+bool facesAway(const EpsilonPvs::Face& f, const Box3f& cell, const Box3f& solid) {
+  if (f.oneSided.empty() || cell.overlaps(solid)) return false;
+  const glm::dvec3 centre(cell.center()), half(0.5 * (glm::dvec3(cell.hi) - glm::dvec3(cell.lo)));
+  const double magnitude =
+      std::max(glm::length(glm::dvec3(cell.hi)), glm::length(glm::dvec3(cell.lo)));
+  for (const auto& t : f.oneSided) {
+    const glm::dvec3& a = f.vertices[t[0]];
+    const glm::dvec3 n = glm::cross(f.vertices[t[1]] - a, f.vertices[t[2]] - a);
+    const double len = glm::length(n);
+    if (!(len > 0.0)) return false;
+    // The largest signed distance of a cell point from the plane, times |n|.
+    const double support = glm::dot(n, centre - a) + glm::dot(glm::abs(n), half);
+    if (!(support < -occluderMargin(std::max(magnitude, glm::length(a))) * len)) return false;
+  }
+  return true;
 }
 
 }  // namespace
@@ -398,6 +474,10 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
            std::binary_search(options.candidateFaces->begin(), options.candidateFaces->end(), face);
   };
 
+  auto faceAway = [&](const Face& f) {
+    return f.solid != kNoHit && facesAway(f, cell, solidBounds_[f.solid]);
+  };
+
   double boxMs = 0.0, faceMs = 0.0;
   for (uint32_t idx : order) {
     const ObjectEntry& e = objects_[idx];
@@ -415,6 +495,17 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
           any = isCandidate(e.faces[fi].id);
         if (!any) {
           stats.facesOccluded += g.faceCount;
+          continue;
+        }
+      }
+      if (options.backFaces) {
+        // A group facing away from the cell entirely needs no box stage.
+        uint32_t away = 0;
+        for (uint32_t fi = g.firstFace; fi < g.firstFace + g.faceCount; ++fi)
+          away += faceAway(e.faces[fi]);
+        if (away == g.faceCount) {
+          stats.facesBackFacing += away;
+          stats.facesOccluded += away;
           continue;
         }
       }
@@ -444,6 +535,11 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
       for (uint32_t fi = g.firstFace; fi < g.firstFace + g.faceCount; ++fi) {
         const Face& f = e.faces[fi];
         if (!isCandidate(f.id)) {
+          ++stats.facesOccluded;
+          continue;
+        }
+        if (options.backFaces && faceAway(f)) {
+          ++stats.facesBackFacing;
           ++stats.facesOccluded;
           continue;
         }

@@ -9,7 +9,30 @@
 // points hidden from a viewpoint, so blocking the lines between the cell's
 // corners and the occludee's vertices hides the occludee from every point of
 // the cell. The PVS is therefore valid for any viewpoint in the closed cell
-// and any view direction (frustum culling stays on the client).
+// outside closed solids, and any view direction (frustum culling stays on
+// the client).
+//
+// Viewpoints inside solids, or on the surface of closed ones, are not
+// served (Solids::unservedViewpoint, common/world/solids.h). A solid
+// occluder is the inside of a closed mesh: it blocks a line only because the
+// line must cross the mesh's surface to enter it, which holds for viewpoints
+// outside it. A cell that reaches into a closed building (a street cell
+// 0.4 m into a facade) therefore misses what is seen from inside the
+// building (its far wall from behind); no viewer stands there. The same
+// holds inside open solids (a wall box without its bottom face) and for an
+// eye on a closed solid's surface, which looks into the solid.
+//
+// Back faces (PvsOptions::backFaces, on by default): a face whose every
+// triangle belongs to a closed, manifold, consistently OUTWARD component is
+// culled when the closed cell lies strictly behind every triangle's plane
+// (by a rounding margin) and does not meet the solid's bounding box (so no
+// viewpoint of the cell lies inside the solid or on its surface). From a
+// viewpoint outside the solid, a line reaching
+// such a face from behind was inside the solid just before, so it crossed
+// the surface earlier and the face is not the first thing it meets. Faces of
+// open, non-manifold, inconsistently wound and inward-wound components stay
+// two-sided (inward meshes are ambiguous: a solid exported inside out, or a
+// room to be seen from inside).
 //
 // The paper's accelerations, each switchable (PvsOptions):
 //  - bounding-box stage: an object whose bounding box is hidden is culled
@@ -54,6 +77,7 @@ struct PvsOptions {
   bool dropOccludedOccluders = true;  // --no-redundant-occluders
   bool removeRedundantLines = true;   // --no-redundant-rays
   size_t largeOccluders = 0;          // 0: every occluder; K: the K largest by solid angle
+  bool backFaces = true;              // --no-back-faces: keep faces that face away from the cell
   // Coarse-to-fine: when non-null, only these faces (sorted) can be in the PVS.
   const std::vector<uint32_t>* candidateFaces = nullptr;
 };
@@ -78,6 +102,7 @@ struct PvsStats {
   size_t faces = 0;          // faces considered
   size_t facesOccluded = 0;  // culled in total (box stage included)
   size_t facesCulledByBoxStage = 0;
+  size_t facesBackFacing = 0;  // culled because they face away from the whole cell
 
   // Every field above, once: `vistream-pvs cell` prints its JSON and its
   // table from this list (common/core/stats_output.h).
@@ -104,10 +129,11 @@ struct PvsStats {
     f(StatField{"faces_occluded", "faces occluded", ""}, facesOccluded);
     f(StatField{"faces_culled_by_box_stage", "faces culled by box stage", ""},
       facesCulledByBoxStage);
+    f(StatField{"faces_back_facing", "faces facing away from the cell", ""}, facesBackFacing);
   }
 };
-// 17 fields of 8 bytes: a field added above must be added to forEachField too.
-static_assert(sizeof(PvsStats) == 17 * 8, "PvsStats changed: update PvsStats::forEachField");
+// 18 fields of 8 bytes: a field added above must be added to forEachField too.
+static_assert(sizeof(PvsStats) == 18 * 8, "PvsStats changed: update PvsStats::forEachField");
 
 struct PvsResult {
   std::vector<uint32_t> faces;    // sorted face IDs of the PVS
@@ -148,6 +174,7 @@ class EpsilonPvs {
   KdTree occluderTree_;
   std::vector<ObjectEntry> objects_;
   std::vector<std::pair<uint32_t, uint32_t>> faceIndex_;  // face ID -> (object entry, face), or ~0u
+  std::vector<Box3f> solidBounds_;  // bounds of the closed components of one-sided faces
   double prepareMs_ = 0.0;
 
   friend struct PvsQuery;

@@ -39,8 +39,9 @@ uint64_t bakeFingerprint(const PvsDatabaseHeader& h, const BakeOptions& o) {
   f = fnv1a64(h.method.data(), h.method.size(), f);
   const uint32_t shard[2] = {o.shardIndex, o.shardCount};
   f = fnv1a64(shard, sizeof shard, f);
-  const uint8_t flags[5] = {o.pvs.boxStage, o.pvs.incremental, o.pvs.dropOccludedOccluders,
-                            o.pvs.removeRedundantLines, o.coarseToFine};
+  const uint8_t flags[6] = {
+      o.pvs.boxStage, o.pvs.incremental, o.pvs.dropOccludedOccluders, o.pvs.removeRedundantLines,
+      o.coarseToFine, o.pvs.backFaces};
   f = fnv1a64(flags, sizeof flags, f);
   const uint64_t large = o.pvs.largeOccluders;
   return fnv1a64(&large, sizeof large, f);
@@ -328,7 +329,7 @@ BakeReport bakePvs(const Scene& scene, const EpsilonPvs& pvs, const FreeSpace& f
   header.gridLo = grid.origin();
   header.cellSize = grid.cellSize();
   header.dims = grid.dims();
-  header.method = "paper";
+  header.method = options.pvs.backFaces ? "paper+back-faces" : "paper";
 
   // Blocks of 2 x 1 x 2 cells: the coarse level, and the unit of sharding.
   std::map<uint64_t, std::vector<uint32_t>> blocks;

@@ -44,17 +44,25 @@ TEST(SampledVisibility, SeesTheFrontOfABoxButNotItsGrazedTopOrSides) {
   EXPECT_EQ(vis.faces, (std::vector<uint32_t>{ground, target + testing::kPlusZ}));
 }
 
-TEST(SampledVisibility, SkipsViewpointsInsideSolidGeometry) {
+TEST(SampledVisibility, SkipsAndCountsTheViewpointsItsRuleExcludes) {
   World w;
   addGround(w.scene, -50, -50, 50, 50);
   addBox(w.scene, "block", {-5, 0, -5}, {5, 5, 5});
   w.build();
+  const Box3f cell({-1, 1, 8}, {1, 2, 10});
   SampledVisibilityOptions options;
   options.points = 20;
-  const auto vis = sampleVisibleFaces(*w.rays, w.triangles, Box3f({-1, 1, -1}, {1, 2, 1}), options);
-  EXPECT_EQ(vis.insideSolid, 20u);
-  EXPECT_EQ(vis.viewpoints, 0u);
-  EXPECT_TRUE(vis.faces.empty());
+  options.skipViewpoint = [](const glm::vec3& p) { return p.x < 0.0f; };
+  size_t left = 0;
+  for (const glm::vec3& p : cellViewpoints(cell, options.points, options.seed)) left += p.x < 0.0f;
+  ASSERT_GT(left, 0u);
+  const auto vis = sampleVisibleFaces(*w.rays, w.triangles, cell, options);
+  EXPECT_EQ(vis.insideSolid, left);
+  EXPECT_EQ(vis.viewpoints, 20u - left);
+  options.skipViewpoint = [](const glm::vec3&) { return true; };
+  const auto none = sampleVisibleFaces(*w.rays, w.triangles, cell, options);
+  EXPECT_EQ(none.viewpoints, 0u);
+  EXPECT_TRUE(none.faces.empty());
 }
 
 TEST(SampledVisibility, UsesTheCornersFaceCentresAndCentreOfTheCell) {
@@ -89,30 +97,6 @@ TEST(SampledVisibility, EmbreeAndBruteForceSeeTheSameFaces) {
   const auto b = sampleVisibleFaces(*brute, w.triangles, cell, options);
   EXPECT_EQ(a.faces, b.faces);
   EXPECT_GT(a.faces.size(), 10u);
-}
-
-}  // namespace
-}  // namespace vistream
-
-namespace vistream {
-namespace {
-
-TEST(InsideSolid, APointInsideAThinWallBetweenFloorAndCeilingIsInside) {
-  // A 0.2 m wall standing on a floor and touching a ceiling, crossed by a
-  // second wall: the floor, ceiling and crossing wall give four front-face
-  // hits against two back-face hits, but both rays across the wall's
-  // thickness leave through its own faces.
-  Scene s;
-  testing::addGround(s, -10, -10, 10, 10);
-  testing::addBox(s, "ceiling", {-10, 3, -10}, {10, 3.2f, 10});
-  testing::addBox(s, "wall", {-5, 0, -0.1f}, {5, 3, 0.1f});
-  testing::addBox(s, "cross", {2, 0, -5}, {2.2f, 3, 5});
-  finalizeScene(s);
-  const FlatTriangles tris = flattenScene(s);
-  const auto rays = makeEmbreeRayQuery(tris);
-  EXPECT_TRUE(insideSolid(*rays, {0.5f, 1.5f, 0.05f}));
-  EXPECT_FALSE(insideSolid(*rays, {0.5f, 1.5f, 0.5f}));   // in the room beside it
-  EXPECT_FALSE(insideSolid(*rays, {0.5f, 1.5f, -0.5f}));  // in the room behind it
 }
 
 }  // namespace

@@ -23,6 +23,7 @@ struct Built {
   }
   size_t count(SolidClass c) const { return solids.census().components[size_t(c)]; }
   bool inside(glm::vec3 p) const { return solids.inside(*rays, p); }
+  bool insideClosed(glm::vec3 p) const { return solids.insideClosed(*rays, p); }
 };
 
 TEST(Solids, AClosedCubeIsOutwardOrInwardBySignedVolume) {
@@ -113,6 +114,49 @@ TEST(Solids, ASheetBelowOrAboveAPointDoesNotContainIt) {
   b.build();
   EXPECT_EQ(b.count(SolidClass::Open), 2u);
   EXPECT_FALSE(b.inside({0, 1, 0}));
+}
+
+TEST(Solids, OnlyClosedConsistentlyWoundSolidsAreInsideClosedAndAnySolidHoldsUnservedViewpoints) {
+  // insideClosed answers for closed, consistently wound solids only (either
+  // way round), surface included; the PVS contract's rule adds the inside of
+  // any solid.
+  struct Case {
+    Winding winding;
+    bool bottom;
+    bool closed;
+  };
+  for (const Case c :
+       {Case{Winding::Outward, true, true}, Case{Winding::Inward, true, true},
+        Case{Winding::SidesInward, true, false}, Case{Winding::Outward, false, false}}) {
+    Built b;
+    addWoundBox(b.scene, "block", {0, 0, 0}, {10, 6, 10}, c.winding, c.bottom);
+    b.build();
+    EXPECT_TRUE(b.inside({5, 1, 5}));
+    EXPECT_EQ(b.insideClosed({5, 1, 5}), c.closed) << int(c.winding) << c.bottom;
+    EXPECT_TRUE(b.solids.unservedViewpoint(*b.rays, {5, 1, 5})) << "inside any solid";
+    EXPECT_EQ(b.solids.unservedViewpoint(*b.rays, {5, 6, 5}), c.closed) << "on the roof";
+    EXPECT_FALSE(b.solids.unservedViewpoint(*b.rays, {-1, 1, 5}));
+    EXPECT_FALSE(b.insideClosed({-1, 1, 5}));
+    EXPECT_EQ(b.insideClosed({5, 6, 5}), c.closed) << "the surface of a closed solid counts in";
+    EXPECT_FALSE(b.insideClosed({5, 6.01f, 5}));
+  }
+}
+
+TEST(Solids, APointInsideAThinWallBetweenFloorAndCeilingIsInsideAClosedSolid) {
+  // A 0.2 m wall standing on a floor and touching a ceiling, crossed by a
+  // second wall: the floor, ceiling and crossing wall are hit on the way out
+  // of the wall, but they belong to other parity groups.
+  for (const Winding w : {Winding::Outward, Winding::Inward}) {
+    Built b;
+    addWoundBox(b.scene, "floor", {-10, -0.2f, -10}, {10, 0, 10}, w);
+    addWoundBox(b.scene, "ceiling", {-10, 3, -10}, {10, 3.2f, 10}, w);
+    addWoundBox(b.scene, "wall", {-5, 0, -0.1f}, {5, 3, 0.1f}, w);
+    addWoundBox(b.scene, "cross", {2, 0, -5}, {2.2f, 3, 5}, w);
+    b.build();
+    EXPECT_TRUE(b.insideClosed({0.5f, 1.5f, 0.05f}));
+    EXPECT_FALSE(b.insideClosed({0.5f, 1.5f, 0.5f}));   // in the room beside it
+    EXPECT_FALSE(b.insideClosed({0.5f, 1.5f, -0.5f}));  // in the room behind it
+  }
 }
 
 }  // namespace

@@ -38,6 +38,7 @@ PvsStats distinctPvsStats() {
   s.faces = 115;
   s.facesOccluded = 116;
   s.facesCulledByBoxStage = 117;
+  s.facesBackFacing = 118;
   return s;
 }
 
@@ -61,10 +62,11 @@ const std::map<std::string, std::pair<std::string, std::string>> kPvsFields = {
     {"faces_total", {"faces considered", "115"}},
     {"faces_occluded", {"faces occluded", "116"}},
     {"faces_culled_by_box_stage", {"faces culled by box stage", "117"}},
+    {"faces_back_facing", {"faces facing away from the cell", "118"}},
 };
-// Three doubles and fourteen 8-byte counts: a member added to PvsStats
+// Three doubles and fifteen 8-byte counts: a member added to PvsStats
 // without a line above fails here.
-static_assert(sizeof(PvsStats) == 17 * 8);
+static_assert(sizeof(PvsStats) == 18 * 8);
 
 std::vector<std::string> linesOf(const std::string& text) {
   std::vector<std::string> lines;
