@@ -37,6 +37,7 @@
 #include "common/world/free_space.h"
 #include "tests/common/support/box_scenes.h"
 #include "tests/common/support/pvs_truth.h"
+#include "tests/common/world/wound_boxes.h"
 
 namespace vistream {
 namespace {
@@ -730,6 +731,75 @@ TEST(EpsilonPvs, DynamicObjectsAreAlwaysInThePvsAndNeverOcclude) {
     }
     EXPECT_TRUE(holdsGroundTruth(w, kCell, r));
   }
+}
+
+// --- Back faces -------------------------------------------------------------
+
+// Five boxes around a 2 m cell, each wound as its case says; a box's side
+// facing the cell is its front, the side opposite and the ones behind their
+// planes face away.
+struct WoundCase {
+  const char* name;
+  testing::Winding winding;
+  bool bottom;
+  bool culledForFacing;  // only closed, consistently outward boxes
+};
+
+TEST(EpsilonPvs, BackFacesAreCulledOnlyOnClosedOutwardSolidsAndTheGroundTruthHolds) {
+  const Box3f cell({-1, 1, -1}, {1, 2, 1});
+  for (const WoundCase& c : {WoundCase{"closed outward", testing::Winding::Outward, true, true},
+                             WoundCase{"closed inward", testing::Winding::Inward, true, false},
+                             WoundCase{"inconsistent", testing::Winding::SidesInward, true, false},
+                             WoundCase{"open below", testing::Winding::Outward, false, false}}) {
+    SCOPED_TRACE(c.name);
+    World w;
+    testing::addGround(w.scene(), -40, -40, 40, 40);
+    // Boxes around the cell, none touching it; the ground is an open sheet.
+    const glm::vec3 centres[] = {{0, 0, -12}, {0, 0, 12}, {-12, 0, 0}, {12, 0, 0}, {9, 0, 9}};
+    std::vector<uint32_t> firstFace;
+    for (const glm::vec3& o : centres) {
+      firstFace.push_back(w.scene().faceCount);
+      testing::addWoundBox(w.scene(), "box", o + glm::vec3(-3, 0, -3), o + glm::vec3(3, 5, 3),
+                           c.winding, c.bottom);
+    }
+    const PvsResult culled = w.compute(cell, PvsOptions{});
+    const PvsResult paperOnly = w.compute(cell, paper());
+    EXPECT_TRUE(includes(paperOnly.faces, culled.faces)) << "back faces only remove faces";
+    EXPECT_TRUE(holdsGroundTruth(w, cell, culled));
+    // The box at z in [-15, -9]: the cell lies in front of its +z face and
+    // strictly behind the planes of its -z face (z = -15) and its top
+    // (y = 5): those two face away.
+    const uint32_t box = firstFace[0];
+    const uint32_t minusZ = box + 2, top = box + 4;  // boxLoops order: -x, +x, -z, +z, +y, -y
+    EXPECT_EQ(culled.stats.facesBackFacing > 0, c.culledForFacing);
+    for (const uint32_t f : {minusZ, top}) {
+      const bool inPaper = std::binary_search(paperOnly.faces.begin(), paperOnly.faces.end(), f);
+      if (!inPaper) continue;  // hidden by occlusion already
+      EXPECT_EQ(inPvs(culled, f), !c.culledForFacing) << "face " << f;
+    }
+    // The side facing the cell (+z at z = -9) stays whatever the winding.
+    EXPECT_TRUE(inPvs(culled, box + 3));
+  }
+}
+
+TEST(EpsilonPvs, ACellTouchingAClosedBoxKeepsThatBoxsBackFaces) {
+  // The cell's -z side lies in the plane of the box's +z face (z = -9): an
+  // eye there stands on the box's surface, so the box's faces stay
+  // two-sided; the box further away still loses its back faces.
+  World w;
+  testing::addGround(w.scene(), -40, -40, 40, 40);
+  const uint32_t near = w.scene().faceCount;
+  testing::addWoundBox(w.scene(), "near", {-3, 0, -15}, {3, 5, -9}, testing::Winding::Outward);
+  const uint32_t far = w.scene().faceCount;
+  testing::addWoundBox(w.scene(), "far", {20, 0, 20}, {26, 5, 26}, testing::Winding::Outward);
+  const Box3f cell({-1, 1, -9}, {1, 2, -7});
+  const PvsResult r = w.compute(cell, PvsOptions{});
+  const PvsResult p = w.compute(cell, paper());
+  for (uint32_t f = near; f < near + 6; ++f)
+    EXPECT_EQ(inPvs(r, f), inPvs(p, f)) << "near box face " << f;
+  EXPECT_FALSE(inPvs(r, far + 1)) << "the far box's +x face faces away";
+  EXPECT_FALSE(inPvs(r, far + 4)) << "the far box's top faces away";
+  EXPECT_TRUE(holdsGroundTruth(w, cell, r));
 }
 
 // --- The accelerations must not change the answer -------------------------
