@@ -11,7 +11,7 @@ packages=(
   libboost-dev libflatbuffers-dev flatbuffers-compiler libglm-dev libglfw3-dev
   libembree-dev libspdlog-dev libfmt-dev libtbb-dev libepoxy-dev
   libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev
-  libtinyobjloader-dev libtinygltf-dev libstb-dev libmeshoptimizer-dev
+  libtinyobjloader-dev libtinygltf-dev libstb-dev libmeshoptimizer-dev libzstd-dev
   # headless OpenGL for tests (Mesa llvmpipe under Xvfb)
   xvfb xauth libgl1-mesa-dri libgl1-mesa-dev
   # plots in benchmarks; the demo's result check

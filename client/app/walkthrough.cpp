@@ -86,6 +86,7 @@ struct Means {
   PixelCounts pixelSums;
   StageTimes msSums;
   double frames = 1.0;
+  double intakeMs = 0, wallMs = 0;  // sums
   double differing = 0, colourError = 0;
   size_t compared = 0;
 
@@ -107,6 +108,8 @@ Means means(const std::vector<FrameRecord>& frames) {
   for (const FrameRecord& f : frames) {
     m.pixelSums += f.report.pixels;
     m.msSums += f.report.ms;
+    m.intakeMs += f.geometryIntakeMs;
+    m.wallMs += f.wallMs;
     if (f.compared) {
       ++m.compared;
       m.differing += f.difference.differingFraction;
@@ -134,6 +137,8 @@ nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const Pip
     j["frame"] = f.frame;
     j["t"] = f.t;
     j["frame_ms"] = f.report.ms.total;
+    j["geometry_intake_ms"] = f.geometryIntakeMs;
+    j["wall_ms"] = f.wallMs;
     if (f.compared)
       j["error"] = {{"differing_fraction", f.difference.differingFraction},
                     {"mean_colour_error", f.difference.meanColourError}};
@@ -160,6 +165,9 @@ nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const Pip
   nlohmann::json out = {
       {"frames", frames.size()},
       {"mean_frame_ms", m.frameMs()},
+      {"geometry_intake_ms_total", m.intakeMs},
+      {"geometry_intake_ms_per_frame", m.intakeMs / m.frames},
+      {"wall_ms_per_frame", m.wallMs / m.frames},
       {"pixels", pixels},
       {"mean_stage_ms", stageMs},
       {"mode", renderModeName(o.mode)},
@@ -196,6 +204,9 @@ std::string walkthroughTable(const std::vector<FrameRecord>& frames, const Pipel
   s += fmt::format("\n{:<28} {:>12}\n", "stage (mean)", "ms");
   m.forEachStageMean(
       [&](const StatField& f, double v) { s += fmt::format("{:<28} {:>12.3f}\n", f.label, v); });
+  s += fmt::format("{:<28} {:>12.3f}\n", "geometry intake", m.intakeMs / m.frames);
+  s += fmt::format("{:<28} {:>12.3f}\n", "wall clock (intake + frame)", m.wallMs / m.frames);
+  s += fmt::format("geometry intake: {:.1f} ms in total\n", m.intakeMs);
   if (m.compared)
     s += fmt::format("\nagainst raycast-all: {:.3f}% of pixels differ, mean colour error {:.5f}\n",
                      100.0 * m.differing, m.colourError);

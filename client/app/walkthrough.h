@@ -38,13 +38,21 @@ struct FrameRecord {
   size_t frame = 0;
   double t = 0.0;
   FrameReport report;
+  // Taking up the geometry that arrived before this frame (connected
+  // clients: adding and evicting faces in the scene, grids and cache), ms.
+  double geometryIntakeMs = 0.0;
+  // Wall-clock ms of the frame: geometry intake plus rendering (not the wait
+  // for the server, nor the comparison against the reference or writing PNGs).
+  double wallMs = 0.0;
   bool compared = false;
   ImageDifference difference;
 };
 
 // The headless JSON contract: frames, mean_frame_ms, pixels (means of
 // polygon, horizon, cache, ray_hit, ray_miss), per_frame records, plus
-// extensions (mode, size, stage summaries, error against the reference).
+// extensions (mode, size, stage summaries, error against the reference,
+// geometry_intake_ms_total, geometry_intake_ms_per_frame, wall_ms_per_frame;
+// per frame geometry_intake_ms and wall_ms).
 nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames,
                                const PipelineOptions& options, int width, int height);
 // The same for people: an aligned table of pixel classes and stage times.

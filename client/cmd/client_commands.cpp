@@ -22,6 +22,7 @@
 #include "client/gl/gl_window.h"
 #include "client/net/stream_client.h"
 #include "client/render/render_geometry.h"
+#include "client/render/streamed_geometry.h"
 #include "common/cmd/cli.h"
 #include "common/core/error.h"
 #include "common/core/log.h"
@@ -29,7 +30,6 @@
 #include "common/core/timer.h"
 #include "common/generate/path.h"
 #include "common/generate/scene_spec.h"
-#include "common/raycast/embree_ray_query.h"
 #include "common/world/static_world.h"
 
 namespace vistream {
@@ -42,6 +42,7 @@ struct Args {
   GroundChoice ground;  // for --path auto
   uint16_t port = 7070;
   bool headless = false, json = false, noCache = false, compare = false;
+  std::string intake = "incremental";
   size_t frames = 0;
   float vfov = 60.0f;
   float nearDistance = 0.0f;
@@ -128,43 +129,99 @@ void printSummary(const Args& a, const std::vector<FrameRecord>& records, const 
   }
 }
 
-// The geometry a renderer draws, and the renderer built over it. Local
-// scenes build it once; connected clients rebuild it when the server sent or
-// evicted geometry (at most every `minRebuildS` seconds).
+// The geometry a renderer draws, and the renderers built over it. A local
+// scene is built once. A connected client takes up what the server sent or
+// evicted as it comes (StreamedGeometry, FrameRenderer::update): renderers
+// are built again only when dead slots outnumber live ones (compaction) or
+// the near-field grid outgrows its limit.
 struct LiveGeometry {
-  std::unique_ptr<RenderGeometry> geometry;
+  static constexpr size_t kMaxRayBatches = 256;
+  std::unique_ptr<RenderGeometry> local;  // a local scene's geometry
+  StreamedGeometry streamed;              // a connected client's
   std::unique_ptr<FrameRenderer> renderer, reference;
   PipelineOptions options;
   bool sceneHasFarField = true;  // the scene as a whole reaches beyond d
   bool compare = false;
+  bool rebuildOnIntake = false;  // --intake rebuild: the old way, as a baseline
   uint64_t version = ~uint64_t(0);
-  size_t faces = 0;  // distinct face IDs held
-  Stopwatch sinceRebuild;
+  uint64_t generation = 0;  // changes whenever the drawn triangles change (OpenGL uploads again)
+  size_t rebuilds = 0;      // renderers built (the first included)
+  Stopwatch sinceIntake;
 
-  void set(RenderGeometry g) {
+  const RenderGeometry& geometry() const { return local ? *local : streamed.geometry(); }
+  size_t faces() const {
+    if (!local) return streamed.faces();
+    std::vector<uint32_t> ids = local->triangles.faceIds;
+    std::sort(ids.begin(), ids.end());
+    return size_t(std::unique(ids.begin(), ids.end()) - ids.begin());
+  }
+
+  void updateFarField() {
+    const RenderGeometry& g = geometry();
+    const size_t live = local ? g.size() : streamed.liveTriangles();
+    options.farFieldAllowed =
+        sceneHasFarField && live > 0 && glm::length(g.bounds.extent()) > options.nearDistance;
+  }
+  // Renderers from scratch over geometry().
+  void build() {
     // The renderers hold references to the geometry: drop them first.
     renderer.reset();
     reference.reset();
-    geometry = std::make_unique<RenderGeometry>(std::move(g));
-    std::vector<uint32_t> ids = geometry->triangles.faceIds;
-    std::sort(ids.begin(), ids.end());
-    faces = size_t(std::unique(ids.begin(), ids.end()) - ids.begin());
-    options.farFieldAllowed = sceneHasFarField && geometry->size() > 0 &&
-                              glm::length(geometry->bounds.extent()) > options.nearDistance;
-    renderer = std::make_unique<FrameRenderer>(*geometry, options);
+    updateFarField();
+    renderer = std::make_unique<FrameRenderer>(geometry(), options);
     if (compare) {
       PipelineOptions r = options;
       r.mode = RenderMode::RaycastAll;
-      reference = std::make_unique<FrameRenderer>(*geometry, r);
+      reference = std::make_unique<FrameRenderer>(geometry(), r);
     }
-    sinceRebuild = Stopwatch();
+    ++rebuilds;
+    ++generation;
   }
-  // Connected: pick up what arrived.
-  void refresh(StreamClient& net, bool force, double minRebuildS = 0.5) {
-    const uint64_t v = net.version();
-    if (v == version || (!force && sinceRebuild.ms() < 1000.0 * minRebuildS)) return;
-    version = v;
-    set(net.snapshot());
+  // Local: the scene's geometry, drawn as it is.
+  void set(RenderGeometry g) {
+    renderer.reset();
+    reference.reset();
+    local = std::make_unique<RenderGeometry>(std::move(g));
+    build();
+  }
+  // Connected: takes up a delta.
+  void takeUp(const GeometryDelta& delta) {
+    version = delta.version;
+    const GeometryChange change = streamed.apply(delta);
+    if (!renderer) return build();
+    if (change.empty(streamed.geometry().size())) return;
+    ++generation;
+    if (rebuildOnIntake) {
+      streamed.compact();
+      return build();
+    }
+    // Dead slots cost memory and grid entries: compact when they outnumber
+    // the live ones (amortised: each compaction follows as many removals).
+    if (streamed.deadTriangles() > std::max<size_t>(streamed.liveTriangles(), 65'536)) {
+      streamed.compact();
+      return build();
+    }
+    bool ok = renderer->update(change);
+    const FrameRenderer::UpdateStats& u = renderer->lastUpdate();
+    spdlog::debug(
+        "intake: +{} -{} triangles; grid {:.2f} ms, rays {:.2f} ms, horizon {:.2f} ms{}, cache "
+        "{:.2f} ms ({} texels forgotten)",
+        u.added, u.removed, u.gridMs, u.raysMs, u.horizonMs, u.horizonRebuilt ? " (rebuilt)" : "",
+        u.cacheMs, u.texelsForgotten);
+    // Too many batches slow the ray query down (each is a BVH of its own).
+    if (!ok || renderer->rayBatches() > kMaxRayBatches) {
+      streamed.compact();
+      return build();
+    }
+    updateFarField();
+    renderer->allowFarField(options.farFieldAllowed);
+    if (reference) reference->allowFarField(options.farFieldAllowed);
+  }
+  // Connected: picks up what arrived (at most every minIntakeS seconds unless forced).
+  void refresh(StreamClient& net, bool force, double minIntakeS = 0.1) {
+    if (net.version() == version || (!force && sinceIntake.ms() < 1000.0 * minIntakeS)) return;
+    takeUp(net.takeDelta());
+    sinceIntake = Stopwatch();
   }
 };
 
@@ -189,11 +246,14 @@ int runHeadless(const Args& a, LiveGeometry& live, const std::vector<Camera>& ca
       ++connection.waits;
       if (!complete) ++connection.timeouts;
       if (!complete && !net->error().empty()) throwInputError("connection lost: {}", net->error());
-      live.refresh(*net, /*force=*/true);
     }
     FrameRecord r;
     r.frame = i;
+    Stopwatch wall;
+    if (net) live.refresh(*net, /*force=*/true);
+    r.geometryIntakeMs = wall.ms();
     r.report = live.renderer->render(cameras[i], image);
+    r.wallMs = wall.ms();
     if (live.reference) {
       live.reference->render(cameras[i], refImage);
       r.compared = true;
@@ -220,8 +280,8 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
   wo.vsync = cameras.empty();
   GlWindow window(wo);
   GlRenderer gl;
-  gl.upload(*live.geometry);
-  const RenderGeometry* uploaded = live.geometry.get();
+  gl.upload(live.geometry());
+  uint64_t uploaded = live.generation;
   ImageRgb8 farImage;
   std::vector<uint32_t> near;
   std::vector<FrameRecord> records;
@@ -232,9 +292,9 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
         if (!net->waitForCell(a.waitS) && !net->error().empty())
           throwInputError("connection lost: {}", net->error());
         live.refresh(*net, /*force=*/true);
-        if (live.geometry.get() != uploaded) {
-          gl.upload(*live.geometry);
-          uploaded = live.geometry.get();
+        if (live.generation != uploaded) {
+          gl.upload(live.geometry());
+          uploaded = live.generation;
         }
       }
       FrameRecord r;
@@ -267,9 +327,9 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
       if (!net->error().empty()) throwInputError("connection lost: {}", net->error());
       net->sendPose(cam.eye, cam.yawDeg, cam.pitchDeg);
       live.refresh(*net, /*force=*/false);
-      if (live.geometry.get() != uploaded) {
-        gl.upload(*live.geometry);
-        uploaded = live.geometry.get();
+      if (live.generation != uploaded) {
+        gl.upload(live.geometry());
+        uploaded = live.generation;
       }
     }
     const FrameReport rep = live.renderer->renderFarField(cam, farImage, near);
@@ -280,7 +340,7 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
         {fmt::format("pixels: polygon {}  horizon {}  cache {}  ray hit {}  ray miss {}", p.polygon,
                      p.horizon, p.cache, p.rayHit, p.rayMiss)},
         {fmt::format("faces held {}  received {:.1f} MB  far field {}  horizon {}  cache {}",
-                     live.faces, net ? double(net->bytesReceived()) / 1e6 : 0.0,
+                     live.faces(), net ? double(net->bytesReceived()) / 1e6 : 0.0,
                      rep.farFieldRan ? "on" : "off", rep.horizonRan ? "on" : "off",
                      rep.cacheRan ? "on" : "off")},
     };
@@ -320,11 +380,6 @@ int run(const Args& a) {
   if (local) {
     scene = openScene(a.scene, a.sceneLimits);
     geometry = renderGeometryFromScene(*scene);
-    // The server decides this for a connected client (Welcome.ground_y).
-    const GroundPlane ground =
-        decideGround(*scene, *makeEmbreeRayQuery(geometry.triangles), a.ground);
-    geometry.groundY = ground.y;
-    if (ground.y) spdlog::info("ground {}", ground.why);
     origin = scene->origin;
   } else {
     if (!a.scene.empty()) pathScene = openScene(a.scene, a.sceneLimits);
@@ -360,16 +415,24 @@ int run(const Args& a) {
       spdlog::warn(
           "the server did not complete the first view cell within {:.0f} s; rendering what arrived",
           a.waitS);
-    geometry = net->snapshot();
     if (!(a.nearDistance > 0.0f)) o.nearDistance = std::min(150.0f, 0.5f * net->radius());
-    spdlog::info("holding {} triangles from {}:{}", geometry.size(), a.host, a.port);
   }
   LiveGeometry live;
   live.options = o;
   live.sceneHasFarField = o.farFieldAllowed;
   live.compare = a.compare;
-  live.set(std::move(geometry));
-  if (net) live.version = net->version();
+  live.rebuildOnIntake = a.intake == "rebuild";
+  if (net) {
+    live.takeUp(net->takeDelta());
+    spdlog::info("holding {} triangles from {}:{}", live.geometry().size(), a.host, a.port);
+  } else {
+    live.set(std::move(geometry));
+    // The server decides this for a connected client (Welcome.ground_y); the
+    // local client with the ray query its renderer built.
+    const GroundPlane ground = decideGround(*scene, live.renderer->rays(), a.ground);
+    live.local->groundY = ground.y;
+    if (ground.y) spdlog::info("ground {}", ground.why);
+  }
   if (a.headless) return runHeadless(a, live, cameras, size, net.get(), connection);
   Camera start;
   start.width = size.x;
@@ -377,8 +440,8 @@ int run(const Args& a) {
   start.vfovDeg = a.vfov;
   if (!cameras.empty())
     start = cameras.front();
-  else if (!live.geometry->bounds.empty())
-    start.eye = live.geometry->bounds.center();
+  else if (!live.geometry().bounds.empty())
+    start.eye = live.geometry().bounds.center();
   return runWindow(a, live, cameras, size, start, net.get());
 }
 
@@ -442,6 +505,10 @@ int runClientTool(int argc, char** argv) {
       ->check(atLeast(1));
   app.add_option("--path-speed", a.pathSpeed, "relative walking speed of --path auto")
       ->check(positive());
+  app.add_option("--intake", a.intake,
+                 "connected: take up arriving geometry incrementally, or rebuild the renderer "
+                 "for every change (the old way, a baseline for benchmarks)")
+      ->check(CLI::IsMember({"incremental", "rebuild"}));
   app.add_option("--wait", a.waitS, "connected: seconds to wait for each view cell")
       ->check(nonNegative());
   app.add_flag("--compare", a.compare,

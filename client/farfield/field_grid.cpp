@@ -5,29 +5,83 @@
 #include <cmath>
 #include <limits>
 
+#include "common/core/check.h"
+
 namespace vistream {
 
+namespace {
+constexpr glm::vec2 kNoY(std::numeric_limits<float>::max(), std::numeric_limits<float>::lowest());
+}  // namespace
+
 FieldGrid::FieldGrid(const RenderGeometry& g, float cellSize) {
-  triangles_ = g.size();
-  bounds_ = g.bounds;
-  if (g.size() == 0 || bounds_.empty()) return;
-  const glm::vec2 ext = glm::max(
-      glm::vec2(bounds_.hi.x - bounds_.lo.x, bounds_.hi.z - bounds_.lo.z), glm::vec2(1e-3f));
+  const Box3f bounds = g.bounds;
+  const glm::vec2 ext =
+      bounds.empty() ? glm::vec2(0.0f)
+                     : glm::max(glm::vec2(bounds.hi.x - bounds.lo.x, bounds.hi.z - bounds.lo.z),
+                                glm::vec2(1e-3f));
   const float cell = cellSize > 0.0f && std::isfinite(cellSize)
                          ? cellSize
                          : std::max(4.0f, std::max(ext.x, ext.y) / 64.0f);
-  std::vector<Box3f> boxes(g.size());
-  for (size_t t = 0; t < g.size(); ++t) boxes[t] = g.triangles.triangleBounds(t);
-  grid_ = XzGrid(bounds_, cell, boxes);
+  // Cells for the whole extent (64 x 64 at the automatic size), so a
+  // scene's grid never hits the limit a streamed one may.
+  const size_t cells = size_t(std::ceil(ext.x / cell) + 2) * size_t(std::ceil(ext.y / cell) + 2);
+  grid_ = DynamicXzGrid(cell, std::max(cells, size_t(1) << 20));
+  VS_CHECK(add(g, 0, uint32_t(g.size())));
+}
+
+void FieldGrid::followGrowth(glm::ivec2 oldOrigin, glm::ivec2 oldDims) {
   const glm::ivec2 dims = grid_.dims();
-  cellY_.assign(size_t(dims.x) * size_t(dims.y),
-                glm::vec2(std::numeric_limits<float>::max(), std::numeric_limits<float>::lowest()));
-  for (int z = 0; z < dims.y; ++z)
-    for (int x = 0; x < dims.x; ++x) {
-      glm::vec2& y = cellY_[size_t(z) * size_t(dims.x) + size_t(x)];
-      for (uint32_t t : grid_.itemsIn({x, z}))
-        y = {std::min(y.x, boxes[t].lo.y), std::max(y.y, boxes[t].hi.y)};
+  std::vector<glm::vec2> y(size_t(dims.x) * size_t(dims.y), kNoY);
+  for (int z = 0; z < oldDims.y; ++z)
+    for (int x = 0; x < oldDims.x; ++x) {
+      const glm::ivec2 to = oldOrigin + glm::ivec2(x, z) - grid_.origin();
+      y[size_t(to.y) * size_t(dims.x) + size_t(to.x)] =
+          cellY_[size_t(z) * size_t(oldDims.x) + size_t(x)];
     }
+  cellY_ = std::move(y);
+}
+
+bool FieldGrid::add(const RenderGeometry& g, uint32_t first, uint32_t count) {
+  VS_CHECK_LE(size_t(first) + count, g.size());
+  triangles_ = g.size();
+  for (uint32_t t = first; t < first + count; ++t) {
+    const Box3f box = g.triangles.triangleBounds(t);
+    const glm::ivec2 origin = grid_.origin(), dims = grid_.dims();
+    if (!grid_.insert(t, box)) return false;
+    if (grid_.origin() != origin || grid_.dims() != dims) followGrowth(origin, dims);
+    if (box.empty()) continue;
+    const XzGrid::CellRange r = grid_.cellsOverlapping({box.lo.x, box.lo.z}, {box.hi.x, box.hi.z});
+    for (int z = r.lo.y; z <= r.hi.y; ++z)
+      for (int x = r.lo.x; x <= r.hi.x; ++x) {
+        glm::vec2& y = cellY({x, z});
+        y = {std::min(y.x, box.lo.y), std::max(y.y, box.hi.y)};
+      }
+  }
+  return true;
+}
+
+void FieldGrid::remove(const RenderGeometry& g, std::span<const uint32_t> triangles) {
+  std::vector<glm::ivec2> touched;
+  for (const uint32_t t : triangles) {
+    const Box3f box = g.triangles.triangleBounds(t);
+    grid_.erase(t, box);
+    if (box.empty() || grid_.empty()) continue;
+    const XzGrid::CellRange r = grid_.cellsOverlapping({box.lo.x, box.lo.z}, {box.hi.x, box.hi.z});
+    for (int z = r.lo.y; z <= r.hi.y; ++z)
+      for (int x = r.lo.x; x <= r.hi.x; ++x) touched.push_back({x, z});
+  }
+  std::sort(touched.begin(), touched.end(),
+            [](glm::ivec2 a, glm::ivec2 b) { return a.y != b.y ? a.y < b.y : a.x < b.x; });
+  touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
+  // The Y range of a cell shrinks only with its triangles: recompute it there.
+  for (const glm::ivec2 c : touched) {
+    glm::vec2& y = cellY(c);
+    y = kNoY;
+    for (const uint32_t t : grid_.itemsIn(c)) {
+      const Box3f box = g.triangles.triangleBounds(t);
+      y = {std::min(y.x, box.lo.y), std::max(y.y, box.hi.y)};
+    }
+  }
 }
 
 namespace {

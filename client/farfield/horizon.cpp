@@ -31,17 +31,48 @@ float HorizonMap::raySlope(const glm::vec3& d) {
   return d.y / h;
 }
 
-HorizonMap::HorizonMap(const RenderGeometry& g, float cellSize) {
-  if (g.size() == 0 || g.bounds.empty()) return;
-  lo_ = {g.bounds.lo.x, g.bounds.lo.z};
-  const glm::vec2 ext = glm::max(glm::vec2(g.bounds.hi.x, g.bounds.hi.z) - lo_, glm::vec2(1e-3f));
+HorizonMap::HorizonMap(const RenderGeometry& g, float cellSize, const Box3f& cover) {
+  Box3f bounds = g.bounds;
+  if (g.size() == 0 || bounds.empty()) return;
+  if (!cover.empty()) {
+    bounds.extend(cover.lo);
+    bounds.extend(cover.hi);
+  }
+  lo_ = {bounds.lo.x, bounds.lo.z};
+  const glm::vec2 ext = glm::max(glm::vec2(bounds.hi.x, bounds.hi.z) - lo_, glm::vec2(1e-3f));
   // At most kMaxCells a side: the levels cost cells x log(cells) of memory.
   cell_ = std::max({cellSize, 0.01f, std::max(ext.x, ext.y) / float(kMaxCells)});
   dims_ = glm::max(glm::ivec2(glm::ceil(ext / cell_)), glm::ivec2(1));
-  std::vector<float> base(size_t(dims_.x) * size_t(dims_.y), kLowest);
+  levels_.assign(1, std::vector<float>(size_t(dims_.x) * size_t(dims_.y), kLowest));
   maxHeight_ = kLowest;
-  for (size_t t = 0; t < g.size(); ++t) {
+  raiseClamped(g, 0, uint32_t(g.size()));
+}
+
+Box3f HorizonMap::extent() const {
+  if (levels_.empty()) return {};
+  const glm::vec2 hi = lo_ + glm::vec2(dims_) * cell_;
+  return Box3f{{lo_.x, maxHeight_, lo_.y}, {hi.x, maxHeight_, hi.y}};
+}
+
+bool HorizonMap::raise(const RenderGeometry& g, uint32_t first, uint32_t count) {
+  if (levels_.empty()) return count == 0;
+  const glm::vec2 hi = lo_ + glm::vec2(dims_) * cell_;
+  for (uint32_t t = first; t < first + count; ++t) {
     const Box3f box = g.triangles.triangleBounds(t);
+    if (box.empty()) continue;
+    // A triangle outside the map would be clamped into the border cells only
+    // when the map is built from scratch: refuse, the caller builds a new one.
+    if (box.lo.x < lo_.x || box.lo.z < lo_.y || box.hi.x > hi.x || box.hi.z > hi.y) return false;
+  }
+  raiseClamped(g, first, count);
+  return true;
+}
+
+void HorizonMap::raiseClamped(const RenderGeometry& g, uint32_t first, uint32_t count) {
+  std::vector<float>& base = levels_.front();
+  for (uint32_t t = first; t < first + count; ++t) {
+    const Box3f box = g.triangles.triangleBounds(t);
+    if (box.empty()) continue;
     const glm::ivec2 a =
         glm::clamp(glm::ivec2(glm::floor((glm::vec2(box.lo.x, box.lo.z) - lo_) / cell_)),
                    glm::ivec2(0), dims_ - 1);
@@ -55,10 +86,14 @@ HorizonMap::HorizonMap(const RenderGeometry& g, float cellSize) {
       }
     maxHeight_ = std::max(maxHeight_, box.hi.y);
   }
+  buildLevels();
+}
+
+void HorizonMap::buildLevels() {
+  levels_.resize(1);
+  radius_.assign(1, 0);
   // Dilated levels: r_0 = 0, r_{k+1} = 2 r_k + 1, each the max of the previous
   // level shifted by -(r_k+1), 0, +(r_k+1) on each axis (separably).
-  levels_.push_back(std::move(base));
-  radius_.push_back(0);
   const int maxDim = std::max(dims_.x, dims_.y);
   // The widest level covers the whole grid from any cell within reach of it.
   while (radius_.back() < 2 * maxDim) {

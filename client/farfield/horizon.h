@@ -40,8 +40,19 @@ class HorizonMap {
  public:
   HorizonMap() = default;
   // cellSize in metres (the resolution knob of the thesis: coarser is faster
-  // but overestimates the horizon).
-  HorizonMap(const RenderGeometry& geometry, float cellSize);
+  // but overestimates the horizon). The map covers the X/Z rectangle of the
+  // geometry's bounds and of `cover` (room for geometry still to come).
+  HorizonMap(const RenderGeometry& geometry, float cellSize, const Box3f& cover = {});
+
+  // Raises the height field by triangles [first, first + count) of
+  // `geometry` (added since the map was built). False, leaving the map as it
+  // was, if one lies outside the map's rectangle: build a new map then.
+  // Removed triangles may stay in the map: a height field that is too high
+  // only makes fewer pixels sky, which the ray caster then finds (the same
+  // colour), so the map stays conservative.
+  bool raise(const RenderGeometry& geometry, uint32_t first, uint32_t count);
+  // The X/Z rectangle the map covers (Y: the highest point), empty without geometry.
+  Box3f extent() const;
 
   float cellSize() const { return cell_; }
   glm::ivec2 dims() const { return dims_; }
@@ -58,6 +69,9 @@ class HorizonMap {
   float height(int level, int x, int z) const {
     return levels_[size_t(level)][size_t(z) * size_t(dims_.x) + size_t(x)];
   }
+  // Raises level 0 by the triangles (clamped into the border cells) and rebuilds the levels.
+  void raiseClamped(const RenderGeometry& geometry, uint32_t first, uint32_t count);
+  void buildLevels();  // levels 1.. from level 0
   float traceWedge(const glm::vec3& eye, float azimuth, float halfAngle, float nearDistance,
                    size_t& cells) const;
 

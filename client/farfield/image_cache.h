@@ -26,13 +26,24 @@
 // `recordSpacing` since the current one; records no texel points to are
 // recycled, so their number stays below the number of texels.
 //
+// Geometry that changes (a streaming client's) invalidates only the texels it
+// may change (invalidate()): each texel keeps the distance its ray travelled
+// to its hit and the triangle it hit. A texel's ray left from within
+// `recordSpacing` of its record's position, in a direction inside the texel's
+// patch of azimuth and slope; new triangles can change it only if such a ray
+// meets their bounds before its recorded hit, and removed triangles only if
+// it hit one of them. Every other texel stays.
+//
 // Thread safety: none; one cache per viewer, used from one thread.
 #pragma once
 
 #include <cstdint>
 #include <glm/glm.hpp>
+#include <limits>
 #include <span>
 #include <vector>
+
+#include "common/core/box.h"
 
 namespace vistream {
 
@@ -74,9 +85,26 @@ class PanoramicCache {
   CachePlanStats plan(const glm::vec3& eye, std::span<const int64_t> texels, size_t budget,
                       float maxStale, std::vector<uint8_t>& trace, bool viewTurned = true);
   glm::u8vec3 colour(int64_t texel) const { return colours_[size_t(texel)]; }
-  // Stores a traced colour under the current record (opened by plan()).
-  void store(int64_t texel, glm::u8vec3 colour);
+  // Stores a traced colour under the current record (opened by plan()):
+  // hitDistance (metres from the eye to the hit; infinity for a miss) and
+  // the triangle hit (kNoTexelHit for none) decide what invalidate() keeps.
+  static constexpr uint32_t kNoTexelHit = 0xffffffffu;
+  void store(int64_t texel, glm::u8vec3 colour,
+             float hitDistance = std::numeric_limits<float>::infinity(),
+             uint32_t triangle = kNoTexelHit);
   void clear();
+
+  // Forgets (as never traced) every texel the change of the geometry may
+  // have changed: texels whose ray hit a triangle with removed[triangle] != 0,
+  // and texels whose ray may meet one of the `added` boxes before its hit
+  // (conservatively: a cone over the texel's directions from a ball of radius
+  // recordSpacing around the record's position). `added` must hold every
+  // added triangle; smaller boxes keep more texels. Returns the texels forgotten.
+  size_t invalidate(std::span<const Box3f> added, std::span<const uint8_t> removed);
+  // Whether a texel holds a traced colour (not forgotten, never traced).
+  bool traced(int64_t texel) const { return texelRecord_[size_t(texel)] != 0; }
+  // The unit direction through a texel's centre.
+  glm::vec3 texelDirection(int64_t texel) const;
 
  private:
   struct Record {
@@ -88,13 +116,23 @@ class PanoramicCache {
   uint32_t openRecord(const glm::vec3& eye);
   void release(uint32_t r);
   bool onEdge(int64_t texel) const;
+  void forget(size_t texel);
+  static constexpr int kTile = 16;  // invalidate() works in tiles of kTile x kTile texels
+  size_t tileOf(int64_t texel) const {
+    return size_t(texel / columns_ / kTile) * size_t(tileColumns_) +
+           size_t(texel % columns_ / kTile);
+  }
 
   int columns_ = 0, rows_ = 0;
   float maxSlope_ = 1.0f;
   PanoramicCacheOptions options_;
   std::vector<glm::u8vec3> colours_;
   std::vector<uint32_t> texelRecord_;  // 0: never traced
-  std::vector<Record> records_;        // records_[0] is "never traced"
+  std::vector<float> hitDistance_;     // per texel: metres to the hit, infinity for a miss
+  std::vector<uint32_t> hitTriangle_;  // per texel: the triangle hit, kNoTexelHit for none
+  int tileColumns_ = 0;
+  std::vector<uint32_t> tileTraced_;  // per tile: texels traced
+  std::vector<Record> records_;       // records_[0] is "never traced"
   std::vector<uint32_t> free_;
   uint32_t current_ = 0;
   std::vector<uint32_t> touched_, partialStep_, partialSeen_;

@@ -6,7 +6,9 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <unordered_map>
 
+#include "common/core/check.h"
 #include "common/core/stats_output.h"
 #include "common/core/timer.h"
 
@@ -59,10 +61,81 @@ FrameRenderer::FrameRenderer(const RenderGeometry& geometry, const PipelineOptio
     : geometry_(geometry), options_(options) {
   grid_ = FieldGrid(geometry, options.gridCellSize);
   horizon_ = HorizonMap(geometry, options.horizonCellSize);
-  rays_ = makeEmbreeRayQuery(geometry.triangles);
+  rays_ = makeBatchedEmbreeRayQuery();
+  rays_->addBatch(geometry.triangles, 0, uint32_t(geometry.size()));
+  rays_->commit();
+  liveTriangles_ = geometry.size();
   // A scene small enough for the polygon budget is drawn whole: the far
   // field would cost more than it saves.
-  wholeScene_ = options.polygonBudget > 0 && geometry.size() <= options.polygonBudget;
+  wholeScene_ = options.polygonBudget > 0 && liveTriangles_ <= options.polygonBudget;
+}
+
+namespace {
+
+// Boxes holding triangles [first, end) of `g`, one per X/Z square of
+// kChangeBoxSide metres they start in: what the image cache tests its texels
+// against (smaller boxes keep more texels; more boxes cost more tests).
+constexpr float kChangeBoxSide = 32.0f;
+
+std::vector<Box3f> changeBoxes(const RenderGeometry& g, uint32_t first, uint32_t end) {
+  std::unordered_map<uint64_t, Box3f> byCell;
+  for (uint32_t t = first; t < end; ++t) {
+    const Box3f b = g.triangles.triangleBounds(t);
+    if (b.empty()) continue;
+    const glm::vec2 c = glm::floor(glm::vec2(b.lo.x, b.lo.z) / kChangeBoxSide);
+    const uint64_t key = (uint64_t(uint32_t(int32_t(std::clamp(c.x, -1e9f, 1e9f)))) << 32) |
+                         uint32_t(int32_t(std::clamp(c.y, -1e9f, 1e9f)));
+    Box3f& box = byCell[key];
+    box.extend(b.lo);
+    box.extend(b.hi);
+  }
+  std::vector<Box3f> boxes;
+  boxes.reserve(byCell.size());
+  for (const auto& [key, box] : byCell) boxes.push_back(box);
+  return boxes;
+}
+
+}  // namespace
+
+bool FrameRenderer::update(const GeometryChange& change) {
+  const RenderGeometry& g = geometry_;
+  VS_CHECK_LE(size_t(change.firstAdded), g.size());
+  lastUpdate_ = UpdateStats{};
+  lastUpdate_.added = g.size() - change.firstAdded;
+  lastUpdate_.removed = change.removed.size();
+  if (change.empty(g.size())) return true;
+  Stopwatch clock;
+  const uint32_t count = uint32_t(g.size() - change.firstAdded);
+  grid_.remove(g, change.removed);
+  if (!grid_.add(g, change.firstAdded, count)) return false;
+  lastUpdate_.gridMs = clock.ms();
+  clock = Stopwatch();
+  rays_->removeTriangles(change.removed);
+  rays_->addBatch(g.triangles, change.firstAdded, count);
+  rays_->commit();
+  lastUpdate_.raysMs = clock.ms();
+  clock = Stopwatch();
+  if (!horizon_.raise(g, change.firstAdded, count)) {
+    // Room to grow: a quarter of the extent on every side.
+    Box3f cover = horizon_.extent();
+    cover.extend(g.bounds.lo);
+    cover.extend(g.bounds.hi);
+    const glm::vec3 spare = 0.25f * cover.extent();
+    horizon_ = HorizonMap(g, options_.horizonCellSize, Box3f{cover.lo - spare, cover.hi + spare});
+    lastUpdate_.horizonRebuilt = true;
+  }
+  lastUpdate_.horizonMs = clock.ms();
+  liveTriangles_ = liveTriangles_ + count - change.removed.size();
+  wholeScene_ = options_.polygonBudget > 0 && liveTriangles_ <= options_.polygonBudget;
+  if (cache_) {
+    std::vector<uint8_t> removed(change.removed.empty() ? 0 : g.size(), 0);
+    for (const uint32_t t : change.removed) removed[t] = 1;
+    const std::vector<Box3f> boxes = changeBoxes(g, change.firstAdded, uint32_t(g.size()));
+    clock = Stopwatch();
+    lastUpdate_.texelsForgotten = cache_->invalidate(boxes, removed);
+    lastUpdate_.cacheMs = clock.ms();
+  }
+  return true;
 }
 
 FrameRenderer::~FrameRenderer() = default;
@@ -186,7 +259,7 @@ struct FrameRun {
     } else if (wholeScene) {
       rep.farFieldWhy = fmt::format(
           "the whole scene ({} triangles) fits the polygon budget of {}: drawn as polygons",
-          r.geometry_.size(), options.polygonBudget);
+          r.liveTriangles_, options.polygonBudget);
     } else if (!options.farFieldAllowed) {
       rep.farFieldWhy = "the scene has no geometry beyond d";
     } else if (!r.grid_.anythingBeyond(camera.eye, d)) {
@@ -319,7 +392,11 @@ struct FrameRun {
                                             : r.geometry_.background(camera.eye, dirs[i]);
       hits[k].valid() ? ++rep.pixels.rayHit : ++rep.pixels.rayMiss;
       setPixel(candidates[i], c);
-      if (useCache && texels[i] >= 0) r.cache_->store(texels[i], c);
+      if (useCache && texels[i] >= 0)
+        r.cache_->store(texels[i], c,
+                        hits[k].valid() ? hits[k].t * glm::length(dirs[i])
+                                        : std::numeric_limits<float>::infinity(),
+                        hits[k].valid() ? hits[k].triangle : PanoramicCache::kNoTexelHit);
     }
     if (useCache)
       for (size_t i = 0; i < candidates.size(); ++i)

@@ -39,8 +39,9 @@
 #include "client/render/image.h"
 #include "client/render/render_geometry.h"
 #include "client/render/soft_raster.h"
+#include "client/render/streamed_geometry.h"
 #include "common/core/stats_fields.h"
-#include "common/raycast/ray_query.h"
+#include "common/raycast/embree_ray_query.h"
 
 namespace vistream {
 
@@ -161,9 +162,37 @@ class FrameRenderer {
   // How far from the eye polygons are drawn: d in pipeline mode, unlimited
   // in geometry-all. An OpenGL near field discards fragments beyond it.
   float polygonDistance() const;
-  // Forgets the cache and the motion history. The geometry must not change
-  // under a renderer: build a new one for new geometry.
+  // Forgets the cache and the motion history.
   void reset();
+
+  // Takes up a change of the geometry (a StreamedGeometry's slots, changed
+  // in place; `geometry` is the object given to the constructor): the new
+  // triangles go into the near-field grid, the horizon map and the ray query
+  // as one batch, the removed ones leave the grid and the ray query (the
+  // horizon map keeps them: too high a horizon stays conservative), and the
+  // image cache forgets only the texels the change may alter
+  // (PanoramicCache::invalidate). Between changes the renderer draws what a
+  // renderer built from scratch over the live triangles draws (with the same
+  // gridCellSize, pixel for pixel without the cache). False if the grid
+  // would outgrow its cell limit: the renderer is then unusable, build a new one.
+  bool update(const GeometryChange& change);
+  // Whether the far field may run at all (PipelineOptions::farFieldAllowed),
+  // for geometry that has grown.
+  void allowFarField(bool allowed) { options_.farFieldAllowed = allowed; }
+  // The ray query over the live triangles (for decisions about the scene that
+  // need rays, such as the ground plane: built once, here).
+  const RayQuery& rays() const { return *rays_; }
+  // What the last update() did.
+  struct UpdateStats {
+    size_t added = 0, removed = 0;
+    size_t texelsForgotten = 0;
+    bool horizonRebuilt = false;
+    double gridMs = 0, raysMs = 0, horizonMs = 0, cacheMs = 0;  // time in each part
+  };
+  const UpdateStats& lastUpdate() const { return lastUpdate_; }
+  // Batches in the ray query (one per update that added triangles): rays
+  // slow down as they pile up, so an owner builds a new renderer past a few hundred.
+  size_t rayBatches() const { return rays_->batchCount(); }
 
  private:
   friend struct FrameRun;  // one frame's steps (pipeline.cpp)
@@ -173,14 +202,16 @@ class FrameRenderer {
   PipelineOptions options_;
   FieldGrid grid_;
   HorizonMap horizon_;
-  std::unique_ptr<RayQuery> rays_;
+  std::unique_ptr<BatchedRayQuery> rays_;
   std::unique_ptr<PanoramicCache> cache_;
   SoftwareRasterizer raster_;
   IdBuffer ids_;
   std::vector<uint8_t> covered_;
   std::vector<uint32_t> near_, stamp_;
   uint32_t stampValue_ = 0;
-  bool wholeScene_ = false;  // within the polygon budget: no near/far split
+  bool wholeScene_ = false;   // within the polygon budget: no near/far split
+  size_t liveTriangles_ = 0;  // geometry_.size() less the removed slots
+  UpdateStats lastUpdate_;
   bool havePrevious_ = false;
   glm::vec3 previousEye_{0.0f};
   float previousYaw_ = 0.0f, previousPitch_ = 0.0f;

@@ -14,6 +14,7 @@
 #include "common/core/error.h"
 #include "common/core/ivec_less.h"
 #include "common/raycast/ray_query.h"
+#include "common/raycast/sampled_visibility.h"
 #include "protocol/geometry/geometry_codec.h"
 #include "protocol/wire/peer.h"
 
@@ -158,6 +159,7 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
   std::string errorReason;  // the first error's kind (a key of errors_by_reason); empty: none
   bool cutOff = false;
   uint64_t missesWhilePending = 0;
+  std::vector<Hit> scratch_;  // seenTriangle's
   uint64_t misses = 0, checks = 0, geometryFrames = 0, facesReceived = 0, cellEntries = 0;
   // Cell entries that found their cell ready, and the waits of those that
   // did not (entry to CellReady, or to the end of the walk if it never came).
@@ -230,7 +232,7 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
   void onGeometry(const Geometry& geometry) {
     DecodedGeometry g;
     std::string error;
-    if (!decodeGeometry(geometry, g, error)) return finish(error, "bad_frame");
+    if (!decodeGeometry(geometry, grid_.quantization, g, error)) return finish(error, "bad_frame");
     ++geometryFrames;
     for (uint32_t f : g.faces)
       if ((f >> 6) < held_.size()) {
@@ -296,9 +298,12 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
       cell_ = cell;
       const bool first = !hasCell_;
       hasCell_ = true;
-      if (first && ready_.count(cell) && initialLoadMs < 0.0)
-        initialLoadMs = msSince(helloSent_, now);
-      if (!first && initialLoadMs >= 0.0) {
+      // The initial load is the first time the client stands in a cell it
+      // holds whole: announced before it arrived (a cell it walked into
+      // after its first one's CellReady came late), or later (onCellReady).
+      const bool loadedBefore = initialLoadMs >= 0.0;
+      if (!loadedBefore && ready_.count(cell)) initialLoadMs = msSince(helloSent_, now);
+      if (!first && loadedBefore) {
         ++cellEntries;
         if (ready_.count(cell)) {
           ++cellEntriesReady;
@@ -332,10 +337,12 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
       for (int x = 0; x < opt_.checkRaysX; ++x) {
         const glm::dvec3 d = f + r * (th * ((x + 0.5) / (0.5 * opt_.checkRaysX) - 1.0)) +
                              u * (tv * ((y + 0.5) / (0.5 * opt_.checkRaysY) - 1.0));
-        const Hit h = shared_.rays->firstHit(
-            Ray{glm::vec3(eye), glm::vec3(glm::normalize(d)), 0.0f, radius_});
+        const Ray ray{glm::vec3(eye), glm::vec3(glm::normalize(d)), 0.0f, radius_};
+        const Hit h = shared_.rays->firstHit(ray);
         if (!h.valid()) continue;
-        const uint32_t face = shared_.triangles.faceIds[h.triangle];
+        const uint32_t tri = seenTriangle(*shared_.rays, ray, h, scratch_);
+        if (tri == kNoHit) continue;  // the back of a face grazed along its edge
+        const uint32_t face = shared_.triangles.faceIds[tri];
         if ((face >> 6) >= held_.size() || !((held_[face >> 6] >> (face & 63)) & 1u))
           missing.insert(face);
       }

@@ -12,8 +12,9 @@
 // client converts with the Welcome's local origin.
 //
 // Failing honestly: a client fails if its connection, handshake or stream
-// ends with an error, or if it never gets its initial load (the CellReady of
-// the cell it stands in, which says it holds that cell's whole face set). A
+// ends with an error, or if it never gets its initial load (the first time
+// it stands in a cell whose CellReady it has, which says it holds that
+// cell's whole face set; the cell may be its first or one it walked into). A
 // run where any client failed is a failed run (LoadTestReport::failure), so
 // a server that serves nothing never reports success.
 //

@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <boost/asio.hpp>
 #include <chrono>
 #include <cmath>
@@ -12,6 +13,7 @@
 #include <optional>
 #include <set>
 #include <thread>
+#include <unordered_set>
 #include <utility>  // before Boost.Asio, whose awaitable.hpp uses std::exchange
 
 #include "common/core/error.h"
@@ -53,6 +55,41 @@ struct StreamClient::Impl : PeerHandler {
   std::set<glm::ivec3, IvecLess> ready;
   glm::ivec3 poseCell{0};
   uint64_t version = 0;
+  // Faces received or evicted since the last takeDelta(). Past a bound (a
+  // consumer that never takes deltas) the set is dropped and the next delta
+  // replaces everything.
+  std::unordered_set<uint32_t> changedFaces;
+  bool replaceAll = true;  // the first delta carries everything
+
+  // Called with `mutex` held.
+  void noteChanged(uint32_t face) {
+    if (replaceAll) return;
+    changedFaces.insert(face);
+    if (changedFaces.size() > faces.size() + 100'000) {
+      changedFaces.clear();
+      replaceAll = true;
+    }
+  }
+  // Appends a held face's triangles (called with `mutex` held).
+  void appendFace(RenderGeometry& g, std::vector<uint16_t>& material, uint32_t id,
+                  const HeldFace& f) const {
+    for (size_t i = 0; i + 2 < f.corners.size(); i += 3) {
+      for (int k = 0; k < 3; ++k) g.triangles.positions.push_back(f.corners[i + size_t(k)]);
+      g.triangles.faceIds.push_back(id);
+      g.triangles.objectIds.push_back(0);
+      g.triangles.degenerate.push_back(
+          isDegenerateTriangle(f.corners[i], f.corners[i + 1], f.corners[i + 2]) ? 1 : 0);
+      material.push_back(f.material);
+    }
+  }
+  // Colours, sky and ground of geometry assembled by appendFace (`mutex` held).
+  void finishGeometry(RenderGeometry& g, const std::vector<uint16_t>& material) const {
+    g.sky = encodeColour(sky);
+    g.groundY = groundY;
+    recolour(g, [&](size_t t) {
+      return material[t] < materials.size() ? materials[material[t]] : glm::vec3(0.8f);
+    });
+  }
   size_t trianglesHeld = 0, maxTriangles = 0;
 
   void finish(const std::string& why) {
@@ -135,7 +172,7 @@ struct StreamClient::Impl : PeerHandler {
   void onGeometry(const Geometry& geometry) {
     DecodedGeometry g;
     std::string error;
-    if (!decodeGeometry(geometry, g, error))
+    if (!decodeGeometry(geometry, grid.quantization, g, error))  // grid: set on this strand
       return finish("bad geometry from the server: " + error);
     for (const glm::vec3& p : g.positions)
       if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
@@ -146,6 +183,7 @@ struct StreamClient::Impl : PeerHandler {
       size_t index = 0;
       for (size_t f = 0; f < g.faces.size(); ++f) {
         HeldFace& h = faces[g.faces[f]];
+        noteChanged(g.faces[f]);
         trianglesHeld -= h.corners.size() / 3;
         h.material = g.materials[f];
         h.corners.clear();
@@ -167,6 +205,7 @@ struct StreamClient::Impl : PeerHandler {
         if (auto it = faces.find(f); it != faces.end()) {
           trianglesHeld -= it->second.corners.size() / 3;
           faces.erase(it);
+          noteChanged(f);
         }
     ready.clear();  // the server announces complete cells again
     ++version;
@@ -286,21 +325,31 @@ RenderGeometry StreamClient::snapshot() const {
   std::lock_guard lock(impl_->mutex);
   RenderGeometry g;
   std::vector<uint16_t> material;
-  for (const auto& [id, f] : impl_->faces)
-    for (size_t i = 0; i + 2 < f.corners.size(); i += 3) {
-      for (int k = 0; k < 3; ++k) g.triangles.positions.push_back(f.corners[i + size_t(k)]);
-      g.triangles.faceIds.push_back(id);
-      g.triangles.objectIds.push_back(0);
-      g.triangles.degenerate.push_back(
-          isDegenerateTriangle(f.corners[i], f.corners[i + 1], f.corners[i + 2]) ? 1 : 0);
-      material.push_back(f.material);
-    }
-  g.sky = encodeColour(impl_->sky);
-  g.groundY = impl_->groundY;
-  recolour(g, [&](size_t t) {
-    return material[t] < impl_->materials.size() ? impl_->materials[material[t]] : glm::vec3(0.8f);
-  });
+  for (const auto& [id, f] : impl_->faces) impl_->appendFace(g, material, id, f);
+  impl_->finishGeometry(g, material);
   return g;
+}
+
+GeometryDelta StreamClient::takeDelta() {
+  Impl& s = *impl_;
+  std::lock_guard lock(s.mutex);
+  GeometryDelta d;
+  std::vector<uint16_t> material;
+  d.replaceAll = s.replaceAll;
+  if (s.replaceAll) {
+    for (const auto& [id, f] : s.faces) s.appendFace(d.added, material, id, f);
+  } else {
+    d.removed.assign(s.changedFaces.begin(), s.changedFaces.end());
+    std::sort(d.removed.begin(), d.removed.end());
+    for (const uint32_t id : d.removed)
+      if (const auto it = s.faces.find(id); it != s.faces.end())
+        s.appendFace(d.added, material, id, it->second);
+  }
+  s.finishGeometry(d.added, material);
+  s.changedFaces.clear();
+  s.replaceAll = false;
+  d.version = s.version;
+  return d;
 }
 
 uint64_t StreamClient::version() const {

@@ -15,6 +15,7 @@
 #include <string>
 
 #include "client/render/render_geometry.h"
+#include "client/render/streamed_geometry.h"
 
 namespace vistream {
 
@@ -47,6 +48,10 @@ class StreamClient {
   bool waitForCell(double timeoutS);
   // The triangles held now, coloured with the server's materials.
   RenderGeometry snapshot() const;
+  // What changed since the previous takeDelta() (the first: everything held,
+  // with replaceAll), for a StreamedGeometry to take up; `version` is that of
+  // the state it brings the consumer to. Faces are in ascending ID order.
+  GeometryDelta takeDelta();
   uint64_t version() const;  // changes whenever geometry arrives or is evicted
   uint64_t bytesReceived() const;
   size_t facesHeld() const;

@@ -1,7 +1,8 @@
 // EmbreeRayQuery: the production back end, on Embree 3.
 //
 // One scene per query object on a process-wide device, holding one triangle
-// geometry built with
+// geometry (the batched query: one per batch, in a two-level scene of build
+// quality low, with RTC_SCENE_FLAG_DYNAMIC) built with
 //  - RTC_SCENE_FLAG_ROBUST: Embree then intersects with its Pluecker test
 //    (kernels/geometry/triangle_intersector_pluecker.h), whose edge function
 //    for an edge shared by two triangles is computed from the same two
@@ -13,7 +14,8 @@
 //
 // How the shared semantics of ray_query.h are met:
 //  - Degenerate triangles are left out of the geometry: the index buffer lists
-//    only the others and primToTriangle_ maps Embree's primID back. They are
+//    only the others and each geometry's primToTriangle maps Embree's
+//    (geomID, primID) back to the triangle index. They are
 //    never hit and cost nothing at query time, with no filter.
 //  - [tnear, tfar] is widened by kBoundSlack (relative) before Embree sees it
 //    and the reported t is clamped back into it: Embree computes
@@ -57,6 +59,8 @@
 #include <atomic>
 #include <cmath>
 #include <cstring>
+#include <map>
+#include <memory>
 #include <mutex>
 #include <stdexcept>
 #include <type_traits>
@@ -201,44 +205,78 @@ RTCRayHit withEmptyHit(const RTCRay& ray) {
   return rh;
 }
 
-// A hit as Embree reports it, by primitive ID.
+// A hit as Embree reports it: geometry and primitive ID, and the triangle
+// index they stand for (filled in by the query, which knows the mapping).
 struct PrimHit {
-  unsigned prim = RTC_INVALID_GEOMETRY_ID;
+  unsigned geom = RTC_INVALID_GEOMETRY_ID, prim = RTC_INVALID_GEOMETRY_ID;
+  uint32_t triangle = kNoHit;
   float t = 0.0f, u = 0.0f, v = 0.0f;
   glm::vec3 ng{0.0f};
+
+  bool valid() const { return triangle != kNoHit; }
 };
 
 PrimHit fromEmbree(const RTCRayHit& rh) {
-  return PrimHit{rh.hit.primID, rh.ray.tfar, rh.hit.u, rh.hit.v,
+  return PrimHit{rh.hit.geomID,
+                 rh.hit.primID,
+                 kNoHit,
+                 rh.ray.tfar,
+                 rh.hit.u,
+                 rh.hit.v,
                  glm::vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z)};
 }
 
 // Candidate i of a filter call; Embree puts the candidate's t in the ray's tfar.
 PrimHit fromFilter(const RTCFilterFunctionNArguments* args, unsigned i) {
   const unsigned n = args->N;
-  return PrimHit{RTCHitN_primID(args->hit, n, i), RTCRayN_tfar(args->ray, n, i),
-                 RTCHitN_u(args->hit, n, i), RTCHitN_v(args->hit, n, i),
+  return PrimHit{RTCHitN_geomID(args->hit, n, i),
+                 RTCHitN_primID(args->hit, n, i),
+                 kNoHit,
+                 RTCRayN_tfar(args->ray, n, i),
+                 RTCHitN_u(args->hit, n, i),
+                 RTCHitN_v(args->hit, n, i),
                  glm::vec3(RTCHitN_Ng_x(args->hit, n, i), RTCHitN_Ng_y(args->hit, n, i),
                            RTCHitN_Ng_z(args->hit, n, i))};
+}
+
+// One Embree triangle geometry: its own copy of the vertices and the
+// triangle index of each of its primitives.
+struct Mesh {
+  std::vector<float> vertices;           // 3 floats a vertex + 1 float of padding
+  std::vector<glm::uvec3> indices;       // into vertices, one per primitive
+  std::vector<uint32_t> primToTriangle;  // primitive -> triangle index
+};
+
+using Meshes = std::vector<std::unique_ptr<Mesh>>;  // by geomID; null where detached
+
+uint32_t triangleOfHit(const Meshes& meshes, unsigned geom, unsigned prim) {
+  return meshes[geom]->primToTriangle[prim];
 }
 
 // Context filters. Embree passes the filter the RTCIntersectContext pointer
 // it was given, so a struct that starts with one carries extra state along
 // (the extension pattern of Embree's own tutorials).
 
-// Tie pass: keeps, per ray (by RTCRay::id), the hit with the smallest primID.
+// Tie pass: keeps, per ray (by RTCRay::id), the hit with the smallest triangle index.
 struct TieContext {
   RTCIntersectContext embree;  // must stay the first member
   PrimHit* best;               // indexed by ray id
+  const Meshes* meshes;
 };
 static_assert(std::is_standard_layout_v<TieContext>);
 
-void keepSmallestPrim(const RTCFilterFunctionNArguments* args) {
+// Keeps, per ray, the candidate with the smallest triangle index.
+void keepSmallestTriangle(const RTCFilterFunctionNArguments* args) {
   const TieContext* ctx = reinterpret_cast<const TieContext*>(args->context);
   for (unsigned i = 0; i < args->N; ++i) {
     if (args->valid[i] == 0) continue;
     PrimHit& best = ctx->best[RTCRayN_id(args->ray, args->N, i)];
-    if (RTCHitN_primID(args->hit, args->N, i) < best.prim) best = fromFilter(args, i);
+    const uint32_t triangle = triangleOfHit(*ctx->meshes, RTCHitN_geomID(args->hit, args->N, i),
+                                            RTCHitN_primID(args->hit, args->N, i));
+    if (triangle < best.triangle) {
+      best = fromFilter(args, i);
+      best.triangle = triangle;
+    }
     args->valid[i] = 0;  // reject: traversal goes on to the other candidates
   }
 }
@@ -259,59 +297,19 @@ void collectAll(const RTCFilterFunctionNArguments* args) {
   }
 }
 
-class EmbreeRayQuery final : public RayQuery {
+// The queries of both back ends (one static geometry, or one geometry per
+// batch): an Embree scene whose geometries are Meshes, indexed by geomID.
+template <class Interface>
+class EmbreeScene : public Interface {
  public:
-  explicit EmbreeRayQuery(const FlatTriangles& triangles)
-      : triangles_(triangles), device_(acquireDevice()) {
-    const size_t n = triangles.size();
-    VS_CHECK_EQ(triangles.positions.size(), 3 * n);
-    VS_CHECK_EQ(triangles.degenerate.size(), n);
-    // Embree indexes vertices with 32 bits.
-    VS_CHECK_LE(triangles.positions.size(), size_t(std::numeric_limits<uint32_t>::max()));
-
-    const size_t degenerate =
-        size_t(std::count_if(triangles.degenerate.begin(), triangles.degenerate.end(),
-                             [](uint8_t d) { return d != 0; }));
-    indices_.reserve(n - degenerate);
-    if (degenerate > 0) primToTriangle_.reserve(n - degenerate);
-    for (size_t i = 0; i < n; ++i) {
-      if (triangles.degenerate[i]) continue;
-      const uint32_t first = uint32_t(3 * i);
-      indices_.push_back(glm::uvec3(first, first + 1, first + 2));
-      if (degenerate > 0) primToTriangle_.push_back(uint32_t(i));
-    }
-
-    rtcGetDeviceError(device_.get());  // clear this thread's error code
-    scene_ = rtcNewScene(device_.get());
-    rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION);
-    rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_HIGH);
-    if (!indices_.empty()) {
-      // Embree reads the last vertex with a 16-byte load: one float of padding.
-      vertices_.resize(3 * triangles.positions.size() + 1, 0.0f);
-      std::memcpy(vertices_.data(), triangles.positions.data(),
-                  triangles.positions.size() * sizeof(glm::vec3));
-      RTCGeometry geometry = rtcNewGeometry(device_.get(), RTC_GEOMETRY_TYPE_TRIANGLE);
-      rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
-                                 vertices_.data(), 0, 3 * sizeof(float),
-                                 triangles.positions.size());
-      rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                 indices_.data(), 0, sizeof(glm::uvec3), indices_.size());
-      rtcCommitGeometry(geometry);
-      rtcAttachGeometry(scene_, geometry);
-      rtcReleaseGeometry(geometry);
-    }
-    rtcCommitScene(scene_);
-    const RTCError error = rtcGetDeviceError(device_.get());
-    if (error != RTC_ERROR_NONE) {
-      rtcReleaseScene(scene_);
-      throw std::runtime_error(fmt::format("Embree: building the scene of {} triangles failed: {}",
-                                           n, errorName(error)));
-    }
+  EmbreeScene() : device_(acquireDevice()) {}
+  ~EmbreeScene() override {
+    if (scene_) rtcReleaseScene(scene_);
   }
+  EmbreeScene(const EmbreeScene&) = delete;
+  EmbreeScene& operator=(const EmbreeScene&) = delete;
 
-  ~EmbreeRayQuery() override { rtcReleaseScene(scene_); }
-  EmbreeRayQuery(const EmbreeRayQuery&) = delete;
-  EmbreeRayQuery& operator=(const EmbreeRayQuery&) = delete;
+  const char* name() const override { return "embree"; }
 
   Hit firstHit(const Ray& ray) const override {
     if (!isTraceable(ray)) return Hit{};
@@ -324,12 +322,11 @@ class EmbreeRayQuery final : public RayQuery {
       RTCRayHit rh = withEmptyHit(toEmbreeRay(variants[size_t(k)], 0));
       rtcIntersect1(scene_, &context, &rh);
       if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
-      const PrimHit h = fromEmbree(rh);
-      if (best.prim == RTC_INVALID_GEOMETRY_ID || h.t < best.t ||
-          (h.t == best.t && h.prim < best.prim))
-        best = h;
+      PrimHit h = fromEmbree(rh);
+      h.triangle = triangleOfHit(meshes_, h.geom, h.prim);
+      if (!best.valid() || h.t < best.t || (h.t == best.t && h.triangle < best.triangle)) best = h;
     }
-    if (best.prim == RTC_INVALID_GEOMETRY_ID) return Hit{};
+    if (!best.valid()) return Hit{};
 
     const PrimHit nearest = best;  // the tie window stays centred on it
     TieContext tie = tieContext(&best);
@@ -368,15 +365,17 @@ class EmbreeRayQuery final : public RayQuery {
       RTCRayHit rh = withEmptyHit(toEmbreeRay(variants[size_t(k)], 0));
       rtcIntersect1(scene_, &collect.embree, &rh);
     }
+    for (PrimHit& h : found) h.triangle = triangleOfHit(meshes_, h.geom, h.prim);
 
     // A triangle split into several leaves is reported once per leaf, with
     // the same t (same arithmetic on the same vertices): keep one.
     std::sort(found.begin(), found.end(), [](const PrimHit& a, const PrimHit& b) {
-      return a.prim != b.prim ? a.prim < b.prim : a.t < b.t;
+      return a.triangle != b.triangle ? a.triangle < b.triangle : a.t < b.t;
     });
-    found.erase(std::unique(found.begin(), found.end(),
-                            [](const PrimHit& a, const PrimHit& b) { return a.prim == b.prim; }),
-                found.end());
+    found.erase(
+        std::unique(found.begin(), found.end(),
+                    [](const PrimHit& a, const PrimHit& b) { return a.triangle == b.triangle; }),
+        found.end());
     hits.reserve(found.size());
     for (const PrimHit& h : found) hits.push_back(toHit(ray, h));
     std::sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) {
@@ -416,13 +415,14 @@ class EmbreeRayQuery final : public RayQuery {
         if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
         const unsigned i = rh.ray.id;
         best[i] = fromEmbree(rh);
+        best[i].triangle = triangleOfHit(meshes_, best[i].geom, best[i].prim);
         stream[hitCount++] = withEmptyHit(tieRay(chunk[i], best[i], i));
       }
       TieContext tie = tieContext(best.data());
       rtcIntersect1M(scene_, &tie.embree, stream.data(), hitCount, sizeof(RTCRayHit));
 
       for (size_t i = 0; i < count; ++i)
-        if (best[i].prim != RTC_INVALID_GEOMETRY_ID) out[i] = toHit(chunk[i], best[i]);
+        if (best[i].valid()) out[i] = toHit(chunk[i], best[i]);
     }
   }
 
@@ -450,14 +450,64 @@ class EmbreeRayQuery final : public RayQuery {
     }
   }
 
-  const char* name() const override { return "embree"; }
+ protected:
+  // A new empty scene: static (one high-quality BVH) or dynamic (a two-level
+  // BVH, whose commit rebuilds only the geometries that changed).
+  void newScene(bool dynamic) {
+    rtcGetDeviceError(device_.get());  // clear this thread's error code
+    scene_ = rtcNewScene(device_.get());
+    RTCSceneFlags flags =
+        RTCSceneFlags(RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION);
+    if (dynamic) flags = RTCSceneFlags(flags | RTC_SCENE_FLAG_DYNAMIC);
+    rtcSetSceneFlags(scene_, flags);
+    // RTC_BUILD_QUALITY_LOW selects Embree's two-level structure; each
+    // geometry's own BVH is still built with its geometry's quality.
+    rtcSetSceneBuildQuality(scene_, dynamic ? RTC_BUILD_QUALITY_LOW : RTC_BUILD_QUALITY_HIGH);
+  }
+
+  // Attaches `mesh` (non-empty) as a new geometry; returns its geomID.
+  unsigned attach(std::unique_ptr<Mesh> mesh) {
+    VS_CHECK(!mesh->indices.empty());
+    RTCGeometry geometry = rtcNewGeometry(device_.get(), RTC_GEOMETRY_TYPE_TRIANGLE);
+    const size_t vertexCount = (mesh->vertices.size() - 1) / 3;
+    rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                               mesh->vertices.data(), 0, 3 * sizeof(float), vertexCount);
+    rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                               mesh->indices.data(), 0, sizeof(glm::uvec3), mesh->indices.size());
+    rtcSetGeometryBuildQuality(geometry, RTC_BUILD_QUALITY_HIGH);
+    rtcCommitGeometry(geometry);
+    const unsigned id = rtcAttachGeometry(scene_, geometry);
+    rtcReleaseGeometry(geometry);
+    if (meshes_.size() <= id) meshes_.resize(size_t(id) + 1);
+    meshes_[id] = std::move(mesh);
+    return id;
+  }
+
+  // Detaches a geometry; its Mesh lives until the next commit, which ends
+  // the old BVH's use of it.
+  void detach(unsigned id) {
+    rtcDetachGeometry(scene_, id);
+    retired_.push_back(std::move(meshes_[id]));
+  }
+  const Mesh& mesh(unsigned id) const { return *meshes_[id]; }
+
+  // Commits the scene; throws std::runtime_error naming what failed.
+  void commitScene(size_t triangles) {
+    rtcCommitScene(scene_);
+    retired_.clear();
+    const RTCError error = rtcGetDeviceError(device_.get());
+    if (error != RTC_ERROR_NONE)
+      throw std::runtime_error(fmt::format("Embree: building the scene of {} triangles failed: {}",
+                                           triangles, errorName(error)));
+  }
 
  private:
-  static TieContext tieContext(PrimHit* best) {
+  TieContext tieContext(PrimHit* best) const {
     TieContext tie;
     rtcInitIntersectContext(&tie.embree);
-    tie.embree.filter = keepSmallestPrim;
+    tie.embree.filter = keepSmallestTriangle;
     tie.best = best;
+    tie.meshes = &meshes_;
     return tie;
   }
 
@@ -465,7 +515,13 @@ class EmbreeRayQuery final : public RayQuery {
   // Embree's t grows with the distance from the ray origin to the vertices of
   // the triangles involved, i.e. with t |dir| plus the size of the triangle.
   float tieWindow(const Ray& ray, const PrimHit& hit) const {
-    const Box3f bounds = triangles_.triangleBounds(triangleOf(hit.prim));
+    const Mesh& mesh = *meshes_[hit.geom];
+    const glm::uvec3 corners = mesh.indices[hit.prim];
+    Box3f bounds;
+    for (int k = 0; k < 3; ++k) {
+      const float* v = &mesh.vertices[3 * size_t(corners[k])];
+      bounds.extend(glm::vec3(v[0], v[1], v[2]));
+    }
     return kTieWindow * (std::abs(hit.t) + glm::length(bounds.extent()) / glm::length(ray.dir));
   }
 
@@ -477,13 +533,9 @@ class EmbreeRayQuery final : public RayQuery {
                        std::min(widenUp(ray.tfar), hit.t + w), id);
   }
 
-  uint32_t triangleOf(unsigned prim) const {
-    return primToTriangle_.empty() ? uint32_t(prim) : primToTriangle_[prim];
-  }
-
-  Hit toHit(const Ray& ray, const PrimHit& h) const {
+  static Hit toHit(const Ray& ray, const PrimHit& h) {
     Hit hit;
-    hit.triangle = triangleOf(h.prim);
+    hit.triangle = h.triangle;
     hit.t = std::clamp(h.t, ray.tnear, ray.tfar);
     hit.u = h.u;
     hit.v = h.v;
@@ -491,12 +543,124 @@ class EmbreeRayQuery final : public RayQuery {
     return hit;
   }
 
-  const FlatTriangles& triangles_;
   std::shared_ptr<RTCDeviceTy> device_;
   RTCScene scene_ = nullptr;
-  std::vector<float> vertices_;           // FlatTriangles::positions + 1 float of padding
-  std::vector<glm::uvec3> indices_;       // the non-degenerate triangles
-  std::vector<uint32_t> primToTriangle_;  // Embree primID -> triangle; empty if the identity
+  Meshes meshes_;
+  std::vector<std::unique_ptr<Mesh>> retired_;  // detached since the last commit
+};
+
+// A copy of triangles [first, first + count) that are not degenerate, as one
+// Mesh; its vertices are those triangles' corners.
+std::unique_ptr<Mesh> meshOf(const FlatTriangles& triangles, uint32_t first, uint32_t count) {
+  auto mesh = std::make_unique<Mesh>();
+  // Embree reads the last vertex with a 16-byte load: one float of padding.
+  mesh->vertices.resize(9 * size_t(count) + 1, 0.0f);
+  std::memcpy(mesh->vertices.data(), &triangles.positions[3 * size_t(first)],
+              3 * size_t(count) * sizeof(glm::vec3));
+  for (uint32_t i = 0; i < count; ++i) {
+    const uint32_t t = first + i;
+    if (triangles.degenerate[t]) continue;
+    mesh->indices.push_back(glm::uvec3(3 * i, 3 * i + 1, 3 * i + 2));
+    mesh->primToTriangle.push_back(t);
+  }
+  return mesh;
+}
+
+class EmbreeRayQuery final : public EmbreeScene<RayQuery> {
+ public:
+  explicit EmbreeRayQuery(const FlatTriangles& triangles) {
+    const size_t n = triangles.size();
+    VS_CHECK_EQ(triangles.positions.size(), 3 * n);
+    VS_CHECK_EQ(triangles.degenerate.size(), n);
+    // Embree indexes vertices with 32 bits.
+    VS_CHECK_LE(triangles.positions.size(), size_t(std::numeric_limits<uint32_t>::max()));
+    newScene(/*dynamic=*/false);
+    std::unique_ptr<Mesh> mesh = meshOf(triangles, 0, uint32_t(n));
+    if (!mesh->indices.empty()) attach(std::move(mesh));
+    commitScene(n);
+  }
+};
+
+// Batches as contiguous ranges of triangle indices, each its own geometry.
+// Removing triangles rebuilds the geometry of their batch from its own mesh
+// without them (or detaches it when nothing is left); commit() lets Embree's
+// two-level BVH rebuild only what changed.
+class EmbreeBatchedRayQuery final : public EmbreeScene<BatchedRayQuery> {
+ public:
+  EmbreeBatchedRayQuery() { newScene(/*dynamic=*/true); }
+
+  void addBatch(const FlatTriangles& triangles, uint32_t first, uint32_t count) override {
+    VS_CHECK_EQ(triangles.positions.size(), 3 * triangles.size());
+    VS_CHECK_EQ(triangles.degenerate.size(), triangles.size());
+    VS_CHECK_LE(size_t(first) + count, triangles.size());
+    if (count == 0) return;
+    // Ranges must not overlap: the next batch starts at or after this one's end.
+    auto next = batches_.lower_bound(first);
+    VS_CHECK(next == batches_.end() || next->first >= first + count);
+    if (next != batches_.begin()) {
+      const auto before = std::prev(next);
+      VS_CHECK_LE(before->first + before->second.count, first);
+    }
+    Batch b;
+    b.count = count;
+    b.removed.assign(count, 0);
+    std::unique_ptr<Mesh> m = meshOf(triangles, first, count);
+    b.live = m->indices.size();
+    if (b.live == 0) return;  // only degenerate triangles: nothing to hit or remove
+    b.geom = attach(std::move(m));
+    live_ += b.live;
+    batches_.emplace(first, std::move(b));
+  }
+
+  void removeTriangles(std::span<const uint32_t> triangles) override {
+    std::vector<uint32_t> changed;  // first triangle of each batch touched
+    for (const uint32_t t : triangles) {
+      auto it = batches_.upper_bound(t);
+      if (it == batches_.begin()) continue;
+      --it;
+      Batch& b = it->second;
+      if (t >= it->first + b.count || b.removed[t - it->first]) continue;
+      b.removed[t - it->first] = 1;
+      changed.push_back(it->first);
+    }
+    std::sort(changed.begin(), changed.end());
+    changed.erase(std::unique(changed.begin(), changed.end()), changed.end());
+    for (const uint32_t first : changed) {
+      Batch& b = batches_.at(first);
+      // The batch's geometry again, without the triangles removed.
+      const Mesh& old = mesh(b.geom);
+      auto rebuilt = std::make_unique<Mesh>();
+      rebuilt->vertices = old.vertices;
+      for (size_t p = 0; p < old.indices.size(); ++p)
+        if (!b.removed[old.primToTriangle[p] - first]) {
+          rebuilt->indices.push_back(old.indices[p]);
+          rebuilt->primToTriangle.push_back(old.primToTriangle[p]);
+        }
+      detach(b.geom);
+      b.geom = RTC_INVALID_GEOMETRY_ID;
+      live_ -= b.live;
+      b.live = rebuilt->indices.size();
+      live_ += b.live;
+      if (b.live > 0)
+        b.geom = attach(std::move(rebuilt));
+      else
+        batches_.erase(first);
+    }
+  }
+
+  void commit() override { commitScene(live_); }
+  size_t batchCount() const override { return batches_.size(); }
+
+ private:
+  struct Batch {
+    uint32_t count = 0;
+    std::vector<uint8_t> removed;  // per triangle of the range
+    size_t live = 0;               // primitives attached
+    unsigned geom = RTC_INVALID_GEOMETRY_ID;
+  };
+
+  std::map<uint32_t, Batch> batches_;  // by first triangle index
+  size_t live_ = 0;
 };
 
 }  // namespace
@@ -507,6 +671,10 @@ uint64_t embreeErrorCount() {
 
 std::unique_ptr<RayQuery> makeEmbreeRayQuery(const FlatTriangles& triangles) {
   return std::make_unique<EmbreeRayQuery>(triangles);
+}
+
+std::unique_ptr<BatchedRayQuery> makeBatchedEmbreeRayQuery() {
+  return std::make_unique<EmbreeBatchedRayQuery>();
 }
 
 }  // namespace vistream

@@ -28,11 +28,45 @@
 // queries share one process-wide Embree device. Errors Embree reports are
 // logged with spdlog and counted (embreeErrorCount); a scene that fails to
 // build (e.g. out of memory) throws std::runtime_error from makeEmbreeRayQuery.
+//
+// Batches (makeBatchedEmbreeRayQuery): a scene whose triangles come and go,
+// as a streaming client's do. Each batch is one Embree geometry (a BVH of its
+// own, built with high quality) in a two-level scene (build quality low), so
+// commit() rebuilds only the geometries added or changed and the top level.
+// Hits, ties and precision are those of the static back end above: the same
+// triangles give the same answers however they were batched.
 #pragma once
 
 #include <cstdint>
+#include <memory>
+#include <span>
+
+#include "common/raycast/ray_query.h"
 
 namespace vistream {
+
+// A RayQuery over triangles added and removed in batches. Triangle indices
+// are those of the FlatTriangles given to addBatch (a batch is a contiguous
+// range of them, copied: the FlatTriangles need not outlive the call).
+// Changes become visible to queries at commit().
+//
+// Thread safety: queries are const and may run concurrently with each other,
+// never with addBatch, removeTriangles or commit.
+class BatchedRayQuery : public RayQuery {
+ public:
+  // Adds triangles [first, first + count) of `triangles`; the range must not
+  // overlap a batch added before (VS_CHECK). Degenerate triangles are never hit.
+  virtual void addBatch(const FlatTriangles& triangles, uint32_t first, uint32_t count) = 0;
+  // Removes triangles by index; indices never added or already removed are
+  // ignored. Rebuilds the geometry of each batch touched (cost: its size).
+  virtual void removeTriangles(std::span<const uint32_t> triangles) = 0;
+  // Builds what changed; throws std::runtime_error if Embree fails (out of memory).
+  virtual void commit() = 0;
+  // Batches holding at least one triangle that can be hit.
+  virtual size_t batchCount() const = 0;
+};
+
+std::unique_ptr<BatchedRayQuery> makeBatchedEmbreeRayQuery();
 
 // Number of errors Embree has reported through vistream's device error
 // handler since the process started, over every EmbreeRayQuery. Each error is

@@ -29,18 +29,7 @@ std::vector<glm::vec3> cellViewpoints(const Box3f& cell, size_t points, uint64_t
   return out;
 }
 
-namespace {
-
-// The triangle a ray sees at its first hit, or kNoHit. When the first hit
-// faces away from the ray, a triangle facing the ray within the tie window
-// (ray_query.h resolves ties within float error to the smaller index, which
-// can credit the back of a roof over the wall that meets it at the rim) is
-// seen instead. Failing that, a hit on the triangle's boundary only grazes
-// its edge (over a roof's rim, through the corner of a box) and credits
-// nothing. Visibility is that of open faces: a face seen only along its
-// edges, from behind, is not counted.
-uint32_t seenTriangle(const RayQuery& rays, const Ray& ray, const Hit& h,
-                      std::vector<Hit>& tied) {
+uint32_t seenTriangle(const RayQuery& rays, const Ray& ray, const Hit& h, std::vector<Hit>& tied) {
   if (!(glm::dot(h.normal, ray.dir) > 0.0f)) return h.triangle;
   const float window = 1e-5f * std::max(h.t, 1e-3f);
   tied.clear();
@@ -53,8 +42,6 @@ uint32_t seenTriangle(const RayQuery& rays, const Ray& ray, const Hit& h,
   const bool onBoundary = h.u <= kEdge || h.v <= kEdge || h.u + h.v >= 1.0f - kEdge;
   return onBoundary ? kNoHit : h.triangle;
 }
-
-}  // namespace
 
 SampledVisibility sampleVisibleFaces(const RayQuery& rays, const FlatTriangles& triangles,
                                      const Box3f& cell, const SampledVisibilityOptions& options) {

@@ -47,6 +47,17 @@ struct SampledVisibility {
 // The viewpoints sampleVisibleFaces uses for a cell (before skipViewpoint).
 std::vector<glm::vec3> cellViewpoints(const Box3f& cell, size_t points, uint64_t seed);
 
+// The triangle a ray sees at its first hit `h`, or kNoHit: the rule of
+// open faces above. When `h` faces away from the ray, a triangle facing the
+// ray within the tie window (ray_query.h resolves ties within float error to
+// the smaller index, which can credit the back of a roof over the wall that
+// meets it at the rim) is seen instead; failing that, a hit on the
+// triangle's boundary only grazes its edge and credits nothing. `scratch`
+// is reused between calls. Every visibility oracle (this sampler, the load
+// tester's miss check) applies it.
+uint32_t seenTriangle(const RayQuery& rays, const Ray& ray, const Hit& h,
+                      std::vector<Hit>& scratch);
+
 SampledVisibility sampleVisibleFaces(const RayQuery& rays, const FlatTriangles& triangles,
                                      const Box3f& cell,
                                      const SampledVisibilityOptions& options = {});

@@ -83,4 +83,99 @@ std::vector<uint32_t> XzGrid::itemsNear(glm::vec2 lo, glm::vec2 hi) const {
   return out;
 }
 
+DynamicXzGrid::DynamicXzGrid(float cellSize, size_t maxCells)
+    : cell_(cellSize), maxCells_(maxCells) {
+  VS_CHECK(cellSize > 0.0f && std::isfinite(cellSize));
+}
+
+bool DynamicXzGrid::planeCells(const Box3f& box, glm::ivec2& lo, glm::ivec2& hi) const {
+  constexpr double kLimit = double(1 << 30);
+  const double v[4] = {std::floor(double(box.lo.x) / cell_), std::floor(double(box.lo.z) / cell_),
+                       std::floor(double(box.hi.x) / cell_), std::floor(double(box.hi.z) / cell_)};
+  for (const double c : v)
+    if (!(std::abs(c) < kLimit)) return false;
+  lo = {int(v[0]), int(v[1])};
+  hi = {int(v[2]), int(v[3])};
+  return true;
+}
+
+bool DynamicXzGrid::insert(uint32_t item, const Box3f& box) {
+  if (box.empty()) return true;
+  glm::ivec2 lo, hi;
+  if (!planeCells(box, lo, hi)) return false;
+  const glm::ivec2 end = origin_ + dims_;
+  if (empty() || glm::any(glm::lessThan(lo, origin_)) || glm::any(glm::greaterThanEqual(hi, end))) {
+    // Grow: cover the box, with a quarter of the old size to spare on each
+    // side that grows.
+    glm::ivec2 newLo = empty() ? lo : glm::min(origin_, lo);
+    glm::ivec2 newEnd = empty() ? hi + 1 : glm::max(end, hi + 1);
+    auto cellsOf = [](glm::ivec2 from, glm::ivec2 to) {
+      return double(to.x - from.x) * double(to.y - from.y);
+    };
+    if (cellsOf(newLo, newEnd) > double(maxCells_)) return false;
+    // The spare only where the limit allows it.
+    const glm::ivec2 spare = dims_ / 4;
+    glm::ivec2 spareLo = newLo, spareEnd = newEnd;
+    for (int a = 0; a < 2; ++a) {
+      if (!empty() && newLo[a] < origin_[a]) spareLo[a] -= spare[a];
+      if (!empty() && newEnd[a] > end[a]) spareEnd[a] += spare[a];
+    }
+    if (cellsOf(spareLo, spareEnd) <= double(maxCells_)) {
+      newLo = spareLo;
+      newEnd = spareEnd;
+    }
+    const glm::ivec2 newDims = newEnd - newLo;
+    std::vector<std::vector<uint32_t>> grown(size_t(newDims.x) * size_t(newDims.y));
+    for (int z = 0; z < dims_.y; ++z)
+      for (int x = 0; x < dims_.x; ++x) {
+        const glm::ivec2 to = origin_ + glm::ivec2(x, z) - newLo;
+        grown[size_t(to.y) * size_t(newDims.x) + size_t(to.x)] = std::move(cells_[index({x, z})]);
+      }
+    cells_ = std::move(grown);
+    origin_ = newLo;
+    dims_ = newDims;
+  }
+  for (int z = lo.y; z <= hi.y; ++z)
+    for (int x = lo.x; x <= hi.x; ++x) {
+      std::vector<uint32_t>& items = cells_[index(glm::ivec2(x, z) - origin_)];
+      if (items.empty() || items.back() < item)
+        items.push_back(item);
+      else if (auto at = std::lower_bound(items.begin(), items.end(), item);
+               at == items.end() || *at != item)
+        items.insert(at, item);
+    }
+  return true;
+}
+
+void DynamicXzGrid::erase(uint32_t item, const Box3f& box) {
+  if (box.empty() || empty()) return;
+  glm::ivec2 lo, hi;
+  if (!planeCells(box, lo, hi)) return;
+  lo = glm::max(lo, origin_);
+  hi = glm::min(hi, origin_ + dims_ - 1);
+  for (int z = lo.y; z <= hi.y; ++z)
+    for (int x = lo.x; x <= hi.x; ++x) {
+      std::vector<uint32_t>& items = cells_[index(glm::ivec2(x, z) - origin_)];
+      if (auto at = std::lower_bound(items.begin(), items.end(), item);
+          at != items.end() && *at == item)
+        items.erase(at);
+    }
+}
+
+glm::ivec2 DynamicXzGrid::cellOf(glm::vec2 p) const {
+  VS_CHECK(!empty());
+  const glm::vec2 v = (p - lo()) / cell_;
+  return {clampedIndex(v.x, dims_.x), clampedIndex(v.y, dims_.y)};
+}
+
+XzGrid::CellRange DynamicXzGrid::cellsOverlapping(glm::vec2 lo, glm::vec2 hi) const {
+  if (empty()) return {};
+  return {cellOf(lo), cellOf(hi)};
+}
+
+std::span<const uint32_t> DynamicXzGrid::itemsIn(glm::ivec2 cell) const {
+  VS_CHECK(cell.x >= 0 && cell.y >= 0 && cell.x < dims_.x && cell.y < dims_.y);
+  return cells_[index(cell)];
+}
+
 }  // namespace vistream

@@ -75,4 +75,57 @@ class XzGrid {
   std::vector<uint32_t> items_;
 };
 
+// An X/Z grid that takes items up and lets them go one at a time (a
+// streaming client's triangles), with the lookups of XzGrid.
+//
+// Cells sit at fixed multiples of cellSize in the frame of the boxes: the
+// cell of the plane holding point p is floor(p / cellSize), whatever else was
+// entered and in whatever order, so two grids of one cell size holding the
+// same items list the same items in the same cells, ascending. The array of
+// cells covers every item entered and grows when one lands outside it (with a
+// quarter of its size to spare on the side it grows while that stays within
+// the limit, so growing costs amortised O(1) a cell); insert() refuses an
+// item that would take it beyond `maxCells` cells (a box far away or huge),
+// leaving the grid unchanged.
+//
+// Thread safety: const methods may run concurrently; insert and erase may not
+// run with anything else.
+class DynamicXzGrid {
+ public:
+  DynamicXzGrid() = default;
+  // cellSize must be positive and finite (VS_CHECK).
+  explicit DynamicXzGrid(float cellSize, size_t maxCells = size_t(1) << 20);
+
+  // Enters `item` in every cell `box`'s X/Z rectangle overlaps (an empty box:
+  // nowhere, and true). False if the grid would grow beyond maxCells.
+  bool insert(uint32_t item, const Box3f& box);
+  // Takes `item` out of the cells of `box`, which must be the box it was
+  // entered with; an item not there is ignored.
+  void erase(uint32_t item, const Box3f& box);
+
+  bool empty() const { return dims_.x == 0; }
+  float cellSize() const { return cell_; }
+  // The low X/Z corner of array cell (0, 0), and the array's size.
+  glm::vec2 lo() const { return glm::vec2(origin_) * cell_; }
+  glm::ivec2 dims() const { return dims_; }
+  // The cell of the plane (in units of cells) that array cell (0, 0) is.
+  glm::ivec2 origin() const { return origin_; }
+  // As in XzGrid, over the array's cells.
+  glm::ivec2 cellOf(glm::vec2 p) const;
+  XzGrid::CellRange cellsOverlapping(glm::vec2 lo, glm::vec2 hi) const;
+  glm::vec2 cellLo(glm::ivec2 cell) const { return glm::vec2(origin_ + cell) * cell_; }
+  std::span<const uint32_t> itemsIn(glm::ivec2 cell) const;
+
+ private:
+  size_t index(glm::ivec2 cell) const { return size_t(cell.y) * size_t(dims_.x) + size_t(cell.x); }
+  // The cells of the plane `box` covers; false if beyond +-2^30 cells.
+  bool planeCells(const Box3f& box, glm::ivec2& lo, glm::ivec2& hi) const;
+
+  float cell_ = 1.0f;
+  size_t maxCells_ = 0;
+  glm::ivec2 origin_{0, 0};
+  glm::ivec2 dims_{0, 0};
+  std::vector<std::vector<uint32_t>> cells_;  // row-major, X fastest; each ascending
+};
+
 }  // namespace vistream

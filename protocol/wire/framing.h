@@ -19,7 +19,8 @@
 
 namespace vistream::wire {
 
-inline constexpr uint32_t kProtocolVersion = 1;
+inline constexpr uint32_t kProtocolVersion =
+    2;  // 2: compact Geometry, the quantization grid in Welcome
 inline constexpr uint32_t kDefaultMaxFrameBytes = 16u << 20;  // 16 MiB
 inline constexpr size_t kFrameHeaderBytes = 4;
 

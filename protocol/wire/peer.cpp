@@ -44,6 +44,13 @@ WelcomeGrid validateWelcome(const Welcome& w, uint32_t maxFaceCount) {
   if (g.faceCount > maxFaceCount)
     badWelcome(
         fmt::format("face_count {} is more than the limit of {}", g.faceCount, maxFaceCount));
+  if (!w.quant_origin()) badWelcome("quant_origin is missing");
+  if (!isFinite(w.quant_origin())) badWelcome("quant_origin is not finite");
+  g.quantization.origin = fromWire(*w.quant_origin());
+  g.quantization.step = w.quant_step();
+  // A step over a kilometre is no scene's; it bounds every decoded position.
+  if (!(g.quantization.step > 0.0 && g.quantization.step <= 1e3))
+    badWelcome(fmt::format("quant_step {} is not in (0, 1000] metres", g.quantization.step));
   return g;
 }
 

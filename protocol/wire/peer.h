@@ -34,6 +34,7 @@
 #include <utility>
 #include <vector>
 
+#include "protocol/geometry/geometry_codec.h"
 #include "protocol/wire/messages.h"
 
 namespace vistream::wire {
@@ -42,12 +43,13 @@ namespace vistream::wire {
 
 // What a client computes with from a Welcome, all checked.
 struct WelcomeGrid {
-  glm::dvec3 localOrigin{0.0};  // file coordinates of the local frame's origin
-  glm::vec3 gridOrigin{0.0f};   // local frame, metres
-  glm::vec3 cellSize{1.0f};     // metres, every axis finite and positive
-  glm::ivec3 dims{1};           // cells per axis, each >= 0
-  float radius = 0.0f;          // near-field radius, finite and >= 0 (metres)
-  uint32_t faceCount = 0;       // at most the maximum given to validateWelcome
+  glm::dvec3 localOrigin{0.0};    // file coordinates of the local frame's origin
+  glm::vec3 gridOrigin{0.0f};     // local frame, metres
+  glm::vec3 cellSize{1.0f};       // metres, every axis finite and positive
+  glm::ivec3 dims{1};             // cells per axis, each >= 0
+  float radius = 0.0f;            // near-field radius, finite and >= 0 (metres)
+  uint32_t faceCount = 0;         // at most the maximum given to validateWelcome
+  QuantizationGrid quantization;  // every Geometry's grid: origin finite, step in (0, 1 km]
 
   // The view cell holding `local` (local frame), clamped into the grid.
   glm::ivec3 cellOf(const glm::vec3& local) const {
@@ -146,20 +148,28 @@ class Outbox {
     writing_ = true;
     return frames_.front();
   }
-  // The write in flight completed: its frame leaves the queue. (After
-  // clear() there is nothing to remove; only the flag is reset.)
+  // The write in flight completed: its frame, always the front of the
+  // queue (clear() keeps it), leaves the queue.
   void finishWrite() {
+    if (!writing_) return;
     writing_ = false;
-    if (frames_.empty()) return;
     queued_ -= frames_.front()->size();
     frames_.pop_front();
   }
-  // The write in flight failed or was abandoned; the connection is closing.
-  void abandonWrite() { writing_ = false; }
-  // Drops every queued frame (the one in flight stays with its handler).
+  // The write in flight failed or was abandoned (the connection is
+  // closing): its frame leaves the queue unsent.
+  void abandonWrite() { finishWrite(); }
+  // Drops every frame not yet being written. The one in flight stays at the
+  // front (and in the byte count) until its write completes, so a frame
+  // pushed after the clear is the next to go, never mistaken for it.
   void clear() {
-    frames_.clear();
-    queued_ = 0;
+    if (writing_) {
+      frames_.erase(frames_.begin() + 1, frames_.end());
+      queued_ = frames_.front()->size();
+    } else {
+      frames_.clear();
+      queued_ = 0;
+    }
   }
 
   bool writing() const { return writing_; }

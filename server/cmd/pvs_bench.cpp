@@ -24,6 +24,7 @@
 #include "common/world/static_world.h"
 #include "server/visibility/epsilon_pvs.h"
 #include "server/visibility/fused_pvs.h"
+#include "server/visibility/horizon_fusion.h"
 
 namespace vistream {
 namespace {
@@ -47,6 +48,7 @@ struct World {
   std::unique_ptr<const FlatTriangles> triangles;  // static world (static_world.h)
   std::unique_ptr<RayQuery> rays;
   FreeSpace freeSpace;
+  Solids solids;
   std::unique_ptr<EpsilonPvs> pvs;
   double typicalBuilding = 16.0;  // metres: median horizontal size of objects
 };
@@ -58,6 +60,7 @@ World makeWorld(const std::string& spec) {
   w.triangles = std::move(world.triangles);
   w.rays = std::move(world.rays);
   w.freeSpace = std::move(world.freeSpace);
+  w.solids = std::move(world.solids);
   Stopwatch sw;
   w.pvs = std::make_unique<EpsilonPvs>(w.scene);
   spdlog::info("{}: {} occluders ({} solids, {} polygons), prepared in {:.0f} ms", spec,
@@ -225,26 +228,45 @@ int runPvsBench(const PvsBenchOptions& options) {
   for (const std::string& spec : options.scenes) {
     World w = makeWorld(spec);
     const bool indoor = spec.rfind("interior", 0) == 0;
+    // The fused occlusion horizons (horizon_fusion.h) stand on the ground:
+    // cities and terrain, not interiors.
+    std::unique_ptr<HorizonFusion> horizon;
+    if (!indoor) {
+      horizon = std::make_unique<HorizonFusion>(w.scene);
+      w.pvs->setFusion(horizon.get());
+    }
     const std::vector<float> sizes = indoor ? std::vector<float>{0.5f, 1.0f, 2.0f, 4.0f}
                                             : std::vector<float>{2.0f, 4.0f, 8.0f, 16.0f};
     if (human)
       fmt::print(
           "\nAccuracy against time ({}, {} cells per size, the same cells for every method; ground "
           "truth {} points x {}^2 rays per cube face)\n"
-          "  {:>8} {:<16} {:>10} {:>10} {:>14} {:>10} {:>8}\n",
+          "  {:>8} {:<20} {:>10} {:>10} {:>14} {:>12} {:>10} {:>8}\n",
           spec, options.accuracyCells, options.groundTruthPoints, options.groundTruthRes,
-          "cell (m)", "method", "PVS faces", "seen", "overestimation", "ms/cell", "missing");
+          "cell (m)", "method", "PVS faces", "seen", "mean PVS/seen", "median ratio", "ms/cell",
+          "missing");
     for (float size : sizes) {
       const auto cells =
           streetCells(w, size, options.accuracyCells, options.seed + uint64_t(size * 10));
+      // Every method and combination, on the same cells: the paper's single
+      // convex occluders, + back faces of closed outward solids (the
+      // default), + fused occlusion horizons, and the cube-map fusion.
       struct Method {
         std::string name;
-        std::unique_ptr<FusedPvs> fused;  // null: the paper's method
-        std::vector<double> pvsSize, ms;
+        PvsOptions options;
+        std::unique_ptr<FusedPvs> fused;  // non-null: the cube-map fusion on top
+        std::vector<double> pvsSize, ms, ratio;
         size_t missing = 0;
       };
       std::vector<Method> methods;
-      methods.push_back({"paper", nullptr, {}, {}, 0});
+      PvsOptions paper;
+      paper.backFaces = false;
+      paper.fusion = false;
+      PvsOptions backFaces;
+      backFaces.fusion = false;
+      methods.push_back({"paper", paper, nullptr, {}, {}, {}, 0});
+      methods.push_back({"+back faces", backFaces, nullptr, {}, {}, {}, 0});
+      if (horizon) methods.push_back({"+horizons", PvsOptions{}, nullptr, {}, {}, {}, 0});
       // Interior walls are 0.2 m thick: an erosion of half that removes them,
       // so indoors the fused method runs with 0.04 m, and (its sample count
       // growing with the cell's area over epsilon squared) on cells up to 1 m.
@@ -255,8 +277,13 @@ int runPvsBench(const PvsBenchOptions& options) {
         FusedPvsOptions fo;
         fo.epsilon = eps;
         fo.resolution = options.fusedResolution;
-        methods.push_back(
-            {fmt::format("fused eps={}", eps), std::make_unique<FusedPvs>(*w.pvs, fo), {}, {}, 0});
+        methods.push_back({fmt::format("+cube fusion {}", eps),
+                           backFaces,
+                           std::make_unique<FusedPvs>(*w.pvs, fo),
+                           {},
+                           {},
+                           {},
+                           0});
       }
       std::vector<double> seen;
       for (size_t ci = 0; ci < cells.size(); ++ci) {
@@ -264,14 +291,20 @@ int runPvsBench(const PvsBenchOptions& options) {
         SampledVisibilityOptions gt;
         gt.points = options.groundTruthPoints;
         gt.resolution = options.groundTruthRes;
+        gt.skipViewpoint = [&w](const glm::vec3& p) {
+          return w.solids.unservedViewpoint(*w.rays, p);
+        };
         const SampledVisibility truth = sampleVisibleFaces(*w.rays, *w.triangles, cell, gt);
         seen.push_back(double(truth.faces.size()));
         for (Method& m : methods) {
-          const PvsResult r = m.fused ? m.fused->compute(cell) : w.pvs->compute(cell);
+          const PvsResult r =
+              m.fused ? m.fused->compute(cell, m.options) : w.pvs->compute(cell, m.options);
           for (uint32_t f : truth.faces)
             m.missing += !std::binary_search(r.faces.begin(), r.faces.end(), f);
           m.pvsSize.push_back(double(r.faces.size()));
           m.ms.push_back(r.stats.timeMs);
+          if (!truth.faces.empty())
+            m.ratio.push_back(double(r.faces.size()) / double(truth.faces.size()));
         }
       }
       for (const Method& m : methods) {
@@ -284,14 +317,17 @@ int runPvsBench(const PvsBenchOptions& options) {
                           {"pvs_faces", mean(m.pvsSize)},
                           {"seen_faces", seenMean},
                           {"overestimation", over},
+                          {"median_pvs_over_seen", median(m.ratio)},
                           {"ms_per_cell", median(m.ms)},
                           {"missing_faces", m.missing}};
         out["accuracy"].push_back(row);
-        if (!m.fused)
-          lines.push_back(fmt::format("{} paper {} {} {}", spec, size, over, median(m.ms)));
+        if (m.name == "+back faces")
+          lines.push_back(
+              fmt::format("{} default {} {} {}", spec, size, median(m.ratio), median(m.ms)));
         if (human)
-          fmt::print("  {:>8.1f} {:<16} {:>10.0f} {:>10.0f} {:>14.2f} {:>10.2f} {:>8}\n", size,
-                     m.name, mean(m.pvsSize), seenMean, over, median(m.ms), m.missing);
+          fmt::print("  {:>8.1f} {:<20} {:>10.0f} {:>10.0f} {:>14.2f} {:>12.2f} {:>10.2f} {:>8}\n",
+                     size, m.name, mean(m.pvsSize), seenMean, over, median(m.ratio), median(m.ms),
+                     m.missing);
       }
     }
   }
@@ -299,7 +335,7 @@ int runPvsBench(const PvsBenchOptions& options) {
     std::filesystem::create_directories(options.plotDir);
     const auto dat = std::filesystem::path(options.plotDir) / "accuracy.dat";
     std::ofstream f(dat);
-    f << "# scene method cell_size_m overestimation ms_per_cell\n";
+    f << "# scene method cell_size_m median_pvs_over_seen ms_per_cell (default method)\n";
     for (const auto& l : lines) f << l << "\n";
     f.close();
     const auto gp = std::filesystem::path(options.plotDir) / "accuracy.gp";
@@ -307,7 +343,7 @@ int runPvsBench(const PvsBenchOptions& options) {
     g << "set terminal pngcairo size 900,420\nset output '"
       << (std::filesystem::path(options.plotDir) / "accuracy.png").string()
       << "'\nset multiplot layout 1,2\nset logscale x 2\nset xlabel 'cell size (m)'\nset ylabel "
-         "'PVS / seen faces'\n"
+         "'median PVS / seen faces (with back faces)'\n"
       << "set key top left\nplot ";
     bool first = true;
     for (const auto& s : options.scenes) {

@@ -28,6 +28,7 @@
 #include "server/visibility/epsilon_pvs.h"
 #include "server/visibility/fused_pvs.h"
 #include "server/visibility/hierarchical_culling.h"
+#include "server/visibility/horizon_fusion.h"
 #include "server/visibility/pvs_bake.h"
 #include "server/visibility/pvs_database.h"
 
@@ -67,13 +68,18 @@ int cmdCell(const std::string& spec, const SceneLimits& limits, const std::strin
             const std::string& method, const PvsOptions& options,
             const FusedPvsOptions& fusedOptions, bool asJson) {
   // --epsilon and --fused-res are range-checked at parse time.
-  if (method != "paper" && method != "fused")
-    throwInputError("--method: expected 'paper' or 'fused', got '{}'", method);
+  if (method != "paper" && method != "fused" && method != "horizons")
+    throwInputError("--method: expected 'paper', 'fused' or 'horizons', got '{}'", method);
   const Box3d fileCell = parseFileBox(cellText, "--cell");
   const Scene scene = openScene(spec, limits);
   warnIfOutsideScene(scene, fileCell, "--cell", cellText);
   const Box3f cell = toLocal(scene, fileCell);
-  const EpsilonPvs pvs(scene);
+  EpsilonPvs pvs(scene);
+  std::unique_ptr<HorizonFusion> horizons;
+  if (method == "horizons") {
+    horizons = std::make_unique<HorizonFusion>(scene);
+    pvs.setFusion(horizons.get());
+  }
   FusedPvsStats fusedStats;
   const PvsResult r = method == "fused"
                           ? FusedPvs(pvs, fusedOptions).compute(cell, options, &fusedStats)
@@ -359,7 +365,9 @@ int runPvsTool(int argc, char** argv) {
   };
   cell->add_option("--scene", scene, "SCENE")->required();
   cell->add_option("--cell", cellText, "x0,y0,z0,x1,y1,z1 in file coordinates")->required();
-  cell->add_option("--method", method, "paper (single convex occluders) or fused");
+  cell->add_option("--method", method,
+                   "paper (single convex occluders), horizons (then fused occlusion horizons over "
+                   "solid columns) or fused (then cube-map fusion)");
   addPvsStageFlags(cell);
   cell->add_option("--large-occluders", largeOccluders,
                    "use only the K largest occluders by solid angle (0: all)")

@@ -133,8 +133,9 @@ int runServerTool(int argc, char** argv) {
     checkListenAddress(cfg.bindAddress, cfg.port);
     if (pvsDb.empty())
       spdlog::info(
-          "no --pvs-db: PVSs are computed on demand as clients enter cells, so the first clients "
-          "in a cell wait for them (seconds on a city); bake a database once with "
+          "no --pvs-db: PVSs are computed on demand as clients enter cells (first the coarse "
+          "cell's around them, shared, then their own), so the first clients in a cell wait for "
+          "them; bake a database once with "
           "`vistream-pvs bake --scene {} --cell-size {:g} --out scene.db` and serve it with "
           "--pvs-db scene.db",
           scene, worldOptions.cellSize);

@@ -190,6 +190,7 @@ void Session::onHello(const Hello& hello) {
   sc.maxSpeedMps = cfg.maxSpeedMps;
   sc.maxCellRequests = cfg.maxCellRequests;
   sc.batchBytes = cfg.batchBytes;
+  sc.coarseFirst = world_.coarseFirst();
   scheduler_ = std::make_unique<StreamScheduler>(world_, sc, radius_, budget_);
   {
     std::lock_guard lock(snapshotMutex_);
@@ -227,6 +228,9 @@ void Session::onHello(const Hello& hello) {
     w.has_ground = true;
     w.ground_y = *g;
   }
+  const QuantizationGrid quantization = QuantizationGrid::forBounds(b);  // as every Geometry's
+  w.quant_origin = std::make_unique<Vec3d>(toWire(quantization.origin));
+  w.quant_step = quantization.step;
   send(std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(w))));
   spdlog::debug("session {}: welcome (radius {:.0f} m, budget {} bytes)", id_, radius_, budget_);
 }
@@ -391,8 +395,7 @@ void Session::writeNext() {
       socket_, asio::buffer(*frame),
       asio::bind_executor(strand_, [self = shared_from_this(), frame](
                                        const boost::system::error_code& ec, size_t n) {
-        if (self->state_ == State::Closed || self->outbox_.empty())
-          return self->outbox_.abandonWrite();
+        if (self->state_ == State::Closed) return self->outbox_.abandonWrite();
         if (ec) {
           self->outbox_.abandonWrite();
           return self->close("write error");
@@ -452,13 +455,23 @@ void Session::housekeeping() {
 
 void Session::requestFaceSets() {
   const StreamServerConfig& cfg = server_.config();
-  for (StreamScheduler::CellRequest& r : scheduler_->takeCellRequests()) {
+  const double now = seconds(Clock::now().time_since_epoch());
+  for (StreamScheduler::CellRequest& r : scheduler_->takeCellRequests(now)) {
     const uint32_t l = r.cell;
+    const CellLevel level = r.level;
+    // A dropped prefetch is asked again later (StreamScheduler::onDropped).
+    auto dropped = [weak = weak_from_this(), l, level] {
+      if (auto self = weak.lock())
+        asio::post(self->strand_, [self, l, level] {
+          if (self->state_ != State::Active) return;
+          self->scheduler_->onDropped(l, level, seconds(Clock::now().time_since_epoch()));
+        });
+    };
     world_.cellFaceSet(
-        world_.grid().cellAt(l), cfg.policy, scheduler_->radius(), server_.workers(),
-        [self = shared_from_this(), l](FaceListPtr faces) {
-          asio::post(self->strand_, [self, l, faces] {
-            if (self->state_ != State::Active || !self->scheduler_->isRequested(l)) return;
+        world_.grid().cellAt(l), level, cfg.policy, scheduler_->radius(), server_.workers(),
+        [self = shared_from_this(), l, level](FaceListPtr faces) {
+          asio::post(self->strand_, [self, l, level, faces] {
+            if (self->state_ != State::Active || !self->scheduler_->isRequested(l, level)) return;
             if (!faces) {
               const glm::ivec3 c = self->world_.grid().cellAt(l);
               return self->fail(
@@ -466,16 +479,19 @@ void Session::requestFaceSets() {
                   fmt::format("the face set of cell ({}, {}, {}) could not be computed", c.x, c.y,
                               c.z));
             }
-            if (self->scheduler_->onFaceSet(l, faces)) self->pump();
+            if (self->scheduler_->onFaceSet(l, faces, level)) self->pump();
           });
         },
-        r.interest);
+        CellWork{r.priority, r.interest, std::move(dropped)});
   }
 }
 
 void Session::maybeCull() {
-  if (cullingInFlight_) return;
-  const auto request = scheduler_->takeCullRequest(seconds(Clock::now().time_since_epoch()));
+  // Culling orders the first faces sent; while the workers are behind it
+  // would only delay them.
+  if (cullingInFlight_ || behind_) return;
+  const double now = seconds(Clock::now().time_since_epoch());
+  const auto request = scheduler_->takeCullRequest(now);
   if (!request) return;
   cullingInFlight_ = true;
   if (!viewer_) {
@@ -484,18 +500,35 @@ void Session::maybeCull() {
     o.collectFaces = true;
     viewer_ = std::make_unique<CullingViewer>(world_.culling(), o);
   }
-  asio::post(server_.workers(), [self = shared_from_this(), r = *request] {
-    const FrameResult result = self->viewer_->frame(r.eye, r.yawDeg, r.pitchDeg);
-    FaceList visible;
-    std::set_intersection(result.faces.begin(), result.faces.end(), r.faceSet->begin(),
-                          r.faceSet->end(), std::back_inserter(visible));
-    asio::post(self->strand_, [self, visible = std::move(visible), cell = r.cell]() mutable {
-      self->cullingInFlight_ = false;
-      if (self->state_ != State::Active) return;
-      self->scheduler_->onCulled(cell, std::move(visible));
-      self->pump();
-    });
-  });
+  // In the work queue with the current cells (one per session at most):
+  // streaming waits for it unless the workers are behind.
+  auto ended = [weak = weak_from_this()] {
+    if (auto self = weak.lock())
+      asio::post(self->strand_, [self] { self->cullingInFlight_ = false; });
+  };
+  world_.work().submit(
+      server_.workers().get_executor(), {WorkPriority::Current, now},
+      [self = shared_from_this(), r = *request] {
+        const FrameResult result = self->viewer_->frame(r.eye, r.yawDeg, r.pitchDeg);
+        FaceList visible;
+        std::set_intersection(result.faces.begin(), result.faces.end(), r.faceSet->begin(),
+                              r.faceSet->end(), std::back_inserter(visible));
+        asio::post(self->strand_, [self, visible = std::move(visible), cell = r.cell]() mutable {
+          self->cullingInFlight_ = false;
+          if (self->state_ != State::Active) return;
+          self->scheduler_->onCulled(cell, std::move(visible));
+          self->pump();
+        });
+      },
+      ended);
+}
+
+void Session::runFirst(std::function<void()> job) {
+  // A short job a client waits for (encoding its next batch): due before
+  // every computation waiting in the work queue, so a crowd of PVSs does
+  // not hold back the faces already known.
+  world_.work().submit(server_.workers().get_executor(), {WorkPriority::Current, 0.0},
+                       std::move(job));
 }
 
 void Session::sendReadyCells() {
@@ -512,6 +545,11 @@ void Session::pump() {
   if (state_ != State::Active || cfg.pvsOnly || !wantsGeometry_ || !scheduler_ ||
       !scheduler_->hasPose())
     return;
+  // Behind on current cells: no culling, no prefetch, no refinement. With
+  // enough prefetch already waiting: no more prefetch or refinement.
+  const WorkQueue::Load load = world_.work().load();
+  behind_ = load.oldestCurrentS > cfg.behindLagS || load.waitingCurrent > cfg.behindQueuedJobs;
+  scheduler_->setBehind(behind_ || load.waiting - load.waitingCurrent > cfg.maxWaitingPrefetch);
   requestFaceSets();
   maybeCull();
   if (produceInFlight_ || outbox_.queuedBytes() > cfg.geometryWatermarkBytes) return;
@@ -519,7 +557,7 @@ void Session::pump() {
   // visibility policy before its culling: what the client sees from its pose
   // goes first. (maybeCull starts the culling of a new current cell at once;
   // its result pumps again.)
-  if (!scheduler_->readyToStream(cullingInFlight_)) return;
+  if (!scheduler_->readyToStream(cullingInFlight_ && !behind_)) return;
   if (cfg.maxClientKbps > 0.0) {
     const auto now = Clock::now();
     const double rate = cfg.maxClientKbps * 1000.0 / 8.0;  // bytes per second
@@ -536,11 +574,13 @@ void Session::pump() {
   std::vector<uint32_t> batch = scheduler_->takeBatch();
   if (batch.empty()) return sendReadyCells();
   produceInFlight_ = true;
-  asio::post(server_.workers(), [self = shared_from_this(), batch = std::move(batch)] {
+  runFirst([self = shared_from_this(), batch = std::move(batch)] {
     std::vector<FaceTriangles> faces;
     faces.reserve(batch.size());
     for (uint32_t f : batch) faces.push_back(self->world_.face(f));
-    auto frame = std::make_shared<const std::vector<uint8_t>>(encodeMessage(encodeGeometry(faces)));
+    const QuantizationGrid grid = QuantizationGrid::forBounds(self->world_.scene().bounds());
+    auto frame =
+        std::make_shared<const std::vector<uint8_t>>(encodeMessage(encodeGeometry(faces, grid)));
     asio::post(self->strand_, [self, frame] {
       self->produceInFlight_ = false;
       if (self->state_ != State::Active) return;

@@ -35,6 +35,7 @@
 #include <boost/asio/strand.hpp>
 #include <chrono>
 #include <deque>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -100,6 +101,8 @@ class Session : public std::enable_shared_from_this<Session> {
   void requestFaceSets();
   void maybeCull();
   void sendReadyCells();
+  // Runs `job` on the workers before any visibility computation waiting.
+  void runFirst(std::function<void()> job);
 
   StreamServer& server_;
   StreamWorld& world_;
@@ -135,6 +138,7 @@ class Session : public std::enable_shared_from_this<Session> {
   // What the client gets next (created at Hello), and the work in flight for it.
   std::unique_ptr<StreamScheduler> scheduler_;
   bool cullingInFlight_ = false, produceInFlight_ = false;
+  bool behind_ = false;  // the workers are behind (WorkQueue::behind): no prefetch, no culling
   std::unique_ptr<CullingViewer> viewer_;
   struct PendingPvs {
     uint32_t requestId;

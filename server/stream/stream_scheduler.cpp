@@ -45,10 +45,14 @@ void StreamScheduler::setHeld(uint32_t face, bool on) {
 void StreamScheduler::updateNeededCells() {
   const ViewCellGrid& grid = world_.grid();
   std::vector<uint32_t> needed{uint32_t(grid.linearIndex(cell_))};
-  auto add = [&](const glm::ivec3& c) {
+  std::vector<double> inS{0.0};
+  auto add = [&](const glm::ivec3& c, double seconds) {
     if (!grid.contains(c)) return;
     const uint32_t l = uint32_t(grid.linearIndex(c));
-    if (std::find(needed.begin(), needed.end(), l) == needed.end()) needed.push_back(l);
+    if (std::find(needed.begin(), needed.end(), l) == needed.end()) {
+      needed.push_back(l);
+      inS.push_back(seconds);
+    }
   };
   // Ahead along the velocity: at most kMaxPrefetchSteps samples, spaced
   // half a cell or more, whatever the speed.
@@ -62,20 +66,31 @@ void StreamScheduler::updateNeededCells() {
     const glm::vec3 direction = glm::normalize(velocity_);
     for (int i = 1; i <= kMaxPrefetchSteps && double(i) * step <= horizon; ++i)
       if (auto c = world_.cellOf(glm::vec3(position_) + direction * float(double(i) * step)))
-        add(*c);
+        add(*c, double(i) * step / double(speed));
   }
   // Neighbours the client could step into before their face sets would
   // arrive: those whose shared side or corner lies within the margin.
   const Box3f box = grid.cellBox(cell_);
   const glm::vec3 p(position_);
-  const float margin = std::max(2.0f, float(config_.prefetchSeconds) * std::max(speed, 1.4f));
+  const float walking = std::max(speed, 1.4f);
+  const float margin = std::max(2.0f, float(config_.prefetchSeconds) * walking);
   for (int dz = -1; dz <= 1; ++dz)
     for (int dx = -1; dx <= 1; ++dx) {
-      const bool nearX = dx == 0 || (dx < 0 ? p.x - box.lo.x : box.hi.x - p.x) <= margin;
-      const bool nearZ = dz == 0 || (dz < 0 ? p.z - box.lo.z : box.hi.z - p.z) <= margin;
-      if (nearX && nearZ) add(cell_ + glm::ivec3(dx, 0, dz));
+      const float gapX = dx == 0 ? 0.0f : dx < 0 ? p.x - box.lo.x : box.hi.x - p.x;
+      const float gapZ = dz == 0 ? 0.0f : dz < 0 ? p.z - box.lo.z : box.hi.z - p.z;
+      if (gapX <= margin && gapZ <= margin)
+        add(cell_ + glm::ivec3(dx, 0, dz), double(std::max({gapX, gapZ, 0.0f}) / walking));
     }
+  // The cell the client has just left is no longer worth its current-cell
+  // urgency: its requests are dropped (joined ones for the same coarse cell
+  // live on through the new current cell's request), and asked for again
+  // as prefetch if it is still needed.
+  if (!needed_.empty() && needed_.front() != needed.front()) {
+    requested_.erase(requestKey(needed_.front(), CellLevel::Fine));
+    requested_.erase(requestKey(needed_.front(), CellLevel::Coarse));
+  }
   needed_ = std::move(needed);
+  neededInS_ = std::move(inS);
   evictionsExhausted_ = false;  // the faces to keep may have changed
   // Forget the face sets of cells no longer needed (their faces stay held),
   // and drop their requests: the newest pose wins.
@@ -84,34 +99,95 @@ void StreamScheduler::updateNeededCells() {
       ++it;
     } else {
       cursor_.erase(it->first);
+      fine_.erase(it->first);
       it = cellSets_.erase(it);
     }
   }
   for (auto it = requested_.begin(); it != requested_.end();)
-    it = isNeeded(it->first) ? std::next(it) : requested_.erase(it);
+    it = isNeeded(uint32_t(it->first)) ? std::next(it) : requested_.erase(it);
+  for (auto it = retryAt_.begin(); it != retryAt_.end();)
+    it = isNeeded(uint32_t(it->first)) ? std::next(it) : retryAt_.erase(it);
 }
 
-std::vector<StreamScheduler::CellRequest> StreamScheduler::takeCellRequests() {
+std::vector<StreamScheduler::CellRequest> StreamScheduler::takeCellRequests(double nowS) {
   std::vector<CellRequest> out;
   if (!hasPose_) return out;
-  for (uint32_t l : needed_) {
-    if (requested_.size() >= config_.maxCellRequests) break;
-    if (cellSets_.count(l) || requested_.count(l)) continue;
+  auto request = [&](uint32_t l, CellLevel level, WorkPriority priority) {
+    const uint64_t key = requestKey(l, level);
+    if (auto r = retryAt_.find(key); r != retryAt_.end()) {
+      if (nowS < r->second) return;
+      retryAt_.erase(r);
+    }
     Interest interest = makeInterest();
-    requested_[l] = interest;
-    out.push_back({l, std::move(interest)});
+    requested_[key] = interest;
+    out.push_back({l, std::move(interest), level, priority});
+  };
+  // Requests of one level for a cell; the other level's may also be out.
+  auto requestedAny = [&](uint32_t l) {
+    return requested_.count(requestKey(l, CellLevel::Fine)) ||
+           requested_.count(requestKey(l, CellLevel::Coarse));
+  };
+  // A client keeps its place in the line: the current cell is due from when
+  // the client began waiting for one, so a client walking into the next
+  // cell before its request ran is not sent to the back of the queue.
+  if (needed_.empty() || cellSets_.count(needed_.front()))
+    waitingSinceS_.reset();
+  else if (!waitingSinceS_)
+    waitingSinceS_ = nowS;
+  size_t outstanding = 0;  // of needed cells' first face sets (refinement apart)
+  for (const auto& [key, interest] : requested_)
+    if (!cellSets_.count(uint32_t(key))) ++outstanding;
+  for (size_t i = 0; i < needed_.size(); ++i) {
+    const uint32_t l = needed_[i];
+    // The limit is on prefetch: the current cell is always asked for.
+    if (i > 0 && outstanding >= config_.maxCellRequests) break;
+    if (i > 0 && behind_) break;  // prefetch backs off while the workers are behind
+    if (cellSets_.count(l) || requestedAny(l)) continue;
+    const WorkPriority priority =
+        i == 0 ? WorkPriority{WorkPriority::Current, waitingSinceS_.value_or(nowS)}
+               : WorkPriority{WorkPriority::Prefetch, nowS + neededInS_[i]};
+    // Coarse first unless the cell's own set is at hand (or is all there is).
+    const bool own =
+        !config_.coarseFirst || config_.policy == StreamPolicy::Radius ||
+        world_.hasCellFaceSet(world_.grid().cellAt(l), CellLevel::Fine, config_.policy, radius_);
+    request(l, own ? CellLevel::Fine : CellLevel::Coarse, priority);
+    ++outstanding;
+  }
+  // Refinement: the current cell's own set, once its coarse one streams.
+  if (config_.coarseFirst && !behind_ && !needed_.empty()) {
+    const uint32_t l = needed_.front();
+    if (cellSets_.count(l) && !fine_.count(l) && !requested_.count(requestKey(l, CellLevel::Fine)))
+      request(l, CellLevel::Fine, {WorkPriority::Refine, nowS});
   }
   return out;
 }
 
-bool StreamScheduler::onFaceSet(uint32_t cell, FaceListPtr faces) {
+bool StreamScheduler::onFaceSet(uint32_t cell, FaceListPtr faces, CellLevel level) {
   // A result nobody asks for any more (cancelled, or answered already
   // through a request that joined the same computation).
-  if (requested_.erase(cell) == 0 || !faces || !isNeeded(cell)) return false;
+  if (requested_.erase(requestKey(cell, level)) == 0 || !faces || !isNeeded(cell)) return false;
+  if (level == CellLevel::Coarse && fine_.count(cell)) return false;  // refined already
+  if (level == CellLevel::Fine) {
+    // The own set replaces the parent's; a coarse request still out is moot.
+    fine_.insert(cell);
+    requested_.erase(requestKey(cell, CellLevel::Coarse));
+    // Announced ready with the parent's set: the client held a superset.
+    // Should the budget have kept some of the own set back, the cell is
+    // announced again once whole.
+    if (announced_.count(cell) &&
+        !std::all_of(faces->begin(), faces->end(), [&](uint32_t f) { return held(f); }))
+      announced_.erase(cell);
+  }
   cellSets_[cell] = std::move(faces);
   cursor_[cell] = 0;
   evictionsExhausted_ = false;
   return true;
+}
+
+void StreamScheduler::onDropped(uint32_t cell, CellLevel level, double nowS) {
+  const uint64_t key = requestKey(cell, level);
+  if (requested_.erase(key) == 0 || !isNeeded(cell)) return;
+  retryAt_[key] = nowS + kRetryAfterDropS;
 }
 
 std::optional<StreamScheduler::CullRequest> StreamScheduler::takeCullRequest(double nowS) {

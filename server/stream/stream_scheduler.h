@@ -10,8 +10,26 @@
 //   times), then the neighbours whose shared side or corner lies within the
 //   prefetch margin (prefetchSeconds at walking speed, at least 2 m).
 // - Face sets of needed cells are requested in that order, at most
-//   maxCellRequests outstanding; a cell no longer needed has its request
-//   dropped (its Interest expires, so queued work for it is cancelled).
+//   maxCellRequests outstanding (the current cell is asked for whatever is
+//   outstanding); a cell no longer needed, or no longer the current one,
+//   has its request dropped (its Interest expires, so queued work for it is
+//   cancelled unless another request joined it).
+//   Each request says how urgent it is (work_queue.h): the current cell is
+//   rank Current, due now; a prefetch cell is rank Prefetch, due when the
+//   client is expected to reach it; a client waiting for its current cell
+//   keeps its place (due from when it began waiting) across cell changes.
+//   While the workers are behind
+//   (setBehind), only the current cell is requested: prefetch backs off.
+//   A prefetch request the work queue dropped (onDropped) is asked again no
+//   sooner than kRetryAfterDropS later.
+// - Coarse first (config.coarseFirst, the server without a database): a
+//   needed cell whose own face set is not cached gets its coarse parent's
+//   (stream_world.h), a superset, at once; the current cell's own face set
+//   is then requested as a refinement (rank Refine, not while behind) and
+//   replaces the coarse one when it arrives. The client already holds every
+//   face of the refined set unless the budget stopped some (they are sent
+//   then); what the coarse set had beyond it is not evicted at once but is
+//   no longer kept by that cell when the budget needs room.
 // - Under the visibility policy nothing streams before the current cell's
 //   face set is known and its culling (faces visible from the pose) has
 //   answered; those faces go first, then the rest of each needed cell in
@@ -44,6 +62,7 @@ struct StreamSchedulerConfig {
   unsigned maxCellRequests = 3;
   size_t batchBytes = 48u << 10;  // raw face bytes per batch
   double cullIntervalS = 0.25;
+  bool coarseFirst = false;  // see above; the server sets it without a database
 };
 
 class StreamScheduler {
@@ -51,6 +70,8 @@ class StreamScheduler {
   // Samples along the velocity when prefetching: bounds the work of one pose
   // whatever the speed and horizon.
   static constexpr int kMaxPrefetchSteps = 32;
+  // Seconds before a prefetch request the work queue dropped is made again.
+  static constexpr double kRetryAfterDropS = 1.0;
 
   // `radius`: the client's near-field radius (metres); `budgetBytes`: its
   // memory budget (0: unlimited), counted in StreamWorld::faceBytes.
@@ -70,12 +91,24 @@ class StreamScheduler {
     uint32_t cell;  // linear index
     Interest
         interest;  // hand to StreamWorld::cellFaceSet; expires when the cell is no longer wanted
+    CellLevel level = CellLevel::Fine;
+    WorkPriority priority;  // dueS on the clock of `nowS`
   };
-  // The face sets to request now (marked as requested).
-  std::vector<CellRequest> takeCellRequests();
+  // The face sets to request now (marked as requested). `nowS`: the caller's
+  // clock, for due times and retries.
+  std::vector<CellRequest> takeCellRequests(double nowS = 0.0);
   // A requested face set arrived. False if it was no longer wanted (dropped).
-  bool onFaceSet(uint32_t cell, FaceListPtr faces);
-  bool isRequested(uint32_t cell) const { return requested_.count(cell) > 0; }
+  bool onFaceSet(uint32_t cell, FaceListPtr faces, CellLevel level = CellLevel::Fine);
+  // The work queue dropped a request (prefetch or refinement only).
+  void onDropped(uint32_t cell, CellLevel level, double nowS);
+  bool isRequested(uint32_t cell, CellLevel level = CellLevel::Fine) const {
+    return requested_.count(requestKey(cell, level)) > 0;
+  }
+  // Whether the needed cell streams its own (fine) face set rather than its
+  // coarse parent's; false while it has none.
+  bool hasFineSet(uint32_t cell) const { return fine_.count(cell) > 0; }
+  // The workers are behind (WorkQueue::behind): prefetch and refinement wait.
+  void setBehind(bool behind) { behind_ = behind; }
 
   struct CullRequest {
     uint32_t cell;
@@ -90,6 +123,7 @@ class StreamScheduler {
 
   // Drops every request (a closing session): their interests expire.
   void cancelAll() { requested_.clear(); }
+  size_t outstandingRequests() const { return requested_.size(); }
 
   // ---- what to send ------------------------------------------------------------
   // Whether streaming may go on: the current cell's face set is known and,
@@ -112,6 +146,9 @@ class StreamScheduler {
   uint32_t cellsReady() const { return uint32_t(announced_.size()); }
 
  private:
+  static uint64_t requestKey(uint32_t cell, CellLevel level) {
+    return (uint64_t(level) << 32) | cell;
+  }
   void updateNeededCells();
   void setHeld(uint32_t face, bool on);
   bool isNeeded(uint32_t cell) const;
@@ -131,9 +168,14 @@ class StreamScheduler {
   uint64_t heldBytes_ = 0;
   uint32_t heldCount_ = 0;
   std::vector<uint32_t> needed_;              // linear cell indices, current first
+  std::vector<double> neededInS_;             // per needed cell: seconds until the client needs it
   std::map<uint32_t, FaceListPtr> cellSets_;  // loaded face sets of needed cells
   std::map<uint32_t, size_t> cursor_;         // per loaded cell: faces before this index are held
-  std::map<uint32_t, Interest> requested_;    // face sets being computed
+  std::set<uint32_t> fine_;                 // loaded cells whose set is their own, not the parent's
+  std::map<uint64_t, Interest> requested_;  // face sets being computed, by requestKey
+  std::map<uint64_t, double> retryAt_;      // dropped requests: not again before this time
+  bool behind_ = false;
+  std::optional<double> waitingSinceS_;  // since when the current cell has had no face set
   std::set<uint32_t> announced_;
   FaceList visibleNow_;
   uint32_t culledCell_ = UINT32_MAX, visibleNowCell_ = UINT32_MAX;

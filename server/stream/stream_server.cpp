@@ -44,6 +44,14 @@ StreamServer::~StreamServer() {
   workers_.join();
 }
 
+void StreamServer::abandonQueuedWork() {
+  // Nothing waiting is started any more: what waits in the world's queue is
+  // dropped, and so is what was posted to the pool (culling, encoding). The
+  // workers finish what they are computing and end; join() waits for that.
+  world_.abandonWork();
+  workers_.stop();
+}
+
 void StreamServer::start() {
   boost::system::error_code ec;
   const auto address = asio::ip::make_address(config_.bindAddress, ec);
@@ -195,6 +203,8 @@ StreamServer::Counters StreamServer::counters() const {
 
 void StreamServer::avatarTick() {
   if (stopping_ || config_.avatarHz <= 0.0) return;
+  // One update at a time: behind workers skip ticks rather than pile them up.
+  if (avatarsInFlight_.exchange(true)) return scheduleAvatarTick();
   std::vector<std::shared_ptr<Session>> live;
   std::vector<uint32_t> departed;
   {
@@ -236,7 +246,12 @@ void StreamServer::avatarTick() {
       live[i]->deliverAvatars(
           std::make_shared<const std::vector<uint8_t>>(wire::encodeMessage(std::move(message))));
     }
+    avatarsInFlight_ = false;
   });
+  scheduleAvatarTick();
+}
+
+void StreamServer::scheduleAvatarTick() {
   avatarTimer_.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
       std::chrono::duration<double>(1.0 / config_.avatarHz)));
   avatarTimer_.async_wait([this](const boost::system::error_code& ec) {
@@ -268,13 +283,18 @@ void StreamServer::statsTick() {
     const auto cs = world_.cacheStats();
     const double hitRate =
         cs.hits + cs.misses ? double(cs.hits) / double(cs.hits + cs.misses) : 0.0;
+    const WorkQueue::Load work = world_.work().load();
     spdlog::info(
-        "stats: {} sessions, {:.1f} kB/s out, cache hit rate {:.1f}% ({} PVS computed, {} from the "
-        "database, "
-        "{} cancelled unstarted), queues {:.1f} kB total / {:.1f} kB max, CPU {:.0f}%",
+        "stats: {} sessions, {:.1f} kB/s out, cache hit rate {:.1f}% ({} PVS computed ({} coarse), "
+        "{} from the database, {} cancelled unstarted, {} dropped), queues {:.1f} kB total / "
+        "{:.1f} kB max, workers {} (visibility jobs waiting: {}, {} for current cells, the oldest "
+        "for {:.1f} s), CPU {:.0f}%",
         sessions, double(bytes - lastBytes_) / 1e3 / config_.statsIntervalS, 100.0 * hitRate,
-        cs.pvsComputed, cs.pvsFromDatabase, cs.cancelled, double(queueSum) / 1e3,
-        double(queueMax) / 1e3, cpuMsPerS_ / 10.0);
+        cs.pvsComputed, cs.coarseComputed, cs.pvsFromDatabase, cs.cancelled, cs.dropped,
+        double(queueSum) / 1e3, double(queueMax) / 1e3,
+        world_.work().behind(config_.behindLagS, config_.behindQueuedJobs) ? "behind"
+                                                                           : "keeping up",
+        work.waiting, work.waitingCurrent, work.oldestCurrentS, cpuMsPerS_ / 10.0);
     lastBytes_ = bytes;
   }
   lastStats_ = now;
@@ -287,6 +307,7 @@ void StreamServer::statsTick() {
 
 void StreamServer::stop() {
   if (stopping_.exchange(true)) return;
+  abandonQueuedWork();
   asio::post(acceptStrand_, [this] {
     boost::system::error_code ignored;
     acceptor_.close(ignored);

@@ -72,6 +72,15 @@ struct StreamServerConfig {
   unsigned maxCellRequests = 3;
   unsigned maxPvsRequestsInFlight = 2;
   size_t maxPvsRequestsWaiting = 64;
+  // The workers are behind when a current-cell computation has waited longer
+  // than behindLagS or more than behindQueuedJobs current-cell computations
+  // wait; then sessions stop asking for prefetch and refinement, and stop
+  // culling (work_queue.h). Chosen on bigcity without a database, 2 cores,
+  // 20 and 100 walking clients (a cell's face set costs about 0.1 s there).
+  double behindLagS = 0.5;
+  size_t behindQueuedJobs = 4;
+  // Sessions add no prefetch or refinement while more than this waits.
+  size_t maxWaitingPrefetch = 8;
 };
 
 class Session;
@@ -85,7 +94,11 @@ class StreamServer {
   void start();
   // Runs until stop() (or SIGINT/SIGTERM when handleSignals is set).
   void run(bool handleSignals);
-  // Stops accepting, says Bye to every session and ends run(). Thread-safe.
+  // Stops accepting, abandons the visibility work waiting for a worker (the
+  // world's queue and the pool's), says Bye to every session and ends run()
+  // about 0.3 s later; the workers end once their current computations do.
+  // Thread-safe. The world's queue stays abandoned: a world serves one
+  // server's run.
   void stop();
   uint16_t port() const { return port_; }
 
@@ -116,6 +129,8 @@ class StreamServer {
   void fitOpenFileLimit();
   void accept();
   void avatarTick();
+  void scheduleAvatarTick();
+  void abandonQueuedWork();
   void statsTick();
 
   StreamWorld& world_;
@@ -139,6 +154,7 @@ class StreamServer {
   std::vector<uint32_t> departed_;  // sessions ended since the last avatar update
   uint32_t nextId_ = 1;
   std::atomic<bool> stopping_{false};
+  std::atomic<bool> avatarsInFlight_{false};  // one avatar update on the workers at a time
   std::atomic<uint64_t> accepted_{0}, rejected_{0}, ended_{0}, bytesSent_{0};
   uint64_t lastBytes_ = 0;
   double lastCpuMs_ = 0.0, sinceLog_ = 0.0;

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "common/core/check.h"
 #include "common/core/error.h"
 #include "common/core/timer.h"
 #include "common/raycast/ray_query.h"
@@ -38,7 +39,7 @@ float boxDistance(const Box3f& a, const Box3f& b) {
 }  // namespace
 
 StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
-    : scene_(std::move(scene)) {
+    : scene_(std::move(scene)), work_(options.maxQueuedPrefetch) {
   Stopwatch clock;
   if (!options.pvsDatabase.empty()) {
     database_.emplace(PvsDatabase::open(options.pvsDatabase));
@@ -62,6 +63,7 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
     bo.cellSize = glm::vec3(options.cellSize);
     grid_ = bakeGrid(scene_, world.freeSpace, bo);
   }
+  VS_CHECK_LT(grid_.cellCount(), size_t(kCoarseKey));  // keys leave the top bit for coarse cells
   culling_ = std::make_unique<CullingScene>(scene_);
 
   // Per-face triangles and bounds, in face-ID order.
@@ -90,16 +92,17 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
   pvsCache_ = std::make_unique<AsyncCache<uint32_t, FaceList>>(
       options.pvsCacheCells, [this](const uint32_t& c) { return computePvs(c); },
       [this](const uint32_t& c, const char* what) {
-        const glm::ivec3 i = grid_.cellAt(c);
+        const glm::ivec3 i = grid_.cellAt(c & ~kCoarseKey);
         spdlog::error("PVS of cell ({}, {}, {}) failed: {}", i.x, i.y, i.z, what);
       },
-      options.pvsCacheBytes, faceListBytes);
+      options.pvsCacheBytes, faceListBytes, &work_);
   faceSetCache_ = std::make_unique<AsyncCache<FaceSetKey, FaceList, FaceSetKeyHash>>(
       options.faceSetCacheEntries,
       [this](const FaceSetKey& k) {
-        const Box3f box = grid_.cellBox(grid_.cellAt(k.cell));
+        const Box3f box = pvsKeyBox(k.cell);
         FaceList near = facesWithin(box, float(k.radiusCm) / 100.0f);
         if (k.policy == StreamPolicy::Radius) return near;
+        if (!database_) return computeNearPvs(k, box, near);
         FaceListPtr pvs = pvsCache_->find(k.cell);
         const FaceList computed = pvs ? FaceList{} : computePvs(k.cell);
         const FaceList& p = pvs ? *pvs : computed;
@@ -109,10 +112,13 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
         return out;
       },
       [this](const FaceSetKey& k, const char* what) {
-        const glm::ivec3 i = grid_.cellAt(k.cell);
+        const glm::ivec3 i = grid_.cellAt(k.cell & ~kCoarseKey);
         spdlog::error("face set of cell ({}, {}, {}) failed: {}", i.x, i.y, i.z, what);
       },
-      options.faceSetCacheBytes, faceListBytes);
+      options.faceSetCacheBytes, faceListBytes, &work_);
+  // Without a database every client needs the occluders at once: prepared
+  // here (seconds on a big city) rather than by the first client's request.
+  if (!database_) epsilonPvs();
   spdlog::info(
       "stream world: scene '{}' ({} faces), {} x {} x {} cells of {:.1f} m, PVS {}, ready in "
       "{:.0f} ms",
@@ -132,7 +138,62 @@ const EpsilonPvs& StreamWorld::epsilonPvs() {
   return *pvs_;
 }
 
-FaceList StreamWorld::computePvs(uint32_t linear) {
+uint32_t StreamWorld::pvsKey(const glm::ivec3& cell, CellLevel level) const {
+  if (level == CellLevel::Fine) return uint32_t(grid_.linearIndex(cell));
+  const glm::ivec3 first(cell.x & ~1, cell.y, cell.z & ~1);
+  return kCoarseKey | uint32_t(grid_.linearIndex(first));
+}
+
+Box3f StreamWorld::coarseBox(const glm::ivec3& cell) const {
+  const glm::ivec3 first(cell.x & ~1, cell.y, cell.z & ~1);
+  Box3f box;
+  for (int dz = 0; dz <= 1; ++dz)
+    for (int dx = 0; dx <= 1; ++dx)
+      if (grid_.contains(first + glm::ivec3(dx, 0, dz)))
+        box.extend(grid_.cellBox(first + glm::ivec3(dx, 0, dz)));
+  return box;
+}
+
+Box3f StreamWorld::pvsKeyBox(uint32_t key) const {
+  const glm::ivec3 cell = grid_.cellAt(key & ~kCoarseKey);
+  return key & kCoarseKey ? coarseBox(cell) : grid_.cellBox(cell);
+}
+
+// Only the faces within the radius are candidates: a face the client could
+// see but that is outside the radius is not streamed anyway, and a face
+// that is not a candidate is never an occludee, so the answer for every
+// candidate is what the whole PVS would say of it or, where fewer occluders
+// remain (an object left out is no longer an occluder of those behind it),
+// a face more: never one less. On bigcity this costs about a fifth of the
+// whole PVS. A fine cell with its parent's face set at hand (the same
+// radius) takes only the parent's faces as candidates, as the bake's
+// coarse-to-fine does: its set is then never larger than the parent's.
+FaceList StreamWorld::computeNearPvs(const FaceSetKey& k, const Box3f& box, const FaceList& near) {
+  PvsOptions options;
+  options.candidateFaces = &near;
+  FaceList fromParent;
+  if (!(k.cell & kCoarseKey)) {
+    const glm::ivec3 cell = grid_.cellAt(k.cell);
+    if (FaceListPtr parent =
+            faceSetCache_->find({pvsKey(cell, CellLevel::Coarse), k.radiusCm, k.policy})) {
+      std::set_intersection(parent->begin(), parent->end(), near.begin(), near.end(),
+                            std::back_inserter(fromParent));
+      options.candidateFaces = &fromParent;
+    }
+  }
+  FaceList faces = epsilonPvs().compute(box, options).faces;
+  ++nearPvsComputed_;
+  if (k.cell & kCoarseKey) ++coarseComputed_;
+  return faces;
+}
+
+FaceList StreamWorld::computePvs(uint32_t key) {
+  if (key & kCoarseKey) {
+    FaceList faces = epsilonPvs().compute(pvsKeyBox(key)).faces;
+    ++coarseComputed_;
+    return faces;
+  }
+  const uint32_t linear = key;
   if (database_) {
     // The database is validated when opened; should a cell still fail to
     // decode, it is computed on demand (and said once) rather than lost.
@@ -148,7 +209,13 @@ FaceList StreamWorld::computePvs(uint32_t linear) {
       });
     }
   }
-  return epsilonPvs().compute(grid_.cellBox(grid_.cellAt(linear))).faces;
+  // Coarse-to-fine, as the bake: with the parent's PVS cached, only its faces
+  // are candidates (the parent's PVS holds every face the cell can see).
+  const glm::ivec3 cell = grid_.cellAt(linear);
+  PvsOptions options;
+  const FaceListPtr parent = pvsCache_->find(pvsKey(cell, CellLevel::Coarse));
+  if (parent) options.candidateFaces = parent.get();
+  return epsilonPvs().compute(grid_.cellBox(cell), options).faces;
 }
 
 std::optional<glm::ivec3> StreamWorld::cellOf(const glm::vec3& p) const {
@@ -171,25 +238,48 @@ FaceListPtr StreamWorld::cachedPvs(const glm::ivec3& cell) {
 void StreamWorld::cellFaceSet(const glm::ivec3& cell, StreamPolicy policy, float radius,
                               boost::asio::thread_pool& pool, std::function<void(FaceListPtr)> done,
                               const Interest& interest) {
-  const FaceSetKey key{uint32_t(grid_.linearIndex(cell)),
-                       uint32_t(std::lround(std::max(0.0f, radius) * 100.0f)), policy};
-  if (policy == StreamPolicy::Radius) {
-    faceSetCache_->get(key, pool.get_executor(), std::move(done), interest);
+  cellFaceSet(cell, CellLevel::Fine, policy, radius, pool, std::move(done),
+              CellWork{{}, interest, {}});
+}
+
+void StreamWorld::cellFaceSet(const glm::ivec3& cell, CellLevel level, StreamPolicy policy,
+                              float radius, boost::asio::thread_pool& pool,
+                              std::function<void(FaceListPtr)> done, CellWork work) {
+  if (policy == StreamPolicy::Radius) level = CellLevel::Fine;
+  const uint32_t pvs = pvsKey(cell, level);
+  const FaceSetKey key{pvs, uint32_t(std::lround(std::max(0.0f, radius) * 100.0f)), policy};
+  // One stage where the face set is computed from the near faces alone.
+  if (policy == StreamPolicy::Radius || !database_) {
+    faceSetCache_->get(key, pool.get_executor(), std::move(done), work.interest, work.priority,
+                       std::move(work.dropped));
     return;
   }
   // The PVS first (shared with PvsRequest and avatars), then the face set.
   // The continuation holds the interest only weakly, so dropping it also
-  // cancels the second stage.
-  pvs(
-      cell, pool,
-      [this, key, &pool, done = std::move(done), weak = std::weak_ptr<const int>(interest),
-       unconditional = interest == nullptr](FaceListPtr p) mutable {
+  // cancels the second stage. The drop callback is shared by the stages;
+  // only the one waiting can be dropped.
+  auto dropped = std::make_shared<std::function<void()>>(std::move(work.dropped));
+  auto onDrop = [dropped] {
+    if (*dropped) (*dropped)();
+  };
+  pvsCache_->get(
+      pvs, pool.get_executor(),
+      [this, key, &pool, done = std::move(done), weak = std::weak_ptr<const int>(work.interest),
+       unconditional = work.interest == nullptr, priority = work.priority,
+       onDrop](FaceListPtr p) mutable {
         if (!p) return done(nullptr);
         Interest still = weak.lock();
         if (!unconditional && !still) return;  // cancelled between the stages
-        faceSetCache_->get(key, pool.get_executor(), std::move(done), still);
+        faceSetCache_->get(key, pool.get_executor(), std::move(done), still, priority, onDrop);
       },
-      interest);
+      work.interest, work.priority, onDrop);
+}
+
+bool StreamWorld::hasCellFaceSet(const glm::ivec3& cell, CellLevel level, StreamPolicy policy,
+                                 float radius) const {
+  if (policy == StreamPolicy::Radius) level = CellLevel::Fine;
+  return faceSetCache_->contains(
+      {pvsKey(cell, level), uint32_t(std::lround(std::max(0.0f, radius) * 100.0f)), policy});
 }
 
 FaceList StreamWorld::facesWithin(const Box3f& box, float radius) const {
@@ -220,9 +310,13 @@ bool StreamWorld::cellSeesCell(const glm::ivec3& viewerCell, const glm::ivec3& a
 }
 
 StreamWorld::CacheStats StreamWorld::cacheStats() const {
-  return {pvsCache_->hits() + faceSetCache_->hits(), pvsCache_->misses() + faceSetCache_->misses(),
-          pvsCache_->computed(), pvsFromDatabase_,
-          pvsCache_->cancelled() + faceSetCache_->cancelled()};
+  return {pvsCache_->hits() + faceSetCache_->hits(),
+          pvsCache_->misses() + faceSetCache_->misses(),
+          pvsCache_->computed() + nearPvsComputed_,
+          pvsFromDatabase_,
+          pvsCache_->cancelled() + faceSetCache_->cancelled(),
+          coarseComputed_,
+          pvsCache_->dropped() + faceSetCache_->dropped()};
 }
 
 }  // namespace vistream

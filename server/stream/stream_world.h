@@ -5,11 +5,32 @@
 //
 // Policies: "visibility" streams, per cell, the faces of the cell's PVS
 // within the near-field radius of the cell; "radius" (the baseline) streams
-// every face within that radius, visible or not.
+// every face within that radius, visible or not. Without a database, a
+// cell's face set is computed with only the faces within the radius as
+// candidates (PvsOptions::candidateFaces; see computeNearPvs), not as the
+// whole PVS cut down to the radius: a superset of that, at a fraction of the
+// cost.
 //
-// Thread safety: immutable after construction except the caches, which are
-// thread-safe; every const member may be called from any thread. Work that
-// computes (PVS, face sets) runs on the executor passed in, never inline.
+// Coarse cells (without a database): blocks of 2 x 1 x 2 view cells, as the
+// bake's coarse-to-fine level (server/visibility/pvs_bake.cpp). The PVS of a
+// coarse cell is conservative for every viewpoint of the block, so it is a
+// superset of each member cell's PVS and can be sent at once, shared by every
+// client inside the block; a fine cell's PVS is computed with its coarse
+// parent's PVS as the candidate faces (PvsOptions::candidateFaces) when that
+// is cached, so it is never larger than the parent's. A coarse face set (the
+// coarse PVS within the radius of the whole block) likewise contains the face
+// set of each member cell at the same radius.
+//
+// Work order: PVS and face-set computations wait in one WorkQueue
+// (work_queue.h) in order of urgency (a client's current cell before any
+// prefetch, prefetch due soonest first, refinement last), with a bound on
+// the prefetch and refinement waiting; abandonWork() drops everything
+// waiting (a stopping server).
+//
+// Thread safety: immutable after construction except the caches and the work
+// queue, which are thread-safe; every const member may be called from any
+// thread. Work that computes (PVS, face sets) runs on the executor passed in,
+// never inline.
 #pragma once
 
 #include <boost/asio/thread_pool.hpp>
@@ -47,6 +68,22 @@ struct StreamWorldOptions {
   // part of a face set's key (their radius), so entries alone do not bound it.
   size_t pvsCacheBytes = size_t(1) << 30;
   size_t faceSetCacheBytes = size_t(1) << 30;
+  // Prefetch and refinement computations that may wait for a worker; beyond
+  // this the least urgent are dropped (work_queue.h).
+  size_t maxQueuedPrefetch = 64;
+};
+
+// Which PVS a face set is built from: a view cell's own, or its coarse
+// parent's (the 2 x 1 x 2 block holding it; see above).
+enum class CellLevel : uint8_t { Fine, Coarse };
+
+// How a request for visibility work waits: its urgency, the requester's
+// interest (see async_cache.h), and what to call instead of `done` if the
+// queue drops it for its bound (never for rank Current).
+struct CellWork {
+  WorkPriority priority;
+  Interest interest;
+  std::function<void()> dropped;
 };
 
 using FaceList = std::vector<uint32_t>;  // sorted face IDs
@@ -89,6 +126,26 @@ class StreamWorld {
   void cellFaceSet(const glm::ivec3& cell, StreamPolicy policy, float radius,
                    boost::asio::thread_pool& pool, std::function<void(FaceListPtr)> done,
                    const Interest& interest = nullptr);
+  // The same at a level (the radius policy has only Fine: Coarse is served
+  // as Fine), waiting in the work queue as `work` says.
+  void cellFaceSet(const glm::ivec3& cell, CellLevel level, StreamPolicy policy, float radius,
+                   boost::asio::thread_pool& pool, std::function<void(FaceListPtr)> done,
+                   CellWork work);
+  // Whether that face set is cached now (a request for it answers at once).
+  bool hasCellFaceSet(const glm::ivec3& cell, CellLevel level, StreamPolicy policy,
+                      float radius) const;
+  // The closed box a coarse cell covers: the union of the member cells of
+  // the block holding `cell` (clipped to the grid).
+  Box3f coarseBox(const glm::ivec3& cell) const;
+  // Whether clients get a coarse PVS first: only without a database (a
+  // baked cell is read, not computed).
+  bool coarseFirst() const { return !database_.has_value(); }
+
+  // The order and bound of visibility work (work_queue.h).
+  WorkQueue& work() { return work_; }
+  const WorkQueue& work() const { return work_; }
+  // Drops all waiting visibility work and refuses more (a stopping server).
+  void abandonWork() { work_.abandon(); }
   // Faces whose bounding box lies within `radius` of the box (sorted).
   FaceList facesWithin(const Box3f& box, float radius) const;
   // Whether an avatar anywhere in view cell `avatarCell` may be visible from
@@ -101,14 +158,23 @@ class StreamWorld {
   bool cellSeesCell(const glm::ivec3& viewerCell, const glm::ivec3& avatarCell);
 
   struct CacheStats {
+    // pvsComputed: PVS computations of every kind (whole, or of the near
+    // faces for a face set), coarse cells included.
     uint64_t hits = 0, misses = 0, pvsComputed = 0, pvsFromDatabase = 0;
-    uint64_t cancelled = 0;  // computations dropped unstarted: nobody waited any more
+    uint64_t cancelled = 0;       // computations dropped unstarted: nobody waited any more
+    uint64_t coarseComputed = 0;  // of pvsComputed, coarse cells
+    uint64_t dropped = 0;         // prefetch dropped unstarted for the queue's bound
   };
   CacheStats cacheStats() const;
   bool hasDatabase() const { return database_.has_value(); }
 
  private:
-  FaceList computePvs(uint32_t linear);
+  // PVS cache keys: a fine cell's linear index, or kCoarseKey | the linear
+  // index of its block's first cell.
+  static constexpr uint32_t kCoarseKey = 1u << 31;
+  uint32_t pvsKey(const glm::ivec3& cell, CellLevel level) const;
+  Box3f pvsKeyBox(uint32_t key) const;
+  FaceList computePvs(uint32_t key);
   struct FaceSetKey {
     uint32_t cell;
     uint32_t radiusCm;
@@ -120,12 +186,15 @@ class StreamWorld {
       return (size_t(k.cell) * 1000003u) ^ (size_t(k.radiusCm) << 1) ^ size_t(k.policy);
     }
   };
+  // The visibility face set without a database (see the policies above).
+  FaceList computeNearPvs(const FaceSetKey& key, const Box3f& box, const FaceList& near);
   const EpsilonPvs& epsilonPvs();
 
   Scene scene_;
   ViewCellGrid grid_;
   GroundPlane ground_;
   std::optional<PvsDatabase> database_;
+  WorkQueue work_;  // before the caches, which submit to it
   std::unique_ptr<CullingScene> culling_;
   std::once_flag pvsOnce_;
   std::unique_ptr<EpsilonPvs> pvs_;
@@ -135,7 +204,7 @@ class StreamWorld {
   XzGrid faceGrid_;
   std::unique_ptr<AsyncCache<uint32_t, FaceList>> pvsCache_;
   std::unique_ptr<AsyncCache<FaceSetKey, FaceList, FaceSetKeyHash>> faceSetCache_;
-  std::atomic<uint64_t> pvsFromDatabase_{0};
+  std::atomic<uint64_t> pvsFromDatabase_{0}, coarseComputed_{0}, nearPvsComputed_{0};
   std::once_flag databaseFailureLogged_;
   std::mutex cellPairsMutex_;
   std::unordered_map<uint64_t, bool> cellPairs_;

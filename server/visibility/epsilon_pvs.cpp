@@ -25,6 +25,7 @@
 #include "common/core/check.h"
 #include "common/core/timer.h"
 #include "common/world/solids.h"
+#include "server/visibility/horizon_fusion.h"
 
 namespace vistream {
 
@@ -567,13 +568,21 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
 
   std::sort(result.faces.begin(), result.faces.end());
   result.faces.erase(std::unique(result.faces.begin(), result.faces.end()), result.faces.end());
+  // Occluder fusion on what one occluder could not hide.
+  if (options.fusion && fusion_) {
+    Stopwatch sw;
+    HorizonFusionResult fused = fusion_->cull(cell, result.faces);
+    stats.facesFused = result.faces.size() - fused.faces.size();
+    stats.facesOccluded += stats.facesFused;
+    result.faces = std::move(fused.faces);
+    stats.fusionMs = sw.ms();
+  }
   // Objects with a face in the PVS.
-  for (const ObjectEntry& e : objects_)
-    for (const Face& f : e.faces)
-      if (std::binary_search(result.faces.begin(), result.faces.end(), f.id)) {
-        result.objects.push_back(e.object);
-        break;
-      }
+  std::vector<uint8_t> hasFace(objects_.size(), 0);
+  for (uint32_t f : result.faces)
+    if (f < faceIndex_.size() && faceIndex_[f].first != ~0u) hasFace[faceIndex_[f].first] = 1;
+  for (uint32_t e = 0; e < objects_.size(); ++e)
+    if (hasFace[e]) result.objects.push_back(objects_[e].object);
   stats.occludersUsed = size_t(std::count(q.used.begin(), q.used.end(), uint8_t(1)));
   stats.boxStageMs = boxMs;
   stats.faceStageMs = faceMs;

@@ -71,6 +71,8 @@
 
 namespace vistream {
 
+class HorizonFusion;
+
 struct PvsOptions {
   bool boxStage = true;               // --no-bbox turns it off
   bool incremental = true;            // --no-incremental
@@ -78,6 +80,7 @@ struct PvsOptions {
   bool removeRedundantLines = true;   // --no-redundant-rays
   size_t largeOccluders = 0;          // 0: every occluder; K: the K largest by solid angle
   bool backFaces = true;              // --no-back-faces: keep faces that face away from the cell
+  bool fusion = true;                 // run the fused stage, when EpsilonPvs has one (setFusion)
   // Coarse-to-fine: when non-null, only these faces (sorted) can be in the PVS.
   const std::vector<uint32_t>* candidateFaces = nullptr;
 };
@@ -103,6 +106,8 @@ struct PvsStats {
   size_t facesOccluded = 0;  // culled in total (box stage included)
   size_t facesCulledByBoxStage = 0;
   size_t facesBackFacing = 0;  // culled because they face away from the whole cell
+  size_t facesFused = 0;       // culled by the fused stage (hidden by several occluders together)
+  double fusionMs = 0.0;
 
   // Every field above, once: `vistream-pvs cell` prints its JSON and its
   // table from this list (common/core/stats_output.h).
@@ -130,10 +135,12 @@ struct PvsStats {
     f(StatField{"faces_culled_by_box_stage", "faces culled by box stage", ""},
       facesCulledByBoxStage);
     f(StatField{"faces_back_facing", "faces facing away from the cell", ""}, facesBackFacing);
+    f(StatField{"faces_fused", "faces hidden by fused occluders", ""}, facesFused);
+    f(StatField{"fusion_ms", "fusion stage", "ms"}, fusionMs);
   }
 };
-// 18 fields of 8 bytes: a field added above must be added to forEachField too.
-static_assert(sizeof(PvsStats) == 18 * 8, "PvsStats changed: update PvsStats::forEachField");
+// 20 fields of 8 bytes: a field added above must be added to forEachField too.
+static_assert(sizeof(PvsStats) == 20 * 8, "PvsStats changed: update PvsStats::forEachField");
 
 struct PvsResult {
   std::vector<uint32_t> faces;    // sorted face IDs of the PVS
@@ -152,6 +159,13 @@ class EpsilonPvs {
 
   // `cell` in the scene's local frame.
   PvsResult compute(const Box3f& cell, const PvsOptions& options = {}) const;
+
+  // The fused stage compute() runs last (PvsOptions::fusion): occlusion
+  // horizons over the scene's solid columns (horizon_fusion.h), which hide
+  // what several occluders hide together. Null: none. Not owned; it must
+  // outlive this object's queries. Set it before any compute() runs.
+  void setFusion(const HorizonFusion* fusion) { fusion_ = fusion; }
+  const HorizonFusion* fusion() const { return fusion_; }
 
   // True if one occluder hides the whole closed box from every point of the
   // cell: the test compute() applies to object boxes (8 corner-to-corner
@@ -174,6 +188,7 @@ class EpsilonPvs {
   KdTree occluderTree_;
   std::vector<ObjectEntry> objects_;
   std::vector<std::pair<uint32_t, uint32_t>> faceIndex_;  // face ID -> (object entry, face), or ~0u
+  const HorizonFusion* fusion_ = nullptr;
   std::vector<Box3f> solidBounds_;  // bounds of the closed components of one-sided faces
   double prepareMs_ = 0.0;
 

@@ -24,7 +24,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       if (const auto* g = env->payload_as_Geometry()) {
         vistream::wire::DecodedGeometry out;
         std::string error;
-        (void)vistream::wire::decodeGeometry(*g, out, error);
+        (void)vistream::wire::decodeGeometry(*g, vistream::wire::QuantizationGrid{}, out, error);
       }
       if (const auto* p = env->payload_as_Pose()) (void)vistream::wire::isFinite(p->position());
     }

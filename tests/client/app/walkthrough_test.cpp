@@ -110,5 +110,28 @@ TEST(Walkthrough, TableHasARowForEveryPixelClassAndStageWithItsMean) {
   }
 }
 
+// Geometry intake and wall-clock time: frame k took up geometry for 2k ms
+// and spent 3k ms in all.
+TEST(Walkthrough, ReportsGeometryIntakeAndWallClockPerFrameAndInTotal) {
+  std::vector<FrameRecord> frames = {frame(1), frame(3)};
+  for (FrameRecord& f : frames) {
+    f.geometryIntakeMs = 2.0 * double(f.frame);
+    f.wallMs = 3.0 * double(f.frame);
+  }
+  const nlohmann::json j = walkthroughJson(frames, PipelineOptions{}, 64, 48);
+  EXPECT_EQ(j["geometry_intake_ms_total"].get<double>(), 8.0);
+  EXPECT_EQ(j["geometry_intake_ms_per_frame"].get<double>(), 4.0);
+  EXPECT_EQ(j["wall_ms_per_frame"].get<double>(), 6.0);
+  ASSERT_EQ(j["per_frame"].size(), 2u);
+  EXPECT_EQ(j["per_frame"][1]["geometry_intake_ms"].get<double>(), 6.0);
+  EXPECT_EQ(j["per_frame"][1]["wall_ms"].get<double>(), 9.0);
+  const std::string table = walkthroughTable(frames, PipelineOptions{});
+  for (const std::string& row :
+       {fmt::format("{:<28} {:>12.3f}\n", "geometry intake", 4.0),
+        fmt::format("{:<28} {:>12.3f}\n", "wall clock (intake + frame)", 6.0),
+        std::string("geometry intake: 8.0 ms in total\n")})
+    EXPECT_NE(table.find(row), std::string::npos) << "missing row: " << row << table;
+}
+
 }  // namespace
 }  // namespace vistream

@@ -142,6 +142,13 @@ TEST(ClientTool, ConnectedHeadlessRendersWhatTheServerStreams) {
   st >> status;
   std::ifstream err(dir.path() / "client.err");
   ASSERT_EQ(status, 0) << std::string((std::istreambuf_iterator<char>(err)), {});
+  std::ifstream netJson(dir.path() / "net.json");
+  const auto j = parseJson(std::string((std::istreambuf_iterator<char>(netJson)), {}));
+  // Taking up geometry is part of each frame's wall-clock time.
+  EXPECT_GE(j["geometry_intake_ms_total"].get<double>(), 0.0);
+  EXPECT_GE(
+      j["wall_ms_per_frame"].get<double>(),
+      j["mean_frame_ms"].get<double>() + j["geometry_intake_ms_per_frame"].get<double>() - 1e-9);
   const auto local = runTool("vistream-client",
                              "--scene " + scene.string() + " --headless --path " + path.string() +
                                  " --size 160x120 --near-distance 40 --out " + d + "/local --json");

@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <boost/asio.hpp>
 #include <limits>
 #include <optional>
@@ -58,6 +60,8 @@ WelcomeT goodWelcome() {
   w.grid->cell_size = std::make_unique<Vec3f>(4.0f, 4.0f, 4.0f);
   w.grid->dims = std::make_unique<CellIndex>(10, 2, 10);
   w.near_field_radius_m = 100.0f;
+  w.quant_origin = std::make_unique<Vec3d>(0.0, 0.0, 0.0);  // QuantizationGrid{}'s
+  w.quant_step = QuantizationGrid{}.step;
   return w;
 }
 
@@ -97,7 +101,8 @@ TEST(StreamClient, EndsTheSessionWhenTheServerSendsMoreTrianglesThanItsLimit) {
   std::vector<FaceTriangles> faces;
   for (uint32_t f = 0; f < 20; ++f)
     faces.push_back({f, 0, {{float(f), 0, 0}, {float(f) + 1, 0, 0}, {float(f), 1, 0}}});
-  ScriptedServer server({encodeMessage(goodWelcome()), encodeMessage(encodeGeometry(faces))});
+  ScriptedServer server(
+      {encodeMessage(goodWelcome()), encodeMessage(encodeGeometry(faces, QuantizationGrid{}))});
   StreamClientOptions o = to(server);
   o.maxTriangles = 10;
   StreamClient client(o);
@@ -111,7 +116,8 @@ TEST(StreamClient, HoldsWhatAWellBehavedServerSends) {
   std::vector<FaceTriangles> faces;
   for (uint32_t f = 0; f < 5; ++f)
     faces.push_back({f, 0, {{float(f), 0, 0}, {float(f) + 1, 0, 0}, {float(f), 1, 0}}});
-  ScriptedServer server({encodeMessage(goodWelcome()), encodeMessage(encodeGeometry(faces))});
+  ScriptedServer server(
+      {encodeMessage(goodWelcome()), encodeMessage(encodeGeometry(faces, QuantizationGrid{}))});
   StreamClient client(to(server));
   for (int i = 0; i < 200 && client.facesHeld() < 5; ++i)
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
@@ -146,6 +152,74 @@ TEST(StreamClient, TakesTheAssumedGroundPlaneFromTheWelcome) {
     ScriptedServer server({encodeMessage(std::move(w))});
     StreamClient client(to(server));
     EXPECT_EQ(client.snapshot().groundY, k.expected);
+  }
+}
+
+// The faces of a geometry as (face ID, corners) pairs, in a canonical order.
+std::vector<std::pair<uint32_t, std::array<float, 9>>> facesIn(const RenderGeometry& g) {
+  std::vector<std::pair<uint32_t, std::array<float, 9>>> out;
+  for (size_t t = 0; t < g.size(); ++t) {
+    std::array<float, 9> c;
+    for (int k = 0; k < 3; ++k)
+      for (int a = 0; a < 3; ++a) c[size_t(3 * k + a)] = g.triangles.vertex(t, k)[a];
+    out.push_back({g.triangles.faceIds[t], c});
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+TEST(StreamClient, DeltasTakenUpInTurnHoldWhatTheSnapshotHolds) {
+  auto face = [](uint32_t f, float y) {
+    return FaceTriangles{f, 0, {{float(f), y, 0}, {float(f) + 1, y, 0}, {float(f), y + 1, 0}}};
+  };
+  std::vector<FaceTriangles> first;
+  for (uint32_t f = 0; f < 10; ++f) first.push_back(face(f, 0.0f));
+  ScriptedServer server(
+      {encodeMessage(goodWelcome()), encodeMessage(encodeGeometry(first, QuantizationGrid{}))});
+  StreamClient client(to(server));
+  for (int i = 0; i < 300 && client.facesHeld() < 10; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  ASSERT_EQ(client.facesHeld(), 10u) << client.error();
+  StreamedGeometry held;
+  const GeometryDelta all = client.takeDelta();
+  EXPECT_TRUE(all.replaceAll) << "the first delta carries everything";
+  held.apply(all);
+  EXPECT_EQ(facesIn(held.compacted()), facesIn(client.snapshot()));
+  const GeometryDelta none = client.takeDelta();
+  EXPECT_TRUE(none.removed.empty());
+  EXPECT_EQ(none.added.size(), 0u);
+}
+
+TEST(StreamClient, DeltasCarryEvictionsAndFacesSentAgain) {
+  auto face = [](uint32_t f, float y) {
+    return FaceTriangles{f, 0, {{float(f), y, 0}, {float(f) + 1, y, 0}, {float(f), y + 1, 0}}};
+  };
+  std::vector<FaceTriangles> first;
+  for (uint32_t f = 0; f < 10; ++f) first.push_back(face(f, 0.0f));
+  EvictT evict;
+  evict.face_ids = {2, 3, 7, 99};  // 99 never held
+  const std::vector<FaceTriangles> second = {face(3, 5.0f), face(4, 6.0f), face(10, 0.0f)};
+  ScriptedServer server(
+      {encodeMessage(goodWelcome()), encodeMessage(encodeGeometry(first, QuantizationGrid{})),
+       encodeMessage(std::move(evict)), encodeMessage(encodeGeometry(second, QuantizationGrid{}))});
+  StreamClient client(to(server));
+  StreamedGeometry held;
+  // Take deltas while the frames arrive, until the client has seen them all
+  // (Geometry, Evict, Geometry: three versions).
+  for (int i = 0; i < 300 && client.version() < 3; ++i) {
+    held.apply(client.takeDelta());
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  ASSERT_GE(client.version(), 3u) << client.error();
+  held.apply(client.takeDelta());
+  const auto faces = facesIn(held.compacted());
+  EXPECT_EQ(faces, facesIn(client.snapshot()));
+  // Independently: faces 0-10 but 2 and 7, face 3 at y = 5 and face 4 at y = 6.
+  ASSERT_EQ(faces.size(), 9u);
+  for (const auto& [id, corners] : faces) {
+    EXPECT_NE(id, 2u);
+    EXPECT_NE(id, 7u);
+    EXPECT_EQ(corners[1], id == 3 ? 5.0f : id == 4 ? 6.0f : 0.0f) << "face " << id;
   }
 }
 

@@ -25,6 +25,22 @@ inline FlatTriangles makeTriangles(const std::vector<Triangle>& triangles) {
   return flat;
 }
 
+// The 12 triangles of an axis-aligned box, two per side in the order
+// -Z, +Z, -X, +X, +Y, -Y (triangles 2k and 2k + 1 make side k).
+inline std::vector<Triangle> boxTriangles(glm::vec3 lo, glm::vec3 hi) {
+  const glm::vec3 c[8] = {{lo.x, lo.y, lo.z}, {hi.x, lo.y, lo.z}, {hi.x, hi.y, lo.z},
+                          {lo.x, hi.y, lo.z}, {lo.x, lo.y, hi.z}, {hi.x, lo.y, hi.z},
+                          {hi.x, hi.y, hi.z}, {lo.x, hi.y, hi.z}};
+  const int q[6][4] = {{0, 1, 2, 3}, {5, 4, 7, 6}, {4, 0, 3, 7},
+                       {1, 5, 6, 2}, {3, 2, 6, 7}, {4, 5, 1, 0}};
+  std::vector<Triangle> out;
+  for (const auto& f : q) {
+    out.push_back({c[f[0]], c[f[1]], c[f[2]]});
+    out.push_back({c[f[0]], c[f[2]], c[f[3]]});
+  }
+  return out;
+}
+
 // A uniformly distributed unit direction: a normalised Gaussian vector,
 // redrawn while it is too short to normalise safely.
 inline glm::vec3 randomDirection(std::mt19937& rng) {

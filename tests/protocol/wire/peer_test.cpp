@@ -35,6 +35,8 @@ WelcomeT goodWelcome() {
   w.grid->dims = std::make_unique<CellIndex>(4, 1, 4);
   w.near_field_radius_m = 100.0f;
   w.face_count = 12;
+  w.quant_origin = std::make_unique<Vec3d>(-8.0, 0.0, -8.0);
+  w.quant_step = 1e-3;
   return w;
 }
 
@@ -77,6 +79,8 @@ TEST(ValidateWelcome, ReturnsTheGridTheServerSent) {
   EXPECT_EQ(g.dims, glm::ivec3(4, 1, 4));
   EXPECT_EQ(g.radius, 100.0f);
   EXPECT_EQ(g.faceCount, 12u);
+  EXPECT_EQ(g.quantization.origin, glm::dvec3(-8.0, 0.0, -8.0));
+  EXPECT_EQ(g.quantization.step, 1e-3);
 }
 
 TEST(ValidateWelcome, PlacesPointsInTheirCellsAndClampsThoseOutside) {
@@ -115,6 +119,21 @@ TEST(ValidateWelcome, RefusesAMissingOrNonFiniteLocalOrigin) {
   WelcomeT infinite = goodWelcome();
   infinite.local_origin = std::make_unique<Vec3d>(0.0, HUGE_VAL, 0.0);
   expectRefusedNaming(refusalOf(std::move(infinite)), "Welcome.local_origin");
+}
+
+TEST(ValidateWelcome, RefusesAMissingNonFiniteOrNonPositiveQuantizationGrid) {
+  WelcomeT missing = goodWelcome();
+  missing.quant_origin.reset();
+  expectRefusedNaming(refusalOf(std::move(missing)), "Welcome.quant_origin");
+  WelcomeT infinite = goodWelcome();
+  infinite.quant_origin = std::make_unique<Vec3d>(0.0, HUGE_VAL, 0.0);
+  expectRefusedNaming(refusalOf(std::move(infinite)), "Welcome.quant_origin");
+  for (double step : {0.0, -1e-3, std::nan(""), HUGE_VAL, 1e4}) {
+    WelcomeT w = goodWelcome();
+    w.quant_step = step;
+    SCOPED_TRACE(step);
+    expectRefusedNaming(refusalOf(std::move(w)), "Welcome.quant_step");
+  }
 }
 
 TEST(ValidateWelcome, RefusesANegativeRadiusAndNegativeDims) {
@@ -192,6 +211,38 @@ TEST(Outbox, ClearedMidWriteForgetsEverythingAndAcceptsTheLateCompletion) {
   EXPECT_EQ(outbox.queuedBytes(), 0u);
   EXPECT_FALSE(outbox.writing());
   EXPECT_EQ(inFlight->size(), 60u);  // the handler's frame stayed valid
+}
+
+TEST(Outbox, ClearedMidWriteThenPushedSendsTheNewFrameAfterTheOneInFlight) {
+  Outbox outbox(1000);
+  ASSERT_TRUE(outbox.push(frameOf(60, 1)));
+  ASSERT_TRUE(outbox.push(frameOf(20, 2)));  // queued, never written: cleared
+  const Outbox::Frame inFlight = outbox.startWrite();
+  ASSERT_NE(inFlight, nullptr);
+  outbox.clear();
+  EXPECT_EQ(outbox.queuedBytes(), 60u);  // the frame in flight still counts
+  ASSERT_TRUE(outbox.push(frameOf(30, 3)));
+  EXPECT_EQ(outbox.startWrite(), nullptr);  // still one write in flight
+  outbox.finishWrite();                     // the write begun before the clear completes
+  EXPECT_EQ(outbox.queuedBytes(), 30u);
+  const Outbox::Frame next = outbox.startWrite();
+  ASSERT_NE(next, nullptr);  // the new frame was not popped as if it had been sent
+  EXPECT_EQ(next->size(), 30u);
+  EXPECT_EQ(next->front(), 3);
+  outbox.finishWrite();
+  EXPECT_TRUE(outbox.empty());
+  EXPECT_EQ(outbox.queuedBytes(), 0u);
+}
+
+TEST(Outbox, AbandonedWriteLeavesTheQueueWithoutItsFrame) {
+  Outbox outbox(1000);
+  ASSERT_TRUE(outbox.push(frameOf(60, 1)));
+  ASSERT_TRUE(outbox.push(frameOf(20, 2)));
+  ASSERT_NE(outbox.startWrite(), nullptr);
+  outbox.abandonWrite();
+  EXPECT_FALSE(outbox.writing());
+  EXPECT_EQ(outbox.queuedBytes(), 20u);
+  EXPECT_EQ(outbox.startWrite()->front(), 2);
 }
 
 // ---- Peer over loopback sockets --------------------------------------------------

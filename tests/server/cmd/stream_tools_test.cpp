@@ -77,6 +77,8 @@ class StallingServer {
     w.face_count = 100;
     w.near_field_radius_m = 60.0f;
     w.policy = "visibility";
+    w.quant_origin = std::make_unique<wire::Vec3d>(-40.0, 0.0, -40.0);
+    w.quant_step = 1e-3;
     return wire::encodeMessage(std::move(w));
   }
 

@@ -5,8 +5,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <future>
 #include <limits>
+#include <set>
 
 #include "tests/server/stream/stream_test_support.h"
 
@@ -229,6 +231,113 @@ TEST_F(SchedulerTest, TheRadiusPolicyStreamsWithoutCulling) {
   EXPECT_FALSE(s.takeCullRequest(0.0));
   EXPECT_TRUE(s.readyToStream(false));
   EXPECT_FALSE(s.takeBatch().empty());
+}
+
+TEST_F(SchedulerTest, PrefetchBacksOffWhileTheWorkersAreBehindAndADroppedOneWaitsToBeAskedAgain) {
+  StreamScheduler s(world(), {}, 200.0f, 0);
+  s.setBehind(true);
+  s.setPose(kPoint, glm::vec3(1.4f, 0.0f, 0.0f), -90.0f, 0.0f);
+  ASSERT_GT(s.neededCells().size(), 1u) << "cells to prefetch";
+  const auto behind = s.takeCellRequests(0.0);
+  ASSERT_EQ(behind.size(), 1u) << "only the current cell while behind";
+  EXPECT_EQ(behind[0].cell, cellOf(kPoint));
+  EXPECT_EQ(behind[0].priority.rank, WorkPriority::Current);
+  s.onFaceSet(behind[0].cell, faceSet(behind[0].cell));
+  EXPECT_TRUE(s.takeCellRequests(0.0).empty());
+  s.setBehind(false);
+  const auto prefetch = s.takeCellRequests(10.0);
+  ASSERT_FALSE(prefetch.empty());
+  for (const auto& r : prefetch) {
+    EXPECT_EQ(r.priority.rank, WorkPriority::Prefetch);
+    EXPECT_GE(r.priority.dueS, 10.0) << "due when the client gets there, not before now";
+  }
+  // The queue drops the first: it is not asked again within kRetryAfterDropS.
+  const uint32_t droppedCell = prefetch[0].cell;
+  s.onDropped(droppedCell, prefetch[0].level, 10.0);
+  EXPECT_FALSE(s.isRequested(droppedCell));
+  for (const auto& r : s.takeCellRequests(10.0 + StreamScheduler::kRetryAfterDropS / 2))
+    EXPECT_NE(r.cell, droppedCell);
+  bool askedAgain = false;
+  for (const auto& r : s.takeCellRequests(10.0 + StreamScheduler::kRetryAfterDropS))
+    askedAgain = askedAgain || r.cell == droppedCell;
+  EXPECT_TRUE(askedAgain);
+}
+
+// Coarse first, then the cell's own set: at every step the client holds
+// every face of the cell's PVS within the radius as computed directly (the
+// oracle: EpsilonPvs on the cell's box, no candidate faces), and the cell is
+// announced ready only then.
+TEST(SchedulerCoarseFirst, NeverLeavesTheClientWithoutAFaceOfTheCellsOwnPvs) {
+  StreamWorld world(streetScene(), StreamWorldOptions{});
+  ASSERT_TRUE(world.coarseFirst());
+  const EpsilonPvs direct(world.scene());
+  boost::asio::thread_pool pool(2);
+  constexpr float kRadius = 15.0f;  // small: the coarse set's wider reach shows too
+  auto faceSet = [&](uint32_t cell, CellLevel level) {
+    std::promise<FaceListPtr> p;
+    world.cellFaceSet(
+        world.grid().cellAt(cell), level, StreamPolicy::Visibility, kRadius, pool,
+        [&](FaceListPtr f) { p.set_value(f); }, CellWork{});
+    return p.get_future().get();
+  };
+  StreamSchedulerConfig cfg;
+  cfg.coarseFirst = true;
+  const ViewCellGrid& grid = world.grid();
+  size_t cellsTried = 0, coarseLarger = 0;
+  for (int z = 0; z < grid.dims().z; z += 3)
+    for (int x = 0; x < grid.dims().x; x += 3) {
+      const glm::ivec3 cell(x, 0, z);
+      const Box3f box = grid.cellBox(cell);
+      SCOPED_TRACE(::testing::Message() << "cell " << x << ", " << z);
+      FaceList oracle;
+      const FaceList pvs = direct.compute(box).faces, near = world.facesWithin(box, kRadius);
+      std::set_intersection(pvs.begin(), pvs.end(), near.begin(), near.end(),
+                            std::back_inserter(oracle));
+      StreamScheduler s(world, cfg, kRadius, 0);
+      s.setPose(glm::dvec3(box.center()), glm::vec3(0.0f), 0.0f, 0.0f);
+      const uint32_t here = uint32_t(grid.linearIndex(cell));
+      std::vector<StreamScheduler::CellRequest> refinements;
+      auto drain = [&] {
+        for (int round = 0; round < 1000; ++round) {
+          for (auto& r : s.takeCellRequests(0.0)) {
+            if (r.priority.rank == WorkPriority::Refine)
+              refinements.push_back(std::move(r));
+            else
+              s.onFaceSet(r.cell, faceSet(r.cell, r.level), r.level);
+          }
+          if (auto c = s.takeCullRequest(double(round))) s.onCulled(c->cell, {});
+          if (s.takeBatch().empty()) break;
+        }
+      };
+      drain();
+      EXPECT_FALSE(s.hasFineSet(here)) << "coarse first";
+      auto missing = [&] {
+        size_t n = 0;
+        for (uint32_t f : oracle) n += !s.held(f);
+        return n;
+      };
+      EXPECT_EQ(missing(), 0u) << "faces of the cell's own PVS missing after the coarse set";
+      bool ready = false;
+      for (const auto& r : s.takeReadyCells()) ready = ready || r.cell == cell;
+      EXPECT_TRUE(ready);
+      // The refinement: the cell's own set, after the coarse one.
+      ASSERT_EQ(refinements.size(), 1u);
+      EXPECT_EQ(refinements[0].cell, here);
+      EXPECT_EQ(refinements[0].level, CellLevel::Fine);
+      const FaceListPtr coarse = faceSet(here, CellLevel::Coarse);
+      const FaceListPtr fine = faceSet(here, CellLevel::Fine);
+      EXPECT_TRUE(std::includes(coarse->begin(), coarse->end(), fine->begin(), fine->end()))
+          << "the coarse set contains the cell's own";
+      coarseLarger += coarse->size() > fine->size();
+      EXPECT_TRUE(s.onFaceSet(here, fine, CellLevel::Fine));
+      EXPECT_TRUE(s.hasFineSet(here));
+      drain();
+      EXPECT_EQ(missing(), 0u) << "faces of the cell's own PVS missing after the refinement";
+      EXPECT_FALSE(s.onFaceSet(here, coarse, CellLevel::Coarse)) << "a late coarse set is moot";
+      ++cellsTried;
+    }
+  EXPECT_GT(cellsTried, 4u);
+  EXPECT_GT(coarseLarger, 0u) << "somewhere the coarse set is larger, so refining matters";
 }
 
 }  // namespace

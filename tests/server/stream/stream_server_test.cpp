@@ -34,7 +34,9 @@ struct Received {
   std::set<uint32_t> held() const { return {faces.begin(), faces.end()}; }
 };
 
-Received receiveUntilReady(TestClient& c, const glm::ivec3& cell, double timeoutS = 10.0) {
+// `grid`: the scene's quantization grid, as the server's Welcome sends it.
+Received receiveUntilReady(TestClient& c, const glm::ivec3& cell,
+                           const wire::QuantizationGrid& grid, double timeoutS = 10.0) {
   Received r;
   const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(int(timeoutS));
   while (!r.ready && std::chrono::steady_clock::now() < end) {
@@ -44,7 +46,7 @@ Received receiveUntilReady(TestClient& c, const glm::ivec3& cell, double timeout
     if (e->payload_type() == Payload::Geometry) {
       wire::DecodedGeometry g;
       std::string error;
-      EXPECT_TRUE(wire::decodeGeometry(*e->payload_as_Geometry(), g, error)) << error;
+      EXPECT_TRUE(wire::decodeGeometry(*e->payload_as_Geometry(), grid, g, error)) << error;
       r.faces.insert(r.faces.end(), g.faces.begin(), g.faces.end());
       r.batches.push_back(std::move(g));
     } else if (e->payload_type() == Payload::CellReady) {
@@ -63,7 +65,8 @@ Received joinAndLoad(ServerFixture& fx, const glm::dvec3& eye, float radiusM, fl
   TestClient c(fx.port());
   EXPECT_TRUE(c.join("", wire::kProtocolVersion, radiusM));
   c.pose(eye, yawDeg);
-  return receiveUntilReady(c, *fx.world().cellOf(glm::vec3(eye)));
+  return receiveUntilReady(c, *fx.world().cellOf(glm::vec3(eye)),
+                           wire::QuantizationGrid::forBounds(fx.world().scene().bounds()));
 }
 
 // What the server should stream for a cell, computed here: the PVS of the
@@ -220,15 +223,19 @@ TEST(StreamServer, FacesSeenFromThePoseArriveBeforeFacesBehindTheViewer) {
       const Hit h = rays->firstHit(Ray{glm::vec3(eye), glm::normalize(d), 0.0f, 60.0f});
       if (h.valid()) seen.insert(tris.faceIds[h.triangle]);
     }
-  size_t lastSeen = 0, firstBehind = r.faces.size();
-  for (size_t i = 0; i < r.faces.size(); ++i) {
-    if (seen.count(r.faces[i])) lastSeen = i;
-    if (r.faces[i] >= behind && r.faces[i] < behind + 6) firstBehind = std::min(firstBehind, i);
-  }
+  // By frame: a Geometry frame is taken up whole, and lists its faces by ID
+  // (protocol version 2), so order shows between frames, not within one.
+  size_t lastSeen = 0, firstBehind = r.batches.size();
+  for (size_t b = 0; b < r.batches.size(); ++b)
+    for (uint32_t f : r.batches[b].faces) {
+      if (seen.count(f)) lastSeen = b;
+      if (f >= behind && f < behind + 6) firstBehind = std::min(firstBehind, b);
+    }
   ASSERT_GT(seen.size(), 6u);
-  ASSERT_LT(firstBehind, r.faces.size())
+  ASSERT_LT(firstBehind, r.batches.size())
       << "the box behind is within the radius and must come eventually";
-  EXPECT_LT(lastSeen, firstBehind) << "a face behind the viewer came before one in view";
+  EXPECT_LE(lastSeen, firstBehind)
+      << "a frame with a face behind the viewer came before one in view";
 }
 
 TEST(StreamServer, RadiusPolicyStreamsEverythingWithinTheRadiusVisibleOrNot) {
@@ -275,6 +282,7 @@ TEST(StreamServer, AClientOverItsMemoryBudgetGetsEvictionsAndStaysWithinIt) {
   ASSERT_TRUE(c.join("", wire::kProtocolVersion, 10.0f, budget));
   std::set<uint32_t> held;
   size_t evictions = 0;
+  const auto grid = wire::QuantizationGrid::forBounds(fx.world().scene().bounds());
   for (double x : {-24.0, -8.0, 8.0, 24.0}) {
     c.pose({x, 1.7, 8.5});
     for (int i = 0; i < 20; ++i) {
@@ -282,7 +290,10 @@ TEST(StreamServer, AClientOverItsMemoryBudgetGetsEvictionsAndStaysWithinIt) {
       if (!f) continue;
       const auto* e = wire::envelopeOf(*f);
       if (e->payload_type() == Payload::Geometry) {
-        for (uint32_t id : *e->payload_as_Geometry()->face_ids()) held.insert(id);
+        wire::DecodedGeometry g;
+        std::string error;
+        ASSERT_TRUE(wire::decodeGeometry(*e->payload_as_Geometry(), grid, g, error)) << error;
+        held.insert(g.faces.begin(), g.faces.end());
       } else if (e->payload_type() == Payload::Evict) {
         ++evictions;
         for (uint32_t id : *e->payload_as_Evict()->face_ids()) held.erase(id);
@@ -299,7 +310,22 @@ TEST(StreamServer, BandwidthLimitBoundsTheBytesEachClientReceives) {
   StreamServerConfig cfg;
   cfg.maxClientKbps = 40.0;  // 5,000 bytes a second
   cfg.batchBytes = 2048;
-  ServerFixture fx(cfg);
+  cfg.policy = StreamPolicy::Radius;  // every face within the radius
+  // More geometry than 2 s at the limit, even coded compactly (protocol 2
+  // sends the whole street in under 2 KB): 900 boxes of irregular sizes.
+  Scene field;
+  testing::addGround(field, -31, -31, 31, 31);
+  for (int i = 0; i < 30; ++i)
+    for (int j = 0; j < 30; ++j) {
+      const float x = -29.0f + 2.0f * float(i), z = -29.0f + 2.0f * float(j);  // (0.5, 8.5) free
+      testing::addBox(
+          field, fmt::format("box_{}_{}", i, j), {x, 0, z},
+          {x + 0.6f + 0.013f * float((i * 7 + j) % 23), 1.0f + 0.21f * float((i + j) % 7),
+           z + 0.6f + 0.017f * float((i + 3 * j) % 19)});
+    }
+  finalizeScene(field);
+  field.name = "field";
+  ServerFixture fx(cfg, std::move(field));
   TestClient c(fx.port());
   ASSERT_TRUE(c.join("", wire::kProtocolVersion, 60.0f));
   c.pose({0.5, 1.7, 8.5});
@@ -427,6 +453,26 @@ TEST(StreamServer, WrongProtocolVersionGetsUnsupportedVersionAndIsClosed) {
   TestClient bad(fx.port());
   bad.hello("", 99);
   expectRefusedAndClosed(bad, ErrorCode::UnsupportedVersion);
+  expectOthersStillServed(fx);
+}
+
+TEST(StreamServer, APeerOfTheOldProtocolVersionGetsAnErrorNamingBothVersionsAndIsClosed) {
+  // Version 1 sent Geometry in a layout version 2 replaced: refused at Hello.
+  ServerFixture fx;
+  TestClient old(fx.port());
+  old.hello("", wire::kProtocolVersion - 1);
+  const auto f = old.nextOf(Payload::Error);
+  ASSERT_TRUE(f.has_value());
+  const wire::Error* e = wire::envelopeOf(*f)->payload_as_Error();
+  EXPECT_EQ(e->code(), ErrorCode::UnsupportedVersion);
+  ASSERT_TRUE(e->text());
+  EXPECT_NE(e->text()->str().find(fmt::format("protocol version {}", wire::kProtocolVersion - 1)),
+            std::string::npos)
+      << e->text()->str();
+  EXPECT_NE(e->text()->str().find(fmt::format("speaks {}", wire::kProtocolVersion)),
+            std::string::npos)
+      << e->text()->str();
+  EXPECT_TRUE(old.closedWithin(3.0));
   expectOthersStillServed(fx);
 }
 

@@ -3,6 +3,8 @@
 // requests leave nothing behind when they move on, leave or the server
 // stops. Slow (city1's world takes seconds to build): label slow.
 #include <gtest/gtest.h>
+#include <signal.h>
+#include <unistd.h>
 
 #include <random>
 
@@ -147,6 +149,56 @@ TEST(WorkBound, StoppingTheServerDropsQueuedVisibilityWork) {
   std::printf("stop: %llu PVS computed before the stop, %llu after\n", (unsigned long long)atStop,
               (unsigned long long)after);
   for (auto& c : clients) EXPECT_TRUE(c->closedWithin(5.0));
+}
+
+// SIGTERM under load, as an operator stops a busy server: the run ends, and
+// what waited for a worker is abandoned rather than computed first (only
+// the computations running when the signal came may still finish).
+TEST(WorkBound, ASignalStopsABusyServerAndAbandonsTheWorkWaiting) {
+  StreamWorld world(toScene(generate("city1")), StreamWorldOptions{});
+  StreamServerConfig cfg;
+  cfg.port = 0;
+  cfg.workerThreads = 2;
+  cfg.maxPvsRequestsInFlight = 64;  // every request reaches the queue at once
+  StreamServer server(world, cfg);
+  server.start();
+  std::thread run([&] { server.run(true); });
+  const ViewCellGrid& g = world.grid();
+  std::mt19937 rng(13);
+  std::uniform_int_distribution<int> x(0, g.dims().x - 1), z(0, g.dims().z - 1);
+  std::vector<std::unique_ptr<TestClient>> clients;
+  for (int i = 0; i < 4; ++i) {
+    clients.push_back(std::make_unique<TestClient>(server.port()));
+    clients.back()->hello();
+    // Served: the signal handler is installed (run() sets it up before serving).
+    ASSERT_TRUE(clients.back()->nextOf(wire::Payload::Welcome));
+  }
+  for (auto& c : clients)
+    for (int r = 0; r < 100; ++r) {
+      wire::PvsRequestT q;
+      q.request_id = uint32_t(r);
+      q.by_cell = true;
+      q.cell = std::make_unique<wire::CellIndex>(wire::toWire(glm::ivec3(x(rng), 0, z(rng))));
+      c->sendRaw(wire::encodeMessage(std::move(q)));
+    }
+  // Wait (bounded) until work waits for the workers.
+  for (int i = 0; i < 500 && world.work().load().waiting < 50; ++i)
+    std::this_thread::sleep_for(10ms);
+  const size_t waiting = world.work().load().waiting;
+  ASSERT_GE(waiting, 50u) << "no load to stop under";
+  const uint64_t atSignal = world.cacheStats().pvsComputed;
+  ASSERT_EQ(::kill(::getpid(), SIGTERM), 0);
+  run.join();  // run() returns: the signal stopped the server
+  for (auto& c : clients) EXPECT_TRUE(c->closedWithin(5.0));
+  const uint64_t atReturn = world.cacheStats().pvsComputed;
+  EXPECT_EQ(world.work().load().waiting, 0u) << "the waiting work was abandoned";
+  // At most what was running (two workers) and what started before the
+  // handler ran; never the waiting crowd.
+  EXPECT_LT(atReturn - atSignal, uint64_t(waiting) / 4)
+      << atSignal << " computed at the signal, " << atReturn << " when run() returned, " << waiting
+      << " waiting";
+  std::printf("signal: %zu computations waiting, %llu computed before, %llu more after\n", waiting,
+              (unsigned long long)atSignal, (unsigned long long)(atReturn - atSignal));
 }
 
 }  // namespace

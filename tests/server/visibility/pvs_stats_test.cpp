@@ -39,6 +39,8 @@ PvsStats distinctPvsStats() {
   s.facesOccluded = 116;
   s.facesCulledByBoxStage = 117;
   s.facesBackFacing = 118;
+  s.facesFused = 119;
+  s.fusionMs = 4.5;
   return s;
 }
 
@@ -63,10 +65,12 @@ const std::map<std::string, std::pair<std::string, std::string>> kPvsFields = {
     {"faces_occluded", {"faces occluded", "116"}},
     {"faces_culled_by_box_stage", {"faces culled by box stage", "117"}},
     {"faces_back_facing", {"faces facing away from the cell", "118"}},
+    {"faces_fused", {"faces hidden by fused occluders", "119"}},
+    {"fusion_ms", {"fusion stage (ms)", "4.500"}},
 };
-// Three doubles and fifteen 8-byte counts: a member added to PvsStats
+// Four doubles and sixteen 8-byte counts: a member added to PvsStats
 // without a line above fails here.
-static_assert(sizeof(PvsStats) == 18 * 8);
+static_assert(sizeof(PvsStats) == 20 * 8);
 
 std::vector<std::string> linesOf(const std::string& text) {
   std::vector<std::string> lines;

@@ -1,0 +1,872 @@
+// Occluder fusion by 2.5D occlusion horizons: Wonka, Wimmer and Schmalstieg,
+// "Visibility Preprocessing with Occluder Fusion for Urban Walkthroughs"
+// (EGWR 2000), section 4 (occluder shrinking: a point hidden from a sample by
+// occluders shrunk by epsilon is hidden from every viewpoint within epsilon
+// of the sample by the original ones) and section 5 (2.5D occluders, samples
+// on the cell); the occlusion of each sample is kept as an occlusion horizon
+// over azimuth (Downs, Moeller and Sequin, "Occlusion Horizons for Driving
+// through Urban Scenery", I3D 2001, section 3) instead of a cull map.
+//
+// Notation: horizontal means the X/Z plane; for a point p, p_h is (p.x, p.z).
+//
+// 1. Solid columns. A column is a grid square S times a height interval
+//    [b, t]. The interval is a gap between the padded height ranges of the
+//    triangles that meet S grown by a margin (each clipped to it, its height
+//    range grown by the margin), leaving out exactly vertical triangles
+//    (collinear in X/Z). So only vertical triangles meet the closed box
+//    S x [b, t]; their lines cut S into convex pieces. At the centroid of
+//    each piece with area, at mid-gap height, one closed, edge-manifold,
+//    consistently wound component K (either winding) has odd crossing
+//    parity along three generic rays (parity of a closed surface does not
+//    depend on the ray; three rays guard against a ray through an edge).
+//    A piece's slice of the box meets no triangle, and every point of the
+//    piece's prism is joined to that slice by a vertical segment meeting no
+//    triangle, unless it lies on a vertical triangle; so every point of the
+//    box is inside some such K or on a triangle. Pieces without area hold
+//    only points of the lines: on a vertical triangle, or limits of inside
+//    points that are on no triangle, hence inside. A piece thinner than a
+//    tenth of the margin leaves the column out (float rounding could carry
+//    its test point across a wall).
+//
+// 2. Jordan. Let v be a point outside K (even parity) and q a point of K's
+//    interior. The parity of K along the segment v-q changes, so the segment
+//    crosses a triangle of K strictly between v and q. Hence: if the line of
+//    sight from v to a point p passes strictly before p through a point q of
+//    a column, either q is on a triangle or the line crosses one before q;
+//    either way p is not the first surface point on it, so p is not seen
+//    from v. A face is hidden from v if each of its points is.
+//    Every viewpoint of the cell is outside K when K's triangles do not meet
+//    the closed cell (clipped with a margin) and the cell's centre has even
+//    parity with K along all three rays: the cell is connected and crosses
+//    no triangle of K. Solids failing this (a cell cutting into a building,
+//    a cell inside one) are excluded: their columns block nothing for this
+//    cell (issue 13, item 4).
+//
+// 3. Shrinking. The shrunk column field keeps, for each grid square c, the
+//    lowest top and the highest base over every column whose square meets c
+//    grown by r = epsilon + binMargin (a square window of ceil(r / grid)
+//    columns), and no column at all if one of those is missing (not solid,
+//    or outside the grid, or of an excluded solid: per cell, every shrunk
+//    column within the window of an excluded solid's bounds is dropped). So for any horizontal
+//    point x within r of c there is a column of a non-excluded solid over
+//    x_h whose box contains heights [base(c), top(c)].
+//
+// 4. Viewpoints. Let v be a viewpoint of the cell, v' the point of the
+//    cell's top face above it (v'_h = v_h, v'.y = Y, the top), and s the
+//    sample whose rectangle holds v' (samples are the centres of a grid of
+//    rectangles on the top face whose half-diagonal is at most epsilon), so
+//    |v'_h - s_h| <= epsilon and v'.y = s.y. Take a face point p at
+//    horizontal distance R from s, direction phi, and the line of sight
+//    from v. At the fraction lam of the way from v to p its horizontal
+//    position is  (1 - lam) v_h + lam p_h = [s_h + lam (p_h - s_h)] +
+//    (1 - lam)(v_h - s_h), within epsilon of the point at horizontal
+//    distance d = lam R along phi from s; its height is
+//    (1 - lam) v.y + lam p.y, which is at most (1 - lam) Y + lam p.y and at
+//    least (1 - lam) L + lam p.y, L being the cell's bottom.
+//
+// 5. Bins. Azimuth is cut into bins of width w = 2 pi / azimuthBins; bin k
+//    is traced along its central ray only. A direction phi of the bin and
+//    the central ray are at most w / 2 apart, so their points at horizontal
+//    distance d are at most d w / 2 <= binMargin apart for d up to the
+//    reach 2 binMargin / w. If the central ray at distance d lies in the
+//    square c, the line of sight of step 4 lies, at lam = d / R, within
+//    epsilon + binMargin = r of c, over a column with [base(c), top(c)].
+//    It lies inside that column when
+//       (a) (1 - lam) Y + lam p.y <= top(c), i.e. (p.y - Y) / R <= (top(c) - Y) / d
+//           (the elevation slope of p is below the column's, seen from s), and
+//       (b) (1 - lam) L + lam p.y >= base(c), which holds when L >= base(c)
+//           and either p.y >= base(c) or d (a + base(c) - p.y) <= R a with
+//           a = L - base(c) > 0,
+//    and lam < 1, i.e. d < R (the column point lies strictly before p).
+//    So each traced square yields a step of the horizon: (d, slope, base)
+//    meaning "beyond horizontal distance d, every point whose slope is at
+//    most `slope` and that meets (b) is hidden from every viewpoint that
+//    maps to this sample". For a square the central ray crosses over
+//    [t_in, t_out], d = t_in when top(c) > Y (the steeper bound), else
+//    d = min(t_out, reach) (any d in [t_in, t_out] is allowed).
+//
+// 6. Faces. A face is a union of triangles. From s, all its points lie in
+//    the azimuth wedge of its vertices (when that wedge is narrower than pi,
+//    else the face is kept), at horizontal distance at least R_min (the
+//    distance from s_h to its projected triangles' edges; s_h is outside
+//    them because the wedge is narrower than pi) and at most R_max (the
+//    farthest vertex), so its slope is at most (maxY - Y) / R_min when
+//    maxY > Y and (maxY - Y) / R_max otherwise, and p.y >= minY. The face
+//    is hidden from s when every bin of its wedge has a step with
+//    d < R_min, slope strictly above the face's, and (b) for minY and R_min
+//    (the bound is monotone in R and p.y); a bin that fails this is tried
+//    again with the same bounds of the part of the face inside the bin's
+//    wedge (its triangles clipped to the wedge grown by 1e-9 rad), which is
+//    all that bin must hide. Hidden from every sample means
+//    hidden from every viewpoint of the cell (step 4 maps each viewpoint to
+//    a sample), which is what is culled.
+//
+// Cost: the horizon of a sample is traced lazily, bin by bin, only where a
+// face still needs it; a bin skips blocks of 8 x 8 columns whose highest top
+// cannot raise it (skipping changes no step), and stops once no column of
+// the scene can raise it, or at the reach. Faces seen from one sample are
+// not tested from the next.
+#include "server/visibility/horizon_fusion.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <numbers>
+
+#include "common/core/check.h"
+#include "common/core/timer.h"
+#include "common/raycast/ray_query.h"
+#include "common/world/solids.h"
+
+namespace vistream {
+namespace {
+
+constexpr float kNoTop = -std::numeric_limits<float>::infinity();
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// Steep, generic upward directions for the parity votes (no axis, no
+// diagonal of an axis-aligned box, no rational slope a city would use).
+const std::array<glm::vec3, 3>& parityDirections() {
+  static const std::array<glm::vec3, 3> d{glm::normalize(glm::vec3(0.1234f, 1.0f, 0.0719f)),
+                                          glm::normalize(glm::vec3(-0.0871f, 1.0f, 0.1537f)),
+                                          glm::normalize(glm::vec3(0.1621f, 1.0f, -0.1113f))};
+  return d;
+}
+
+// Keeps the part of the convex polygon where coordinate `axis` is >= v
+// (above) or <= v (below).
+void clipAxis(std::vector<glm::dvec3>& poly, std::vector<glm::dvec3>& out, int axis, double v,
+              bool above) {
+  out.clear();
+  const size_t n = poly.size();
+  for (size_t i = 0; i < n; ++i) {
+    const glm::dvec3& a = poly[i];
+    const glm::dvec3& b = poly[(i + 1) % n];
+    const double da = above ? a[axis] - v : v - a[axis];
+    const double db = above ? b[axis] - v : v - b[axis];
+    if (da >= 0.0) out.push_back(a);
+    if ((da >= 0.0) != (db >= 0.0)) {
+      const double f = da / (da - db);
+      glm::dvec3 x = a + f * (b - a);
+      x[axis] = v;
+      out.push_back(x);
+    }
+  }
+  poly.swap(out);
+}
+
+// Keeps the part of the convex polygon where nx * x + nz * z >= 0.
+void clipHalfPlane(std::vector<glm::dvec3>& poly, std::vector<glm::dvec3>& out, double nx,
+                   double nz) {
+  out.clear();
+  const size_t n = poly.size();
+  for (size_t i = 0; i < n; ++i) {
+    const glm::dvec3& a = poly[i];
+    const glm::dvec3& b = poly[(i + 1) % n];
+    const double da = nx * a.x + nz * a.z, db = nx * b.x + nz * b.z;
+    if (da >= 0.0) out.push_back(a);
+    if ((da >= 0.0) != (db >= 0.0)) out.push_back(a + (da / (da - db)) * (b - a));
+  }
+  poly.swap(out);
+}
+
+// The triangle clipped to the box (only the axes in `axes`); empty if they
+// do not meet.
+void clipTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c, const glm::dvec3& lo,
+                  const glm::dvec3& hi, std::initializer_list<int> axes,
+                  std::vector<glm::dvec3>& poly, std::vector<glm::dvec3>& tmp) {
+  poly.assign({glm::dvec3(a), glm::dvec3(b), glm::dvec3(c)});
+  for (int axis : axes) {
+    clipAxis(poly, tmp, axis, lo[axis], true);
+    if (poly.empty()) return;
+    clipAxis(poly, tmp, axis, hi[axis], false);
+    if (poly.empty()) return;
+  }
+}
+
+double pointSegmentDistance(glm::dvec2 p, glm::dvec2 a, glm::dvec2 b) {
+  const glm::dvec2 ab = b - a;
+  const double len2 = glm::dot(ab, ab);
+  const double f = len2 > 0.0 ? std::clamp(glm::dot(p - a, ab) / len2, 0.0, 1.0) : 0.0;
+  return glm::length(p - (a + f * ab));
+}
+
+// One step of an occlusion horizon (proof, step 5).
+struct Step {
+  double d;      // horizontal distance from the sample
+  double slope;  // (height - sample height) / distance
+  double base;   // highest base of the columns behind it
+};
+
+struct IRect {
+  int i0, j0, i1, j1;  // inclusive grid index ranges
+};
+
+}  // namespace
+
+struct HorizonFusion::Impl {
+  const Scene& scene;
+  FlatTriangles tris;
+  std::unique_ptr<RayQuery> rays;
+  Solids solids;
+  std::vector<uint8_t> closed;      // per component: may occlude (closed, manifold, consistent)
+  std::vector<uint8_t> hasColumns;  // per component: some column lies inside it
+  std::vector<uint32_t> compStart, compTris;  // triangles by component
+  std::vector<uint32_t> faceStart, faceTris;  // static triangles by face ID
+  // The grid and its shrunk columns (proof, step 3).
+  glm::dvec2 lo{0.0};
+  double g = 1.0;
+  int nx = 0, nz = 0;
+  int window = 0;  // shrinking radius in columns
+  // Shrunk (top, base) per column, stored block by block (kBlock x kBlock
+  // columns together) so that a horizon walking a block reads few cache
+  // lines; top == kNoTop: nothing occludes there.
+  std::vector<glm::vec2> columns;
+  size_t columnIndex(int i, int j) const {
+    return (size_t(j / kBlock) * size_t(bx) + size_t(i / kBlock)) * size_t(kBlock * kBlock) +
+           size_t((j % kBlock) * kBlock + i % kBlock);
+  }
+  double maxTop = -kInf;
+  // The highest shrunk top per block of kBlock x kBlock columns (kNoTop:
+  // nothing occludes there), so that a horizon skips whole blocks.
+  static constexpr int kBlock = 8;
+  int bx = 0, bz = 0;
+  std::vector<float> blockTop;
+  size_t solidColumns = 0;
+  double margin = 1e-3;  // metres, for clipping and heights
+
+  Impl(const Scene& s) : scene(s) {}
+
+  // Closed components with odd crossing parity along `dir` from p; false if
+  // the ray starts on a surface.
+  bool oddComponents(const glm::vec3& p, const glm::vec3& dir, std::vector<uint32_t>& odd) const {
+    thread_local std::vector<Hit> hits;
+    hits.clear();
+    odd.clear();
+    rays->allHits(Ray{p, dir, 0.0f, std::numeric_limits<float>::infinity()}, hits);
+    for (const Hit& h : hits) {
+      if (h.t <= 0.0f) return false;
+      const uint32_t c = solids.componentOf(h.triangle);
+      if (c != kNoHit && closed[c]) odd.push_back(c);
+    }
+    std::sort(odd.begin(), odd.end());
+    size_t w = 0;
+    for (size_t i = 0; i < odd.size();) {
+      size_t j = i;
+      while (j < odd.size() && odd[j] == odd[i]) ++j;
+      if ((j - i) % 2) odd[w++] = odd[i];
+      i = j;
+    }
+    odd.resize(w);
+    return true;
+  }
+
+  // The closed component whose interior holds p by all three votes, or kNoHit.
+  uint32_t insideClosed(const glm::vec3& p) const {
+    std::vector<uint32_t> first, other, both;
+    const auto& dirs = parityDirections();
+    if (!oddComponents(p, dirs[0], first) || first.empty()) return kNoHit;
+    for (size_t d = 1; d < dirs.size(); ++d) {
+      if (!oddComponents(p, dirs[d], other)) return kNoHit;
+      both.clear();
+      std::set_intersection(first.begin(), first.end(), other.begin(), other.end(),
+                            std::back_inserter(both));
+      first.swap(both);
+      if (first.empty()) return kNoHit;
+    }
+    return first.front();
+  }
+
+  void build(const HorizonFusionOptions& o);
+  IRect rectOf(const Box3f& b, int grow) const {
+    auto ix = [&](double x) { return int(std::floor((x - lo.x) / g)); };
+    auto iz = [&](double z) { return int(std::floor((z - lo.y) / g)); };
+    return {ix(b.lo.x) - grow, iz(b.lo.z) - grow, ix(b.hi.x) + grow, iz(b.hi.z) + grow};
+  }
+};
+
+void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
+  tris = flattenScene(scene, /*staticOnly=*/true);
+  rays = makeEmbreeRayQuery(tris);
+  solids = Solids::build(tris);
+  const size_t nc = solids.components().size();
+  closed.assign(nc, 0);
+  hasColumns.assign(nc, 0);
+  for (size_t c = 0; c < nc; ++c) {
+    const SolidClass k = solids.components()[c].kind;
+    closed[c] = k == SolidClass::ClosedOutward || k == SolidClass::ClosedInward;
+  }
+  // Triangles by component and by face (counting sort).
+  compStart.assign(nc + 1, 0);
+  faceStart.assign(size_t(scene.faceCount) + 1, 0);
+  Box3f bounds;
+  for (size_t t = 0; t < tris.size(); ++t) {
+    const uint32_t c = solids.componentOf(uint32_t(t));
+    if (c != kNoHit) ++compStart[c + 1];
+    if (tris.faceIds[t] < scene.faceCount) ++faceStart[tris.faceIds[t] + 1];
+    if (!tris.degenerate[t]) bounds.extend(tris.triangleBounds(t));
+  }
+  for (size_t c = 0; c < nc; ++c) compStart[c + 1] += compStart[c];
+  for (size_t f = 0; f < scene.faceCount; ++f) faceStart[f + 1] += faceStart[f];
+  compTris.resize(compStart.back());
+  faceTris.resize(faceStart.back());
+  {
+    std::vector<uint32_t> cn(compStart.begin(), compStart.end() - 1);
+    std::vector<uint32_t> fn(faceStart.begin(), faceStart.end() - 1);
+    for (size_t t = 0; t < tris.size(); ++t) {
+      const uint32_t c = solids.componentOf(uint32_t(t));
+      if (c != kNoHit) compTris[cn[c]++] = uint32_t(t);
+      if (tris.faceIds[t] < scene.faceCount) faceTris[fn[tris.faceIds[t]]++] = uint32_t(t);
+    }
+  }
+  if (bounds.empty()) return;
+  const glm::dvec3 blo(bounds.lo), bhi(bounds.hi);
+  // Margin: far above float rounding of the coordinates (CONTRIBUTING,
+  // "Conservative geometry" uses 1e-7 of the magnitude; a millimetre here
+  // costs nothing at city scale).
+  margin = 1e-3 + 1e-6 * std::max({std::abs(blo.x), std::abs(blo.y), std::abs(blo.z),
+                                   std::abs(bhi.x), std::abs(bhi.y), std::abs(bhi.z)});
+  const double area = (bhi.x - blo.x + 2.0) * (bhi.z - blo.z + 2.0);
+  g = std::max(o.gridSize, std::sqrt(area / double(kMaxColumns)));
+  lo = glm::dvec2(blo.x - 1.0, blo.z - 1.0);
+  nx = int(std::ceil((bhi.x + 1.0 - lo.x) / g));
+  nz = int(std::ceil((bhi.z + 1.0 - lo.y) / g));
+
+  // Raw columns, row by row (proof, step 1).
+  std::vector<std::vector<uint32_t>> rowTris(static_cast<size_t>(nz));
+  for (size_t t = 0; t < tris.size(); ++t) {
+    if (tris.degenerate[t]) continue;
+    const Box3f b = tris.triangleBounds(t);
+    const int j0 = std::max(0, int(std::floor((b.lo.z - margin - lo.y) / g)));
+    const int j1 = std::min(nz - 1, int(std::floor((b.hi.z + margin - lo.y) / g)));
+    for (int j = j0; j <= j1; ++j) rowTris[size_t(j)].push_back(uint32_t(t));
+  }
+  // Exactly vertical triangles (collinear X/Z projection, tested in double
+  // on float inputs) do not bound a column's height: they cut its square
+  // into pieces, each tested on its own (proof, step 1).
+  std::vector<uint8_t> vertical(tris.size(), 0);
+  for (size_t t = 0; t < tris.size(); ++t) {
+    const glm::dvec3 a(tris.vertex(t, 0)), b(tris.vertex(t, 1)), c(tris.vertex(t, 2));
+    vertical[t] = (b.x - a.x) * (c.z - a.z) - (b.z - a.z) * (c.x - a.x) == 0.0;
+  }
+  std::vector<float> rawTop(size_t(nx) * size_t(nz), kNoTop), rawBase(rawTop.size(), 0.0f);
+  std::vector<uint8_t> rawSolid(rawTop.size(), 0);
+  std::vector<std::vector<uint32_t>> rowComps(static_cast<size_t>(nz));
+  tbb::parallel_for(0, nz, [&](int j) {
+    std::vector<std::vector<std::pair<double, double>>> spans(static_cast<size_t>(nx));
+    std::vector<std::vector<uint32_t>> cuts(static_cast<size_t>(nx));
+    std::vector<glm::dvec3> poly, tmp;
+    const double z0 = lo.y + j * g, z1 = z0 + g;
+    for (uint32_t t : rowTris[size_t(j)]) {
+      const Box3f b = tris.triangleBounds(t);
+      const int i0 = std::max(0, int(std::floor((b.lo.x - margin - lo.x) / g)));
+      const int i1 = std::min(nx - 1, int(std::floor((b.hi.x + margin - lo.x) / g)));
+      for (int i = i0; i <= i1; ++i) {
+        const double x0 = lo.x + i * g, x1 = x0 + g;
+        clipTriangle(tris.vertex(t, 0), tris.vertex(t, 1), tris.vertex(t, 2),
+                     {x0 - margin, 0.0, z0 - margin}, {x1 + margin, 0.0, z1 + margin}, {0, 2}, poly,
+                     tmp);
+        if (poly.empty()) continue;
+        if (vertical[t]) {
+          cuts[size_t(i)].push_back(t);
+          continue;
+        }
+        double y0 = kInf, y1 = -kInf;
+        for (const glm::dvec3& p : poly) {
+          y0 = std::min(y0, p.y);
+          y1 = std::max(y1, p.y);
+        }
+        spans[size_t(i)].push_back({y0 - margin, y1 + margin});
+      }
+    }
+    std::vector<std::pair<double, double>> gaps;
+    std::vector<glm::dvec3> lines;  // (n.x, n.z, c): n . (x, z) = c
+    std::vector<std::vector<glm::dvec3>> pieces, next;
+    std::vector<uint32_t> comps;
+    for (int i = 0; i < nx; ++i) {
+      auto& s = spans[size_t(i)];
+      if (s.size() < 2) continue;
+      std::sort(s.begin(), s.end());
+      gaps.clear();
+      double reach = s[0].second;
+      for (size_t k = 1; k < s.size(); ++k) {
+        if (s[k].first > reach) gaps.push_back({reach, s[k].first});
+        reach = std::max(reach, s[k].second);
+      }
+      if (gaps.empty()) continue;
+      // The pieces of the square cut by the lines of the vertical triangles.
+      const double x0 = lo.x + i * g, x1 = x0 + g;
+      lines.clear();
+      bool tooMany = false;
+      for (uint32_t t : cuts[size_t(i)]) {
+        glm::dvec2 p[3];
+        for (int k = 0; k < 3; ++k) p[k] = {tris.vertex(t, k).x, tris.vertex(t, k).z};
+        glm::dvec2 a = p[0], b = p[1];
+        for (int k = 0; k < 3; ++k)
+          if (glm::length(p[(k + 1) % 3] - p[k]) > glm::length(b - a)) {
+            a = p[k];
+            b = p[(k + 1) % 3];
+          }
+        glm::dvec2 n(a.y - b.y, b.x - a.x);
+        if (glm::length(n) == 0.0) continue;
+        n /= glm::length(n);
+        if (n.x < 0.0 || (n.x == 0.0 && n.y < 0.0)) n = -n;
+        const glm::dvec3 line(n.x, n.y, glm::dot(n, a));
+        bool known = false;
+        for (const glm::dvec3& l : lines) known |= glm::length(l - line) < 1e-9;
+        if (!known) lines.push_back(line);
+        if (lines.size() > 6) tooMany = true;
+      }
+      if (tooMany) continue;
+      pieces.assign(1, {{x0, 0.0, z0}, {x1, 0.0, z0}, {x1, 0.0, z1}, {x0, 0.0, z1}});
+      for (const glm::dvec3& l : lines) {
+        next.clear();
+        for (const auto& piece : pieces)
+          for (int side = 0; side < 2; ++side) {
+            // Keep n . (x, z) >= c (side 0) or <= c (side 1); clipAxis on a
+            // coordinate holding n . (x, z).
+            poly.clear();
+            for (const glm::dvec3& v : piece) poly.push_back({v.x, l.x * v.x + l.y * v.z, v.z});
+            clipAxis(poly, tmp, 1, l.z, side == 0);
+            if (poly.size() >= 3) next.push_back(poly);
+          }
+        pieces.swap(next);
+      }
+      // A piece without area holds only points of the lines, each on a
+      // vertical triangle or a limit of points of the pieces beside it (the
+      // interior of a solid is open and its surface is the triangles, so
+      // such a point is inside when those are). A sliver thinner than float
+      // rounding cannot be tested reliably: the column is left out.
+      bool sliver = false;
+      std::erase_if(pieces, [&](const std::vector<glm::dvec3>& piece) {
+        double twiceArea = 0.0, diameter = 0.0;
+        for (size_t k = 0; k < piece.size(); ++k) {
+          const glm::dvec3& a = piece[k];
+          const glm::dvec3& b = piece[(k + 1) % piece.size()];
+          twiceArea += a.x * b.z - b.x * a.z;
+          for (const glm::dvec3& c : piece)
+            diameter = std::max(diameter, glm::length(glm::dvec2(c.x - a.x, c.z - a.z)));
+        }
+        const double pieceArea = 0.5 * std::abs(twiceArea);
+        if (pieceArea <= 1e-12 * g * g) return true;
+        if (pieceArea < 0.1 * margin * diameter) sliver = true;
+        return false;
+      });
+      if (sliver) continue;
+      // Tallest gap first; the first two that lie inside closed solids.
+      std::sort(gaps.begin(), gaps.end(), [](const auto& a, const auto& b) {
+        return a.second - a.first > b.second - b.first;
+      });
+      for (size_t k = 0; k < std::min<size_t>(gaps.size(), 2); ++k) {
+        const auto [a, b] = gaps[k];
+        if (b - a < margin) break;
+        comps.clear();
+        bool solid = !pieces.empty();
+        for (const auto& piece : pieces) {
+          glm::dvec3 c(0.0);
+          for (const glm::dvec3& v : piece) c += v;
+          c /= double(piece.size());
+          const uint32_t inside =
+              insideClosed(glm::vec3(float(c.x), float(0.5 * (a + b)), float(c.z)));
+          if (inside == kNoHit) {
+            solid = false;
+            break;
+          }
+          comps.push_back(inside);
+        }
+        if (!solid) continue;
+        const size_t idx = size_t(j) * size_t(nx) + size_t(i);
+        // Rounded inward to float.
+        rawTop[idx] = std::nextafter(float(b), -std::numeric_limits<float>::infinity());
+        rawBase[idx] = std::nextafter(float(a), std::numeric_limits<float>::infinity());
+        rawSolid[idx] = 1;
+        rowComps[size_t(j)].insert(rowComps[size_t(j)].end(), comps.begin(), comps.end());
+        break;
+      }
+    }
+  });
+  for (uint8_t solid : rawSolid) solidColumns += solid;
+  for (const auto& row : rowComps)
+    for (uint32_t c : row) hasColumns[c] = 1;
+
+  // Shrinking (proof, step 3): separable min of tops, max of bases, over a
+  // square window; outside the grid nothing occludes.
+  window = int(std::ceil((o.epsilon + o.binMargin) / g));
+  auto shrink = [&](std::vector<float>& t, std::vector<float>& b, bool alongX) {
+    std::vector<float> t2(t.size()), b2(b.size());
+    const int n = alongX ? nx : nz, m = alongX ? nz : nx;
+    for (int r = 0; r < m; ++r)
+      for (int q = 0; q < n; ++q) {
+        float tt = std::numeric_limits<float>::infinity(), bb = -tt;
+        if (q - window < 0 || q + window >= n) tt = kNoTop;
+        for (int k = std::max(0, q - window); k <= std::min(n - 1, q + window) && tt != kNoTop;
+             ++k) {
+          const size_t idx =
+              alongX ? size_t(r) * size_t(nx) + size_t(k) : size_t(k) * size_t(nx) + size_t(r);
+          tt = std::min(tt, t[idx]);
+          bb = std::max(bb, b[idx]);
+        }
+        const size_t out =
+            alongX ? size_t(r) * size_t(nx) + size_t(q) : size_t(q) * size_t(nx) + size_t(r);
+        t2[out] = tt;
+        b2[out] = tt == kNoTop ? 0.0f : bb;
+      }
+    t.swap(t2);
+    b.swap(b2);
+  };
+  shrink(rawTop, rawBase, true);
+  shrink(rawTop, rawBase, false);
+  bx = (nx + kBlock - 1) / kBlock;
+  bz = (nz + kBlock - 1) / kBlock;
+  blockTop.assign(size_t(bx) * size_t(bz), kNoTop);
+  columns.assign(blockTop.size() * size_t(kBlock * kBlock), glm::vec2(kNoTop, 0.0f));
+  for (int j = 0; j < nz; ++j)
+    for (int i = 0; i < nx; ++i) {
+      const float t = rawTop[size_t(j) * size_t(nx) + size_t(i)];
+      columns[columnIndex(i, j)] = {t, rawBase[size_t(j) * size_t(nx) + size_t(i)]};
+      float& b = blockTop[size_t(j / kBlock) * size_t(bx) + size_t(i / kBlock)];
+      b = std::max(b, t);
+      if (t != kNoTop) maxTop = std::max(maxTop, double(t));
+    }
+}
+
+HorizonFusion::HorizonFusion(const Scene& scene, const HorizonFusionOptions& options)
+    : impl_(std::make_unique<Impl>(scene)), options_(options) {
+  VS_CHECK(std::isfinite(options.epsilon) && options.epsilon > 0.0);
+  VS_CHECK(std::isfinite(options.gridSize) && options.gridSize > 0.0);
+  VS_CHECK(std::isfinite(options.binMargin) && options.binMargin > 0.0);
+  VS_CHECK(options.azimuthBins >= 8);
+  Stopwatch sw;
+  impl_->build(options);
+  prepareMs_ = sw.ms();
+}
+
+HorizonFusion::~HorizonFusion() = default;
+
+double HorizonFusion::gridSize() const {
+  return impl_->g;
+}
+size_t HorizonFusion::solidColumns() const {
+  return impl_->solidColumns;
+}
+
+namespace {
+
+// The per-call state of HorizonFusion::cull, one named step per phase.
+struct HorizonQuery {
+  const HorizonFusion::Impl& w;
+  const Box3f& cell;
+  HorizonFusionStats& stats;
+  std::vector<IRect> excluded;  // shrunk columns that must not occlude
+  double binWidth = 0.0, reach = 0.0;
+  // The horizon of the current sample, traced lazily by bin.
+  glm::dvec3 s{0.0};
+  std::vector<uint32_t> traced;  // generation that traced each bin
+  uint32_t generation = 0;
+  std::vector<std::vector<Step>> bins;
+  std::vector<glm::dvec3> poly, tmp;  // scratch for clipping faces to bins
+
+  // Proof, step 2: solids whose surface or interior meets the cell.
+  void excludeSolidsMeetingTheCell() {
+    const double m = w.margin;
+    const glm::dvec3 clo = glm::dvec3(cell.lo) - m, chi = glm::dvec3(cell.hi) + m;
+    std::vector<uint8_t> out(w.closed.size(), 0);
+    std::vector<uint32_t> odd;
+    for (const glm::vec3& d : parityDirections()) {
+      if (!w.oddComponents(cell.center(), d, odd)) continue;  // on a surface: clipping finds it
+      for (uint32_t c : odd) out[c] = 1;
+    }
+    const Box3f grown{glm::vec3(clo), glm::vec3(chi)};
+    for (size_t c = 0; c < w.closed.size(); ++c) {
+      if (!w.closed[c] || !w.hasColumns[c] || out[c]) continue;
+      if (!w.solids.components()[c].bounds.overlaps(grown)) continue;
+      for (uint32_t k = w.compStart[c]; k < w.compStart[c + 1] && !out[c]; ++k) {
+        const uint32_t t = w.compTris[k];
+        if (!w.tris.triangleBounds(t).overlaps(grown)) continue;
+        clipTriangle(w.tris.vertex(t, 0), w.tris.vertex(t, 1), w.tris.vertex(t, 2), clo, chi,
+                     {0, 1, 2}, poly, tmp);
+        out[c] = !poly.empty();
+      }
+    }
+    for (size_t c = 0; c < out.size(); ++c)
+      if (out[c] && w.hasColumns[c]) {
+        excluded.push_back(w.rectOf(w.solids.components()[c].bounds, w.window + 1));
+        ++stats.excludedSolids;
+      }
+  }
+
+  bool isExcluded(int i, int j) const {
+    for (const IRect& r : excluded)
+      if (i >= r.i0 && i <= r.i1 && j >= r.j0 && j <= r.j1) return true;
+    return false;
+  }
+
+  // Proof, step 5: the steps of bin k, walking the shrunk columns along the
+  // bin's central ray (Amanatides and Woo's grid walk).
+  void trace(size_t k) {
+    std::vector<Step>& steps = bins[k];
+    steps.clear();
+    ++stats.horizonBins;
+    const double phi = (double(k) + 0.5) * binWidth;
+    const glm::dvec2 dir(std::cos(phi), std::sin(phi));
+    const glm::dvec2 org(s.x, s.z);
+    // Enter the grid's rectangle.
+    const glm::dvec2 glo = w.lo, ghi = w.lo + glm::dvec2(w.nx, w.nz) * w.g;
+    double t0 = 0.0, t1 = reach;
+    for (int a = 0; a < 2; ++a) {
+      if (dir[a] == 0.0) {
+        if (org[a] < glo[a] || org[a] > ghi[a]) return;
+        continue;
+      }
+      double ta = (glo[a] - org[a]) / dir[a], tb = (ghi[a] - org[a]) / dir[a];
+      if (ta > tb) std::swap(ta, tb);
+      t0 = std::max(t0, ta);
+      t1 = std::min(t1, tb);
+    }
+    if (!(t0 < t1)) return;
+    const glm::dvec2 p0 = org + t0 * dir;
+    int i = std::clamp(int(std::floor((p0.x - glo.x) / w.g)), 0, w.nx - 1);
+    int j = std::clamp(int(std::floor((p0.y - glo.y) / w.g)), 0, w.nz - 1);
+    const int si = dir.x > 0 ? 1 : -1, sj = dir.y > 0 ? 1 : -1;
+    // Reciprocals: the walk below multiplies instead of dividing.
+    const double invX = dir.x != 0.0 ? 1.0 / dir.x : 0.0, invZ = dir.y != 0.0 ? 1.0 / dir.y : 0.0;
+    const double invG = 1.0 / w.g;
+    const double dtx = dir.x != 0.0 ? w.g / std::abs(dir.x) : kInf;
+    const double dtz = dir.y != 0.0 ? w.g / std::abs(dir.y) : kInf;
+    double tx = dir.x != 0.0 ? (glo.x + (i + (si > 0)) * w.g - org.x) / dir.x : kInf;
+    double tz = dir.y != 0.0 ? (glo.y + (j + (sj > 0)) * w.g - org.y) / dir.y : kInf;
+    const double y = s.y, lowest = double(cell.lo.y) - w.margin;
+    double best = -kInf, tin = t0;
+    int block = -1;
+    constexpr int kB = HorizonFusion::Impl::kBlock;
+    while (tin < t1) {
+      // A block none of whose columns can raise the horizon is walked
+      // without reading its columns: a top h adds a step only with a slope
+      // above `best`, at most (h - y) / tin when h > y, and at most
+      // (h - y) / (the block's exit, or the reach) otherwise.
+      const int b = (j / HorizonFusion::Impl::kBlock) * w.bx + i / HorizonFusion::Impl::kBlock;
+      if (b != block) {
+        block = b;
+        const double h = w.blockTop[size_t(b)];
+        const int bi = i / HorizonFusion::Impl::kBlock, bj = j / HorizonFusion::Impl::kBlock;
+        double exit = t1;
+        if (dir.x != 0.0)
+          exit = std::min(
+              exit, (glo.x + (bi + (si > 0)) * HorizonFusion::Impl::kBlock * w.g - org.x) * invX);
+        if (dir.y != 0.0)
+          exit = std::min(
+              exit, (glo.y + (bj + (sj > 0)) * HorizonFusion::Impl::kBlock * w.g - org.y) * invZ);
+        const double bound = h == double(kNoTop) ? -kInf
+                                                 : (h > y ? (tin > 1e-9 ? (h - y) / tin : kInf)
+                                                          : (h - y) / std::max(exit, 1e-9));
+        if (!(bound > best)) {
+          // Jump to where the ray leaves the block: the cell just past the
+          // exit point (stepped cell by cell if rounding keeps it inside).
+          if (exit >= t1) break;
+          const glm::dvec2 p = org + (exit + 1e-7 * w.g) * dir;
+          const int ni = int(std::floor((p.x - glo.x) * invG));
+          const int nj = int(std::floor((p.y - glo.y) * invG));
+          if (ni < 0 || nj < 0 || ni >= w.nx || nj >= w.nz) break;
+          if (ni / kB == bi && nj / kB == bj) {
+            tin = std::min({tx, tz, t1});
+            if (tx < tz) {
+              i += si;
+              tx += dtx;
+            } else {
+              j += sj;
+              tz += dtz;
+            }
+            if (i < 0 || j < 0 || i >= w.nx || j >= w.nz) break;
+            block = -1;
+            continue;
+          }
+          i = ni;
+          j = nj;
+          tin = exit;
+          tx = dir.x != 0.0 ? (glo.x + (i + (si > 0)) * w.g - org.x) * invX : kInf;
+          tz = dir.y != 0.0 ? (glo.y + (j + (sj > 0)) * w.g - org.y) * invZ : kInf;
+          continue;
+        }
+      }
+      const double tout = std::min({tx, tz, t1});
+      ++stats.columnSteps;
+      const glm::vec2 column = w.columns[w.columnIndex(i, j)];
+      const double h = column.x;
+      if (h != double(kNoTop) && double(column.y) <= lowest && !isExcluded(i, j)) {
+        Step st{0.0, 0.0, double(column.y)};
+        if (h > y) {
+          st.d = tin;
+          st.slope = tin > 1e-9 ? (h - y) / tin : -kInf;
+        } else {
+          st.d = std::min(tout, reach);
+          st.slope = (h - y) / st.d;
+        }
+        if (st.slope > best) {
+          steps.push_back(st);
+          best = st.slope;
+        }
+      }
+      // Nothing farther can rise above `best`: every later square starts at
+      // tout or beyond and no top exceeds maxTop.
+      if (w.maxTop > y && best * tout >= w.maxTop - y) break;
+      if (tx < tz) {
+        i += si;
+        tx += dtx;
+      } else {
+        j += sj;
+        tz += dtz;
+      }
+      if (i < 0 || j < 0 || i >= w.nx || j >= w.nz) break;
+      tin = tout;
+    }
+  }
+
+  // Proof, step 6, within one bin.
+  bool binHides(size_t k, double rmin, double slope, double minY) {
+    if (traced[k] != generation) {
+      trace(k);
+      traced[k] = generation;
+    }
+    const std::vector<Step>& steps = bins[k];
+    const double lowest = double(cell.lo.y);
+    for (size_t n = steps.size(); n-- > 0;) {
+      const Step& st = steps[n];
+      if (!(st.slope > slope)) return false;  // earlier steps are lower still
+      if (!(st.d < rmin * (1.0 - 1e-9))) continue;
+      if (minY >= st.base) return true;
+      const double a = lowest - st.base;
+      if (a > 0.0 && st.d * (a + st.base - minY) <= rmin * a * (1.0 - 1e-9)) return true;
+    }
+    return false;
+  }
+
+  // An upper bound of the elevation slope of points at horizontal distance
+  // in [rmin, rmax] and at most maxY high, seen from the sample.
+  double faceSlope(double maxY, double rmin, double rmax) const {
+    return maxY > s.y ? (maxY - s.y) / rmin : (maxY - s.y) / rmax;
+  }
+
+  // Proof, step 6: is the face hidden from the current sample?
+  bool faceHidden(uint32_t f) {
+    const glm::dvec2 sh(s.x, s.z);
+    double a0 = 0.0, amin = 0.0, amax = 0.0, rmin = kInf, rmax = 0.0, minY = kInf, maxY = -kInf;
+    bool first = true;
+    for (uint32_t k = w.faceStart[f]; k < w.faceStart[f + 1]; ++k) {
+      const uint32_t t = w.faceTris[k];
+      for (int v = 0; v < 3; ++v) {
+        const glm::dvec3 p(w.tris.vertex(t, v));
+        const glm::dvec2 ph(p.x, p.z);
+        const glm::dvec2 q = ph - sh;
+        const double ang = std::atan2(q.y, q.x);
+        if (first) {
+          a0 = ang;
+          first = false;
+        } else {
+          double da = ang - a0;
+          if (da > std::numbers::pi) da -= 2.0 * std::numbers::pi;
+          if (da < -std::numbers::pi) da += 2.0 * std::numbers::pi;
+          amin = std::min(amin, da);
+          amax = std::max(amax, da);
+        }
+        rmax = std::max(rmax, glm::length(q));
+        minY = std::min(minY, p.y);
+        maxY = std::max(maxY, p.y);
+        const glm::dvec3 n(w.tris.vertex(t, (v + 1) % 3));
+        rmin = std::min(rmin, pointSegmentDistance(sh, ph, {n.x, n.z}));
+      }
+    }
+    if (first || amax - amin >= std::numbers::pi - 1e-6 || !(rmin > 1e-6)) return false;
+    const long b0 = long(std::floor((a0 + amin - 1e-9) / binWidth));
+    const long b1 = long(std::floor((a0 + amax + 1e-9) / binWidth));
+    const long nb = long(bins.size());
+    for (long b = b0; b <= b1; ++b) {
+      const size_t k = size_t(((b % nb) + nb) % nb);
+      // The whole face's bounds first; then the part of the face inside
+      // the bin's wedge (its nearest point, highest point and farthest
+      // point there), which is what the bin must hide.
+      if (binHides(k, rmin, faceSlope(maxY, rmin, rmax), minY)) continue;
+      if (b0 == b1) return false;
+      double bmin = kInf, bmax = 0.0, bminY = kInf, bmaxY = -kInf;
+      const double p0 = double(b) * binWidth - 1e-9, p1 = double(b + 1) * binWidth + 1e-9;
+      for (uint32_t n = w.faceStart[f]; n < w.faceStart[f + 1]; ++n) {
+        const uint32_t t = w.faceTris[n];
+        poly.clear();
+        for (int v = 0; v < 3; ++v) poly.push_back(glm::dvec3(w.tris.vertex(t, v)) - s);
+        clipHalfPlane(poly, tmp, -std::sin(p0), std::cos(p0));
+        clipHalfPlane(poly, tmp, std::sin(p1), -std::cos(p1));
+        for (size_t v = 0; v < poly.size(); ++v) {
+          const glm::dvec3& a = poly[v];
+          const glm::dvec3& c = poly[(v + 1) % poly.size()];
+          bmin = std::min(bmin, pointSegmentDistance({0.0, 0.0}, {a.x, a.z}, {c.x, c.z}));
+          bmax = std::max(bmax, glm::length(glm::dvec2(a.x, a.z)));
+          bminY = std::min(bminY, a.y + s.y);
+          bmaxY = std::max(bmaxY, a.y + s.y);
+        }
+      }
+      if (bmaxY == -kInf) continue;  // the face does not reach into this bin
+      if (!(bmin > 1e-6) || !binHides(k, bmin, faceSlope(bmaxY, bmin, bmax), bminY)) return false;
+    }
+    return true;
+  }
+};
+
+}  // namespace
+
+HorizonFusionResult HorizonFusion::cull(const Box3f& cell,
+                                        std::span<const uint32_t> candidates) const {
+  VS_CHECK(!cell.empty());
+  VS_CHECK(std::isfinite(cell.lo.x) && std::isfinite(cell.lo.y) && std::isfinite(cell.lo.z) &&
+           std::isfinite(cell.hi.x) && std::isfinite(cell.hi.y) && std::isfinite(cell.hi.z));
+  Stopwatch sw;
+  HorizonFusionResult r;
+  r.stats.candidateFaces = candidates.size();
+  const Impl& w = *impl_;
+  HorizonQuery q{w, cell, r.stats, {}, 0.0, 0.0, {}, {}, 0, {}, {}, {}};
+  // Faces that can be tested: static faces of this scene.
+  std::vector<uint32_t> hidden;
+  for (uint32_t f : candidates)
+    if (f < w.scene.faceCount && w.faceStart[f] < w.faceStart[f + 1]) hidden.push_back(f);
+  if (w.nx > 0 && !hidden.empty()) {
+    q.excludeSolidsMeetingTheCell();
+    q.binWidth = 2.0 * std::numbers::pi / double(options_.azimuthBins);
+    q.reach = 2.0 * options_.binMargin / q.binWidth;
+    q.traced.assign(size_t(options_.azimuthBins), 0);
+    q.bins.resize(size_t(options_.azimuthBins));
+    // Samples: centres of a grid of rectangles of half-diagonal <= epsilon
+    // on the top face (proof, step 4).
+    const glm::dvec3 clo(cell.lo), chi(cell.hi);
+    const double side = options_.epsilon * std::numbers::sqrt2;
+    const int sx = std::max(1, int(std::ceil((chi.x - clo.x) / side)));
+    const int sz = std::max(1, int(std::ceil((chi.z - clo.z) / side)));
+    std::vector<uint32_t> still;
+    for (int a = 0; a < sx && !hidden.empty(); ++a)
+      for (int b = 0; b < sz && !hidden.empty(); ++b) {
+        q.s = glm::dvec3(clo.x + (a + 0.5) * (chi.x - clo.x) / sx, chi.y,
+                         clo.z + (b + 0.5) * (chi.z - clo.z) / sz);
+        ++q.generation;
+        ++r.stats.samples;
+        still.clear();
+        for (uint32_t f : hidden)
+          if (q.faceHidden(f)) still.push_back(f);
+        hidden.swap(still);
+      }
+  } else {
+    hidden.clear();
+  }
+  // The result: candidates minus the faces hidden from every sample (both sorted).
+  r.faces.reserve(candidates.size() - hidden.size());
+  size_t h = 0;
+  for (uint32_t f : candidates) {
+    while (h < hidden.size() && hidden[h] < f) ++h;
+    if (h < hidden.size() && hidden[h] == f) continue;
+    r.faces.push_back(f);
+  }
+  r.stats.culled = candidates.size() - r.faces.size();
+  r.stats.timeMs = sw.ms();
+  return r;
+}
+
+}  // namespace vistream
