@@ -347,14 +347,14 @@ int runPvsBench(const PvsBenchOptions& options) {
       << "set key top left\nplot ";
     bool first = true;
     for (const auto& s : options.scenes) {
-      g << (first ? "" : ", ") << "'" << dat.string() << "' using ($1 eq '" << s
+      g << (first ? "" : ", ") << "'" << dat.string() << "' using (strcol(1) eq '" << s
         << "' ? $3 : 1/0):4 with linespoints title '" << s << "'";
       first = false;
     }
     g << "\nset ylabel 'ms per cell'\nset logscale y\nplot ";
     first = true;
     for (const auto& s : options.scenes) {
-      g << (first ? "" : ", ") << "'" << dat.string() << "' using ($1 eq '" << s
+      g << (first ? "" : ", ") << "'" << dat.string() << "' using (strcol(1) eq '" << s
         << "' ? $3 : 1/0):5 with linespoints title '" << s << "'";
       first = false;
     }
