@@ -555,8 +555,9 @@ std::unique_ptr<Mesh> meshOf(const FlatTriangles& triangles, uint32_t first, uin
   auto mesh = std::make_unique<Mesh>();
   // Embree reads the last vertex with a 16-byte load: one float of padding.
   mesh->vertices.resize(9 * size_t(count) + 1, 0.0f);
-  std::memcpy(mesh->vertices.data(), &triangles.positions[3 * size_t(first)],
-              3 * size_t(count) * sizeof(glm::vec3));
+  if (count > 0)
+    std::memcpy(mesh->vertices.data(), triangles.positions.data() + 3 * size_t(first),
+                3 * size_t(count) * sizeof(glm::vec3));
   for (uint32_t i = 0; i < count; ++i) {
     const uint32_t t = first + i;
     if (triangles.degenerate[t]) continue;
