@@ -43,6 +43,37 @@ uint32_t seenTriangle(const RayQuery& rays, const Ray& ray, const Hit& h, std::v
   return onBoundary ? kNoHit : h.triangle;
 }
 
+namespace {
+
+// Points spread over the unit triangle: the centroid, then Halton (2, 3)
+// pairs folded into the triangle (a point beyond the diagonal is mirrored).
+std::vector<glm::vec2> probeBarycentrics(int count) {
+  std::vector<glm::vec2> out;
+  if (count <= 0) return out;
+  out.emplace_back(1.0f / 3.0f, 1.0f / 3.0f);
+  auto radicalInverse = [](uint32_t i, uint32_t base) {
+    double f = 1.0, r = 0.0;
+    while (i > 0) {
+      f /= double(base);
+      r += f * double(i % base);
+      i /= base;
+    }
+    return r;
+  };
+  for (uint32_t i = 1; out.size() < size_t(count); ++i) {
+    double u = radicalInverse(i, 2), v = radicalInverse(i, 3);
+    if (u + v > 1.0) u = 1.0 - u, v = 1.0 - v;
+    // Keep off the edges, where the open-face rule credits nothing.
+    const double shrink = 0.98;
+    const double cu = 1.0 / 3.0 + (u - 1.0 / 3.0) * shrink;
+    const double cv = 1.0 / 3.0 + (v - 1.0 / 3.0) * shrink;
+    out.emplace_back(float(cu), float(cv));
+  }
+  return out;
+}
+
+}  // namespace
+
 SampledVisibility sampleVisibleFaces(const RayQuery& rays, const FlatTriangles& triangles,
                                      const Box3f& cell, const SampledVisibilityOptions& options) {
   Stopwatch clock;
@@ -50,6 +81,18 @@ SampledVisibility sampleVisibleFaces(const RayQuery& rays, const FlatTriangles& 
   const std::vector<glm::vec3> points = cellViewpoints(cell, options.points, options.seed);
   const int res = std::max(1, options.resolution);
   std::vector<uint8_t> seen(triangles.size(), 0);
+  std::vector<uint8_t> probed(triangles.size(), 0);  // 1: found by a probe ray only
+  // The triangles of the probe faces.
+  std::vector<uint32_t> probeTriangles;
+  if (!options.probeFaces.empty()) {
+    std::vector<uint32_t> wanted = options.probeFaces;
+    std::sort(wanted.begin(), wanted.end());
+    for (size_t t = 0; t < triangles.size(); ++t)
+      if (!triangles.degenerate[t] &&
+          std::binary_search(wanted.begin(), wanted.end(), triangles.faceIds[t]))
+        probeTriangles.push_back(uint32_t(t));
+  }
+  const std::vector<glm::vec2> probePoints = probeBarycentrics(options.probeSamples);
   std::mutex merge;  // guards result counters while merging per-viewpoint results
 
   tbb::parallel_for(size_t(0), points.size(), [&](size_t pi) {
@@ -86,19 +129,55 @@ SampledVisibility sampleVisibleFaces(const RayQuery& rays, const FlatTriangles& 
           if (tri != kNoHit) local.push_back(tri);
         }
     }
+    // Probe rays: aimed at points of the probe triangles, ending just past them.
+    std::vector<uint32_t> fromProbes;
+    uint64_t probeRays = 0;
+    constexpr size_t kProbeBatch = 16384;
+    for (size_t first = 0; first < probeTriangles.size() * probePoints.size();
+         first += kProbeBatch) {
+      const size_t n = std::min(kProbeBatch, probeTriangles.size() * probePoints.size() - first);
+      batch.resize(n);
+      hits.resize(n);
+      for (size_t k = 0; k < n; ++k) {
+        const size_t tri = probeTriangles[(first + k) / probePoints.size()];
+        const glm::vec2 b = probePoints[(first + k) % probePoints.size()];
+        const glm::vec3 target = triangles.vertex(tri, 0) * (1.0f - b.x - b.y) +
+                                 triangles.vertex(tri, 1) * b.x + triangles.vertex(tri, 2) * b.y;
+        batch[k] = Ray{origin, target - origin, 0.0f, 1.001f};
+      }
+      rays.firstHits(std::span<const Ray>(batch.data(), n), std::span<Hit>(hits.data(), n));
+      probeRays += n;
+      for (size_t r = 0; r < n; ++r)
+        if (hits[r].valid()) {
+          ++hitCount;
+          const uint32_t tri = seenTriangle(rays, batch[r], hits[r], tied);
+          if (tri != kNoHit) fromProbes.push_back(tri);
+        }
+    }
     std::sort(local.begin(), local.end());
     local.erase(std::unique(local.begin(), local.end()), local.end());
     std::lock_guard lock(merge);
     for (uint32_t tri : local) seen[tri] = 1;
+    for (uint32_t tri : fromProbes)
+      if (!seen[tri]) probed[tri] = 1;
     ++result.viewpoints;
-    result.rays += uint64_t(batch.size()) * 6;
+    result.rays += uint64_t(res) * uint64_t(res) * 6 + probeRays;
+    result.probeRays += probeRays;
     result.hits += hitCount;
   });
 
-  for (size_t t = 0; t < triangles.size(); ++t)
-    if (seen[t]) result.faces.push_back(triangles.faceIds[t]);
-  std::sort(result.faces.begin(), result.faces.end());
-  result.faces.erase(std::unique(result.faces.begin(), result.faces.end()), result.faces.end());
+  std::vector<uint32_t> cubeFaces;
+  for (size_t t = 0; t < triangles.size(); ++t) {
+    if (seen[t]) cubeFaces.push_back(triangles.faceIds[t]);
+    if (seen[t] || probed[t]) result.faces.push_back(triangles.faceIds[t]);
+  }
+  auto sortUnique = [](std::vector<uint32_t>& v) {
+    std::sort(v.begin(), v.end());
+    v.erase(std::unique(v.begin(), v.end()), v.end());
+  };
+  sortUnique(cubeFaces);
+  sortUnique(result.faces);
+  result.probeOnly = result.faces.size() - cubeFaces.size();
   result.timeMs = clock.ms();
   return result;
 }

@@ -10,6 +10,14 @@
 // of a box) and credits a triangle turned towards it at the same distance,
 // or nothing.
 //
+// Probes (SampledVisibilityOptions::probeFaces): a cube map misses what is
+// smaller than its pixels, a facade's sliver between two far buildings, a
+// roof detail 150 m away. Faces named as probes are also aimed at: from
+// every viewpoint, one ray to each of `probeSamples` points spread over each
+// of their triangles (the centroid first, then a Halton sequence). A ray's
+// first hit is credited by the same rule as a cube-map ray, so probes only
+// add faces that are truly seen. PVS checks probe the PVS's own faces.
+//
 // Viewpoints for which SampledVisibilityOptions::skipViewpoint answers true
 // are skipped and counted. PVS checks pass the PVS contract's rule
 // (Solids::unservedViewpoint, common/world/solids.h): no one is served
@@ -33,6 +41,9 @@ struct SampledVisibilityOptions {
   uint64_t seed = 1;
   // Viewpoints to leave out (empty: none).
   std::function<bool(const glm::vec3&)> skipViewpoint;
+  // Faces (any order) to aim rays at from every viewpoint; empty: none.
+  std::vector<uint32_t> probeFaces;
+  int probeSamples = 8;  // points aimed at per triangle of a probe face
 };
 
 struct SampledVisibility {
@@ -41,6 +52,8 @@ struct SampledVisibility {
   size_t insideSolid = 0;       // viewpoints skipped by skipViewpoint
   uint64_t rays = 0;
   uint64_t hits = 0;
+  uint64_t probeRays = 0;  // of `rays`, aimed at probe faces
+  size_t probeOnly = 0;    // faces of `faces` only the probes found
   double timeMs = 0.0;
 };
 

@@ -285,7 +285,7 @@ int runPvsBench(const PvsBenchOptions& options) {
                            {},
                            0});
       }
-      std::vector<double> seen;
+      std::vector<double> seen, probeOnly;
       for (size_t ci = 0; ci < cells.size(); ++ci) {
         const Box3f& cell = cells[ci];
         SampledVisibilityOptions gt;
@@ -294,11 +294,25 @@ int runPvsBench(const PvsBenchOptions& options) {
         gt.skipViewpoint = [&w](const glm::vec3& p) {
           return w.solids.unservedViewpoint(*w.rays, p);
         };
+        std::vector<PvsResult> results;
+        std::vector<uint32_t> probes;  // every method's PVS: the truth aims at each face
+        for (Method& m : methods) {
+          results.push_back(m.fused ? m.fused->compute(cell, m.options)
+                                    : w.pvs->compute(cell, m.options));
+          probes.insert(probes.end(), results.back().faces.begin(), results.back().faces.end());
+        }
+        if (options.groundTruthProbes > 0) {
+          std::sort(probes.begin(), probes.end());
+          probes.erase(std::unique(probes.begin(), probes.end()), probes.end());
+          gt.probeFaces = std::move(probes);
+          gt.probeSamples = options.groundTruthProbes;
+        }
         const SampledVisibility truth = sampleVisibleFaces(*w.rays, *w.triangles, cell, gt);
         seen.push_back(double(truth.faces.size()));
-        for (Method& m : methods) {
-          const PvsResult r =
-              m.fused ? m.fused->compute(cell, m.options) : w.pvs->compute(cell, m.options);
+        probeOnly.push_back(double(truth.probeOnly));
+        for (size_t mi = 0; mi < methods.size(); ++mi) {
+          Method& m = methods[mi];
+          const PvsResult& r = results[mi];
           for (uint32_t f : truth.faces)
             m.missing += !std::binary_search(r.faces.begin(), r.faces.end(), f);
           m.pvsSize.push_back(double(r.faces.size()));
@@ -316,6 +330,7 @@ int runPvsBench(const PvsBenchOptions& options) {
                           {"cells", m.pvsSize.size()},
                           {"pvs_faces", mean(m.pvsSize)},
                           {"seen_faces", seenMean},
+                          {"seen_by_probes_only", mean(probeOnly)},
                           {"overestimation", over},
                           {"median_pvs_over_seen", median(m.ratio)},
                           {"ms_per_cell", median(m.ms)},

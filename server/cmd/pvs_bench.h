@@ -15,6 +15,7 @@ struct PvsBenchOptions {
   size_t accuracyCells = 6;  // cells per (scene, cell size) for the accuracy table
   int groundTruthRes = 128;  // rays per cube face side for the ground truth
   size_t groundTruthPoints = 24;
+  int groundTruthProbes = 8;  // rays per triangle of a PVS face aimed from each viewpoint (0: none)
   uint64_t seed = 1;
   bool json = false;
   std::vector<double> fusedEpsilons{1.0, 0.5};  // fused method settings compared (cities, terrain)

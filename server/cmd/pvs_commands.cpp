@@ -431,6 +431,11 @@ int runPvsTool(int argc, char** argv) {
       ->add_option("--gt-points", benchOptions.groundTruthPoints,
                    "ground-truth viewpoints per cell")
       ->check(atLeast<size_t>(1));
+  bench
+      ->add_option("--gt-probes", benchOptions.groundTruthProbes,
+                   "ground-truth rays aimed at each triangle of a PVS face from each viewpoint "
+                   "(0: the cube maps only)")
+      ->check(inRange(0, 256));
   bench->add_option("--seed", benchOptions.seed, "seed for cell placement")
       ->check(atLeast<uint64_t>(0));
   bench->add_option("--fused-eps", benchOptions.fusedEpsilons, "fused epsilons to compare (metres)")
