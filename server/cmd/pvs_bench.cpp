@@ -1,19 +1,24 @@
 // Reproduces Tables 1 and 2 of Cohen-Or and Zadicario 1998 on the generated
 // cities and measures the accuracy/time trade-off of the PVS against the
-// sampled ground truth. All configurations run side by side in one process
-// on the same cells; times are medians over cells.
+// sampled ground truth, and the time a district's bake takes with each
+// method. All configurations run side by side in one process on the same
+// cells; times per cell are medians over cells.
 #include "server/cmd/pvs_bench.h"
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <random>
+#include <system_error>
 
 #include "common/core/progress.h"
 #include "common/core/timer.h"
@@ -22,9 +27,10 @@
 #include "common/raycast/sampled_visibility.h"
 #include "common/world/free_space.h"
 #include "common/world/static_world.h"
+#include "server/stream/stream_world.h"
 #include "server/visibility/epsilon_pvs.h"
-#include "server/visibility/fused_pvs.h"
 #include "server/visibility/horizon_fusion.h"
+#include "server/visibility/pvs_bake.h"
 
 namespace vistream {
 namespace {
@@ -116,9 +122,68 @@ std::vector<Config> table2Configs() {
           {"fully optimized", full}};
 }
 
+// Every method and combination the accuracy table and the district bake
+// compare: the paper's single convex occluders, + back faces of closed
+// outward solids (the default of `vistream-pvs cell` and the bake), + fused
+// occlusion horizons (when the PVS has them: not indoors).
+struct Method {
+  const char* name;
+  PvsOptions options;
+};
+
+std::vector<Method> benchMethods(bool horizons) {
+  PvsOptions paper;
+  paper.backFaces = false;
+  paper.fusion = false;
+  PvsOptions backFaces;
+  backFaces.fusion = false;
+  std::vector<Method> methods{{"paper", paper}, {"+back faces", backFaces}};
+  if (horizons) methods.push_back({"+horizons", PvsOptions{}});
+  return methods;
+}
+
+// A scratch directory for the district bakes' databases, removed with
+// everything in it when the bench ends.
+class ScratchDir {
+ public:
+  ScratchDir() {
+    std::string pattern =
+        (std::filesystem::temp_directory_path() / "vistream-pvs-bench-XXXXXX").string();
+    if (!::mkdtemp(pattern.data()))
+      throw std::system_error(errno, std::generic_category(), "cannot create " + pattern);
+    path_ = pattern;
+  }
+  ~ScratchDir() {
+    std::error_code ec;
+    std::filesystem::remove_all(path_, ec);
+  }
+  ScratchDir(const ScratchDir&) = delete;
+  ScratchDir& operator=(const ScratchDir&) = delete;
+  const std::filesystem::path& path() const { return path_; }
+
+ private:
+  std::filesystem::path path_;
+};
+
+// The district a bench bakes: the bake's own region (the scene's bounds in X
+// and Z, its floors' eye range in Y; bakeGrid) cut to a square of `side`
+// metres around the centre of the scene's bounds.
+Box3f districtRegion(const World& w, const BakeOptions& bake, double side) {
+  const ViewCellGrid whole = bakeGrid(w.scene, w.freeSpace, bake);
+  Box3f region(whole.origin(), whole.origin() + glm::vec3(whole.dims()) * whole.cellSize());
+  const glm::vec3 centre = w.scene.bounds().center();
+  const float half = float(side / 2.0);
+  region.lo.x = std::max(region.lo.x, centre.x - half);
+  region.hi.x = std::min(region.hi.x, centre.x + half);
+  region.lo.z = std::max(region.lo.z, centre.z - half);
+  region.hi.z = std::min(region.hi.z, centre.z + half);
+  return region;
+}
+
 }  // namespace
 
 int runPvsBench(const PvsBenchOptions& options) {
+  const Stopwatch total;
   json out;
   const bool human = !options.json;
   std::vector<std::string> cities;
@@ -225,6 +290,12 @@ int runPvsBench(const PvsBenchOptions& options) {
 
   // ---- accuracy against time: PVS over ground truth by cell size ------------
   std::vector<std::string> lines;
+  // The district bakes write their databases here.
+  std::optional<ScratchDir> scratch;
+  if (options.districtSize > 0) scratch.emplace();
+  const float bakeCell =
+      options.bakeCellSize > 0 ? options.bakeCellSize : StreamWorldOptions{}.cellSize;
+  size_t bakes = 0;
   for (const std::string& spec : options.scenes) {
     World w = makeWorld(spec);
     const bool indoor = spec.rfind("interior", 0) == 0;
@@ -240,51 +311,24 @@ int runPvsBench(const PvsBenchOptions& options) {
     if (human)
       fmt::print(
           "\nAccuracy against time ({}, {} cells per size, the same cells for every method; ground "
-          "truth {} points x {}^2 rays per cube face)\n"
+          "truth {} points x {}^2 rays per cube face + {} probe rays per triangle of every "
+          "method's PVS faces)\n"
           "  {:>8} {:<20} {:>10} {:>10} {:>14} {:>12} {:>10} {:>8}\n",
           spec, options.accuracyCells, options.groundTruthPoints, options.groundTruthRes,
-          "cell (m)", "method", "PVS faces", "seen", "mean PVS/seen", "median ratio", "ms/cell",
-          "missing");
+          options.groundTruthProbes, "cell (m)", "method", "PVS faces", "seen", "mean PVS/seen",
+          "median ratio", "ms/cell", "missing");
     for (float size : sizes) {
       const auto cells =
           streetCells(w, size, options.accuracyCells, options.seed + uint64_t(size * 10));
-      // Every method and combination, on the same cells: the paper's single
-      // convex occluders, + back faces of closed outward solids (the
-      // default), + fused occlusion horizons, and the cube-map fusion.
-      struct Method {
-        std::string name;
-        PvsOptions options;
-        std::unique_ptr<FusedPvs> fused;  // non-null: the cube-map fusion on top
+      // Every method and combination, on the same cells.
+      struct Measured {
+        Method method;
         std::vector<double> pvsSize, ms, ratio;
         size_t missing = 0;
       };
-      std::vector<Method> methods;
-      PvsOptions paper;
-      paper.backFaces = false;
-      paper.fusion = false;
-      PvsOptions backFaces;
-      backFaces.fusion = false;
-      methods.push_back({"paper", paper, nullptr, {}, {}, {}, 0});
-      methods.push_back({"+back faces", backFaces, nullptr, {}, {}, {}, 0});
-      if (horizon) methods.push_back({"+horizons", PvsOptions{}, nullptr, {}, {}, {}, 0});
-      // Interior walls are 0.2 m thick: an erosion of half that removes them,
-      // so indoors the fused method runs with 0.04 m, and (its sample count
-      // growing with the cell's area over epsilon squared) on cells up to 1 m.
-      std::vector<double> epsilons = options.fusedEpsilons;
-      if (indoor && !epsilons.empty())
-        epsilons = size <= 1.0f ? std::vector<double>{0.04} : std::vector<double>{};
-      for (double eps : epsilons) {
-        FusedPvsOptions fo;
-        fo.epsilon = eps;
-        fo.resolution = options.fusedResolution;
-        methods.push_back({fmt::format("+cube fusion {}", eps),
-                           backFaces,
-                           std::make_unique<FusedPvs>(*w.pvs, fo),
-                           {},
-                           {},
-                           {},
-                           0});
-      }
+      std::vector<Measured> methods;
+      for (const Method& m : benchMethods(horizon != nullptr))
+        methods.push_back({m, {}, {}, {}, 0});
       std::vector<double> seen, probeOnly;
       for (size_t ci = 0; ci < cells.size(); ++ci) {
         const Box3f& cell = cells[ci];
@@ -296,9 +340,8 @@ int runPvsBench(const PvsBenchOptions& options) {
         };
         std::vector<PvsResult> results;
         std::vector<uint32_t> probes;  // every method's PVS: the truth aims at each face
-        for (Method& m : methods) {
-          results.push_back(m.fused ? m.fused->compute(cell, m.options)
-                                    : w.pvs->compute(cell, m.options));
+        for (const Measured& m : methods) {
+          results.push_back(w.pvs->compute(cell, m.method.options));
           probes.insert(probes.end(), results.back().faces.begin(), results.back().faces.end());
         }
         if (options.groundTruthProbes > 0) {
@@ -311,7 +354,7 @@ int runPvsBench(const PvsBenchOptions& options) {
         seen.push_back(double(truth.faces.size()));
         probeOnly.push_back(double(truth.probeOnly));
         for (size_t mi = 0; mi < methods.size(); ++mi) {
-          Method& m = methods[mi];
+          Measured& m = methods[mi];
           const PvsResult& r = results[mi];
           for (uint32_t f : truth.faces)
             m.missing += !std::binary_search(r.faces.begin(), r.faces.end(), f);
@@ -321,11 +364,11 @@ int runPvsBench(const PvsBenchOptions& options) {
             m.ratio.push_back(double(r.faces.size()) / double(truth.faces.size()));
         }
       }
-      for (const Method& m : methods) {
+      for (const Measured& m : methods) {
         const double seenMean = mean(seen);
         const double over = mean(m.pvsSize) / std::max(1.0, seenMean);
         const json row = {{"scene", spec},
-                          {"method", m.name},
+                          {"method", m.method.name},
                           {"cell_size_m", size},
                           {"cells", m.pvsSize.size()},
                           {"pvs_faces", mean(m.pvsSize)},
@@ -336,13 +379,48 @@ int runPvsBench(const PvsBenchOptions& options) {
                           {"ms_per_cell", median(m.ms)},
                           {"missing_faces", m.missing}};
         out["accuracy"].push_back(row);
-        if (m.name == "+back faces")
+        if (std::string(m.method.name) == "+back faces")
           lines.push_back(
               fmt::format("{} default {} {} {}", spec, size, median(m.ratio), median(m.ms)));
         if (human)
           fmt::print("  {:>8.1f} {:<20} {:>10.0f} {:>10.0f} {:>14.2f} {:>12.2f} {:>10.2f} {:>8}\n",
-                     size, m.name, mean(m.pvsSize), seenMean, over, median(m.ratio), median(m.ms),
-                     m.missing);
+                     size, m.method.name, mean(m.pvsSize), seenMean, over, median(m.ratio),
+                     median(m.ms), m.missing);
+      }
+    }
+
+    // ---- bake time for a district -------------------------------------------
+    if (scratch) {
+      BakeOptions bake;
+      bake.cellSize = glm::vec3(bakeCell);
+      bake.threads = options.bakeThreads;
+      bake.region = districtRegion(w, bake, options.districtSize);
+      const glm::vec3 extent = bake.region->extent();
+      if (human)
+        fmt::print(
+            "\nBake time for a district ({}: {:.0f} m x {:.0f} m around the scene's centre, "
+            "{:g} m cells, coarse to fine, {} thread{})\n"
+            "  {:<20} {:>8} {:>10} {:>10} {:>16}\n",
+            spec, extent.x, extent.z, bakeCell, options.bakeThreads,
+            options.bakeThreads == 1 ? "" : "s (0: all cores)", "method", "cells", "bake (s)",
+            "ms/cell", "mean PVS faces");
+      for (const Method& m : benchMethods(horizon != nullptr)) {
+        bake.pvs = m.options;
+        const BakeReport r = bakePvs(w.scene, *w.pvs, w.freeSpace, bake,
+                                     scratch->path() / fmt::format("district-{}.db", bakes++));
+        const double pvsFaces = r.shardCells ? double(r.totalFaces) / double(r.shardCells) : 0.0;
+        out["bake"].push_back({{"scene", spec},
+                               {"method", m.name},
+                               {"cell_size_m", bakeCell},
+                               {"district_m", {extent.x, extent.z}},
+                               {"cells", r.shardCells},
+                               {"bake_s", r.timeMs / 1000.0},
+                               {"mean_cell_ms", r.meanCellMs},
+                               {"mean_pvs_faces", pvsFaces},
+                               {"threads", options.bakeThreads}});
+        if (human)
+          fmt::print("  {:<20} {:>8} {:>10.2f} {:>10.2f} {:>16.0f}\n", m.name, r.shardCells,
+                     r.timeMs / 1000.0, r.meanCellMs, pvsFaces);
       }
     }
   }
@@ -379,7 +457,11 @@ int runPvsBench(const PvsBenchOptions& options) {
     if (std::system(cmd.c_str()) != 0)
       spdlog::warn("gnuplot not available: wrote {} only", dat.string());
   }
-  if (!human) std::cout << out.dump(2) << "\n";
+  out["total_s"] = total.ms() / 1000.0;
+  if (human)
+    fmt::print("\nbench run time: {:.0f} s\n", total.ms() / 1000.0);
+  else
+    std::cout << out.dump(2) << "\n";
   return 0;
 }
 

@@ -25,6 +25,7 @@
 #include "common/world/static_world.h"
 #include "server/cmd/pvs_bench.h"
 #include "server/cmd/walk_bench.h"
+#include "server/stream/stream_world.h"
 #include "server/visibility/epsilon_pvs.h"
 #include "server/visibility/fused_pvs.h"
 #include "server/visibility/hierarchical_culling.h"
@@ -416,7 +417,9 @@ int runPvsTool(int argc, char** argv) {
   merge->add_option("--out,-o", out, "merged database")->required();
 
   auto* bench =
-      app.add_subcommand("bench", "Tables 1 and 2 of the paper, and PVS accuracy against time");
+      app.add_subcommand("bench",
+                         "Tables 1 and 2 of the paper; per method, PVS accuracy against time "
+                         "and the bake time of a district");
   PvsBenchOptions benchOptions;
   addScenesOption(bench, benchOptions.scenes);
   bench->add_option("--cells", benchOptions.cells, "street cells per city for Tables 1 and 2")
@@ -438,11 +441,20 @@ int runPvsTool(int argc, char** argv) {
       ->check(inRange(0, 256));
   bench->add_option("--seed", benchOptions.seed, "seed for cell placement")
       ->check(atLeast<uint64_t>(0));
-  bench->add_option("--fused-eps", benchOptions.fusedEpsilons, "fused epsilons to compare (metres)")
-      ->delimiter(',')
-      ->check(positive());
-  bool noFused = false;
-  bench->add_flag("--no-fused", noFused, "measure the paper's method only");
+  bench
+      ->add_option("--district", benchOptions.districtSize,
+                   "side of the square district baked per scene and method, around the scene's "
+                   "centre (metres; 0: no bake)")
+      ->check(nonNegative());
+  bench
+      ->add_option("--bake-cell", benchOptions.bakeCellSize,
+                   "view cell size of the district bake (metres)")
+      ->check(positive())
+      ->default_str(fmt::format("the server's, {}", StreamWorldOptions{}.cellSize));
+  bench
+      ->add_option("--bake-threads", benchOptions.bakeThreads,
+                   "worker threads of the district bake (0: all cores)")
+      ->check(atLeast<unsigned>(0));
   bench->add_option("--plot", benchOptions.plotDir, "directory for accuracy.dat/.png (gnuplot)");
   bench->add_flag("--json", benchOptions.json, "one JSON object on stdout");
 
@@ -513,10 +525,7 @@ int runPvsTool(int argc, char** argv) {
     if (*query) return cmdQuery(db, point, cellIndex, asJson, queryFaces);
     if (*walk) return cmdWalk(scene, limits, pathFile, walkMethod, cullOptions, asJson, withFaces);
     if (*walkBench) return runWalkBench(walkBenchOptions);
-    if (*bench) {
-      if (noFused) benchOptions.fusedEpsilons.clear();
-      return runPvsBench(benchOptions);
-    }
+    if (*bench) return runPvsBench(benchOptions);
     if (*merge) {
       std::vector<std::filesystem::path> paths(inputs.begin(), inputs.end());
       mergePvsDatabases(paths, out);

@@ -539,6 +539,7 @@ HorizonFusion::HorizonFusion(const Scene& scene, const HorizonFusionOptions& opt
   VS_CHECK(std::isfinite(options.gridSize) && options.gridSize > 0.0);
   VS_CHECK(std::isfinite(options.binMargin) && options.binMargin > 0.0);
   VS_CHECK(options.azimuthBins >= 8);
+  VS_CHECK(options.refinements >= 0 && options.refinements <= 4);
   Stopwatch sw;
   impl_->build(options);
   prepareMs_ = sw.ms();
@@ -561,12 +562,17 @@ struct HorizonQuery {
   const Box3f& cell;
   HorizonFusionStats& stats;
   std::vector<IRect> excluded;  // shrunk columns that must not occlude
-  double binWidth = 0.0, reach = 0.0;
-  // The horizon of the current sample, traced lazily by bin.
+  // The horizon of the current sample at each level of bins (level l has
+  // kRefine^l times the bins of level 0 and reaches as many times farther),
+  // traced lazily by bin.
+  struct Level {
+    double binWidth = 0.0, reach = 0.0;
+    std::vector<uint32_t> traced;  // generation that traced each bin
+    std::vector<std::vector<Step>> bins;
+  };
+  std::vector<Level> levels;
   glm::dvec3 s{0.0};
-  std::vector<uint32_t> traced;  // generation that traced each bin
   uint32_t generation = 0;
-  std::vector<std::vector<Step>> bins;
   std::vector<glm::dvec3> poly, tmp;  // scratch for clipping faces to bins
 
   // Proof, step 2: solids whose surface or interior meets the cell.
@@ -606,8 +612,8 @@ struct HorizonQuery {
 
   // Proof, step 5: the steps of bin k, walking the shrunk columns along the
   // bin's central ray (Amanatides and Woo's grid walk).
-  void trace(size_t k) {
-    std::vector<Step>& steps = bins[k];
+  void trace(const Level& level, size_t k, std::vector<Step>& steps) {
+    const double binWidth = level.binWidth, reach = level.reach;
     steps.clear();
     ++stats.horizonBins;
     const double phi = (double(k) + 0.5) * binWidth;
@@ -725,12 +731,12 @@ struct HorizonQuery {
   }
 
   // Proof, step 6, within one bin.
-  bool binHides(size_t k, double rmin, double slope, double minY) {
-    if (traced[k] != generation) {
-      trace(k);
-      traced[k] = generation;
+  bool binHides(Level& level, size_t k, double rmin, double slope, double minY) {
+    if (level.traced[k] != generation) {
+      trace(level, k, level.bins[k]);
+      level.traced[k] = generation;
     }
-    const std::vector<Step>& steps = bins[k];
+    const std::vector<Step>& steps = level.bins[k];
     const double lowest = double(cell.lo.y);
     for (size_t n = steps.size(); n-- > 0;) {
       const Step& st = steps[n];
@@ -747,6 +753,54 @@ struct HorizonQuery {
   // in [rmin, rmax] and at most maxY high, seen from the sample.
   double faceSlope(double maxY, double rmin, double rmax) const {
     return maxY > s.y ? (maxY - s.y) / rmin : (maxY - s.y) / rmax;
+  }
+
+  // Proof, step 6, for bin b of level `lv` (b counts from angle 0 and may
+  // lie outside [0, bins)): is the part of face f in the bin's wedge hidden?
+  // (rmin, slope, minY) bound the part; `whole` says they are the face's own
+  // bounds and the face lies in this bin only. The whole face's bounds
+  // first; then those of the part inside the wedge (its nearest, highest and
+  // farthest points there); failing both, the kRefine bins of the next
+  // level that split this one, which reach kRefine times farther, must each
+  // hide their part.
+  bool wedgeHides(size_t lv, long b, uint32_t f, double rmin, double slope, double minY,
+                  bool whole) {
+    Level& level = levels[lv];
+    const long nb = long(level.bins.size());
+    const size_t k = size_t(((b % nb) + nb) % nb);
+    bool hiddenHere = binHides(level, k, rmin, slope, minY);
+    if (!hiddenHere && !whole) {
+      double bmin = kInf, bmax = 0.0, bminY = kInf, bmaxY = -kInf;
+      const double p0 = double(b) * level.binWidth - 1e-9;
+      const double p1 = double(b + 1) * level.binWidth + 1e-9;
+      for (uint32_t n = w.faceStart[f]; n < w.faceStart[f + 1]; ++n) {
+        const uint32_t t = w.faceTris[n];
+        poly.clear();
+        for (int v = 0; v < 3; ++v) poly.push_back(glm::dvec3(w.tris.vertex(t, v)) - s);
+        clipHalfPlane(poly, tmp, -std::sin(p0), std::cos(p0));
+        clipHalfPlane(poly, tmp, std::sin(p1), -std::cos(p1));
+        for (size_t v = 0; v < poly.size(); ++v) {
+          const glm::dvec3& a = poly[v];
+          const glm::dvec3& c = poly[(v + 1) % poly.size()];
+          bmin = std::min(bmin, pointSegmentDistance({0.0, 0.0}, {a.x, a.z}, {c.x, c.z}));
+          bmax = std::max(bmax, glm::length(glm::dvec2(a.x, a.z)));
+          bminY = std::min(bminY, a.y + s.y);
+          bmaxY = std::max(bmaxY, a.y + s.y);
+        }
+      }
+      if (bmaxY == -kInf) return true;  // the face does not reach into this bin
+      if (!(bmin > 1e-6)) return false;
+      rmin = bmin;
+      slope = faceSlope(bmaxY, bmin, bmax);
+      minY = bminY;
+      hiddenHere = binHides(level, k, rmin, slope, minY);
+    }
+    if (hiddenHere) return true;
+    if (lv + 1 >= levels.size()) return false;
+    constexpr long kRefine = HorizonFusion::kRefine;
+    for (long sb = b * kRefine; sb < (b + 1) * kRefine; ++sb)
+      if (!wedgeHides(lv + 1, sb, f, rmin, slope, minY, false)) return false;
+    return true;
   }
 
   // Proof, step 6: is the face hidden from the current sample?
@@ -779,36 +833,11 @@ struct HorizonQuery {
       }
     }
     if (first || amax - amin >= std::numbers::pi - 1e-6 || !(rmin > 1e-6)) return false;
+    const double binWidth = levels[0].binWidth;
     const long b0 = long(std::floor((a0 + amin - 1e-9) / binWidth));
     const long b1 = long(std::floor((a0 + amax + 1e-9) / binWidth));
-    const long nb = long(bins.size());
-    for (long b = b0; b <= b1; ++b) {
-      const size_t k = size_t(((b % nb) + nb) % nb);
-      // The whole face's bounds first; then the part of the face inside
-      // the bin's wedge (its nearest point, highest point and farthest
-      // point there), which is what the bin must hide.
-      if (binHides(k, rmin, faceSlope(maxY, rmin, rmax), minY)) continue;
-      if (b0 == b1) return false;
-      double bmin = kInf, bmax = 0.0, bminY = kInf, bmaxY = -kInf;
-      const double p0 = double(b) * binWidth - 1e-9, p1 = double(b + 1) * binWidth + 1e-9;
-      for (uint32_t n = w.faceStart[f]; n < w.faceStart[f + 1]; ++n) {
-        const uint32_t t = w.faceTris[n];
-        poly.clear();
-        for (int v = 0; v < 3; ++v) poly.push_back(glm::dvec3(w.tris.vertex(t, v)) - s);
-        clipHalfPlane(poly, tmp, -std::sin(p0), std::cos(p0));
-        clipHalfPlane(poly, tmp, std::sin(p1), -std::cos(p1));
-        for (size_t v = 0; v < poly.size(); ++v) {
-          const glm::dvec3& a = poly[v];
-          const glm::dvec3& c = poly[(v + 1) % poly.size()];
-          bmin = std::min(bmin, pointSegmentDistance({0.0, 0.0}, {a.x, a.z}, {c.x, c.z}));
-          bmax = std::max(bmax, glm::length(glm::dvec2(a.x, a.z)));
-          bminY = std::min(bminY, a.y + s.y);
-          bmaxY = std::max(bmaxY, a.y + s.y);
-        }
-      }
-      if (bmaxY == -kInf) continue;  // the face does not reach into this bin
-      if (!(bmin > 1e-6) || !binHides(k, bmin, faceSlope(bmaxY, bmin, bmax), bminY)) return false;
-    }
+    for (long b = b0; b <= b1; ++b)
+      if (!wedgeHides(0, b, f, rmin, faceSlope(maxY, rmin, rmax), minY, b0 == b1)) return false;
     return true;
   }
 };
@@ -824,17 +853,21 @@ HorizonFusionResult HorizonFusion::cull(const Box3f& cell,
   HorizonFusionResult r;
   r.stats.candidateFaces = candidates.size();
   const Impl& w = *impl_;
-  HorizonQuery q{w, cell, r.stats, {}, 0.0, 0.0, {}, {}, 0, {}, {}, {}};
+  HorizonQuery q{w, cell, r.stats, {}, {}, {}, 0, {}, {}};
   // Faces that can be tested: static faces of this scene.
   std::vector<uint32_t> hidden;
   for (uint32_t f : candidates)
     if (f < w.scene.faceCount && w.faceStart[f] < w.faceStart[f + 1]) hidden.push_back(f);
   if (w.nx > 0 && !hidden.empty()) {
     q.excludeSolidsMeetingTheCell();
-    q.binWidth = 2.0 * std::numbers::pi / double(options_.azimuthBins);
-    q.reach = 2.0 * options_.binMargin / q.binWidth;
-    q.traced.assign(size_t(options_.azimuthBins), 0);
-    q.bins.resize(size_t(options_.azimuthBins));
+    size_t nbins = size_t(options_.azimuthBins);
+    for (int l = 0; l <= options_.refinements; ++l, nbins *= size_t(kRefine)) {
+      HorizonQuery::Level& level = q.levels.emplace_back();
+      level.binWidth = 2.0 * std::numbers::pi / double(nbins);
+      level.reach = 2.0 * options_.binMargin / level.binWidth;
+      level.traced.assign(nbins, 0);
+      level.bins.resize(nbins);
+    }
     // Samples: centres of a grid of rectangles of half-diagonal <= epsilon
     // on the top face (proof, step 4).
     const glm::dvec3 clo(cell.lo), chi(cell.hi);

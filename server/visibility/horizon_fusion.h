@@ -59,6 +59,12 @@ struct HorizonFusionOptions {
   // 2048 bins with a 0.25 m margin cull the same faces in twice the time, and
   // epsilon 0.5 m (36 samples instead of 9) culls 1-3% more in 3-4x the time.
   double binMargin = 0.5;
+  // Levels of finer bins tried where a bin does not hide its part of a face:
+  // each level splits every bin into kRefine and reaches kRefine times
+  // farther with the same shrinking (a street whose far end opens onto a
+  // square hidden by buildings 300 m away). Traced lazily, only for the bins
+  // that need them. 0: azimuthBins only.
+  int refinements = 1;
 };
 
 struct HorizonFusionStats {
@@ -92,6 +98,7 @@ struct HorizonFusionResult {
 
 class HorizonFusion {
  public:
+  static constexpr int kRefine = 4;  // bins per bin of the previous level
   // Upper bound on height-field columns (memory: 8 bytes each).
   static constexpr size_t kMaxColumns = size_t(16) << 20;
 

@@ -1,5 +1,5 @@
 // End-to-end tests of the vistream-pvs executable: the command-line and JSON
-// contracts of cell, bake, query, merge and walk.
+// contracts of cell, bake, query, merge, walk and bench.
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <string>
 
 #include "tests/common/support/box_scenes.h"
@@ -141,7 +142,46 @@ TEST(PvsTool, OutOfRangeNumbersAndBadBoxesFailBeforeTheSceneLoadsNamingTheOption
   pvs.common = "walk-bench";
   expectEachOptionNamed(pvs, {"--frames 0"});
   pvs.common = "bench";
-  expectEachOptionNamed(pvs, {"--fused-eps 1,-0.5"});
+  expectEachOptionNamed(pvs, {"--district -1", "--bake-cell 0", "--gt-probes -1"});
+}
+
+TEST(PvsTool, BenchPrintsOneRowPerSceneSizeAndMethodWithNoMissingFacesAndTheDistrictBakes) {
+  vistream::testing::TempDir dir;
+  const fs::path scene = dir.write("wall.obj", wallScene());
+  const ToolRun r = runPvs("bench --scenes " + scene.string() +
+                           " --cells 1 --accuracy-cells 2 --gt-res 16 --gt-points 6 --gt-probes 2 "
+                           "--district 24 --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  // Not indoors: paper, + back faces and + horizons, at 2, 4, 8 and 16 m.
+  const std::vector<std::string> methods{"paper", "+back faces", "+horizons"};
+  ASSERT_EQ(j["accuracy"].size(), 4 * methods.size());
+  std::set<std::pair<double, std::string>> rows;
+  for (const auto& row : j["accuracy"]) {
+    for (const char* key : {"scene", "method", "cell_size_m", "median_pvs_over_seen",
+                            "missing_faces", "ms_per_cell", "seen_by_probes_only"})
+      EXPECT_TRUE(row.contains(key)) << key << " in " << row;
+    EXPECT_EQ(row["scene"], scene.string());
+    EXPECT_EQ(row["missing_faces"].get<size_t>(), 0u) << row;
+    EXPECT_GE(row["median_pvs_over_seen"].get<double>(), 1.0) << row;
+    rows.emplace(row["cell_size_m"].get<double>(), row["method"].get<std::string>());
+  }
+  EXPECT_EQ(rows.size(), j["accuracy"].size()) << "one row per cell size and method";
+  // The bake: a 24 m square around the scene's centre (the scene is 100 m
+  // wide), the same cells for every method, in the order of the table.
+  ASSERT_EQ(j["bake"].size(), methods.size());
+  for (size_t m = 0; m < methods.size(); ++m) {
+    const auto& row = j["bake"][m];
+    for (const char* key : {"scene", "method", "cell_size_m", "district_m", "cells", "bake_s"})
+      EXPECT_TRUE(row.contains(key)) << key << " in " << row;
+    EXPECT_EQ(row["method"], methods[m]);
+    EXPECT_EQ(row["district_m"].get<std::vector<double>>(), (std::vector<double>{24, 24}));
+    EXPECT_EQ(row["cell_size_m"].get<double>(), 4.0) << "the server's default cell";
+    EXPECT_GT(row["cells"].get<size_t>(), 0u);
+    EXPECT_EQ(row["cells"], j["bake"][0]["cells"]);
+    EXPECT_GE(row["bake_s"].get<double>(), 0.0);
+  }
+  EXPECT_TRUE(j.contains("total_s"));
 }
 
 TEST(PvsTool, ACellFarOutsideTheSceneGetsAWarningAndStillItsPvs) {

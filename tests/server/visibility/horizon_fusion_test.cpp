@@ -17,6 +17,8 @@
 
 #include <algorithm>
 #include <iostream>
+#include <iterator>
+#include <numbers>
 #include <string>
 #include <vector>
 
@@ -61,16 +63,17 @@ struct RowScene {
   Box3f cell{glm::vec3(-2.0f, 0.2f, -2.0f), glm::vec3(2.0f, 2.0f, 2.0f)};
 };
 
-RowScene rowScene(Winding winding, float rowBase = 0.0f) {
+// `far` moves the row and the box behind it farther by that many metres.
+RowScene rowScene(Winding winding, float rowBase = 0.0f, float far = 0.0f) {
   RowScene r;
-  testing::addGround(r.scene, -60.0f, -20.0f, 60.0f, 60.0f);
+  testing::addGround(r.scene, -60.0f, -20.0f, 60.0f, 60.0f + far);
   for (int k = -15; k < 15; ++k) {
     const float odd = float(k & 1);
-    addWoundBox(r.scene, "row" + std::to_string(k), {2.0f * float(k), rowBase, 10.0f},
-                {2.0f * float(k) + 2.0f, 8.0f + odd, 14.0f + 0.5f * odd}, winding);
+    addWoundBox(r.scene, "row" + std::to_string(k), {2.0f * float(k), rowBase, 10.0f + far},
+                {2.0f * float(k) + 2.0f, 8.0f + odd, 14.0f + 0.5f * odd + far}, winding);
   }
   const uint32_t first =
-      testing::addBox(r.scene, "behind", {-3.0f, 0.0f, 30.0f}, {3.0f, 4.0f, 34.0f});
+      testing::addBox(r.scene, "behind", {-3.0f, 0.0f, 30.0f + far}, {3.0f, 4.0f, 34.0f + far});
   r.hiddenFace = first + testing::kMinusZ;
   finalizeScene(r.scene);
   return r;
@@ -103,6 +106,25 @@ TEST(HorizonFusion, CullsAFaceThatOnlyARowOfTouchingBoxesHides) {
   EXPECT_EQ(fused.stats.culled, paper.faces.size() - fused.faces.size());
   EXPECT_TRUE(std::includes(paper.faces.begin(), paper.faces.end(), fused.faces.begin(),
                             fused.faces.end()));
+}
+
+TEST(HorizonFusion, FinerBinsReachARowBeyondTheFirstHorizonsReach) {
+  // The row stands 250 m away: beyond the reach of azimuthBins (163 m with
+  // the defaults), within that of the next level (652 m).
+  const RowScene r = rowScene(Winding::Outward, 0.0f, 240.0f);
+  const FlatTriangles triangles = flattenScene(r.scene);
+  const auto rays = makeEmbreeRayQuery(triangles);
+  SampledVisibilityOptions sampling;
+  sampling.probeFaces = {r.hiddenFace};
+  ASSERT_FALSE(has(sampleVisibleFaces(*rays, triangles, r.cell, sampling).faces, r.hiddenFace));
+
+  HorizonFusionOptions coarse;
+  coarse.refinements = 0;
+  ASSERT_LT(2.0 * coarse.binMargin / (2.0 * std::numbers::pi / coarse.azimuthBins), 250.0);
+  const HorizonFusion withoutRefinement(r.scene, coarse);
+  EXPECT_TRUE(has(withoutRefinement.cull(r.cell, allFaces(r.scene)).faces, r.hiddenFace));
+  const HorizonFusion refined(r.scene);
+  EXPECT_FALSE(has(refined.cull(r.cell, allFaces(r.scene)).faces, r.hiddenFace));
 }
 
 TEST(HorizonFusion, CullsTheSameFaceBehindARowWoundInsideOut) {
@@ -203,16 +225,28 @@ void expectNoSampledFaceCulled(const std::string& spec, size_t cellCount, bool e
   size_t missing = 0, paperFaces = 0, bothFaces = 0, seenFaces = 0, culled = 0;
   for (const Box3f& cell : streetCells(world.freeSpace, cellCount)) {
     const HorizonFusionResult fused = fusion.cull(cell, all);
-    const SampledVisibility seen = sampleVisibleFaces(*world.rays, *world.triangles, cell);
+    const PvsResult paper = single.compute(cell);
+    const HorizonFusionResult both = fusion.cull(cell, paper.faces);
+    // The sampler also aims rays at every face the stage removed from the
+    // single-occluder PVS: a face culled wrongly is found even when it is
+    // smaller than a cube-map pixel.
+    // Viewpoints the PVS contract does not serve (inside solids) are left out.
+    SampledVisibilityOptions sampling;
+    sampling.skipViewpoint = [&world](const glm::vec3& p) {
+      return world.solids.unservedViewpoint(*world.rays, p);
+    };
+    std::set_difference(paper.faces.begin(), paper.faces.end(), both.faces.begin(),
+                        both.faces.end(), std::back_inserter(sampling.probeFaces));
+    const SampledVisibility seen =
+        sampleVisibleFaces(*world.rays, *world.triangles, cell, sampling);
     for (uint32_t f : seen.faces)
-      if (!has(fused.faces, f)) {
+      if (!has(fused.faces, f) || !has(both.faces, f)) {
         ++missing;
         ADD_FAILURE() << spec << ": face " << f << " is seen from cell (" << cell.lo.x << ", "
                       << cell.lo.y << ", " << cell.lo.z << ") but was culled";
       }
-    const PvsResult paper = single.compute(cell);
     paperFaces += paper.faces.size();
-    bothFaces += fusion.cull(cell, paper.faces).faces.size();
+    bothFaces += both.faces.size();
     seenFaces += seen.faces.size();
     culled += fused.stats.culled;
   }
