@@ -18,6 +18,7 @@
 #include "common/core/parse.h"
 #include "common/core/progress.h"
 #include "common/core/stats_output.h"
+#include "common/core/timer.h"
 #include "common/generate/path.h"
 #include "common/generate/scene_spec.h"
 #include "common/raycast/ray_query.h"
@@ -65,22 +66,36 @@ void warnIfOutsideScene(const Scene& scene, const Box3d& fileBox, const char* op
       option, text, b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z);
 }
 
+// The occlusion horizons for `choice` (--method of cell, --fusion of bake):
+// none for "paper" and "none"; for "auto", only where the scene has solid
+// columns to build them from (cities and terrain, not interiors).
+std::unique_ptr<HorizonFusion> horizonsFor(const Scene& scene, const std::string& choice) {
+  if (choice != "auto" && choice != "horizons") return nullptr;
+  Stopwatch clock;
+  auto horizons = std::make_unique<HorizonFusion>(scene);
+  spdlog::info("occlusion horizons: {} solid columns of {:.2f} m, built in {:.1f} s",
+               horizons->solidColumns(), horizons->gridSize(), clock.ms() / 1000.0);
+  if (choice == "auto" && horizons->solidColumns() == 0) {
+    spdlog::info("no solid columns: the PVS runs without occlusion horizons");
+    return nullptr;
+  }
+  return horizons;
+}
+
 int cmdCell(const std::string& spec, const SceneLimits& limits, const std::string& cellText,
             const std::string& method, const PvsOptions& options,
             const FusedPvsOptions& fusedOptions, bool asJson) {
   // --epsilon and --fused-res are range-checked at parse time.
-  if (method != "paper" && method != "fused" && method != "horizons")
-    throwInputError("--method: expected 'paper', 'fused' or 'horizons', got '{}'", method);
+  if (method != "auto" && method != "paper" && method != "fused" && method != "horizons")
+    throwInputError("--method: expected 'auto', 'paper', 'fused' or 'horizons', got '{}'", method);
   const Box3d fileCell = parseFileBox(cellText, "--cell");
   const Scene scene = openScene(spec, limits);
   warnIfOutsideScene(scene, fileCell, "--cell", cellText);
   const Box3f cell = toLocal(scene, fileCell);
   EpsilonPvs pvs(scene);
-  std::unique_ptr<HorizonFusion> horizons;
-  if (method == "horizons") {
-    horizons = std::make_unique<HorizonFusion>(scene);
-    pvs.setFusion(horizons.get());
-  }
+  const std::unique_ptr<HorizonFusion> horizons = horizonsFor(scene, method);
+  pvs.setFusion(horizons.get());
+  const std::string used = method == "auto" ? (horizons ? "horizons" : "paper") : method;
   FusedPvsStats fusedStats;
   const PvsResult r = method == "fused"
                           ? FusedPvs(pvs, fusedOptions).compute(cell, options, &fusedStats)
@@ -89,7 +104,7 @@ int cmdCell(const std::string& spec, const SceneLimits& limits, const std::strin
     json objects = json::array();
     for (uint32_t o : r.objects) objects.push_back(scene.objects[o].name);
     json stats = statsJson(r.stats);
-    stats["method"] = method;
+    stats["method"] = used;
     if (method == "fused") {
       json fused = statsJson(fusedStats);
       fused["epsilon"] = fusedOptions.epsilon;
@@ -100,7 +115,7 @@ int cmdCell(const std::string& spec, const SceneLimits& limits, const std::strin
     return 0;
   }
   const PvsStats& s = r.stats;
-  fmt::print("PVS of cell {}: {} of {} faces ({:.1f}% culled), {} objects\n", cellText,
+  fmt::print("PVS of cell {} ({}): {} of {} faces ({:.1f}% culled), {} objects\n", cellText, used,
              r.faces.size(), scene.faceCount,
              100.0 * double(s.facesOccluded) / double(std::max<size_t>(1, s.faces)),
              r.objects.size());
@@ -114,7 +129,7 @@ int cmdCell(const std::string& spec, const SceneLimits& limits, const std::strin
 int cmdBake(const std::string& spec, const SceneLimits& limits, const GroundChoice& ground,
             const std::string& cellSizeText, const std::string& regionText, unsigned threads,
             const std::string& shardText, bool coarseToFine, const PvsOptions& pvsOptions,
-            const std::string& out, bool asJson) {
+            const std::string& fusion, const std::string& out, bool asJson) {
   BakeOptions options;
   options.pvs = pvsOptions;
   options.threads = threads;
@@ -153,7 +168,9 @@ int cmdBake(const std::string& spec, const SceneLimits& limits, const GroundChoi
   StaticWorldOptions worldOptions;
   worldOptions.ground = ground;
   const FreeSpace fs = buildStaticWorld(scene, worldOptions).freeSpace;
-  const EpsilonPvs pvs(scene);
+  EpsilonPvs pvs(scene);
+  const std::unique_ptr<HorizonFusion> horizons = horizonsFor(scene, fusion);
+  pvs.setFusion(horizons.get());
   std::unique_ptr<ProgressBar> bar;
   std::mutex barMutex;  // guards creation of the bar from the first progress call
   options.progress = [&](size_t done, size_t total) {
@@ -350,7 +367,7 @@ int runPvsTool(int argc, char** argv) {
   GroundChoice ground;
 
   auto* cell = app.add_subcommand("cell", "the PVS of one view cell");
-  std::string scene, cellText, method = "paper";
+  std::string scene, cellText, method = "auto", fusion = "auto";
   bool asJson = false, noBbox = false, noIncremental = false, noRedundantOccluders = false,
        noRedundantRays = false, noBackFaces = false;
   size_t largeOccluders = 0;
@@ -368,7 +385,9 @@ int runPvsTool(int argc, char** argv) {
   cell->add_option("--cell", cellText, "x0,y0,z0,x1,y1,z1 in file coordinates")->required();
   cell->add_option("--method", method,
                    "paper (single convex occluders), horizons (then fused occlusion horizons over "
-                   "solid columns) or fused (then cube-map fusion)");
+                   "solid columns), auto (horizons where the scene has solid columns, else paper) "
+                   "or fused (then cube-map fusion)")
+      ->check(CLI::IsMember({"auto", "paper", "horizons", "fused"}));
   addPvsStageFlags(cell);
   cell->add_option("--large-occluders", largeOccluders,
                    "use only the K largest occluders by solid angle (0: all)")
@@ -396,6 +415,10 @@ int runPvsTool(int argc, char** argv) {
   bake->add_option("--shard", shard, "i/n: bake only shard i of n (merge shards with 'merge')");
   bake->add_option("--out,-o", out, "output database")->required();
   bake->add_flag("--no-coarse-to-fine", noCoarse, "bake every cell from scratch");
+  bake->add_option("--fusion", fusion,
+                   "occlusion horizons after the single occluders: auto (where the scene has "
+                   "solid columns), horizons or none")
+      ->check(CLI::IsMember({"auto", "horizons", "none"}));
   addPvsStageFlags(bake);
   bake->add_flag("--json", asJson, "statistics as JSON");
   addSceneLimits(bake);
@@ -520,7 +543,7 @@ int runPvsTool(int argc, char** argv) {
     if (*bake) {
       const PvsOptions options = pvsOptionsFromFlags();
       return cmdBake(scene, limits, ground, cellSize, region, threads, shard, !noCoarse, options,
-                     out, asJson);
+                     fusion, out, asJson);
     }
     if (*query) return cmdQuery(db, point, cellIndex, asJson, queryFaces);
     if (*walk) return cmdWalk(scene, limits, pathFile, walkMethod, cullOptions, asJson, withFaces);

@@ -26,7 +26,13 @@
 //    only points of the lines: on a vertical triangle, or limits of inside
 //    points that are on no triangle, hence inside. A piece thinner than a
 //    tenth of the margin leaves the column out (float rounding could carry
-//    its test point across a wall).
+//    its test point across a wall). A column that no vertical triangle cuts
+//    takes the answer of its uncut left neighbour for a gap overlapping one
+//    of the neighbour's by more than the margin: up one column, across
+//    their shared side within the overlap (a triangle meeting that side is
+//    in both columns' spans) and down the other, the two test points are
+//    joined by a path meeting no triangle, so they lie inside the same
+//    components.
 //
 // 2. Jordan. Let v be a point outside K (even parity) and q a point of K's
 //    interior. The parity of K along the segment v-q changes, so the segment
@@ -364,8 +370,77 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
       const Box3f b = tris.triangleBounds(t);
       const int i0 = std::max(0, int(std::floor((b.lo.x - margin - lo.x) / g)));
       const int i1 = std::min(nx - 1, int(std::floor((b.hi.x + margin - lo.x) / g)));
+      // A square (grown by the margin) strictly inside the triangle's X/Z
+      // projection clips to itself: its height range is that of the
+      // triangle's plane over its corners, without clipping (a ground tile
+      // covers thousands of squares).
+      const glm::dvec3 ta(tris.vertex(t, 0)), tb(tris.vertex(t, 1)), tc(tris.vertex(t, 2));
+      const double area2 = (tb.x - ta.x) * (tc.z - ta.z) - (tb.z - ta.z) * (tc.x - ta.x);
+      const glm::dvec3 tn = glm::cross(tb - ta, tc - ta);
+      auto strictlyInside = [&](double x, double z) {
+        const double e0 = (tb.x - ta.x) * (z - ta.z) - (tb.z - ta.z) * (x - ta.x);
+        const double e1 = (tc.x - tb.x) * (z - tb.z) - (tc.z - tb.z) * (x - tb.x);
+        const double e2 = (ta.x - tc.x) * (z - tc.z) - (ta.z - tc.z) * (x - tc.x);
+        return area2 > 0.0 ? (e0 > 0.0 && e1 > 0.0 && e2 > 0.0)
+                           : (e0 < 0.0 && e1 < 0.0 && e2 < 0.0);
+      };
+      auto planeY = [&](double x, double z) {
+        return ta.y - (tn.x * (x - ta.x) + tn.z * (z - ta.z)) / tn.y;
+      };
+      // A vertical triangle's projection is the segment between its two
+      // farthest-apart projected corners; it meets a square exactly when
+      // that segment does (Liang and Barsky's clipping of the segment).
+      glm::dvec2 sa(ta.x, ta.z), sb(tb.x, tb.z);
+      if (vertical[t]) {
+        const glm::dvec2 p[3] = {{ta.x, ta.z}, {tb.x, tb.z}, {tc.x, tc.z}};
+        for (int k = 0; k < 3; ++k)
+          if (glm::length(p[(k + 1) % 3] - p[k]) > glm::length(sb - sa)) {
+            sa = p[k];
+            sb = p[(k + 1) % 3];
+          }
+      }
+      auto segmentMeetsSquare = [&](double xa, double xb, double za, double zb) {
+        double u0 = 0.0, u1 = 1.0;
+        const glm::dvec2 d = sb - sa;
+        const double lim[4][2] = {
+            {-d.x, sa.x - xa}, {d.x, xb - sa.x}, {-d.y, sa.y - za}, {d.y, zb - sa.y}};
+        for (const auto& [pq, q] : lim) {
+          if (pq == 0.0) {
+            if (q < 0.0) return false;
+            continue;
+          }
+          const double u = q / pq;
+          if (pq < 0.0)
+            u0 = std::max(u0, u);
+          else
+            u1 = std::min(u1, u);
+          if (u0 > u1) return false;
+        }
+        return true;
+      };
       for (int i = i0; i <= i1; ++i) {
         const double x0 = lo.x + i * g, x1 = x0 + g;
+        if (vertical[t]) {
+          if (segmentMeetsSquare(x0 - margin, x1 + margin, z0 - margin, z1 + margin))
+            cuts[size_t(i)].push_back(t);
+          continue;
+        }
+        if (tn.y != 0.0) {
+          const double cx[2] = {x0 - margin, x1 + margin}, cz[2] = {z0 - margin, z1 + margin};
+          bool inside = true;
+          double y0 = kInf, y1 = -kInf;
+          for (int k = 0; k < 4 && inside; ++k) {
+            inside = strictlyInside(cx[k & 1], cz[k >> 1]);
+            const double y = planeY(cx[k & 1], cz[k >> 1]);
+            y0 = std::min(y0, y);
+            y1 = std::max(y1, y);
+          }
+          if (inside) {
+            // Float rounding of the plane's heights is far below the margin.
+            spans[size_t(i)].push_back({y0 - margin, y1 + margin});
+            continue;
+          }
+        }
         clipTriangle(tris.vertex(t, 0), tris.vertex(t, 1), tris.vertex(t, 2),
                      {x0 - margin, 0.0, z0 - margin}, {x1 + margin, 0.0, z1 + margin}, {0, 2}, poly,
                      tmp);
@@ -386,6 +461,18 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
     std::vector<glm::dvec3> lines;  // (n.x, n.z, c): n . (x, z) = c
     std::vector<std::vector<glm::dvec3>> pieces, next;
     std::vector<uint32_t> comps;
+    // The gaps tested in the column to the left, when no vertical triangle
+    // cuts it, and their answers. Two uncut neighbours whose gaps overlap by
+    // more than the margin are joined by a path that meets no triangle (up
+    // the one column, across their shared side inside the overlap, down the
+    // other; triangles meeting that side are in both columns' spans), so a
+    // point of the one is inside the same solids as a point of the other.
+    struct Tested {
+      double a, b;
+      uint32_t inside;
+    };
+    std::vector<Tested> left, here;
+    int leftColumn = -2;
     for (int i = 0; i < nx; ++i) {
       auto& s = spans[size_t(i)];
       if (s.size() < 2) continue;
@@ -460,6 +547,8 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
       std::sort(gaps.begin(), gaps.end(), [](const auto& a, const auto& b) {
         return a.second - a.first > b.second - b.first;
       });
+      const bool uncut = lines.empty();
+      here.clear();
       for (size_t k = 0; k < std::min<size_t>(gaps.size(), 2); ++k) {
         const auto [a, b] = gaps[k];
         if (b - a < margin) break;
@@ -469,8 +558,18 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
           glm::dvec3 c(0.0);
           for (const glm::dvec3& v : piece) c += v;
           c /= double(piece.size());
-          const uint32_t inside =
-              insideClosed(glm::vec3(float(c.x), float(0.5 * (a + b)), float(c.z)));
+          uint32_t inside = kNoHit;
+          bool known = false;
+          if (uncut && leftColumn == i - 1)
+            for (const Tested& t : left)
+              if (std::min(b, t.b) - std::max(a, t.a) > margin) {
+                inside = t.inside;
+                known = true;
+                break;
+              }
+          if (!known)
+            inside = insideClosed(glm::vec3(float(c.x), float(0.5 * (a + b)), float(c.z)));
+          if (uncut) here.push_back({a, b, inside});
           if (inside == kNoHit) {
             solid = false;
             break;
@@ -485,6 +584,10 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
         rawSolid[idx] = 1;
         rowComps[size_t(j)].insert(rowComps[size_t(j)].end(), comps.begin(), comps.end());
         break;
+      }
+      if (uncut) {
+        left.swap(here);
+        leftColumn = i;
       }
     }
   });

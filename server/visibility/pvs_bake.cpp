@@ -39,6 +39,7 @@ uint64_t bakeFingerprint(const PvsDatabaseHeader& h, const BakeOptions& o) {
   f = fnv1a64(h.method.data(), h.method.size(), f);
   const uint32_t shard[2] = {o.shardIndex, o.shardCount};
   f = fnv1a64(shard, sizeof shard, f);
+  // The fused stage shows in the method's name.
   const uint8_t flags[6] = {
       o.pvs.boxStage, o.pvs.incremental, o.pvs.dropOccludedOccluders, o.pvs.removeRedundantLines,
       o.coarseToFine, o.pvs.backFaces};
@@ -329,7 +330,8 @@ BakeReport bakePvs(const Scene& scene, const EpsilonPvs& pvs, const FreeSpace& f
   header.gridLo = grid.origin();
   header.cellSize = grid.cellSize();
   header.dims = grid.dims();
-  header.method = options.pvs.backFaces ? "paper+back-faces" : "paper";
+  header.method = std::string(options.pvs.backFaces ? "paper+back-faces" : "paper") +
+                  (pvs.fusion() && options.pvs.fusion ? "+horizons" : "");
 
   // Blocks of 2 x 1 x 2 cells: the coarse level, and the unit of sharding.
   std::map<uint64_t, std::vector<uint32_t>> blocks;

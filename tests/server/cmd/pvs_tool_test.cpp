@@ -37,9 +37,11 @@ std::string wallScene() {
 TEST(PvsTool, CellPrintsTheContractedJsonAndCullsTheHiddenBox) {
   vistream::testing::TempDir dir;
   const fs::path scene = dir.write("wall.obj", wallScene());
-  const ToolRun r = runPvs("cell --scene " + scene.string() + " --cell -1,1,0,1,2,2 --json");
+  const ToolRun r =
+      runPvs("cell --scene " + scene.string() + " --cell -1,1,0,1,2,2 --json --method paper");
   ASSERT_EQ(r.status, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["stats"]["method"], "paper");
   const auto faces = j["faces"].get<std::vector<uint32_t>>();
   EXPECT_TRUE(std::is_sorted(faces.begin(), faces.end()));
   for (uint32_t hidden = 7; hidden <= 12; ++hidden)
@@ -50,8 +52,13 @@ TEST(PvsTool, CellPrintsTheContractedJsonAndCullsTheHiddenBox) {
   for (const char* key : {"time_ms", "occluders_used", "lines_cast", "line_box_tests",
                           "line_polygon_tests", "faces_culled_by_box_stage"})
     EXPECT_TRUE(j["stats"].contains(key)) << key;
-  for (const char* flags : {"--no-bbox", "--no-incremental", "--no-redundant-occluders",
-                            "--no-redundant-rays", "--method fused --epsilon 0.5"}) {
+  // Accelerations switched off give the same PVS; the fused stages (the
+  // default auto picks the horizons over the wall's solid columns) only
+  // remove faces, never the wall's front or the ground.
+  for (const char* flags :
+       {"--method paper --no-bbox", "--method paper --no-incremental",
+        "--method paper --no-redundant-occluders", "--method paper --no-redundant-rays",
+        "--method fused --epsilon 0.5", "--method horizons", ""}) {
     const ToolRun other =
         runPvs("cell --scene " + scene.string() + " --cell -1,1,0,1,2,2 --json " + flags);
     ASSERT_EQ(other.status, 0) << flags << other.err;
@@ -96,6 +103,25 @@ TEST(PvsTool, BakesQueriesAndMergesAndRejectsACorruptDatabase) {
   vistream::testing::expectFailedSaying(r, 1, "--point");
   r = runPvs("bake --scene " + scene.string() + " --cell-size 0 --out " + (dir / "z.db").string());
   vistream::testing::expectFailedSaying(r, 1, "--cell-size");
+  r = runPvs("bake --scene " + scene.string() + " --cell-size 4 --fusion maybe --out " +
+             (dir / "z.db").string());
+  vistream::testing::expectFailedSaying(r, 1, "--fusion");
+}
+
+TEST(PvsTool, BakeNamesTheFusedStageInTheDatabasesMethod) {
+  vistream::testing::TempDir dir;
+  const fs::path scene = dir.write("wall.obj", wallScene());
+  for (const std::string fusion : {"none", "horizons"}) {
+    const std::string db = (dir / (fusion + ".db")).string();
+    ASSERT_EQ(runPvs("bake --scene " + scene.string() + " --cell-size 4,2,4 --fusion " + fusion +
+                     " --out " + db)
+                  .status,
+              0);
+    const ToolRun info = runPvs("query --db " + db + " --point 0,1.5,1 --json");
+    ASSERT_EQ(info.status, 0) << info.err;
+    EXPECT_EQ(nlohmann::json::parse(info.out)["method"],
+              fusion == "none" ? "paper+back-faces" : "paper+back-faces+horizons");
+  }
 }
 
 TEST(PvsTool, WalkPrintsTheSummaryAndOneRecordPerFrame) {
