@@ -11,8 +11,10 @@
 //
 // 1. Solid columns. A column is a grid square S times a height interval
 //    [b, t]. The interval is a gap between the padded height ranges of the
-//    triangles that meet S grown by a margin (each clipped to it, its height
-//    range grown by the margin), leaving out exactly vertical triangles
+//    triangles that meet S grown by a margin (for each, a range holding the
+//    heights of its part over the grown square: its plane's heights at the
+//    square's corners, cut to the triangle's own heights; grown by the
+//    margin), leaving out exactly vertical triangles
 //    (collinear in X/Z). So only vertical triangles meet the closed box
 //    S x [b, t]; their lines cut S into convex pieces. At the centroid of
 //    each piece with area, at mid-gap height, one closed, edge-manifold,
@@ -362,28 +364,24 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
   std::vector<uint8_t> rawSolid(rawTop.size(), 0);
   std::vector<std::vector<uint32_t>> rowComps(static_cast<size_t>(nz));
   tbb::parallel_for(0, nz, [&](int j) {
-    std::vector<std::vector<std::pair<double, double>>> spans(static_cast<size_t>(nx));
-    std::vector<std::vector<uint32_t>> cuts(static_cast<size_t>(nx));
+    // Per thread, emptied for each row (their capacity is kept).
+    thread_local std::vector<std::vector<std::pair<double, double>>> spans;
+    thread_local std::vector<std::vector<uint32_t>> cuts;
+    spans.resize(size_t(nx));
+    cuts.resize(size_t(nx));
+    for (auto& v : spans) v.clear();
+    for (auto& v : cuts) v.clear();
     std::vector<glm::dvec3> poly, tmp;
     const double z0 = lo.y + j * g, z1 = z0 + g;
     for (uint32_t t : rowTris[size_t(j)]) {
       const Box3f b = tris.triangleBounds(t);
       const int i0 = std::max(0, int(std::floor((b.lo.x - margin - lo.x) / g)));
       const int i1 = std::min(nx - 1, int(std::floor((b.hi.x + margin - lo.x) / g)));
-      // A square (grown by the margin) strictly inside the triangle's X/Z
-      // projection clips to itself: its height range is that of the
-      // triangle's plane over its corners, without clipping (a ground tile
-      // covers thousands of squares).
+      // Heights over a square come from the triangle's plane, without
+      // clipping (a ground tile covers thousands of squares).
       const glm::dvec3 ta(tris.vertex(t, 0)), tb(tris.vertex(t, 1)), tc(tris.vertex(t, 2));
       const double area2 = (tb.x - ta.x) * (tc.z - ta.z) - (tb.z - ta.z) * (tc.x - ta.x);
       const glm::dvec3 tn = glm::cross(tb - ta, tc - ta);
-      auto strictlyInside = [&](double x, double z) {
-        const double e0 = (tb.x - ta.x) * (z - ta.z) - (tb.z - ta.z) * (x - ta.x);
-        const double e1 = (tc.x - tb.x) * (z - tb.z) - (tc.z - tb.z) * (x - tb.x);
-        const double e2 = (ta.x - tc.x) * (z - tc.z) - (ta.z - tc.z) * (x - tc.x);
-        return area2 > 0.0 ? (e0 > 0.0 && e1 > 0.0 && e2 > 0.0)
-                           : (e0 < 0.0 && e1 < 0.0 && e2 < 0.0);
-      };
       auto planeY = [&](double x, double z) {
         return ta.y - (tn.x * (x - ta.x) + tn.z * (z - ta.z)) / tn.y;
       };
@@ -425,34 +423,29 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
             cuts[size_t(i)].push_back(t);
           continue;
         }
-        if (tn.y != 0.0) {
-          const double cx[2] = {x0 - margin, x1 + margin}, cz[2] = {z0 - margin, z1 + margin};
-          bool inside = true;
-          double y0 = kInf, y1 = -kInf;
-          for (int k = 0; k < 4 && inside; ++k) {
-            inside = strictlyInside(cx[k & 1], cz[k >> 1]);
-            const double y = planeY(cx[k & 1], cz[k >> 1]);
-            y0 = std::min(y0, y);
-            y1 = std::max(y1, y);
-          }
-          if (inside) {
-            // Float rounding of the plane's heights is far below the margin.
-            spans[size_t(i)].push_back({y0 - margin, y1 + margin});
-            continue;
-          }
-        }
-        clipTriangle(tris.vertex(t, 0), tris.vertex(t, 1), tris.vertex(t, 2),
-                     {x0 - margin, 0.0, z0 - margin}, {x1 + margin, 0.0, z1 + margin}, {0, 2}, poly,
-                     tmp);
-        if (poly.empty()) continue;
-        if (vertical[t]) {
-          cuts[size_t(i)].push_back(t);
-          continue;
-        }
+        // Not vertical: the part of the triangle over the grown square has
+        // heights within the plane's over the square's corners and within
+        // the triangle's own; a square all of whose corners lie outside one
+        // edge does not meet it (the rows and columns outside its bounds
+        // were never visited). A wider span only narrows the gaps.
+        const double cx[2] = {x0 - margin, x1 + margin}, cz[2] = {z0 - margin, z1 + margin};
+        int outside[3] = {0, 0, 0};
         double y0 = kInf, y1 = -kInf;
-        for (const glm::dvec3& p : poly) {
-          y0 = std::min(y0, p.y);
-          y1 = std::max(y1, p.y);
+        for (int k = 0; k < 4; ++k) {
+          const double x = cx[k & 1], z = cz[k >> 1];
+          const double e[3] = {(tb.x - ta.x) * (z - ta.z) - (tb.z - ta.z) * (x - ta.x),
+                               (tc.x - tb.x) * (z - tb.z) - (tc.z - tb.z) * (x - tb.x),
+                               (ta.x - tc.x) * (z - tc.z) - (ta.z - tc.z) * (x - tc.x)};
+          for (int m = 0; m < 3; ++m) outside[m] += area2 > 0.0 ? e[m] < 0.0 : e[m] > 0.0;
+          const double y = planeY(x, z);
+          y0 = std::min(y0, y);
+          y1 = std::max(y1, y);
+        }
+        if (outside[0] == 4 || outside[1] == 4 || outside[2] == 4) continue;
+        if (outside[0] + outside[1] + outside[2] > 0) {
+          // Float rounding of the plane's heights is far below the margin.
+          y0 = std::max(y0, double(b.lo.y));
+          y1 = std::min(y1, double(b.hi.y));
         }
         spans[size_t(i)].push_back({y0 - margin, y1 + margin});
       }
