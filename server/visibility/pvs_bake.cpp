@@ -380,7 +380,12 @@ BakeReport bakePvs(const Scene& scene, const EpsilonPvs& pvs, const FreeSpace& f
     if (options.coarseToFine && block.size() > 1) {
       Box3f box;
       for (uint32_t c : block) box.extend(grid.cellBox(grid.cellAt(c)));
-      coarse = pvs.compute(box, options.pvs).faces;
+      // Without the fused stage: the horizons of a block cost several times
+      // those of its cells (their wedges are wider and reach farther), and
+      // each cell runs them on its own candidates anyway.
+      PvsOptions coarseOptions = options.pvs;
+      coarseOptions.fusion = false;
+      coarse = pvs.compute(box, coarseOptions).faces;
       cellOptions.candidateFaces = &coarse;
     }
     for (uint32_t c : pending) {
