@@ -51,10 +51,7 @@ double mean(const std::vector<double>& v) {
 
 struct World {
   Scene scene;
-  std::unique_ptr<const FlatTriangles> triangles;  // static world (static_world.h)
-  std::unique_ptr<RayQuery> rays;
-  FreeSpace freeSpace;
-  Solids solids;
+  StaticWorld statics;  // triangles, rays, solids, free space (static_world.h)
   std::unique_ptr<EpsilonPvs> pvs;
   double typicalBuilding = 16.0;  // metres: median horizontal size of objects
 };
@@ -62,11 +59,7 @@ struct World {
 World makeWorld(const std::string& spec) {
   World w;
   w.scene = openScene(spec);
-  StaticWorld world = buildStaticWorld(w.scene);
-  w.triangles = std::move(world.triangles);
-  w.rays = std::move(world.rays);
-  w.freeSpace = std::move(world.freeSpace);
-  w.solids = std::move(world.solids);
+  w.statics = buildStaticWorld(w.scene);
   Stopwatch sw;
   w.pvs = std::make_unique<EpsilonPvs>(w.scene);
   spdlog::info("{}: {} occluders ({} solids, {} polygons), prepared in {:.0f} ms", spec,
@@ -84,15 +77,15 @@ World makeWorld(const std::string& spec) {
 // Cells of the given horizontal size centred on random free-space columns,
 // from 0.2 m above the floor up to eye height or the cell size.
 std::vector<Box3f> streetCells(const World& w, float size, size_t count, uint64_t seed) {
-  const auto columns = w.freeSpace.walkableColumns();
+  const auto columns = w.statics.freeSpace.walkableColumns();
   std::vector<Box3f> cells;
   if (columns.empty()) return cells;
   std::mt19937_64 rng(seed);
   const float height = std::min(size, 1.8f);
   for (size_t i = 0; i < count; ++i) {
     const auto c = columns[rng() % columns.size()];
-    const glm::vec2 xz = w.freeSpace.columnCentre(c.x, c.y);
-    const float y = w.freeSpace.floorHeight(c.x, c.y) + 0.2f;
+    const glm::vec2 xz = w.statics.freeSpace.columnCentre(c.x, c.y);
+    const float y = w.statics.freeSpace.floorHeight(c.x, c.y) + 0.2f;
     cells.emplace_back(glm::vec3(xz.x - size / 2, y, xz.y - size / 2),
                        glm::vec3(xz.x + size / 2, y + height, xz.y + size / 2));
   }
@@ -177,7 +170,7 @@ class ScratchDir {
 // and Z, its floors' eye range in Y; bakeGrid) cut to a square of `side`
 // metres around the centre of the scene's bounds.
 Box3f districtRegion(const World& w, const BakeOptions& bake, double side) {
-  const ViewCellGrid whole = bakeGrid(w.scene, w.freeSpace, bake);
+  const ViewCellGrid whole = bakeGrid(w.scene, w.statics.freeSpace, bake);
   Box3f region(whole.origin(), whole.origin() + glm::vec3(whole.dims()) * whole.cellSize());
   const glm::vec3 centre = w.scene.bounds().center();
   const float half = float(side / 2.0);
@@ -311,7 +304,7 @@ int runPvsBench(const PvsBenchOptions& options) {
     // `vistream-pvs cell --method auto` runs them: where the scene has solid
     // columns (cities and terrain; not the interiors, whose walls are
     // thinner than a column).
-    auto horizon = std::make_unique<HorizonFusion>(w.scene);
+    auto horizon = std::make_unique<HorizonFusion>(w.scene, w.statics);
     if (horizon->solidColumns() == 0)
       horizon.reset();
     else
@@ -346,7 +339,7 @@ int runPvsBench(const PvsBenchOptions& options) {
         gt.points = options.groundTruthPoints;
         gt.resolution = options.groundTruthRes;
         gt.skipViewpoint = [&w](const glm::vec3& p) {
-          return w.solids.unservedViewpoint(*w.rays, p);
+          return w.statics.solids.unservedViewpoint(*w.statics.rays, p);
         };
         std::vector<PvsResult> results;
         std::vector<uint32_t> probes;  // every method's PVS: the truth aims at each face
@@ -360,7 +353,8 @@ int runPvsBench(const PvsBenchOptions& options) {
           gt.probeFaces = std::move(probes);
           gt.probeSamples = options.groundTruthProbes;
         }
-        const SampledVisibility truth = sampleVisibleFaces(*w.rays, *w.triangles, cell, gt);
+        const SampledVisibility truth =
+            sampleVisibleFaces(*w.statics.rays, *w.statics.triangles, cell, gt);
         seen.push_back(double(truth.faces.size()));
         probeOnly.push_back(double(truth.probeOnly));
         for (size_t mi = 0; mi < methods.size(); ++mi) {
@@ -419,7 +413,7 @@ int runPvsBench(const PvsBenchOptions& options) {
             "ms/cell", "mean PVS faces");
       for (const Method& m : benchMethods(horizon != nullptr)) {
         bake.pvs = m.options;
-        const BakeReport r = bakePvs(w.scene, *w.pvs, w.freeSpace, bake,
+        const BakeReport r = bakePvs(w.scene, *w.pvs, w.statics.freeSpace, bake,
                                      scratch->path() / fmt::format("district-{}.db", bakes++));
         const double pvsFaces = r.shardCells ? double(r.totalFaces) / double(r.shardCells) : 0.0;
         out["bake"].push_back({{"scene", spec},

@@ -217,9 +217,11 @@ struct IRect {
 
 struct HorizonFusion::Impl {
   const Scene& scene;
-  FlatTriangles tris;
-  std::unique_ptr<RayQuery> rays;
-  Solids solids;
+  std::unique_ptr<const StaticWorld> owned;  // when the caller gave none
+  // The static world's (owned or the caller's).
+  const FlatTriangles& tris;
+  const RayQuery& rays;
+  const Solids& solids;
   std::vector<uint8_t> closed;      // per component: may occlude (closed, manifold, consistent)
   std::vector<uint8_t> hasColumns;  // per component: some column lies inside it
   std::vector<uint32_t> compStart, compTris;  // triangles by component
@@ -246,7 +248,12 @@ struct HorizonFusion::Impl {
   size_t solidColumns = 0;
   double margin = 1e-3;  // metres, for clipping and heights
 
-  Impl(const Scene& s) : scene(s) {}
+  Impl(const Scene& s, std::unique_ptr<const StaticWorld> own, const StaticWorld& world)
+      : scene(s),
+        owned(std::move(own)),
+        tris(*world.triangles),
+        rays(*world.rays),
+        solids(world.solids) {}
 
   // Closed components with odd crossing parity along `dir` from p; false if
   // the ray starts on a surface.
@@ -254,7 +261,7 @@ struct HorizonFusion::Impl {
     thread_local std::vector<Hit> hits;
     hits.clear();
     odd.clear();
-    rays->allHits(Ray{p, dir, 0.0f, std::numeric_limits<float>::infinity()}, hits);
+    rays.allHits(Ray{p, dir, 0.0f, std::numeric_limits<float>::infinity()}, hits);
     for (const Hit& h : hits) {
       if (h.t <= 0.0f) return false;
       const uint32_t c = solids.componentOf(h.triangle);
@@ -297,9 +304,6 @@ struct HorizonFusion::Impl {
 };
 
 void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
-  tris = flattenScene(scene, /*staticOnly=*/true);
-  rays = makeEmbreeRayQuery(tris);
-  solids = Solids::build(tris);
   const size_t nc = solids.components().size();
   closed.assign(nc, 0);
   hasColumns.assign(nc, 0);
@@ -629,8 +633,31 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
     }
 }
 
+namespace {
+
+std::unique_ptr<const StaticWorld> solidsOnly(const Scene& scene) {
+  StaticWorldOptions o;
+  o.parts = StaticWorldParts::Solids;
+  return std::make_unique<const StaticWorld>(buildStaticWorld(scene, o));
+}
+
+}  // namespace
+
 HorizonFusion::HorizonFusion(const Scene& scene, const HorizonFusionOptions& options)
-    : impl_(std::make_unique<Impl>(scene)), options_(options) {
+    : HorizonFusion(scene, solidsOnly(scene), nullptr, options) {}
+
+HorizonFusion::HorizonFusion(const Scene& scene, const StaticWorld& world,
+                             const HorizonFusionOptions& options)
+    : HorizonFusion(scene, nullptr, &world, options) {}
+
+HorizonFusion::HorizonFusion(const Scene& scene, std::unique_ptr<const StaticWorld> owned,
+                             const StaticWorld* borrowed, const HorizonFusionOptions& options)
+    : options_(options) {
+  const StaticWorld& world = borrowed ? *borrowed : *owned;
+  VS_CHECK(world.triangles && world.rays);
+  // The solids part was built (a scene with triangles has components).
+  VS_CHECK(world.triangles->size() == 0 || !world.solids.components().empty());
+  impl_ = std::make_unique<Impl>(scene, std::move(owned), world);
   VS_CHECK(std::isfinite(options.epsilon) && options.epsilon > 0.0);
   VS_CHECK(std::isfinite(options.gridSize) && options.gridSize > 0.0);
   VS_CHECK(std::isfinite(options.binMargin) && options.binMargin > 0.0);

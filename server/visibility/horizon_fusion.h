@@ -38,6 +38,7 @@
 #include "common/core/box.h"
 #include "common/core/stats_fields.h"
 #include "common/scene/scene.h"
+#include "common/world/static_world.h"
 
 namespace vistream {
 
@@ -106,6 +107,11 @@ class HorizonFusion {
   // city). The scene must outlive this object. Options must be positive and
   // finite (VS_CHECK).
   explicit HorizonFusion(const Scene& scene, const HorizonFusionOptions& options = {});
+  // The same over a static world already built for the scene (its
+  // triangles, ray query and solids: StaticWorldParts::Solids or more),
+  // which must outlive this object.
+  HorizonFusion(const Scene& scene, const StaticWorld& world,
+                const HorizonFusionOptions& options = {});
   ~HorizonFusion();
   HorizonFusion(const HorizonFusion&) = delete;
   HorizonFusion& operator=(const HorizonFusion&) = delete;
@@ -123,6 +129,9 @@ class HorizonFusion {
   struct Impl;  // the height field and the scene's triangles, solids and faces
 
  private:
+  HorizonFusion(const Scene& scene, std::unique_ptr<const StaticWorld> owned,
+                const StaticWorld* borrowed, const HorizonFusionOptions& options);
+
   std::unique_ptr<Impl> impl_;
   HorizonFusionOptions options_;
   double prepareMs_ = 0.0;

@@ -220,7 +220,7 @@ void expectNoSampledFaceCulled(const std::string& spec, size_t cellCount, bool e
   const Scene scene = openScene(spec);
   const StaticWorld world = buildStaticWorld(scene);
   const EpsilonPvs single(scene);
-  const HorizonFusion fusion(scene);
+  const HorizonFusion fusion(scene, world);  // over the same triangles and solids
   const std::vector<uint32_t> all = allFaces(scene);
   size_t missing = 0, paperFaces = 0, bothFaces = 0, seenFaces = 0, culled = 0;
   for (const Box3f& cell : streetCells(world.freeSpace, cellCount)) {
