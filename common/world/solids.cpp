@@ -239,14 +239,22 @@ SolidCensus Solids::census() const {
 }
 
 bool Solids::inside(const RayQuery& rays, const glm::vec3& p) const {
-  return insideGroup(rays, p, false);
+  return insideGroup(rays, p, false, false);
 }
 
 bool Solids::insideClosed(const RayQuery& rays, const glm::vec3& p) const {
-  return insideGroup(rays, p, true);
+  return insideGroup(rays, p, true, true);
 }
 
-bool Solids::insideGroup(const RayQuery& rays, const glm::vec3& p, bool closedOnly) const {
+// inside() || insideClosed() in one pass: inside a closed group is inside a
+// group, so the vote over every group decides both, and an eye on a closed
+// group's surface is unserved whatever the vote.
+bool Solids::unservedViewpoint(const RayQuery& rays, const glm::vec3& p) const {
+  return insideGroup(rays, p, false, true);
+}
+
+bool Solids::insideGroup(const RayQuery& rays, const glm::vec3& p, bool closedOnly,
+                         bool closedSurfaceInside) const {
   if (grid_.empty()) return false;
   const auto listed = grid_.itemsIn(grid_.cellOf({p.x, p.z}));
   thread_local std::vector<uint32_t> candidates;
@@ -271,7 +279,8 @@ bool Solids::insideGroup(const RayQuery& rays, const glm::vec3& p, bool closedOn
     for (const Hit& h : hits) {
       // On a surface: outside by convention, except on the surface of a
       // closed solid for insideClosed (whose contract counts the surface in).
-      if (h.t == 0.0f) return closedOnly && groupClosed_[groupOf_[componentOf_[h.triangle]]];
+      if (h.t == 0.0f)
+        return closedSurfaceInside && groupClosed_[groupOf_[componentOf_[h.triangle]]];
       const uint32_t g = groupOf_[componentOf_[h.triangle]];
       for (size_t i = 0; i < candidates.size(); ++i)
         if (candidates[i] == g) parity[i] ^= 1;

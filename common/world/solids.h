@@ -90,9 +90,8 @@ class Solids {
   // The viewpoint rule of the PVS contract (server/visibility/epsilon_pvs.h):
   // a viewer inside any solid (inside()), or inside or on the surface of a
   // closed one (insideClosed()), is not served.
-  bool unservedViewpoint(const RayQuery& rays, const glm::vec3& point) const {
-    return inside(rays, point) || insideClosed(rays, point);
-  }
+  // Equal to inside() || insideClosed(), in one pass over the rays.
+  bool unservedViewpoint(const RayQuery& rays, const glm::vec3& point) const;
 
  private:
   std::vector<uint32_t> componentOf_;
@@ -102,7 +101,10 @@ class Solids {
   std::vector<uint8_t> groupClosed_;  // by group: every component closed and consistently oriented
   XzGrid grid_;                       // groups by X/Z cell of their bounds
 
-  bool insideGroup(const RayQuery& rays, const glm::vec3& point, bool closedOnly) const;
+  // closedOnly: only closed groups are candidates; closedSurfaceInside: a
+  // point on a closed group's surface counts as inside.
+  bool insideGroup(const RayQuery& rays, const glm::vec3& point, bool closedOnly,
+                   bool closedSurfaceInside) const;
 };
 
 }  // namespace vistream

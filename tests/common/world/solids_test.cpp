@@ -2,6 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <random>
+
+#include "common/scene/scene_loader.h"
 #include "tests/common/world/wound_boxes.h"
 
 namespace vistream {
@@ -157,6 +160,34 @@ TEST(Solids, APointInsideAThinWallBetweenFloorAndCeilingIsInsideAClosedSolid) {
     EXPECT_FALSE(b.insideClosed({0.5f, 1.5f, 0.5f}));   // in the room beside it
     EXPECT_FALSE(b.insideClosed({0.5f, 1.5f, -0.5f}));  // in the room behind it
   }
+}
+
+// The one-pass rule against its two-pass definition on the real city model
+// (closed, open and non-manifold buildings, party walls): random points in
+// its bounds, and points on its surfaces (triangle centroids).
+TEST(Solids, AnUnservedViewpointIsOneInsideAnySolidOrInsideOrOnAClosedOne) {
+  Built b;
+  b.scene = loadScene(std::string(VISTREAM_SHARED_DIR) + "/data/delfshaven.obj");
+  b.build();
+  const Box3f box = b.scene.bounds();
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::vector<glm::vec3> points;
+  for (int k = 0; k < 3000; ++k)
+    points.push_back(box.lo + (box.hi - box.lo) * glm::vec3(u(rng), 0.3f * u(rng), u(rng)));
+  for (size_t t = 0; t < b.triangles.size(); t += 97)
+    if (!b.triangles.degenerate[t])
+      points.push_back(
+          (b.triangles.vertex(t, 0) + b.triangles.vertex(t, 1) + b.triangles.vertex(t, 2)) / 3.0f);
+  size_t unserved = 0;
+  for (const glm::vec3& p : points) {
+    const bool expected = b.inside(p) || b.insideClosed(p);
+    EXPECT_EQ(b.solids.unservedViewpoint(*b.rays, p), expected)
+        << p.x << ", " << p.y << ", " << p.z;
+    unserved += expected;
+  }
+  EXPECT_GT(unserved, 0u);  // both answers occur
+  EXPECT_LT(unserved, points.size());
 }
 
 }  // namespace
