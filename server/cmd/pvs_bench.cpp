@@ -10,12 +10,14 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
+#include <numbers>
 #include <optional>
 #include <random>
 #include <system_error>
@@ -393,6 +395,70 @@ int runPvsBench(const PvsBenchOptions& options) {
           fmt::print("  {:>8.1f} {:<20} {:>10.0f} {:>10.0f} {:>14.2f} {:>12.2f} {:>10.2f} {:>8}\n",
                      size, m.method.name, mean(m.pvsSize), seenMean, over, median(m.ratio),
                      median(m.ms), m.missing);
+      }
+    }
+
+    // ---- the horizons' knobs: accuracy against time ------------------------
+    if (horizon) {
+      // The same 4 m cells as above; candidates: the single-occluder PVS
+      // with back faces; the truth aims at every candidate.
+      const auto cells = streetCells(w, 4.0f, options.accuracyCells, options.seed + 40);
+      std::vector<std::vector<uint32_t>> candidates, truths;
+      PvsOptions single;
+      single.fusion = false;
+      for (const Box3f& cell : cells) {
+        candidates.push_back(w.pvs->compute(cell, single).faces);
+        SampledVisibilityOptions gt;
+        gt.points = options.groundTruthPoints;
+        gt.resolution = options.groundTruthRes;
+        gt.skipViewpoint = [&w](const glm::vec3& p) {
+          return w.statics.solids.unservedViewpoint(*w.statics.rays, p);
+        };
+        gt.probeFaces = candidates.back();
+        gt.probeSamples = std::max(1, options.groundTruthProbes);
+        truths.push_back(sampleVisibleFaces(*w.statics.rays, *w.statics.triangles, cell, gt).faces);
+      }
+      struct Knob {
+        double epsilon;
+        int refinements;
+      };
+      const Knob knobs[] = {{2.0, 1}, {1.0, 0}, {1.0, 1}, {1.0, 2}, {0.5, 1}};
+      if (human)
+        fmt::print(
+            "\nOcclusion horizons' knobs ({}, the 4 m cells above; after the single occluders "
+            "with back faces; default epsilon {} m, {} refinement)\n"
+            "  {:>11} {:>11} {:>10} {:>12} {:>12} {:>10} {:>8}\n",
+            spec, HorizonFusionOptions{}.epsilon, HorizonFusionOptions{}.refinements, "epsilon (m)",
+            "refinements", "reach (m)", "median ratio", "fusion ms", "build s", "missing");
+      for (const Knob& k : knobs) {
+        HorizonFusionOptions ho;
+        ho.epsilon = k.epsilon;
+        ho.refinements = k.refinements;
+        const HorizonFusion fusion(w.scene, w.statics, ho);
+        std::vector<double> ratio, ms;
+        size_t missing = 0;
+        for (size_t ci = 0; ci < cells.size(); ++ci) {
+          const HorizonFusionResult r = fusion.cull(cells[ci], candidates[ci]);
+          for (uint32_t f : truths[ci])
+            missing += !std::binary_search(r.faces.begin(), r.faces.end(), f);
+          ms.push_back(r.stats.timeMs);
+          if (!truths[ci].empty())
+            ratio.push_back(double(r.faces.size()) / double(truths[ci].size()));
+        }
+        const double reach = 2.0 * ho.binMargin / (2.0 * std::numbers::pi / ho.azimuthBins) *
+                             std::pow(double(HorizonFusion::kRefine), ho.refinements);
+        out["horizon_knobs"].push_back({{"scene", spec},
+                                        {"epsilon_m", k.epsilon},
+                                        {"refinements", k.refinements},
+                                        {"reach_m", reach},
+                                        {"median_pvs_over_seen", median(ratio)},
+                                        {"fusion_ms_per_cell", median(ms)},
+                                        {"build_s", fusion.prepareMs() / 1000.0},
+                                        {"missing_faces", missing}});
+        if (human)
+          fmt::print("  {:>11.2f} {:>11} {:>10.0f} {:>12.2f} {:>12.2f} {:>10.1f} {:>8}\n",
+                     k.epsilon, k.refinements, reach, median(ratio), median(ms),
+                     fusion.prepareMs() / 1000.0, missing);
       }
     }
 
