@@ -9,6 +9,7 @@
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/ip/tcp.hpp>
 #include <cstdio>
@@ -69,6 +70,10 @@ int runLoadTestTool(int argc, char** argv) {
       ->check(nonNegative());
   app.add_option("--memory-budget", o.memoryBudget, "client memory budget in bytes (0: unlimited)")
       ->check(atLeast<uint64_t>(0));
+  app.add_option("--stats-interval", o.statsIntervalS,
+                 "seconds between the server's Stats frames to each client (0: the server's "
+                 "interval; never more often than that)")
+      ->check(nonNegative());
   app.add_option("--token-file", tokenFile, "auth token file (first line)");
   bool noAvatars = false;
   app.add_flag("--no-avatars", noAvatars, "do not ask for other users' avatars");
@@ -130,6 +135,12 @@ int runLoadTestTool(int argc, char** argv) {
       fmt::print("{:<34} {:.1f}\n", "duration (s)", j["duration_s"].get<double>());
       fmt::print("{:<34} {:.0f}\n", "bytes per client per second",
                  j["bytes_per_client_per_s"].get<double>());
+      for (const auto& [type, bytes] : j["bytes_by_type"].items())
+        fmt::print("{:<34} {:.0f}\n", "  bytes/client/s in " + type,
+                   bytes.get<double>() / std::max(1.0, j["bytes_received"].get<double>()) *
+                       j["bytes_per_client_per_s"].get<double>());
+      fmt::print("{:<34} {:.1f} ({:.1f} in Geometry frames)\n", "bytes per face",
+                 j["bytes_per_face"].get<double>(), j["geometry_bytes_per_face"].get<double>());
       fmt::print("{:<34} {} of {}\n", "clients loaded", j["clients_loaded"].get<size_t>(),
                  j["clients"].get<size_t>());
       fmt::print("{:<34} {}\n", "initial load ms (p50 / p95 / p99)", pct(j["initial_load_ms"]));

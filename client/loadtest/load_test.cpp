@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <array>
 #include <boost/asio.hpp>
 #include <chrono>
 #include <cmath>
@@ -44,6 +45,9 @@ nlohmann::json percentiles(std::vector<double> v) {
           {"max", v.back()},
           {"count", v.size()}};
 }
+
+// Where the byte breakdown counts payload types newer than this build.
+constexpr size_t kUnknownType = size_t(Payload::MAX) + 1;
 
 struct Shared {
   const LoadTestOptions& options;
@@ -133,6 +137,7 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
             hello.capabilities->near_field_radius_m = self->opt_.radius;
             hello.capabilities->memory_budget_bytes = self->opt_.memoryBudget;
             hello.capabilities->wants_avatars = self->opt_.avatars;
+            hello.capabilities->stats_interval_s = self->opt_.statsIntervalS;
             self->helloSent_ = Clock::now();
             self->send(encodeMessage(std::move(hello)));
           });
@@ -156,6 +161,9 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
 
   // Results, read after the io_context has stopped.
   uint64_t bytesReceived() const { return peer_->bytesReceived(); }
+  // Whole frames received, by payload type (index: wire::Payload; types
+  // newer than this build at kUnknownType): bytes with their length prefixes.
+  std::array<uint64_t, kUnknownType + 1> bytesByType{}, framesByType{};
   std::string errorReason;  // the first error's kind (a key of errors_by_reason); empty: none
   bool cutOff = false;
   uint64_t missesWhilePending = 0;
@@ -192,6 +200,9 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
 
   void onFrame(const Envelope& e) override {
     if (done_) return;
+    const size_t type = std::min(size_t(e.payload_type()), kUnknownType);
+    bytesByType[type] += peer_->frameBytes();
+    ++framesByType[type];
     dispatchPayload(
         e,
         Overloaded{
@@ -252,15 +263,15 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
   }
 
   void onCellReady(const CellReady& r) {
-    if (!r.cell()) return;
     const auto now = Clock::now();
-    const glm::ivec3 c = fromWire(*r.cell());
-    ready_.insert(c);
-    if (initialLoadMs < 0.0 && hasCell_ && c == cell_) initialLoadMs = msSince(helloSent_, now);
-    if (auto it = pending_.find(c); it != pending_.end()) {
-      waits.push_back(msSince(it->second, now));
-      latencies.push_back(waits.back());
-      pending_.erase(it);
+    for (const glm::ivec3& c : readyCells(r)) {
+      ready_.insert(c);
+      if (initialLoadMs < 0.0 && hasCell_ && c == cell_) initialLoadMs = msSince(helloSent_, now);
+      if (auto it = pending_.find(c); it != pending_.end()) {
+        waits.push_back(msSince(it->second, now));
+        latencies.push_back(waits.back());
+        pending_.erase(it);
+      }
     }
   }
 
@@ -410,6 +421,8 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
       !std::isfinite(options.durationS) || !std::isfinite(options.speed))
     throwInputError(InputErrorCode::BadArgument,
                     "--duration and --fps must be positive and --speed non-negative");
+  if (!(options.statsIntervalS >= 0.0f) || !std::isfinite(options.statsIntervalS))
+    throwInputError(InputErrorCode::BadArgument, "--stats-interval must be zero or positive");
   if (!(options.connectTimeoutS > 0.0) || !std::isfinite(options.connectTimeoutS))
     throwInputError(InputErrorCode::BadArgument, "--connect-timeout must be positive");
   const double graceS =
@@ -460,8 +473,20 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
   std::string firstError, firstFailure;
   auto failedClients = nlohmann::json::array(), cutOffClients = nlohmann::json::array();
   std::map<std::string, uint64_t> byReason;
+  // Bytes by payload type; what the clients received beyond whole frames
+  // (a frame cut off when the connection closed) counts as "partial_frame",
+  // so the breakdown sums to `bytes_received`.
+  std::array<uint64_t, kUnknownType + 1> typeBytes{}, typeFrames{};
+  uint64_t partialBytes = 0;
   for (size_t i = 0; i < clients.size(); ++i) {
     const SimClient* c = clients[i].get();
+    uint64_t whole = 0;
+    for (size_t t = 0; t <= kUnknownType; ++t) {
+      typeBytes[t] += c->bytesByType[t];
+      typeFrames[t] += c->framesByType[t];
+      whole += c->bytesByType[t];
+    }
+    partialBytes += c->bytesReceived() - std::min(whole, c->bytesReceived());
     latencies.insert(latencies.end(), c->latencies.begin(), c->latencies.end());
     waits.insert(waits.end(), c->waits.begin(), c->waits.end());
     if (c->initialLoadMs >= 0.0) {
@@ -497,6 +522,14 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
     faces += c->facesReceived;
     totalBytes += c->bytesReceived();
   }
+  nlohmann::json bytesByType = nlohmann::json::object(), framesByType = nlohmann::json::object();
+  for (size_t t = 0; t <= kUnknownType; ++t)
+    if (typeFrames[t] > 0) {
+      const char* name = t == kUnknownType ? "unknown" : payloadName(Payload(t));
+      bytesByType[name] = typeBytes[t];
+      framesByType[name] = typeFrames[t];
+    }
+  if (partialBytes > 0) bytesByType["partial_frame"] = partialBytes;
   double meanBytes = 0.0;
   for (double b : bytesPerS) meanBytes += b / double(bytesPerS.size());
   double cpuMean = 0.0;
@@ -524,6 +557,11 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
                  {"geometry_frames", frames},
                  {"faces_received", faces},
                  {"bytes_per_face", faces ? double(totalBytes) / double(faces) : 0.0},
+                 {"geometry_bytes_per_face",
+                  faces ? double(typeBytes[size_t(Payload::Geometry)]) / double(faces) : 0.0},
+                 {"bytes_received", totalBytes},
+                 {"bytes_by_type", bytesByType},
+                 {"frames_by_type", framesByType},
                  {"errors", failed},
                  {"errors_by_reason", byReason},
                  {"failed_clients", failedClients},

@@ -47,6 +47,9 @@ struct LoadTestOptions {
   int checkRaysX = 32, checkRaysY = 24;
   float radius = 0.0f;  // near-field radius asked for (0: the server's)
   uint64_t memoryBudget = 0;
+  // Seconds between Stats frames asked of the server (0: its interval). A
+  // walking user needs none; the load test reads the server's CPU from them.
+  float statsIntervalS = 10.0f;
   bool avatars = true;  // ask for avatar updates
   std::string token;
   unsigned threads = 1;

@@ -211,9 +211,10 @@ struct StreamClient::Impl : PeerHandler {
     ++version;
   }
   void onCellReady(const CellReady& r) {
-    if (!r.cell()) return;
+    const std::vector<glm::ivec3> cells = readyCells(r);
+    if (cells.empty()) return;
     std::lock_guard lock(mutex);
-    ready.insert(fromWire(*r.cell()));
+    ready.insert(cells.begin(), cells.end());
     changed.notify_all();
   }
 };

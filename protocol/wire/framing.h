@@ -19,8 +19,9 @@
 
 namespace vistream::wire {
 
-inline constexpr uint32_t kProtocolVersion =
-    2;  // 2: compact Geometry, the quantization grid in Welcome
+// 2: compact Geometry, the quantization grid in Welcome; 3: CellReady for
+// several cells at once, the Stats interval in Capabilities.
+inline constexpr uint32_t kProtocolVersion = 3;
 inline constexpr uint32_t kDefaultMaxFrameBytes = 16u << 20;  // 16 MiB
 inline constexpr size_t kFrameHeaderBytes = 4;
 

@@ -2,6 +2,22 @@
 
 namespace vistream::wire {
 
+std::vector<uint8_t> encodeCellReady(const std::vector<glm::ivec3>& cells) {
+  CellReadyT ready;
+  ready.cells.reserve(cells.size());
+  for (const glm::ivec3& c : cells) ready.cells.push_back(toWire(c));
+  return encodeMessage(std::move(ready));
+}
+
+std::vector<glm::ivec3> readyCells(const CellReady& ready) {
+  std::vector<glm::ivec3> out;
+  if (const auto* cells = ready.cells()) {
+    out.reserve(cells->size());
+    for (const CellIndex* c : *cells) out.push_back(fromWire(*c));
+  }
+  return out;
+}
+
 const char* payloadName(Payload p) {
   const char* name = EnumNamePayload(p);
   return name && *name ? name : "unknown";

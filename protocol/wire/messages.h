@@ -54,6 +54,13 @@ inline bool isFinite(const Vec3f* v) {
   return v && std::isfinite(v->x()) && std::isfinite(v->y()) && std::isfinite(v->z());
 }
 
+// CellReady (version 3): one frame for every cell that became ready at once.
+std::vector<uint8_t> encodeCellReady(const std::vector<glm::ivec3>& cells);
+// The cells a verified CellReady announces, in the order sent (none if the
+// field is missing). Any cell index may come from the wire: the caller
+// checks it against its grid before indexing with it.
+std::vector<glm::ivec3> readyCells(const CellReady& ready);
+
 // The payload's name, for logs and errors ("Hello", "Pose", ...).
 const char* payloadName(Payload p);
 

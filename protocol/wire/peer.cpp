@@ -98,6 +98,7 @@ void Peer::read() {
         while (self->open_) {
           const auto frame = self->decoder_.next();
           if (!frame) break;
+          self->frameBytes_ = frame->size() + kFrameHeaderBytes;
           handler->onFrame(*envelopeOf(*frame));
         }
         if (!self->open_) return;

@@ -238,6 +238,9 @@ class Peer : public std::enable_shared_from_this<Peer> {
   bool open() const { return open_; }
   uint64_t bytesReceived() const { return bytesReceived_; }
   uint64_t bytesSent() const { return bytesSent_; }
+  // The size on the wire (length prefix included) of the frame being
+  // delivered: valid inside PeerHandler::onFrame, on the strand.
+  size_t frameBytes() const { return frameBytes_; }
 
   Peer(Strand strand, const PeerOptions& options);  // use create()
 
@@ -255,6 +258,7 @@ class Peer : public std::enable_shared_from_this<Peer> {
   std::weak_ptr<PeerHandler> handler_;
   std::atomic<bool> open_{true};
   std::atomic<uint64_t> bytesReceived_{0}, bytesSent_{0};
+  size_t frameBytes_ = 0;
 };
 
 }  // namespace vistream::wire

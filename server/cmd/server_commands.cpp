@@ -122,6 +122,10 @@ int runServerTool(int argc, char** argv) {
   app.add_option("--max-cell-requests", cfg.maxCellRequests,
                  "cell face sets a session may have outstanding on the worker pool")
       ->check(atLeast<unsigned>(1));
+  app.add_option("--unculled-after", cfg.unculledAfterS,
+                 "without a database: seconds a client waits for its current cell's PVS before "
+                 "it gets every face within the radius (at once while the workers are behind)")
+      ->check(nonNegative());
   app.add_option("--max-pvs-requests", cfg.maxPvsRequestsWaiting,
                  "PvsRequests a session may have waiting for replies; more get RateLimited")
       ->check(atLeast<size_t>(1));

@@ -174,11 +174,17 @@ void Session::onHello(const Hello& hello) {
       !sameToken(hello.auth_token() ? hello.auth_token()->str() : std::string(), cfg.token))
     return fail(ErrorCode::BadToken, "bad auth token");
   radius_ = cfg.defaultRadius;
+  statsIntervalS_ = cfg.clientStatsIntervalS;
   if (const Capabilities* caps = hello.capabilities()) {
     const float r = caps->near_field_radius_m();
     if (!std::isfinite(r) || r < 0.0f)
       return fail(ErrorCode::BadRequest, "near_field_radius_m must be finite and >= 0");
     if (r > 0.0f) radius_ = std::min(r, cfg.maxRadius);
+    const float statsInterval = caps->stats_interval_s();
+    if (!std::isfinite(statsInterval) || statsInterval < 0.0f)
+      return fail(ErrorCode::BadRequest, "stats_interval_s must be finite and >= 0");
+    // Never more often than the server's own interval.
+    statsIntervalS_ = std::max(cfg.clientStatsIntervalS, double(statsInterval));
     budget_ = caps->memory_budget_bytes();
     wantsGeometry_ = caps->wants_geometry();
     wantsAvatars_ = caps->wants_avatars();
@@ -190,7 +196,11 @@ void Session::onHello(const Hello& hello) {
   sc.maxSpeedMps = cfg.maxSpeedMps;
   sc.maxCellRequests = cfg.maxCellRequests;
   sc.batchBytes = cfg.batchBytes;
+  // Prefetch deltas gather into batches of about 100 city1 faces (8 bytes a
+  // face after coding rather than 25 for 10) unless something is due.
+  sc.coalesceBytes = std::min<size_t>(8u << 10, cfg.batchBytes);
   sc.coarseFirst = world_.coarseFirst();
+  sc.unculledAfterS = cfg.unculledAfterS;
   scheduler_ = std::make_unique<StreamScheduler>(world_, sc, radius_, budget_);
   {
     std::lock_guard lock(snapshotMutex_);
@@ -431,7 +441,7 @@ void Session::housekeeping() {
                                 cfg.writeStallTimeoutS);
     return close("write stalled");
   }
-  if (state_ == State::Active && seconds(now - lastClientStats_) >= cfg.clientStatsIntervalS) {
+  if (state_ == State::Active && seconds(now - lastClientStats_) >= statsIntervalS_) {
     lastClientStats_ = now;
     StatsT s;
     s.server_time_s = seconds(now.time_since_epoch());
@@ -524,20 +534,19 @@ void Session::maybeCull() {
 }
 
 void Session::runFirst(std::function<void()> job) {
-  // A short job a client waits for (encoding its next batch): due before
-  // every computation waiting in the work queue, so a crowd of PVSs does
-  // not hold back the faces already known.
-  world_.work().submit(server_.workers().get_executor(), {WorkPriority::Current, 0.0},
+  // A short job a client waits for (encoding its next batch): rank
+  // Immediate, before every computation waiting in the work queue, so a
+  // crowd of PVSs does not hold back the faces already known (nor counts
+  // as the workers falling behind).
+  world_.work().submit(server_.workers().get_executor(), {WorkPriority::Immediate, 0.0},
                        std::move(job));
 }
 
 void Session::sendReadyCells() {
-  for (const StreamScheduler::ReadyCell& c : scheduler_->takeReadyCells()) {
-    CellReadyT ready;
-    ready.cell = std::make_unique<CellIndex>(toWire(c.cell));
-    ready.faces = c.faces;
-    send(std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(ready))));
-  }
+  // Every cell that became ready goes in one frame (protocol version 3).
+  std::vector<glm::ivec3> cells;
+  for (const StreamScheduler::ReadyCell& c : scheduler_->takeReadyCells()) cells.push_back(c.cell);
+  if (!cells.empty()) send(std::make_shared<const std::vector<uint8_t>>(encodeCellReady(cells)));
 }
 
 void Session::pump() {
@@ -549,7 +558,7 @@ void Session::pump() {
   // enough prefetch already waiting: no more prefetch or refinement.
   const WorkQueue::Load load = world_.work().load();
   behind_ = load.oldestCurrentS > cfg.behindLagS || load.waitingCurrent > cfg.behindQueuedJobs;
-  scheduler_->setBehind(behind_ || load.waiting - load.waitingCurrent > cfg.maxWaitingPrefetch);
+  scheduler_->setBehind(behind_ || load.waitingDroppable > cfg.maxWaitingPrefetch);
   requestFaceSets();
   maybeCull();
   if (produceInFlight_ || outbox_.queuedBytes() > cfg.geometryWatermarkBytes) return;

@@ -125,6 +125,7 @@ class Session : public std::enable_shared_from_this<Session> {
 
   // Client capabilities.
   float radius_ = 0.0f;
+  double statsIntervalS_ = 0.0;  // seconds between Stats frames (the client's, or the server's)
   uint64_t budget_ = 0;
   bool wantsGeometry_ = true, wantsAvatars_ = true;
 

@@ -69,11 +69,13 @@ void StreamScheduler::updateNeededCells() {
         add(*c, double(i) * step / double(speed));
   }
   // Neighbours the client could step into before their face sets would
-  // arrive: those whose shared side or corner lies within the margin.
+  // arrive: those whose shared side or corner it could reach within
+  // neighbourLeadS at its speed (at least walking speed: it may turn).
+  // Farther ones would ship their PVS long before need, mostly for nothing.
   const Box3f box = grid.cellBox(cell_);
   const glm::vec3 p(position_);
   const float walking = std::max(speed, 1.4f);
-  const float margin = std::max(2.0f, float(config_.prefetchSeconds) * walking);
+  const float margin = float(config_.neighbourLeadS) * walking;
   for (int dz = -1; dz <= 1; ++dz)
     for (int dx = -1; dx <= 1; ++dx) {
       const float gapX = dx == 0 ? 0.0f : dx < 0 ? p.x - box.lo.x : box.hi.x - p.x;
@@ -85,10 +87,9 @@ void StreamScheduler::updateNeededCells() {
   // urgency: its requests are dropped (joined ones for the same coarse cell
   // live on through the new current cell's request), and asked for again
   // as prefetch if it is still needed.
-  if (!needed_.empty() && needed_.front() != needed.front()) {
-    requested_.erase(requestKey(needed_.front(), CellLevel::Fine));
-    requested_.erase(requestKey(needed_.front(), CellLevel::Coarse));
-  }
+  if (!needed_.empty() && needed_.front() != needed.front())
+    for (CellLevel level : {CellLevel::Fine, CellLevel::Coarse, CellLevel::Unculled})
+      requested_.erase(requestKey(needed_.front(), level));
   needed_ = std::move(needed);
   neededInS_ = std::move(inS);
   evictionsExhausted_ = false;  // the faces to keep may have changed
@@ -99,7 +100,7 @@ void StreamScheduler::updateNeededCells() {
       ++it;
     } else {
       cursor_.erase(it->first);
-      fine_.erase(it->first);
+      levels_.erase(it->first);
       it = cellSets_.erase(it);
     }
   }
@@ -125,8 +126,11 @@ std::vector<StreamScheduler::CellRequest> StreamScheduler::takeCellRequests(doub
   // Requests of one level for a cell; the other level's may also be out.
   auto requestedAny = [&](uint32_t l) {
     return requested_.count(requestKey(l, CellLevel::Fine)) ||
-           requested_.count(requestKey(l, CellLevel::Coarse));
+           requested_.count(requestKey(l, CellLevel::Coarse)) ||
+           requested_.count(requestKey(l, CellLevel::Unculled));
   };
+  // Unculled sets stand in for PVSs the workers cannot deliver in time.
+  const bool mayUncull = config_.coarseFirst && config_.policy == StreamPolicy::Visibility;
   // A client keeps its place in the line: the current cell is due from when
   // the client began waiting for one, so a client walking into the next
   // cell before its request ran is not sent to the back of the queue.
@@ -141,23 +145,43 @@ std::vector<StreamScheduler::CellRequest> StreamScheduler::takeCellRequests(doub
     const uint32_t l = needed_[i];
     // The limit is on prefetch: the current cell is always asked for.
     if (i > 0 && outstanding >= config_.maxCellRequests) break;
-    if (i > 0 && behind_) break;  // prefetch backs off while the workers are behind
+    // Prefetch backs off while the workers are behind (to unculled sets,
+    // which cost them little, when those may stand in).
+    if (i > 0 && behind_ && !mayUncull) break;
     if (cellSets_.count(l) || requestedAny(l)) continue;
-    const WorkPriority priority =
-        i == 0 ? WorkPriority{WorkPriority::Current, waitingSinceS_.value_or(nowS)}
-               : WorkPriority{WorkPriority::Prefetch, nowS + neededInS_[i]};
-    // Coarse first unless the cell's own set is at hand (or is all there is).
-    const bool own =
-        !config_.coarseFirst || config_.policy == StreamPolicy::Radius ||
-        world_.hasCellFaceSet(world_.grid().cellAt(l), CellLevel::Fine, config_.policy, radius_);
-    request(l, own ? CellLevel::Fine : CellLevel::Coarse, priority);
+    WorkPriority priority = i == 0
+                                ? WorkPriority{WorkPriority::Current, waitingSinceS_.value_or(nowS)}
+                                : WorkPriority{WorkPriority::Prefetch, nowS + neededInS_[i]};
+    // Coarse first unless the cell's own set is at hand (or is all there
+    // is); unculled if neither is cached and the workers are behind.
+    const glm::ivec3 c = world_.grid().cellAt(l);
+    CellLevel level = CellLevel::Fine;
+    if (config_.coarseFirst && config_.policy == StreamPolicy::Visibility &&
+        !world_.hasCellFaceSet(c, CellLevel::Fine, config_.policy, radius_)) {
+      level = CellLevel::Coarse;
+      if (mayUncull && behind_ &&
+          !world_.hasCellFaceSet(c, CellLevel::Coarse, config_.policy, radius_)) {
+        level = CellLevel::Unculled;
+        priority.rank = WorkPriority::Immediate;
+      }
+    }
+    request(l, level, priority);
     ++outstanding;
   }
-  // Refinement: the current cell's own set, once its coarse one streams.
+  // A current cell waited for too long: its unculled set as well.
+  if (mayUncull && !needed_.empty() && waitingSinceS_ &&
+      nowS - *waitingSinceS_ >= config_.unculledAfterS &&
+      !requested_.count(requestKey(needed_.front(), CellLevel::Unculled)))
+    request(needed_.front(), CellLevel::Unculled, {WorkPriority::Immediate, nowS});
+  // Refinement: the current cell's own set once its coarse one streams,
+  // the coarse one once its unculled one does.
   if (config_.coarseFirst && !behind_ && !needed_.empty()) {
     const uint32_t l = needed_.front();
-    if (cellSets_.count(l) && !fine_.count(l) && !requested_.count(requestKey(l, CellLevel::Fine)))
-      request(l, CellLevel::Fine, {WorkPriority::Refine, nowS});
+    const std::optional<CellLevel> loaded = loadedLevel(l);
+    if (loaded && *loaded != CellLevel::Fine && !requested_.count(requestKey(l, CellLevel::Fine)) &&
+        !requested_.count(requestKey(l, CellLevel::Coarse)))
+      request(l, *loaded == CellLevel::Unculled ? CellLevel::Coarse : CellLevel::Fine,
+              {WorkPriority::Refine, nowS});
   }
   return out;
 }
@@ -166,18 +190,20 @@ bool StreamScheduler::onFaceSet(uint32_t cell, FaceListPtr faces, CellLevel leve
   // A result nobody asks for any more (cancelled, or answered already
   // through a request that joined the same computation).
   if (requested_.erase(requestKey(cell, level)) == 0 || !faces || !isNeeded(cell)) return false;
-  if (level == CellLevel::Coarse && fine_.count(cell)) return false;  // refined already
-  if (level == CellLevel::Fine) {
-    // The own set replaces the parent's; a coarse request still out is moot.
-    fine_.insert(cell);
-    requested_.erase(requestKey(cell, CellLevel::Coarse));
-    // Announced ready with the parent's set: the client held a superset.
-    // Should the budget have kept some of the own set back, the cell is
-    // announced again once whole.
-    if (announced_.count(cell) &&
-        !std::all_of(faces->begin(), faces->end(), [&](uint32_t f) { return held(f); }))
-      announced_.erase(cell);
-  }
+  // Levels from the tightest: Fine, Coarse, Unculled. A set no tighter than
+  // the loaded one is moot (refined already).
+  const std::optional<CellLevel> loaded = loadedLevel(cell);
+  if (loaded && uint8_t(level) >= uint8_t(*loaded)) return false;
+  // A tighter set replaces a looser one; looser requests still out are moot.
+  for (CellLevel looser : {CellLevel::Coarse, CellLevel::Unculled})
+    if (uint8_t(looser) > uint8_t(level)) requested_.erase(requestKey(cell, looser));
+  levels_[cell] = level;
+  // Announced ready with a looser set: the client held a superset. Should
+  // the budget have kept some of the tighter set back, the cell is announced
+  // again once whole.
+  if (announced_.count(cell) &&
+      !std::all_of(faces->begin(), faces->end(), [&](uint32_t f) { return held(f); }))
+    announced_.erase(cell);
   cellSets_[cell] = std::move(faces);
   cursor_[cell] = 0;
   evictionsExhausted_ = false;
@@ -244,8 +270,32 @@ std::vector<uint32_t> StreamScheduler::takeEvictions() {
   return evicted;
 }
 
+bool StreamScheduler::worthABatch() const {
+  if (config_.coalesceBytes == 0 || needed_.empty()) return true;
+  // Faces in view from the pose are due at once.
+  if (visibleNowCell_ == needed_.front())
+    for (uint32_t f : visibleNow_)
+      if (!held(f)) return true;
+  size_t pending = 0;
+  for (size_t i = 0; i < needed_.size(); ++i) {
+    const auto it = cellSets_.find(needed_[i]);
+    if (it == cellSets_.end()) continue;
+    const FaceList& set = *it->second;
+    const auto c = cursor_.find(needed_[i]);
+    for (size_t k = c == cursor_.end() ? 0 : c->second; k < set.size(); ++k) {
+      if (held(set[k])) continue;
+      // A cell the client is in, or may reach soon, goes now.
+      if (i == 0 || neededInS_[i] <= config_.coalesceUntilS) return true;
+      pending += world_.faceBytes(set[k]);
+      if (pending >= config_.coalesceBytes) return true;
+    }
+  }
+  return false;
+}
+
 std::vector<uint32_t> StreamScheduler::takeBatch() {
   std::vector<uint32_t> batch;
+  if (!worthABatch()) return batch;
   size_t bytes = 0;
   auto take = [&](uint32_t f) {
     if (held(f) || (budget_ > 0 && heldBytes_ + world_.faceBytes(f) > budget_)) return;

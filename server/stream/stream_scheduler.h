@@ -7,8 +7,9 @@
 // The policy:
 // - Cells needed: the current view cell first, then the cells ahead along the
 //   velocity (prefetchSeconds of travel, sampled at most kMaxPrefetchSteps
-//   times), then the neighbours whose shared side or corner lies within the
-//   prefetch margin (prefetchSeconds at walking speed, at least 2 m).
+//   times), then the neighbours whose shared side or corner the client
+//   could reach within neighbourLeadS (at its speed, at least walking speed).
+//   Each needed cell has a time to reach (0 for the current one).
 // - Face sets of needed cells are requested in that order, at most
 //   maxCellRequests outstanding (the current cell is asked for whatever is
 //   outstanding); a cell no longer needed, or no longer the current one,
@@ -19,7 +20,8 @@
 //   client is expected to reach it; a client waiting for its current cell
 //   keeps its place (due from when it began waiting) across cell changes.
 //   While the workers are behind
-//   (setBehind), only the current cell is requested: prefetch backs off.
+//   (setBehind), only the current cell is requested: prefetch backs off
+//   (except to unculled sets, below).
 //   A prefetch request the work queue dropped (onDropped) is asked again no
 //   sooner than kRetryAfterDropS later.
 // - Coarse first (config.coarseFirst, the server without a database): a
@@ -30,6 +32,15 @@
 //   face of the refined set unless the budget stopped some (they are sent
 //   then); what the coarse set had beyond it is not evicted at once but is
 //   no longer kept by that cell when the budget needs room.
+// - Unculled before that, when waiting would cost (coarse first only, under
+//   the visibility policy): while the workers are behind, a needed cell
+//   with neither set cached gets its block's unculled set (every face within
+//   the radius, a grid query: rank Immediate), prefetch included, so the
+//   client is served whatever the load; so does a current cell whose set
+//   has not come within unculledAfterS of the client beginning to wait. The
+//   current cell then refines to the coarse set and then to its own (rank
+//   Refine), each replacing the looser one as above. A set looser than the
+//   one loaded is ignored.
 // - Under the visibility policy nothing streams before the current cell's
 //   face set is known and its culling (faces visible from the pose) has
 //   answered; those faces go first, then the rest of each needed cell in
@@ -40,6 +51,12 @@
 //   evicted, farthest first, down to 70%.
 // - CellReady once the client holds every face of a needed cell (again after
 //   an eviction took some of them).
+// - Coalescing (coalesceBytes > 0): a small batch waits while nothing in it
+//   is due: no face in view from the pose or of the current cell, and no
+//   needed cell the client may reach within coalesceUntilS; faces of cells
+//   farther ahead gather until they fill coalesceBytes, since a frame's
+//   fixed cost (about 50 bytes plus the codec's) weighs on small batches.
+//   A cell is never announced before all its faces were sent.
 //
 // Not thread-safe: one scheduler per session, used on the session's strand.
 #pragma once
@@ -62,7 +79,20 @@ struct StreamSchedulerConfig {
   unsigned maxCellRequests = 3;
   size_t batchBytes = 48u << 10;  // raw face bytes per batch
   double cullIntervalS = 0.25;
+  // Neighbour prefetch: seconds of travel to the shared side or corner. One
+  // second covers a face set from the cache and its batch with room to
+  // spare (city1, 40 walkers: 0 misses); 3 s (the previous margin) took in
+  // all eight neighbours of a 4 m cell at walking speed.
+  double neighbourLeadS = 1.0;
+  // Coalescing (see above); 0 bytes: every batch goes as soon as it can.
+  size_t coalesceBytes = 0;
+  double coalesceUntilS = 1.5;
   bool coarseFirst = false;  // see above; the server sets it without a database
+  // Coarse first: seconds a client waits for its current cell's set before
+  // it gets the unculled set (see above). Above a coarse PVS's cost on
+  // bigcity (0.15-0.35 s on one core, 20 clients), so a client alone gets
+  // the PVS rather than the larger unculled set.
+  double unculledAfterS = 0.75;
 };
 
 class StreamScheduler {
@@ -106,7 +136,12 @@ class StreamScheduler {
   }
   // Whether the needed cell streams its own (fine) face set rather than its
   // coarse parent's; false while it has none.
-  bool hasFineSet(uint32_t cell) const { return fine_.count(cell) > 0; }
+  bool hasFineSet(uint32_t cell) const { return loadedLevel(cell) == CellLevel::Fine; }
+  // The level of the set a needed cell streams, if it has one.
+  std::optional<CellLevel> loadedLevel(uint32_t cell) const {
+    const auto it = levels_.find(cell);
+    return it == levels_.end() ? std::nullopt : std::optional<CellLevel>(it->second);
+  }
   // The workers are behind (WorkQueue::behind): prefetch and refinement wait.
   void setBehind(bool behind) { behind_ = behind; }
 
@@ -131,8 +166,11 @@ class StreamScheduler {
   bool readyToStream(bool cullingInFlight) const;
   // Faces to evict now (sorted; empty if within the budget).
   std::vector<uint32_t> takeEvictions();
-  // The next batch of faces to send, in order (about batchBytes); marks them held.
+  // The next batch of faces to send, in order (about batchBytes); marks them
+  // held. Empty while coalescing holds a small batch back (see above).
   std::vector<uint32_t> takeBatch();
+  // Whether a batch would go now: something is due, or enough has gathered.
+  bool worthABatch() const;
   struct ReadyCell {
     glm::ivec3 cell;
     uint32_t faces;
@@ -171,9 +209,9 @@ class StreamScheduler {
   std::vector<double> neededInS_;             // per needed cell: seconds until the client needs it
   std::map<uint32_t, FaceListPtr> cellSets_;  // loaded face sets of needed cells
   std::map<uint32_t, size_t> cursor_;         // per loaded cell: faces before this index are held
-  std::set<uint32_t> fine_;                 // loaded cells whose set is their own, not the parent's
-  std::map<uint64_t, Interest> requested_;  // face sets being computed, by requestKey
-  std::map<uint64_t, double> retryAt_;      // dropped requests: not again before this time
+  std::map<uint32_t, CellLevel> levels_;      // per loaded cell: the level of its set
+  std::map<uint64_t, Interest> requested_;    // face sets being computed, by requestKey
+  std::map<uint64_t, double> retryAt_;        // dropped requests: not again before this time
   bool behind_ = false;
   std::optional<double> waitingSinceS_;  // since when the current cell has had no face set
   std::set<uint32_t> announced_;

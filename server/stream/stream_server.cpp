@@ -286,12 +286,12 @@ void StreamServer::statsTick() {
     const WorkQueue::Load work = world_.work().load();
     spdlog::info(
         "stats: {} sessions, {:.1f} kB/s out, cache hit rate {:.1f}% ({} PVS computed ({} coarse), "
-        "{} from the database, {} cancelled unstarted, {} dropped), queues {:.1f} kB total / "
-        "{:.1f} kB max, workers {} (visibility jobs waiting: {}, {} for current cells, the oldest "
-        "for {:.1f} s), CPU {:.0f}%",
+        "{} unculled sets, {} from the database, {} cancelled unstarted, {} dropped), queues "
+        "{:.1f} kB total / {:.1f} kB max, workers {} (visibility jobs waiting: {}, {} for current "
+        "cells, the oldest for {:.1f} s), CPU {:.0f}%",
         sessions, double(bytes - lastBytes_) / 1e3 / config_.statsIntervalS, 100.0 * hitRate,
-        cs.pvsComputed, cs.coarseComputed, cs.pvsFromDatabase, cs.cancelled, cs.dropped,
-        double(queueSum) / 1e3, double(queueMax) / 1e3,
+        cs.pvsComputed, cs.coarseComputed, cs.unculled, cs.pvsFromDatabase, cs.cancelled,
+        cs.dropped, double(queueSum) / 1e3, double(queueMax) / 1e3,
         world_.work().behind(config_.behindLagS, config_.behindQueuedJobs) ? "behind"
                                                                            : "keeping up",
         work.waiting, work.waitingCurrent, work.oldestCurrentS, cpuMsPerS_ / 10.0);

@@ -29,6 +29,7 @@
 #include <vector>
 
 #include "common/core/log.h"
+#include "server/stream/stream_scheduler.h"
 #include "server/stream/stream_world.h"
 
 namespace vistream {
@@ -75,12 +76,17 @@ struct StreamServerConfig {
   // The workers are behind when a current-cell computation has waited longer
   // than behindLagS or more than behindQueuedJobs current-cell computations
   // wait; then sessions stop asking for prefetch and refinement, and stop
-  // culling (work_queue.h). Chosen on bigcity without a database, 2 cores,
-  // 20 and 100 walking clients (a cell's face set costs about 0.1 s there).
+  // culling (work_queue.h); without a database, cells without a cached set
+  // get their unculled sets instead (stream_scheduler.h). Chosen on bigcity
+  // without a database, 2 cores, 20 and 100 walking clients (a cell's face
+  // set costs about 0.1 s there).
   double behindLagS = 0.5;
   size_t behindQueuedJobs = 4;
   // Sessions add no prefetch or refinement while more than this waits.
   size_t maxWaitingPrefetch = 8;
+  // Without a database: seconds a client waits for its current cell's set
+  // before it gets its block's unculled set (stream_scheduler.h).
+  double unculledAfterS = StreamSchedulerConfig{}.unculledAfterS;
 };
 
 class Session;

@@ -101,7 +101,11 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
       [this](const FaceSetKey& k) {
         const Box3f box = pvsKeyBox(k.cell);
         FaceList near = facesWithin(box, float(k.radiusCm) / 100.0f);
-        if (k.policy == StreamPolicy::Radius) return near;
+        if (k.policy == StreamPolicy::Radius) {
+          // A coarse block's radius set is an unculled set (see cellFaceSet).
+          if (k.cell & kCoarseKey) ++unculledComputed_;
+          return near;
+        }
         if (!database_) return computeNearPvs(k, box, near);
         FaceListPtr pvs = pvsCache_->find(k.cell);
         const FaceList computed = pvs ? FaceList{} : computePvs(k.cell);
@@ -181,7 +185,14 @@ FaceList StreamWorld::computeNearPvs(const FaceSetKey& k, const Box3f& box, cons
       options.candidateFaces = &fromParent;
     }
   }
-  FaceList faces = epsilonPvs().compute(box, options).faces;
+  PvsResult result = epsilonPvs().compute(box, options);
+  spdlog::debug(
+      "near PVS of {} cell {}: {} of {} candidate faces in {:.1f} ms (box stage {:.1f} ms, "
+      "face stage {:.1f} ms, {} lines)",
+      k.cell & kCoarseKey ? "coarse" : "fine", k.cell & ~kCoarseKey, result.faces.size(),
+      options.candidateFaces->size(), result.stats.timeMs, result.stats.boxStageMs,
+      result.stats.faceStageMs, result.stats.linesCast);
+  FaceList faces = std::move(result.faces);
   ++nearPvsComputed_;
   if (k.cell & kCoarseKey) ++coarseComputed_;
   return faces;
@@ -246,8 +257,17 @@ void StreamWorld::cellFaceSet(const glm::ivec3& cell, CellLevel level, StreamPol
                               float radius, boost::asio::thread_pool& pool,
                               std::function<void(FaceListPtr)> done, CellWork work) {
   if (policy == StreamPolicy::Radius) level = CellLevel::Fine;
+  const uint32_t radiusCm = uint32_t(std::lround(std::max(0.0f, radius) * 100.0f));
+  if (level == CellLevel::Unculled) {
+    // The coarse block's faces within the radius: the radius policy's set
+    // for the block's box.
+    faceSetCache_->get({pvsKey(cell, CellLevel::Coarse), radiusCm, StreamPolicy::Radius},
+                       pool.get_executor(), std::move(done), work.interest, work.priority,
+                       std::move(work.dropped));
+    return;
+  }
   const uint32_t pvs = pvsKey(cell, level);
-  const FaceSetKey key{pvs, uint32_t(std::lround(std::max(0.0f, radius) * 100.0f)), policy};
+  const FaceSetKey key{pvs, radiusCm, policy};
   // One stage where the face set is computed from the near faces alone.
   if (policy == StreamPolicy::Radius || !database_) {
     faceSetCache_->get(key, pool.get_executor(), std::move(done), work.interest, work.priority,
@@ -278,8 +298,11 @@ void StreamWorld::cellFaceSet(const glm::ivec3& cell, CellLevel level, StreamPol
 bool StreamWorld::hasCellFaceSet(const glm::ivec3& cell, CellLevel level, StreamPolicy policy,
                                  float radius) const {
   if (policy == StreamPolicy::Radius) level = CellLevel::Fine;
-  return faceSetCache_->contains(
-      {pvsKey(cell, level), uint32_t(std::lround(std::max(0.0f, radius) * 100.0f)), policy});
+  const uint32_t radiusCm = uint32_t(std::lround(std::max(0.0f, radius) * 100.0f));
+  if (level == CellLevel::Unculled)
+    return faceSetCache_->contains(
+        {pvsKey(cell, CellLevel::Coarse), radiusCm, StreamPolicy::Radius});
+  return faceSetCache_->contains({pvsKey(cell, level), radiusCm, policy});
 }
 
 FaceList StreamWorld::facesWithin(const Box3f& box, float radius) const {
@@ -316,7 +339,8 @@ StreamWorld::CacheStats StreamWorld::cacheStats() const {
           pvsFromDatabase_,
           pvsCache_->cancelled() + faceSetCache_->cancelled(),
           coarseComputed_,
-          pvsCache_->dropped() + faceSetCache_->dropped()};
+          pvsCache_->dropped() + faceSetCache_->dropped(),
+          unculledComputed_};
 }
 
 }  // namespace vistream

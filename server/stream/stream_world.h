@@ -21,6 +21,13 @@
 // coarse PVS within the radius of the whole block) likewise contains the face
 // set of each member cell at the same radius.
 //
+// Unculled sets (without a database): every face within the radius of a
+// coarse block, no visibility computed (the radius policy's set for the
+// block). It contains the block's coarse face set, hence each member cell's
+// own, and costs a grid query rather than a PVS: what a client gets at once
+// when the workers are behind, refined to the coarse and then the fine set
+// when they catch up (stream_scheduler.h).
+//
 // Work order: PVS and face-set computations wait in one WorkQueue
 // (work_queue.h) in order of urgency (a client's current cell before any
 // prefetch, prefetch due soonest first, refinement last), with a bound on
@@ -73,9 +80,11 @@ struct StreamWorldOptions {
   size_t maxQueuedPrefetch = 64;
 };
 
-// Which PVS a face set is built from: a view cell's own, or its coarse
-// parent's (the 2 x 1 x 2 block holding it; see above).
-enum class CellLevel : uint8_t { Fine, Coarse };
+// Which PVS a face set is built from: a view cell's own, its coarse
+// parent's (the 2 x 1 x 2 block holding it; see above), or none (Unculled:
+// the coarse block's faces within the radius). Each level's set contains the
+// one before it at the same radius.
+enum class CellLevel : uint8_t { Fine, Coarse, Unculled };
 
 // How a request for visibility work waits: its urgency, the requester's
 // interest (see async_cache.h), and what to call instead of `done` if the
@@ -126,8 +135,8 @@ class StreamWorld {
   void cellFaceSet(const glm::ivec3& cell, StreamPolicy policy, float radius,
                    boost::asio::thread_pool& pool, std::function<void(FaceListPtr)> done,
                    const Interest& interest = nullptr);
-  // The same at a level (the radius policy has only Fine: Coarse is served
-  // as Fine), waiting in the work queue as `work` says.
+  // The same at a level (the radius policy has only Fine: Coarse and
+  // Unculled are served as Fine), waiting in the work queue as `work` says.
   void cellFaceSet(const glm::ivec3& cell, CellLevel level, StreamPolicy policy, float radius,
                    boost::asio::thread_pool& pool, std::function<void(FaceListPtr)> done,
                    CellWork work);
@@ -164,6 +173,7 @@ class StreamWorld {
     uint64_t cancelled = 0;       // computations dropped unstarted: nobody waited any more
     uint64_t coarseComputed = 0;  // of pvsComputed, coarse cells
     uint64_t dropped = 0;         // prefetch dropped unstarted for the queue's bound
+    uint64_t unculled = 0;        // unculled sets computed (no PVS: the workers were behind)
   };
   CacheStats cacheStats() const;
   bool hasDatabase() const { return database_.has_value(); }
@@ -204,7 +214,8 @@ class StreamWorld {
   XzGrid faceGrid_;
   std::unique_ptr<AsyncCache<uint32_t, FaceList>> pvsCache_;
   std::unique_ptr<AsyncCache<FaceSetKey, FaceList, FaceSetKeyHash>> faceSetCache_;
-  std::atomic<uint64_t> pvsFromDatabase_{0}, coarseComputed_{0}, nearPvsComputed_{0};
+  std::atomic<uint64_t> pvsFromDatabase_{0}, coarseComputed_{0}, nearPvsComputed_{0},
+      unculledComputed_{0};
   std::once_flag databaseFailureLogged_;
   std::mutex cellPairsMutex_;
   std::unordered_map<uint64_t, bool> cellPairs_;

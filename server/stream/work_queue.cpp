@@ -6,7 +6,7 @@ void WorkQueue::insert(JobId id, Job job) {
   const Key key = keyOf(id, job.priority);
   if (job.priority.rank == WorkPriority::Current)
     current_[id] = key;
-  else
+  else if (droppable(job.priority))
     ++droppable_;
   keys_[id] = key;
   jobs_.emplace(key, std::move(job));
@@ -15,7 +15,7 @@ void WorkQueue::insert(JobId id, Job job) {
 std::function<void()> WorkQueue::dropExcess() {
   if (droppable_ <= maxDroppable_) return {};
   // The least urgent job is the last one; it is droppable, since at least
-  // one droppable job waits and every droppable rank sorts after Current.
+  // one droppable job waits and every droppable rank sorts after the others.
   auto last = std::prev(jobs_.end());
   const JobId id = std::get<2>(last->first);
   std::function<void()> dropped = std::move(last->second.dropped);
@@ -37,7 +37,7 @@ bool WorkQueue::raise(JobId id, WorkPriority priority) {
   keys_.erase(k);
   if (job.priority.rank == WorkPriority::Current)
     current_.erase(id);
-  else
+  else if (droppable(job.priority))
     --droppable_;
   job.priority = priority;
   insert(id, std::move(job));
@@ -69,7 +69,7 @@ void WorkQueue::runNext() {
     const JobId id = std::get<2>(first->first);
     if (first->second.priority.rank == WorkPriority::Current)
       current_.erase(id);
-    else
+    else if (droppable(first->second.priority))
       --droppable_;
     run = std::move(first->second.run);
     jobs_.erase(first);
@@ -83,6 +83,7 @@ WorkQueue::Load WorkQueue::load() const {
   Load l;
   l.waiting = jobs_.size();
   l.waitingCurrent = current_.size();
+  l.waitingDroppable = droppable_;
   l.dropped = droppedCount_;
   if (!current_.empty()) {
     const Job& oldest = jobs_.at(current_.begin()->second);

@@ -4,16 +4,17 @@
 // waiting (or nothing, if that job was dropped meanwhile), so a job that
 // arrives late can overtake a crowd.
 //
-// Urgency (WorkPriority): a client's current cell first (rank Current),
-// then prefetch (rank Prefetch), then refinement (rank Refine); within a
-// rank, the job due soonest (the time its client is expected to need it),
-// then the oldest.
+// Urgency (WorkPriority): short jobs a client waits for first (rank
+// Immediate: a face set that needs no visibility computation, encoding a
+// batch), then a client's current cell (rank Current), then prefetch (rank
+// Prefetch), then refinement (rank Refine); within a rank, the job due
+// soonest (the time its client is expected to need it), then the oldest.
 //
 // Bounds: at most `maxDroppable` jobs of rank Prefetch or Refine wait; a new
 // one beyond that drops the least urgent waiting (its `dropped` callback
 // runs, so its requester can ask again later) or is itself dropped if it is
-// the least urgent. Current-cell jobs are never dropped for the bound: each
-// session has at most a few, so sessions bound them. abandon() drops
+// the least urgent. Immediate and current-cell jobs are never dropped for
+// the bound: each session has at most a few, so sessions bound them. abandon() drops
 // everything waiting, whatever its rank (each `dropped` runs), and refuses
 // later submissions: a stopping server.
 //
@@ -32,7 +33,7 @@
 namespace vistream {
 
 struct WorkPriority {
-  enum Rank : uint8_t { Current = 0, Prefetch = 1, Refine = 2 };
+  enum Rank : uint8_t { Immediate = 0, Current = 1, Prefetch = 2, Refine = 3 };
   Rank rank = Current;
   double dueS = 0.0;  // when the client is expected to need it (any clock, one per server)
 
@@ -77,16 +78,17 @@ class WorkQueue {
   void abandon();
 
   struct Load {
-    size_t waiting = 0;         // jobs of every rank
-    size_t waitingCurrent = 0;  // current-cell jobs
-    double oldestCurrentS = 0;  // how long the oldest current-cell job has waited
-    uint64_t dropped = 0;       // jobs dropped so far for the bound
+    size_t waiting = 0;           // jobs of every rank
+    size_t waitingCurrent = 0;    // current-cell jobs
+    size_t waitingDroppable = 0;  // prefetch and refinement jobs (not immediate ones)
+    double oldestCurrentS = 0;    // how long the oldest current-cell job has waited
+    uint64_t dropped = 0;         // jobs dropped so far for the bound
   };
   Load load() const;
   // Whether the workers have fallen behind: a current-cell job has waited
   // longer than `lagS`, or more current-cell jobs wait than
-  // `maxWaitingCurrent` (prefetch has its own bound). Prefetch backs off
-  // while it holds.
+  // `maxWaitingCurrent` (prefetch has its own bound; immediate jobs are
+  // short and not counted). Prefetch backs off while it holds.
   bool behind(double lagS, size_t maxWaitingCurrent) const;
 
  private:
@@ -99,6 +101,7 @@ class WorkQueue {
   using Key = std::tuple<uint8_t, double, JobId>;
   static Key keyOf(JobId id, const WorkPriority& p) { return {uint8_t(p.rank), p.dueS, id}; }
 
+  static bool droppable(const WorkPriority& p) { return p.rank >= WorkPriority::Prefetch; }
   void insert(JobId id, Job job);
   // Over the bound: removes the least urgent droppable job and returns its
   // `dropped` callback (to be called once the lock is released).

@@ -204,6 +204,9 @@ EpsilonPvs::EpsilonPvs(const Scene& scene, const OccluderOptions& occluderOption
   for (uint32_t e = 0; e < objects_.size(); ++e)
     for (uint32_t f = 0; f < objects_[e].faces.size(); ++f)
       if (objects_[e].faces[f].id < faceIndex_.size()) faceIndex_[objects_[e].faces[f].id] = {e, f};
+  occludersOf_.resize(scene.objects.size());
+  for (uint32_t i = 0; i < occluders_.occluders.size(); ++i)
+    occludersOf_[occluders_.occluders[i].object].push_back(i);
   prepareMs_ = clock.ms();
 }
 
@@ -464,11 +467,15 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
   std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return dist[a] < dist[b]; });
 
   std::vector<uint8_t> objectHidden(objects_.size(), 0);
-  std::vector<std::vector<uint32_t>> occludersOf;  // object -> its occluders, for dropping
-  if (options.dropOccludedOccluders) {
-    occludersOf.resize(scene_.objects.size());
-    for (uint32_t i = 0; i < occluders_.occluders.size(); ++i)
-      occludersOf[occluders_.occluders[i].object].push_back(i);
+  // Coarse to fine: the objects owning a candidate face; the others are
+  // hidden already and only counted (in their turn, so that the occluders
+  // they drop are dropped at the same point as if they were visited).
+  std::vector<uint8_t> hasCandidate;
+  if (options.candidateFaces) {
+    hasCandidate.assign(objects_.size(), 0);
+    for (uint32_t f : *options.candidateFaces)
+      if (f < faceIndex_.size() && faceIndex_[f].first != ~0u)
+        hasCandidate[faceIndex_[f].first] = 1;
   }
   auto isCandidate = [&](uint32_t face) {
     return !options.candidateFaces ||
@@ -485,6 +492,13 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
     stats.faces += e.faces.size();
     if (e.dynamic) {
       for (const Face& f : e.faces) result.faces.push_back(f.id);
+      continue;
+    }
+    if (options.candidateFaces && !hasCandidate[idx]) {
+      stats.facesOccluded += e.faces.size();
+      objectHidden[idx] = 1;
+      if (options.dropOccludedOccluders)
+        for (uint32_t oc : occludersOf_[e.object]) q.allowed[oc] = 0;
       continue;
     }
     bool anyVisible = false;
@@ -562,7 +576,7 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
     if (!anyVisible) {
       objectHidden[idx] = 1;
       if (options.dropOccludedOccluders)
-        for (uint32_t oc : occludersOf[e.object]) q.allowed[oc] = 0;
+        for (uint32_t oc : occludersOf_[e.object]) q.allowed[oc] = 0;
     }
   }
 

@@ -188,6 +188,7 @@ class EpsilonPvs {
   KdTree occluderTree_;
   std::vector<ObjectEntry> objects_;
   std::vector<std::pair<uint32_t, uint32_t>> faceIndex_;  // face ID -> (object entry, face), or ~0u
+  std::vector<std::vector<uint32_t>> occludersOf_;        // scene object -> its occluders
   const HorizonFusion* fusion_ = nullptr;
   std::vector<Box3f> solidBounds_;  // bounds of the closed components of one-sided faces
   double prepareMs_ = 0.0;

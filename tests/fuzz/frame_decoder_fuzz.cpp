@@ -7,6 +7,7 @@
 
 #include "protocol/geometry/geometry_codec.h"
 #include "protocol/wire/framing.h"
+#include "protocol/wire/messages.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   vistream::wire::FrameDecoder decoder(1u << 16);
@@ -27,6 +28,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         (void)vistream::wire::decodeGeometry(*g, vistream::wire::QuantizationGrid{}, out, error);
       }
       if (const auto* p = env->payload_as_Pose()) (void)vistream::wire::isFinite(p->position());
+      if (const auto* r = env->payload_as_CellReady()) (void)vistream::wire::readyCells(*r);
     }
   }
   return 0;

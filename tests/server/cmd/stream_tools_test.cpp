@@ -247,6 +247,16 @@ TEST(StreamTools, AServerFromAConfigFileServesWalkingClientsAndStopsOnSigterm) {
   EXPECT_GT(j["frames_checked"].get<int>(), 0);
   EXPECT_EQ(j["visibility_misses"], 0);
   EXPECT_GT(j["bytes_per_client_per_s"].get<double>(), 0.0);
+  // The byte breakdown by message type sums to the bytes received (a frame
+  // cut off at the end counts as partial_frame), and says what carried them.
+  uint64_t byType = 0;
+  for (const auto& [type, bytes] : j["bytes_by_type"].items()) byType += bytes.get<uint64_t>();
+  EXPECT_EQ(byType, j["bytes_received"].get<uint64_t>()) << j["bytes_by_type"].dump();
+  for (const char* type : {"Welcome", "Geometry", "CellReady"}) {
+    EXPECT_GT(j["bytes_by_type"].value(type, uint64_t(0)), 0u) << type;
+    EXPECT_GT(j["frames_by_type"].value(type, uint64_t(0)), 0u) << type;
+  }
+  EXPECT_EQ(j["frames_by_type"]["Welcome"], 3) << "one Welcome per client";
   // SIGTERM: the server said goodbye and exited (no process left).
   EXPECT_EQ(sh("kill -0 $(cat " + d + "/pid) 2>/dev/null && echo alive || echo gone"), "gone\n");
 }
@@ -396,8 +406,8 @@ TEST(StreamTools, OutOfRangeNumbersAndAnAddressThatCannotBeUsedFailBeforeTheScen
                                                  .common = "--scene " + missing,
                                                  .at = vistream::testing::MentionAt::Anywhere,
                                                  .unopened = missing};
-  expectEachOptionNamed(
-      server, {"--port -1", "--threads -1", "--cell-size -4", "--radius 0", "--max-speed -3"});
+  expectEachOptionNamed(server, {"--port -1", "--threads -1", "--cell-size -4", "--radius 0",
+                                 "--max-speed -3", "--unculled-after -1"});
   const vistream::testing::BadArguments serverSpecific[] = {
       {"--port 99999", "--port: must be an integer in 0..65535"},
       // 192.0.2.1 (TEST-NET-1, RFC 5737) is no address of this machine.

@@ -50,6 +50,7 @@ const glm::dvec3 kPoint{0.0, 1.7, 8.0};
 TEST_F(SchedulerTest, AsksForTheCurrentCellFirstAndNeverMoreThanTheRequestLimit) {
   StreamSchedulerConfig cfg;
   cfg.maxCellRequests = 2;
+  cfg.neighbourLeadS = 3.0;  // every neighbour needed: more cells than the limit
   StreamScheduler s(world(), cfg, 200.0f, 0);
   EXPECT_TRUE(s.takeCellRequests().empty()) << "nothing before a pose";
   s.setPose(kPoint, glm::vec3(0.0f), 0.0f, 0.0f);
@@ -263,23 +264,41 @@ TEST_F(SchedulerTest, PrefetchBacksOffWhileTheWorkersAreBehindAndADroppedOneWait
   EXPECT_TRUE(askedAgain);
 }
 
-// Coarse first, then the cell's own set: at every step the client holds
-// every face of the cell's PVS within the radius as computed directly (the
-// oracle: EpsilonPvs on the cell's box, no candidate faces), and the cell is
-// announced ready only then.
-TEST(SchedulerCoarseFirst, NeverLeavesTheClientWithoutAFaceOfTheCellsOwnPvs) {
-  StreamWorld world(streetScene(), StreamWorldOptions{});
-  ASSERT_TRUE(world.coarseFirst());
-  const EpsilonPvs direct(world.scene());
-  boost::asio::thread_pool pool(2);
-  constexpr float kRadius = 15.0f;  // small: the coarse set's wider reach shows too
-  auto faceSet = [&](uint32_t cell, CellLevel level) {
+// The street world of the coarse-first tests and their oracle: a cell's PVS
+// within the radius computed directly (EpsilonPvs on the cell's box, no
+// candidate faces).
+struct DirectPvs {
+  static constexpr float kRadius = 15.0f;  // small: the coarse set's wider reach shows too
+  StreamWorld world{streetScene(), StreamWorldOptions{}};
+  EpsilonPvs direct{world.scene()};
+  boost::asio::thread_pool pool{2};
+
+  FaceListPtr faceSet(uint32_t cell, CellLevel level) {
     std::promise<FaceListPtr> p;
     world.cellFaceSet(
         world.grid().cellAt(cell), level, StreamPolicy::Visibility, kRadius, pool,
         [&](FaceListPtr f) { p.set_value(f); }, CellWork{});
     return p.get_future().get();
-  };
+  }
+  FaceList oracle(const Box3f& box) const {
+    FaceList out;
+    const FaceList pvs = direct.compute(box).faces, near = world.facesWithin(box, kRadius);
+    std::set_intersection(pvs.begin(), pvs.end(), near.begin(), near.end(),
+                          std::back_inserter(out));
+    return out;
+  }
+};
+
+// Coarse first, then the cell's own set: at every step the client holds
+// every face of the cell's PVS within the radius as computed directly (the
+// oracle: EpsilonPvs on the cell's box, no candidate faces), and the cell is
+// announced ready only then.
+TEST(SchedulerCoarseFirst, NeverLeavesTheClientWithoutAFaceOfTheCellsOwnPvs) {
+  DirectPvs d;
+  StreamWorld& world = d.world;
+  ASSERT_TRUE(world.coarseFirst());
+  constexpr float kRadius = DirectPvs::kRadius;
+  auto faceSet = [&](uint32_t cell, CellLevel level) { return d.faceSet(cell, level); };
   StreamSchedulerConfig cfg;
   cfg.coarseFirst = true;
   const ViewCellGrid& grid = world.grid();
@@ -289,10 +308,7 @@ TEST(SchedulerCoarseFirst, NeverLeavesTheClientWithoutAFaceOfTheCellsOwnPvs) {
       const glm::ivec3 cell(x, 0, z);
       const Box3f box = grid.cellBox(cell);
       SCOPED_TRACE(::testing::Message() << "cell " << x << ", " << z);
-      FaceList oracle;
-      const FaceList pvs = direct.compute(box).faces, near = world.facesWithin(box, kRadius);
-      std::set_intersection(pvs.begin(), pvs.end(), near.begin(), near.end(),
-                            std::back_inserter(oracle));
+      const FaceList oracle = d.oracle(box);
       StreamScheduler s(world, cfg, kRadius, 0);
       s.setPose(glm::dvec3(box.center()), glm::vec3(0.0f), 0.0f, 0.0f);
       const uint32_t here = uint32_t(grid.linearIndex(cell));
@@ -338,6 +354,132 @@ TEST(SchedulerCoarseFirst, NeverLeavesTheClientWithoutAFaceOfTheCellsOwnPvs) {
     }
   EXPECT_GT(cellsTried, 4u);
   EXPECT_GT(coarseLarger, 0u) << "somewhere the coarse set is larger, so refining matters";
+}
+
+// Unculled first, for a server whose workers are behind: every needed cell
+// (prefetch included) is asked for its unculled set at once, at rank
+// Immediate; the current cell refines to the coarse set and then to its own
+// once the workers catch up; at every step the client holds every face of
+// the cell's PVS within the radius computed directly (the oracle: EpsilonPvs
+// on the cell's box), and under a memory budget the refinement lets go of
+// faces outside the cell's own set only.
+TEST(SchedulerUnculledFirst,
+     ServesEveryCellAtOnceWhileBehindThenRefinesEvictingOnlyFacesOutsideIt) {
+  DirectPvs d;
+  StreamWorld& world = d.world;
+  constexpr float kRadius = DirectPvs::kRadius;
+  auto faceSet = [&](uint32_t cell, CellLevel level) { return d.faceSet(cell, level); };
+  StreamSchedulerConfig cfg;
+  cfg.coarseFirst = true;
+  cfg.maxCellRequests = 4;
+  const ViewCellGrid& grid = world.grid();
+  size_t cellsTried = 0, evictedSome = 0;
+  for (int z = 1; z < grid.dims().z; z += 4)
+    for (int x = 1; x < grid.dims().x; x += 4) {
+      const glm::ivec3 cell(x, 0, z);
+      const Box3f box = grid.cellBox(cell);
+      SCOPED_TRACE(::testing::Message() << "cell " << x << ", " << z);
+      const FaceList oracle = d.oracle(box);
+      const uint32_t here = uint32_t(grid.linearIndex(cell));
+      const FaceListPtr unculled = faceSet(here, CellLevel::Unculled);
+      // The budget holds the unculled set exactly: refining makes room.
+      uint64_t budget = 0;
+      for (uint32_t f : *unculled) budget += world.faceBytes(f);
+      StreamScheduler s(world, cfg, kRadius, budget);
+      s.setBehind(true);
+      s.setPose(glm::dvec3(box.center()), glm::vec3(1.4f, 0.0f, 0.0f), -90.0f, 0.0f);
+      const auto requests = s.takeCellRequests(0.0);
+      ASSERT_GT(requests.size(), 1u) << "prefetch goes on, to unculled sets";
+      EXPECT_LE(requests.size(), cfg.maxCellRequests) << "within the session's bound";
+      EXPECT_EQ(requests[0].cell, here);
+      for (const auto& r : requests) {
+        EXPECT_EQ(r.level, CellLevel::Unculled);
+        EXPECT_EQ(r.priority.rank, WorkPriority::Immediate);
+      }
+      // Only the current cell is answered: the other cells' sets would keep
+      // their faces from eviction.
+      EXPECT_TRUE(s.onFaceSet(here, unculled, CellLevel::Unculled));
+      std::vector<uint32_t> evicted;
+      auto drain = [&] {
+        for (int round = 0; round < 10000; ++round) {
+          if (auto c = s.takeCullRequest(double(round))) s.onCulled(c->cell, {});
+          for (uint32_t f : s.takeEvictions()) evicted.push_back(f);
+          if (s.takeBatch().empty()) break;
+        }
+      };
+      auto missing = [&] {
+        size_t n = 0;
+        for (uint32_t f : oracle) n += !s.held(f);
+        return n;
+      };
+      drain();
+      EXPECT_EQ(missing(), 0u) << "after the unculled set";
+      EXPECT_EQ(s.heldBytes(), budget);
+      bool ready = false;
+      for (const auto& r : s.takeReadyCells()) ready = ready || r.cell == cell;
+      EXPECT_TRUE(ready);
+      for (const auto& r : s.takeCellRequests(0.0))
+        EXPECT_NE(r.cell, here) << "no refinement while behind";
+      // Caught up: the coarse set, then the cell's own.
+      s.setBehind(false);
+      for (CellLevel level : {CellLevel::Coarse, CellLevel::Fine}) {
+        std::optional<StreamScheduler::CellRequest> refinement;
+        for (auto& r : s.takeCellRequests(1.0))
+          if (r.cell == here) refinement = std::move(r);
+        ASSERT_TRUE(refinement);
+        EXPECT_EQ(refinement->level, level);
+        EXPECT_EQ(refinement->priority.rank, WorkPriority::Refine);
+        EXPECT_TRUE(s.onFaceSet(here, faceSet(here, level), level));
+        EXPECT_EQ(s.loadedLevel(here), level);
+        drain();
+        EXPECT_EQ(missing(), 0u) << "after the refinement";
+      }
+      const FaceListPtr own = faceSet(here, CellLevel::Fine);
+      for (uint32_t f : evicted)
+        EXPECT_FALSE(std::binary_search(own->begin(), own->end(), f))
+            << "face " << f << " of the cell's own set evicted";
+      evictedSome += !evicted.empty();
+      ++cellsTried;
+    }
+  EXPECT_GT(cellsTried, 4u);
+  EXPECT_GT(evictedSome, 0u) << "somewhere the refinement made room";
+}
+
+// Not behind: the current cell waits for its coarse set, and gets the
+// unculled one too once it has waited unculledAfterS; whichever is tighter
+// wins, and a looser set arriving later is moot. (A world of its own: no
+// face set is cached before.)
+TEST(SchedulerUnculledFirst, ACurrentCellWaitingTooLongGetsItsUnculledSetAndATighterSetStillWins) {
+  StreamWorld world(streetScene(), StreamWorldOptions{});
+  boost::asio::thread_pool pool(2);
+  StreamSchedulerConfig cfg;
+  cfg.coarseFirst = true;
+  cfg.unculledAfterS = 1.0;
+  StreamScheduler s(world, cfg, 200.0f, 0);
+  s.setPose(kPoint, glm::vec3(0.0f), 0.0f, 0.0f);
+  const uint32_t here = uint32_t(world.grid().linearIndex(*world.cellOf(glm::vec3(kPoint))));
+  const auto first = s.takeCellRequests(10.0);
+  ASSERT_FALSE(first.empty());
+  EXPECT_EQ(first[0].cell, here);
+  EXPECT_EQ(first[0].level, CellLevel::Coarse);
+  EXPECT_EQ(first[0].priority.rank, WorkPriority::Current);
+  for (const auto& r : s.takeCellRequests(10.5)) EXPECT_NE(r.level, CellLevel::Unculled);
+  const auto late = s.takeCellRequests(11.0);
+  ASSERT_EQ(late.size(), 1u);
+  EXPECT_EQ(late[0].cell, here);
+  EXPECT_EQ(late[0].level, CellLevel::Unculled);
+  EXPECT_EQ(late[0].priority.rank, WorkPriority::Immediate);
+  auto set = [&](CellLevel level) {
+    std::promise<FaceListPtr> p;
+    world.cellFaceSet(
+        world.grid().cellAt(here), level, StreamPolicy::Visibility, 200.0f, pool,
+        [&](FaceListPtr f) { p.set_value(f); }, CellWork{});
+    return p.get_future().get();
+  };
+  EXPECT_TRUE(s.onFaceSet(here, set(CellLevel::Coarse), CellLevel::Coarse));
+  EXPECT_FALSE(s.onFaceSet(here, set(CellLevel::Unculled), CellLevel::Unculled))
+      << "looser than the coarse set already loaded";
+  EXPECT_EQ(s.loadedLevel(here), CellLevel::Coarse);
 }
 
 }  // namespace

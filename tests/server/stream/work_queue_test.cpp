@@ -165,6 +165,35 @@ TEST(WorkQueue, ReportsTheWaitOfTheOldestCurrentCellAndFallsBehindOnIt) {
   EXPECT_FALSE(queue.behind(0.0, 0));
 }
 
+// Immediate jobs (a face set needing no visibility computation, encoding a
+// batch) go before every current cell, are not counted as falling behind,
+// and are never dropped for the bound however many wait.
+TEST(WorkQueue, ImmediateJobsOvertakeCurrentCellsAreNeverDroppedAndAreNotFallingBehind) {
+  constexpr size_t kBound = 2;
+  WorkQueue queue(kBound);
+  RunLog log;
+  {
+    HeldWorker worker(queue);
+    auto ex = worker.pool().get_executor();
+    queue.submit(ex, {WorkPriority::Prefetch, 0.0}, log.job(10), log.drop(10));
+    queue.submit(ex, {WorkPriority::Current, 0.0}, log.job(1), log.drop(1));
+    for (int i = 0; i < 5; ++i)
+      queue.submit(ex, {WorkPriority::Immediate, double(5 - i)}, log.job(100 + i),
+                   log.drop(100 + i));
+    queue.submit(ex, {WorkPriority::Refine, 0.0}, log.job(20), log.drop(20));
+    queue.submit(ex, {WorkPriority::Prefetch, 1.0}, log.job(11), log.drop(11));
+    EXPECT_TRUE(log.dropped == std::vector<int>{20}) << "only the refinement, over the bound";
+    const WorkQueue::Load l = queue.load();
+    EXPECT_EQ(l.waiting, 8u);
+    EXPECT_EQ(l.waitingCurrent, 1u) << "immediate jobs are not current cells";
+    EXPECT_EQ(l.waitingDroppable, 2u) << "nor prefetch";
+    EXPECT_FALSE(queue.behind(1e9, 1));
+    worker.finish();
+  }
+  // Immediate by due time, then the current cell, then prefetch by due time.
+  EXPECT_EQ(log.ran, (std::vector<int>{104, 103, 102, 101, 100, 1, 10, 11}));
+}
+
 TEST(WorkQueue, AbandonedItDropsEverythingWaitingWhateverItsRankAndRefusesMore) {
   WorkQueue queue(10);
   RunLog log;
