@@ -559,6 +559,7 @@ void Session::pump() {
   const WorkQueue::Load load = world_.work().load();
   behind_ = load.oldestCurrentS > cfg.behindLagS || load.waitingCurrent > cfg.behindQueuedJobs;
   scheduler_->setBehind(behind_ || load.waitingDroppable > cfg.maxWaitingPrefetch);
+  scheduler_->setLagging(load.oldestCurrentS > cfg.behindLagS);
   requestFaceSets();
   maybeCull();
   if (produceInFlight_ || outbox_.queuedBytes() > cfg.geometryWatermarkBytes) return;

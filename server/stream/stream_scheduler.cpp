@@ -145,21 +145,21 @@ std::vector<StreamScheduler::CellRequest> StreamScheduler::takeCellRequests(doub
     const uint32_t l = needed_[i];
     // The limit is on prefetch: the current cell is always asked for.
     if (i > 0 && outstanding >= config_.maxCellRequests) break;
-    // Prefetch backs off while the workers are behind (to unculled sets,
-    // which cost them little, when those may stand in).
-    if (i > 0 && behind_ && !mayUncull) break;
+    // Prefetch backs off while the workers are behind.
+    if (i > 0 && behind_) break;
     if (cellSets_.count(l) || requestedAny(l)) continue;
     WorkPriority priority = i == 0
                                 ? WorkPriority{WorkPriority::Current, waitingSinceS_.value_or(nowS)}
                                 : WorkPriority{WorkPriority::Prefetch, nowS + neededInS_[i]};
     // Coarse first unless the cell's own set is at hand (or is all there
-    // is); unculled if neither is cached and the workers are behind.
+    // is); for the current cell, unculled if neither is cached and current
+    // cells are lagging.
     const glm::ivec3 c = world_.grid().cellAt(l);
     CellLevel level = CellLevel::Fine;
     if (config_.coarseFirst && config_.policy == StreamPolicy::Visibility &&
         !world_.hasCellFaceSet(c, CellLevel::Fine, config_.policy, radius_)) {
       level = CellLevel::Coarse;
-      if (mayUncull && behind_ &&
+      if (mayUncull && i == 0 && lagging_ &&
           !world_.hasCellFaceSet(c, CellLevel::Coarse, config_.policy, radius_)) {
         level = CellLevel::Unculled;
         priority.rank = WorkPriority::Immediate;

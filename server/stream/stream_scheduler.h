@@ -20,8 +20,7 @@
 //   client is expected to reach it; a client waiting for its current cell
 //   keeps its place (due from when it began waiting) across cell changes.
 //   While the workers are behind
-//   (setBehind), only the current cell is requested: prefetch backs off
-//   (except to unculled sets, below).
+//   (setBehind), only the current cell is requested: prefetch backs off.
 //   A prefetch request the work queue dropped (onDropped) is asked again no
 //   sooner than kRetryAfterDropS later.
 // - Coarse first (config.coarseFirst, the server without a database): a
@@ -33,11 +32,14 @@
 //   then); what the coarse set had beyond it is not evicted at once but is
 //   no longer kept by that cell when the budget needs room.
 // - Unculled before that, when waiting would cost (coarse first only, under
-//   the visibility policy): while the workers are behind, a needed cell
-//   with neither set cached gets its block's unculled set (every face within
-//   the radius, a grid query: rank Immediate), prefetch included, so the
-//   client is served whatever the load; so does a current cell whose set
-//   has not come within unculledAfterS of the client beginning to wait. The
+//   the visibility policy): while current cells wait longer than the lag
+//   bound (setLagging), a current cell with neither set cached gets its
+//   block's unculled set (every face within the radius, a grid query: rank
+//   Immediate), so the client is served whatever the load; so does a
+//   current cell whose set has not come within unculledAfterS of the client
+//   beginning to wait. Prefetch never gets one: an unculled set costs the
+//   bytes of the radius policy, and a start-up crowd that is briefly behind
+//   would take them all. The
 //   current cell then refines to the coarse set and then to its own (rank
 //   Refine), each replacing the looser one as above. A set looser than the
 //   one loaded is ignored.
@@ -144,6 +146,8 @@ class StreamScheduler {
   }
   // The workers are behind (WorkQueue::behind): prefetch and refinement wait.
   void setBehind(bool behind) { behind_ = behind; }
+  // Current cells wait longer than the lag bound: unculled sets stand in.
+  void setLagging(bool lagging) { lagging_ = lagging; }
 
   struct CullRequest {
     uint32_t cell;
@@ -213,6 +217,7 @@ class StreamScheduler {
   std::map<uint64_t, Interest> requested_;    // face sets being computed, by requestKey
   std::map<uint64_t, double> retryAt_;        // dropped requests: not again before this time
   bool behind_ = false;
+  bool lagging_ = false;
   std::optional<double> waitingSinceS_;  // since when the current cell has had no face set
   std::set<uint32_t> announced_;
   FaceList visibleNow_;

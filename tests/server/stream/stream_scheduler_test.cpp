@@ -364,7 +364,7 @@ TEST(SchedulerCoarseFirst, NeverLeavesTheClientWithoutAFaceOfTheCellsOwnPvs) {
 // on the cell's box), and under a memory budget the refinement lets go of
 // faces outside the cell's own set only.
 TEST(SchedulerUnculledFirst,
-     ServesEveryCellAtOnceWhileBehindThenRefinesEvictingOnlyFacesOutsideIt) {
+     ServesTheCurrentCellAtOnceWhileLaggingThenRefinesEvictingOnlyFacesOutsideIt) {
   DirectPvs d;
   StreamWorld& world = d.world;
   constexpr float kRadius = DirectPvs::kRadius;
@@ -387,17 +387,16 @@ TEST(SchedulerUnculledFirst,
       for (uint32_t f : *unculled) budget += world.faceBytes(f);
       StreamScheduler s(world, cfg, kRadius, budget);
       s.setBehind(true);
+      s.setLagging(true);
       s.setPose(glm::dvec3(box.center()), glm::vec3(1.4f, 0.0f, 0.0f), -90.0f, 0.0f);
       const auto requests = s.takeCellRequests(0.0);
-      ASSERT_GT(requests.size(), 1u) << "prefetch goes on, to unculled sets";
-      EXPECT_LE(requests.size(), cfg.maxCellRequests) << "within the session's bound";
+      // Prefetch backs off: an unculled set costs the radius policy's bytes.
+      ASSERT_EQ(requests.size(), 1u);
       EXPECT_EQ(requests[0].cell, here);
       for (const auto& r : requests) {
         EXPECT_EQ(r.level, CellLevel::Unculled);
         EXPECT_EQ(r.priority.rank, WorkPriority::Immediate);
       }
-      // Only the current cell is answered: the other cells' sets would keep
-      // their faces from eviction.
       EXPECT_TRUE(s.onFaceSet(here, unculled, CellLevel::Unculled));
       std::vector<uint32_t> evicted;
       auto drain = [&] {
@@ -422,6 +421,7 @@ TEST(SchedulerUnculledFirst,
         EXPECT_NE(r.cell, here) << "no refinement while behind";
       // Caught up: the coarse set, then the cell's own.
       s.setBehind(false);
+      s.setLagging(false);
       for (CellLevel level : {CellLevel::Coarse, CellLevel::Fine}) {
         std::optional<StreamScheduler::CellRequest> refinement;
         for (auto& r : s.takeCellRequests(1.0))
@@ -449,6 +449,22 @@ TEST(SchedulerUnculledFirst,
 // unculled one too once it has waited unculledAfterS; whichever is tighter
 // wins, and a looser set arriving later is moot. (A world of its own: no
 // face set is cached before.)
+TEST(SchedulerUnculledFirst, BehindButNotLaggingTheCurrentCellWaitsForItsCoarseSet) {
+  DirectPvs d;
+  StreamSchedulerConfig cfg;
+  cfg.coarseFirst = true;
+  const glm::ivec3 cell(1, 0, 1);
+  const Box3f box = d.world.grid().cellBox(cell);
+  StreamScheduler s(d.world, cfg, DirectPvs::kRadius, 0);
+  s.setBehind(true);  // many jobs queued, none waiting long yet
+  s.setPose(glm::dvec3(box.center()), glm::vec3(1.4f, 0.0f, 0.0f), -90.0f, 0.0f);
+  const auto requests = s.takeCellRequests(0.0);
+  ASSERT_EQ(requests.size(), 1u) << "prefetch backs off";
+  EXPECT_EQ(requests[0].cell, uint32_t(d.world.grid().linearIndex(cell)));
+  EXPECT_EQ(requests[0].level, CellLevel::Coarse);
+  EXPECT_EQ(requests[0].priority.rank, WorkPriority::Current);
+}
+
 TEST(SchedulerUnculledFirst, ACurrentCellWaitingTooLongGetsItsUnculledSetAndATighterSetStillWins) {
   StreamWorld world(streetScene(), StreamWorldOptions{});
   boost::asio::thread_pool pool(2);
