@@ -94,6 +94,18 @@ std::vector<Box3f> streetCells(const World& w, float size, size_t count, uint64_
   return cells;
 }
 
+// The sampled ground truth of a cell as the options ask, leaving out the
+// viewpoints the PVS contract does not serve.
+SampledVisibilityOptions groundTruthOptions(const World& w, const PvsBenchOptions& options) {
+  SampledVisibilityOptions gt;
+  gt.points = options.groundTruthPoints;
+  gt.resolution = options.groundTruthRes;
+  gt.skipViewpoint = [&w](const glm::vec3& p) {
+    return w.statics.solids.unservedViewpoint(*w.statics.rays, p);
+  };
+  return gt;
+}
+
 // A scene's name in the plot: a file's stem, without blanks (the .dat file
 // is split at blanks).
 std::string plotLabel(const std::string& spec) {
@@ -337,12 +349,7 @@ int runPvsBench(const PvsBenchOptions& options) {
       std::vector<double> seen, probeOnly;
       for (size_t ci = 0; ci < cells.size(); ++ci) {
         const Box3f& cell = cells[ci];
-        SampledVisibilityOptions gt;
-        gt.points = options.groundTruthPoints;
-        gt.resolution = options.groundTruthRes;
-        gt.skipViewpoint = [&w](const glm::vec3& p) {
-          return w.statics.solids.unservedViewpoint(*w.statics.rays, p);
-        };
+        SampledVisibilityOptions gt = groundTruthOptions(w, options);
         std::vector<PvsResult> results;
         std::vector<uint32_t> probes;  // every method's PVS: the truth aims at each face
         for (const Measured& m : methods) {
@@ -408,12 +415,7 @@ int runPvsBench(const PvsBenchOptions& options) {
       single.fusion = false;
       for (const Box3f& cell : cells) {
         candidates.push_back(w.pvs->compute(cell, single).faces);
-        SampledVisibilityOptions gt;
-        gt.points = options.groundTruthPoints;
-        gt.resolution = options.groundTruthRes;
-        gt.skipViewpoint = [&w](const glm::vec3& p) {
-          return w.statics.solids.unservedViewpoint(*w.statics.rays, p);
-        };
+        SampledVisibilityOptions gt = groundTruthOptions(w, options);
         gt.probeFaces = candidates.back();
         gt.probeSamples = std::max(1, options.groundTruthProbes);
         truths.push_back(sampleVisibleFaces(*w.statics.rays, *w.statics.triangles, cell, gt).faces);

@@ -69,10 +69,13 @@ void warnIfOutsideScene(const Scene& scene, const Box3d& fileBox, const char* op
 // The occlusion horizons for `choice` (--method of cell, --fusion of bake):
 // none for "paper" and "none"; for "auto", only where the scene has solid
 // columns to build them from (cities and terrain, not interiors).
-std::unique_ptr<HorizonFusion> horizonsFor(const Scene& scene, const std::string& choice) {
+// With `world` (parts Solids or more), they use its triangles, rays and solids.
+std::unique_ptr<HorizonFusion> horizonsFor(const Scene& scene, const std::string& choice,
+                                           const StaticWorld* world = nullptr) {
   if (choice != "auto" && choice != "horizons") return nullptr;
   Stopwatch clock;
-  auto horizons = std::make_unique<HorizonFusion>(scene);
+  auto horizons = world ? std::make_unique<HorizonFusion>(scene, *world)
+                        : std::make_unique<HorizonFusion>(scene);
   spdlog::info("occlusion horizons: {} solid columns of {:.2f} m, built in {:.1f} s",
                horizons->solidColumns(), horizons->gridSize(), clock.ms() / 1000.0);
   if (choice == "auto" && horizons->solidColumns() == 0) {
@@ -167,9 +170,10 @@ int cmdBake(const std::string& spec, const SceneLimits& limits, const GroundChoi
   }
   StaticWorldOptions worldOptions;
   worldOptions.ground = ground;
-  const FreeSpace fs = buildStaticWorld(scene, worldOptions).freeSpace;
+  const StaticWorld world = buildStaticWorld(scene, worldOptions);
+  const FreeSpace& fs = world.freeSpace;
   EpsilonPvs pvs(scene);
-  const std::unique_ptr<HorizonFusion> horizons = horizonsFor(scene, fusion);
+  const std::unique_ptr<HorizonFusion> horizons = horizonsFor(scene, fusion, &world);
   pvs.setFusion(horizons.get());
   std::unique_ptr<ProgressBar> bar;
   std::mutex barMutex;  // guards creation of the bar from the first progress call
