@@ -142,6 +142,10 @@ int cmdInfo(const std::string& spec, const SceneLimits& limits, const GroundChoi
                         {"bare_footprint", world.ground.bareFootprint},
                         {"why", world.ground.why}}},
                       {"solids", solidsJson(solids)},
+                      {"sealed_solids",
+                       {{"solids", world.solids.sealedCount()},
+                        {"triangles", world.solids.sealedTriangles()},
+                        {"weld_tolerance_m", SolidsOptions{}.weldTolerance}}},
                       {"effects", decisions},
                       {"object_list", objects},
                       {"load_ms", loadMs}}
@@ -169,6 +173,10 @@ int cmdInfo(const std::string& spec, const SceneLimits& limits, const GroundChoi
   if (fs.walkableCount() == 0) printRow("no free space because", fs.emptyReason());
   printRow("ground", world.ground.why);
   printRow("components", solidsRow(solids));
+  printRow("sealed solids",
+           fmt::format("{} holding {} of {} triangles (welded within {:g} cm, T-junctions cut)",
+                       world.solids.sealedCount(), world.solids.sealedTriangles(),
+                       scene.triangleCount(), 100.0 * SolidsOptions{}.weldTolerance));
   printRow("load time (ms)", fmt::format("{:.1f}", loadMs));
   fmt::print("effects the scene calls for:\n");
   for (const auto& d : effects.decisions)

@@ -6,6 +6,9 @@
 #include <cstring>
 #include <numbers>
 #include <numeric>
+#include <unordered_map>
+
+#include "common/core/check.h"
 
 namespace vistream {
 namespace {
@@ -53,24 +56,23 @@ float exitDistance(const Box3f& box, const glm::vec3& p, const glm::vec3& dir) {
   return t;
 }
 
-}  // namespace
+// Topology the classification is made from: a vertex per welded corner and
+// the edge pieces each triangle's sides are made of.
+struct EdgeUse {
+  uint64_t key;  // lower vertex << 32 | higher vertex
+  uint32_t triangle;
+  bool forward;  // walked from the lower vertex to the higher one
+};
 
-const char* solidClassName(SolidClass c) {
-  constexpr std::array<const char*, 5> kNames{"closed_outward", "closed_inward", "open",
-                                              "non_manifold", "inconsistent"};  // by SolidClass
-  return size_t(c) < kNames.size() ? kNames[size_t(c)] : "?";
-}
-
-Solids Solids::build(const FlatTriangles& tris) {
-  Solids s;
-  const size_t n = tris.size();
-  s.componentOf_.assign(n, kNoHit);
-
-  // Weld corners by exact position: equal floats are the same vertex.
+// Distinct positions of the corners of non-degenerate triangles: vertexOf
+// (by corner 3 t + k) and each vertex's position.
+void exactVertices(const FlatTriangles& tris, std::vector<uint32_t>& vertexOf,
+                   std::vector<glm::dvec3>& position) {
   struct Corner {
     uint32_t key[3];
     uint32_t index;  // 3 * triangle + k
   };
+  const size_t n = tris.size();
   std::vector<Corner> corners;
   corners.reserve(3 * n);
   for (size_t t = 0; t < n; ++t) {
@@ -86,33 +88,223 @@ Solids Solids::build(const FlatTriangles& tris) {
   std::sort(corners.begin(), corners.end(), [](const Corner& a, const Corner& b) {
     return std::lexicographical_compare(a.key, a.key + 3, b.key, b.key + 3);
   });
-  std::vector<uint32_t> vertexOf(3 * n, kNoHit);
-  uint32_t vertices = 0;
+  vertexOf.assign(3 * n, kNoHit);
+  position.clear();
   for (size_t i = 0; i < corners.size(); ++i) {
-    if (i > 0 && !std::equal(corners[i].key, corners[i].key + 3, corners[i - 1].key)) ++vertices;
-    vertexOf[corners[i].index] = vertices;
+    if (i == 0 || !std::equal(corners[i].key, corners[i].key + 3, corners[i - 1].key)) {
+      glm::vec3 p;
+      std::memcpy(&p, corners[i].key, sizeof(p));
+      position.emplace_back(p);
+    }
+    vertexOf[corners[i].index] = uint32_t(position.size() - 1);
   }
-  if (!corners.empty()) ++vertices;
+}
 
-  // Edges: how many triangles use each, and in which direction.
-  struct Edge {
-    uint64_t key;  // lower vertex << 32 | higher vertex
-    uint32_t triangle;
-    bool forward;  // walked from the lower vertex to the higher one
+// Welds vertices closer than `tol` (Euclidean): each vertex, in order, joins
+// the nearest earlier representative within tol, or becomes one. No chains:
+// every vertex lies within tol of its representative. Returns the
+// representative of each vertex.
+std::vector<uint32_t> weldVertices(const std::vector<glm::dvec3>& position, double tol) {
+  struct KeyHash {
+    size_t operator()(const glm::i64vec3& k) const {
+      return size_t(k.x * 73856093LL) ^ size_t(k.y * 19349663LL) ^ size_t(k.z * 83492791LL);
+    }
   };
-  std::vector<Edge> edges;
-  edges.reserve(3 * n);
+  std::unordered_map<glm::i64vec3, std::vector<uint32_t>, KeyHash> cells;
+  std::vector<uint32_t> rep(position.size());
+  auto keyOf = [&](const glm::dvec3& p) { return glm::i64vec3(glm::floor(p / tol)); };
+  for (uint32_t v = 0; v < position.size(); ++v) {
+    const glm::i64vec3 k = keyOf(position[v]);
+    uint32_t best = kNoHit;
+    double bestD = tol;
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz) {
+          const auto it = cells.find(k + glm::i64vec3(dx, dy, dz));
+          if (it == cells.end()) continue;
+          for (uint32_t r : it->second) {
+            const double d = glm::distance(position[r], position[v]);
+            if (d <= bestD) bestD = d, best = r;
+          }
+        }
+    if (best == kNoHit) {
+      cells[k].push_back(v);
+      best = v;
+    }
+    rep[v] = best;
+  }
+  return rep;
+}
+
+// The edge uses of the triangles' sides over vertexOf. With tol > 0, a side
+// that passes within tol of a vertex where the surface has a boundary (a
+// vertex of a side used an odd number of times), away from its ends by more
+// than tol, is cut there: a wall polygon whose corner lies on the long side
+// of its neighbour (a T-junction) then shares the pieces.
+std::vector<EdgeUse> edgeUses(const FlatTriangles& tris, const std::vector<uint8_t>& skip,
+                              const std::vector<uint32_t>& vertexOf,
+                              const std::vector<glm::dvec3>& position, double tol) {
+  const size_t n = tris.size();
+  std::vector<EdgeUse> uses;
+  uses.reserve(3 * n);
   for (size_t t = 0; t < n; ++t) {
-    if (tris.degenerate[t]) continue;
+    if (skip[t]) continue;
     for (int k = 0; k < 3; ++k) {
       const uint32_t a = vertexOf[3 * t + size_t(k)], b = vertexOf[3 * t + size_t((k + 1) % 3)];
       if (a == b) continue;
-      edges.push_back({(uint64_t(std::min(a, b)) << 32) | std::max(a, b), uint32_t(t), a < b});
+      uses.push_back({(uint64_t(std::min(a, b)) << 32) | std::max(a, b), uint32_t(t), a < b});
     }
   }
-  std::sort(edges.begin(), edges.end(), [](const Edge& x, const Edge& y) {
+  auto byKey = [](const EdgeUse& x, const EdgeUse& y) {
     return x.key < y.key || (x.key == y.key && x.triangle < y.triangle);
-  });
+  };
+  std::sort(uses.begin(), uses.end(), byKey);
+  if (tol <= 0.0) return uses;
+
+  // Vertices on a boundary (an odd side), in an X/Z grid.
+  std::vector<uint32_t> boundary;
+  for (size_t i = 0; i < uses.size();) {
+    size_t j = i;
+    while (j < uses.size() && uses[j].key == uses[i].key) ++j;
+    if ((j - i) % 2) {
+      boundary.push_back(uint32_t(uses[i].key >> 32));
+      boundary.push_back(uint32_t(uses[i].key));
+    }
+    i = j;
+  }
+  std::sort(boundary.begin(), boundary.end());
+  boundary.erase(std::unique(boundary.begin(), boundary.end()), boundary.end());
+  if (boundary.empty()) return uses;
+  Box3f area;
+  std::vector<Box3f> points(boundary.size());
+  for (size_t i = 0; i < boundary.size(); ++i) {
+    const glm::vec3 p(position[boundary[i]]);
+    points[i] = Box3f{p, p};
+    area.extend(p);
+  }
+  const float extent = std::max(area.hi.x - area.lo.x, area.hi.z - area.lo.z);
+  const float cellSize = std::max({extent / 1024.0f, float(4.0 * tol), 0.25f});
+  const XzGrid grid(area, cellSize, points);
+
+  // Cut points of each distinct side: (parameter, vertex).
+  std::vector<EdgeUse> out;
+  out.reserve(uses.size());
+  std::vector<std::pair<double, uint32_t>> cuts;
+  const double step = 0.5 * cellSize;
+  for (size_t i = 0; i < uses.size();) {
+    size_t j = i;
+    while (j < uses.size() && uses[j].key == uses[i].key) ++j;
+    const uint32_t a = uint32_t(uses[i].key >> 32), b = uint32_t(uses[i].key);
+    const glm::dvec3 pa = position[a], pb = position[b];
+    const glm::dvec3 ab = pb - pa;
+    const double len = glm::length(ab);
+    cuts.clear();
+    if (len > 2.0 * tol && area.overlaps(Box3f{glm::vec3(glm::min(pa, pb)) - float(tol),
+                                               glm::vec3(glm::max(pa, pb)) + float(tol)})) {
+      const int samples = int(std::ceil(len / step));
+      glm::ivec2 last(-1, -1);
+      for (int s = 0; s <= samples; ++s) {
+        const glm::dvec3 q = pa + ab * (double(s) / samples);
+        const glm::ivec2 c = grid.cellOf({float(q.x), float(q.z)});
+        if (c == last) continue;
+        last = c;
+        for (int dx = -1; dx <= 1; ++dx)
+          for (int dz = -1; dz <= 1; ++dz) {
+            const glm::ivec2 cc = c + glm::ivec2(dx, dz);
+            if (cc.x < 0 || cc.y < 0 || cc.x >= grid.dims().x || cc.y >= grid.dims().y) continue;
+            for (uint32_t item : grid.itemsIn(cc)) {
+              const uint32_t v = boundary[item];
+              if (v == a || v == b) continue;
+              const double along = glm::dot(position[v] - pa, ab) / len;
+              if (along <= tol || along >= len - tol) continue;
+              if (glm::distance(position[v], pa + ab * (along / len)) > tol) continue;
+              cuts.emplace_back(along, v);
+            }
+          }
+      }
+    }
+    if (cuts.empty()) {
+      out.insert(out.end(), uses.begin() + ptrdiff_t(i), uses.begin() + ptrdiff_t(j));
+    } else {
+      std::sort(cuts.begin(), cuts.end());
+      cuts.erase(std::unique(cuts.begin(), cuts.end(),
+                             [](const auto& x, const auto& y) { return x.second == y.second; }),
+                 cuts.end());
+      for (size_t e = i; e < j; ++e) {
+        uint32_t from = a;
+        for (size_t k = 0; k <= cuts.size(); ++k) {
+          const uint32_t to = k < cuts.size() ? cuts[k].second : b;
+          if (to == from) continue;
+          // Direction along the side: a -> b when the use walks it forward.
+          const bool forward = uses[e].forward == (from < to);
+          out.push_back({(uint64_t(std::min(from, to)) << 32) | std::max(from, to),
+                         uses[e].triangle, forward});
+          from = to;
+        }
+      }
+    }
+    i = j;
+  }
+  std::sort(out.begin(), out.end(), byKey);
+  return out;
+}
+
+}  // namespace
+
+const char* solidClassName(SolidClass c) {
+  constexpr std::array<const char*, 5> kNames{"closed_outward", "closed_inward", "open",
+                                              "non_manifold", "inconsistent"};  // by SolidClass
+  return size_t(c) < kNames.size() ? kNames[size_t(c)] : "?";
+}
+
+Solids Solids::build(const FlatTriangles& tris, const SolidsOptions& options) {
+  VS_CHECK(std::isfinite(options.weldTolerance) && options.weldTolerance >= 0.0);
+  Solids s = classify(tris, 0.0);
+  // Sealed groups: the closed parity groups of the welded topology.
+  const Solids welded = options.weldTolerance > 0.0 ? classify(tris, options.weldTolerance) : s;
+  std::vector<uint32_t> sealedOfGroup(welded.groupBounds_.size(), kNoHit);
+  s.sealedOf_.assign(tris.size(), kNoHit);
+  for (size_t t = 0; t < tris.size(); ++t) {
+    const uint32_t c = welded.componentOf(uint32_t(t));
+    if (c == kNoHit) continue;
+    const uint32_t g = welded.groupOf_[c];
+    if (!welded.groupSealed_[g]) continue;
+    if (sealedOfGroup[g] == kNoHit) {
+      sealedOfGroup[g] = uint32_t(s.sealedBounds_.size());
+      s.sealedBounds_.push_back(welded.groupBounds_[g]);
+    }
+    s.sealedOf_[t] = sealedOfGroup[g];
+  }
+  return s;
+}
+
+Solids Solids::classify(const FlatTriangles& tris, double tol) {
+  Solids s;
+  const size_t n = tris.size();
+  s.componentOf_.assign(n, kNoHit);
+
+  std::vector<uint32_t> vertexOf;
+  std::vector<glm::dvec3> position;
+  exactVertices(tris, vertexOf, position);
+  // A triangle two of whose corners weld is thinner than the tolerance: it
+  // takes no part in the topology and is a component of its own (open).
+  std::vector<uint8_t> collapsed(n, 0);
+  if (tol > 0.0) {
+    const std::vector<uint32_t> rep = weldVertices(position, tol);
+    for (uint32_t& v : vertexOf)
+      if (v != kNoHit) v = rep[v];
+    for (size_t t = 0; t < n; ++t) {
+      if (tris.degenerate[t]) continue;
+      const uint32_t* v = &vertexOf[3 * t];
+      if (v[0] == v[1] || v[1] == v[2] || v[2] == v[0]) {
+        collapsed[t] = 1;
+        vertexOf[3 * t] = vertexOf[3 * t + 1] = vertexOf[3 * t + 2] = kNoHit;
+      }
+    }
+  }
+  std::vector<uint8_t> skip(n, 0);
+  for (size_t t = 0; t < n; ++t) skip[t] = tris.degenerate[t] || collapsed[t];
+  const std::vector<EdgeUse> edges = edgeUses(tris, skip, vertexOf, position, tol);
 
   // Components: triangles joined across manifold edges (used by exactly two
   // triangles). A vertex or a non-manifold edge does not join, so a floor
@@ -139,8 +331,12 @@ Solids Solids::build(const FlatTriangles& tris) {
     ++comp.triangles;
     for (int k = 0; k < 3; ++k) comp.bounds.extend(tris.vertex(t, k));
   }
-  std::vector<uint8_t> open(s.components_.size(), 0), nonManifold(s.components_.size(), 0),
-      inconsistent(s.components_.size(), 0);
+  const size_t nc = s.components_.size();
+  // oddEdge: some edge piece is used an odd number of times (the component
+  // bounds no volume by itself, or with the others of its group).
+  std::vector<uint8_t> open(nc, 0), nonManifold(nc, 0), inconsistent(nc, 0), oddEdge(nc, 0);
+  for (size_t t = 0; t < n; ++t)
+    if (collapsed[t]) open[s.componentOf_[t]] = oddEdge[s.componentOf_[t]] = 1;
   for (size_t i = 0; i < edges.size();) {
     size_t j = i, forward = 0;
     while (j < edges.size() && edges[j].key == edges[i].key) forward += edges[j++].forward;
@@ -150,6 +346,7 @@ Solids Solids::build(const FlatTriangles& tris) {
       if (uses == 1) open[c] = 1;
       if (uses > 2) nonManifold[c] = 1;
       if (uses == 2 && forward != 1) inconsistent[c] = 1;
+      if (uses % 2) oddEdge[c] = 1;
     }
     i = j;
   }
@@ -212,10 +409,12 @@ Solids Solids::build(const FlatTriangles& tris) {
     s.groupBounds_[s.groupOf_[c]].extend(s.components_[c].bounds);
   }
   s.groupClosed_.assign(s.groupBounds_.size(), 1);
+  s.groupSealed_.assign(s.groupBounds_.size(), 1);
   for (size_t c = 0; c < s.components_.size(); ++c) {
     const SolidClass k = s.components_[c].kind;
     if (k != SolidClass::ClosedOutward && k != SolidClass::ClosedInward)
       s.groupClosed_[s.groupOf_[c]] = 0;
+    if (oddEdge[c]) s.groupSealed_[s.groupOf_[c]] = 0;
   }
 
   // Groups by X/Z cell of their bounds.
@@ -225,6 +424,11 @@ Solids Solids::build(const FlatTriangles& tris) {
     s.grid_ = XzGrid(all, std::max({all.hi.x - all.lo.x, all.hi.z - all.lo.z, 1e-3f}) / 256.0f,
                      s.groupBounds_);
   return s;
+}
+
+size_t Solids::sealedTriangles() const {
+  return size_t(
+      std::count_if(sealedOf_.begin(), sealedOf_.end(), [](uint32_t g) { return g != kNoHit; }));
 }
 
 SolidCensus Solids::census() const {

@@ -24,13 +24,29 @@
 // cases (boxes without a bottom face, buildings without a ground surface)
 // and never count a floor or terrain sheet below the point.
 //
-// Limitation: a room modelled as one closed box (floor, walls and ceiling
-// in one mesh) reads as a solid whichever way it is wound; model rooms as
-// wall boxes, or leave the mesh open (a door, a separate floor).
+// A group is closed when all its components are closed outward or inward.
 //
-// Frames: local scene coordinates (metres, Y up), like FlatTriangles.
-// Thread safety: immutable after build; inside() may be called from any
-// number of threads.
+// Sealed solids are a second reading, for the occluders that fuse solids
+// (server/visibility/horizon_fusion.h), made with a weld tolerance
+// (SolidsOptions::weldTolerance, 1 cm by default) because real models are
+// not watertight in floats: the polygons of a LoD2 building are
+// triangulated one by one, so the corner of one wall lies on the long side
+// of the next (a T-junction) or a few millimetres off it, and row houses
+// leave out the party walls so that only the block is closed. Corners
+// within the tolerance are one vertex (each joins the nearest earlier
+// representative, so welding never chains), a triangle side passing within
+// the tolerance of a boundary vertex, away from its ends, is cut there into
+// pieces that the neighbour's sides share, and a triangle two of whose
+// corners weld belongs to no solid. Components and parity groups are then
+// formed as above; a group is sealed when every edge piece of it is used an
+// even number of times (a cycle modulo 2, whatever the winding or
+// manifoldness): parity along a ray then does not depend on the ray, and a
+// segment from outside to inside crosses one of its triangles. The price: a
+// crack narrower than the tolerance counts as closed, so a line of sight
+// through it may be taken as blocked. The inside tests above stay on the
+// exact topology: welding joins the floor and ceiling sheets of an interior
+// to its wall boxes, and a room would read as the inside of a solid.
+
 #pragma once
 
 #include <array>
@@ -68,15 +84,27 @@ struct SolidCensus {
   std::array<size_t, kSolidClassCount> faces{};
 };
 
+struct SolidsOptions {
+  // Metres, for sealed solids: corners closer than this weld, and sides
+  // passing this close to a boundary vertex are cut there (see above). 0:
+  // exact positions only. Finite and not negative (VS_CHECK).
+  double weldTolerance = 0.01;
+};
+
 class Solids {
  public:
   // Degenerate triangles take no part (they are never hit by rays).
-  static Solids build(const FlatTriangles& triangles);
+  static Solids build(const FlatTriangles& triangles, const SolidsOptions& options = {});
 
   const std::vector<SolidComponent>& components() const { return components_; }
   // Component of a triangle (index into FlatTriangles); kNoHit for a degenerate one.
   uint32_t componentOf(uint32_t triangle) const { return componentOf_[triangle]; }
   SolidCensus census() const;
+  // Sealed solids (see above): the sealed group of a triangle, or kNoHit.
+  uint32_t sealedOf(uint32_t triangle) const { return sealedOf_[triangle]; }
+  size_t sealedCount() const { return sealedBounds_.size(); }
+  const Box3f& sealedBounds(uint32_t sealed) const { return sealedBounds_[sealed]; }
+  size_t sealedTriangles() const;
 
   // True if `point` lies inside a solid component. `rays` must answer over
   // the same triangles this was built from. A point on a surface is outside
@@ -99,7 +127,13 @@ class Solids {
   std::vector<uint32_t> groupOf_;     // parity group of each component
   std::vector<Box3f> groupBounds_;    // by group
   std::vector<uint8_t> groupClosed_;  // by group: every component closed and consistently oriented
+  std::vector<uint8_t> groupSealed_;  // by group: a cycle modulo 2
   XzGrid grid_;                       // groups by X/Z cell of their bounds
+  std::vector<uint32_t> sealedOf_;    // by triangle: sealed group of the welded topology
+  std::vector<Box3f> sealedBounds_;   // by sealed group
+
+  // Components and parity groups of the topology welded within `tol`.
+  static Solids classify(const FlatTriangles& triangles, double tol);
 
   // closedOnly: only closed groups are candidates; closedSurfaceInside: a
   // point on a closed group's surface counts as inside.

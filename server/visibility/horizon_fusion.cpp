@@ -17,10 +17,14 @@
 //    margin), leaving out exactly vertical triangles
 //    (collinear in X/Z). So only vertical triangles meet the closed box
 //    S x [b, t]; their lines cut S into convex pieces. At the centroid of
-//    each piece with area, at mid-gap height, one closed, edge-manifold,
-//    consistently wound component K (either winding) has odd crossing
-//    parity along three generic rays (parity of a closed surface does not
-//    depend on the ray; three rays guard against a ray through an edge).
+//    each piece with area, at mid-gap height, one closed solid K (a sealed
+//    solid of common/world/solids.h, whose edge pieces are each used an even
+//    number of times: a cycle modulo 2, whatever its winding or manifoldness)
+//    has odd crossing parity along three generic rays (parity of a cycle
+//    does not depend on the ray; three rays guard against a ray through an
+//    edge). Solids welds corners and cuts T-junctions within its tolerance
+//    (1 cm), so the proof holds for the surface with cracks narrower than
+//    that closed: such a crack is taken as blocking.
 //    A piece's slice of the box meets no triangle, and every point of the
 //    piece's prism is joined to that slice by a vertical segment meeting no
 //    triangle, unless it lies on a vertical triangle; so every point of the
@@ -222,9 +226,11 @@ struct HorizonFusion::Impl {
   const FlatTriangles& tris;
   const RayQuery& rays;
   const Solids& solids;
-  std::vector<uint8_t> closed;      // per component: may occlude (closed, manifold, consistent)
-  std::vector<uint8_t> hasColumns;  // per component: some column lies inside it
-  std::vector<uint32_t> compStart, compTris;  // triangles by component
+  // Solids here are the sealed solids of Solids (cycles modulo 2 once
+  // welded, either winding): "component" below means such a solid.
+  std::vector<uint8_t> closed;                // per sealed solid: may occlude
+  std::vector<uint8_t> hasColumns;            // per group: some column lies inside it
+  std::vector<uint32_t> compStart, compTris;  // triangles by group
   std::vector<uint32_t> faceStart, faceTris;  // static triangles by face ID
   // The grid and its shrunk columns (proof, step 3).
   glm::dvec2 lo{0.0};
@@ -255,6 +261,9 @@ struct HorizonFusion::Impl {
         rays(*world.rays),
         solids(world.solids) {}
 
+  // The sealed solid a triangle belongs to, or kNoHit.
+  uint32_t groupOfTriangle(uint32_t t) const { return solids.sealedOf(t); }
+
   // Closed components with odd crossing parity along `dir` from p; false if
   // the ray starts on a surface.
   bool oddComponents(const glm::vec3& p, const glm::vec3& dir, std::vector<uint32_t>& odd) const {
@@ -264,7 +273,7 @@ struct HorizonFusion::Impl {
     rays.allHits(Ray{p, dir, 0.0f, std::numeric_limits<float>::infinity()}, hits);
     for (const Hit& h : hits) {
       if (h.t <= 0.0f) return false;
-      const uint32_t c = solids.componentOf(h.triangle);
+      const uint32_t c = groupOfTriangle(h.triangle);
       if (c != kNoHit && closed[c]) odd.push_back(c);
     }
     std::sort(odd.begin(), odd.end());
@@ -304,19 +313,15 @@ struct HorizonFusion::Impl {
 };
 
 void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
-  const size_t nc = solids.components().size();
-  closed.assign(nc, 0);
+  const size_t nc = solids.sealedCount();
+  closed.assign(nc, 1);
   hasColumns.assign(nc, 0);
-  for (size_t c = 0; c < nc; ++c) {
-    const SolidClass k = solids.components()[c].kind;
-    closed[c] = k == SolidClass::ClosedOutward || k == SolidClass::ClosedInward;
-  }
   // Triangles by component and by face (counting sort).
   compStart.assign(nc + 1, 0);
   faceStart.assign(size_t(scene.faceCount) + 1, 0);
   Box3f bounds;
   for (size_t t = 0; t < tris.size(); ++t) {
-    const uint32_t c = solids.componentOf(uint32_t(t));
+    const uint32_t c = groupOfTriangle(uint32_t(t));
     if (c != kNoHit) ++compStart[c + 1];
     if (tris.faceIds[t] < scene.faceCount) ++faceStart[tris.faceIds[t] + 1];
     if (!tris.degenerate[t]) bounds.extend(tris.triangleBounds(t));
@@ -329,7 +334,7 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
     std::vector<uint32_t> cn(compStart.begin(), compStart.end() - 1);
     std::vector<uint32_t> fn(faceStart.begin(), faceStart.end() - 1);
     for (size_t t = 0; t < tris.size(); ++t) {
-      const uint32_t c = solids.componentOf(uint32_t(t));
+      const uint32_t c = groupOfTriangle(uint32_t(t));
       if (c != kNoHit) compTris[cn[c]++] = uint32_t(t);
       if (tris.faceIds[t] < scene.faceCount) faceTris[fn[tris.faceIds[t]]++] = uint32_t(t);
     }
@@ -711,7 +716,7 @@ struct HorizonQuery {
     const Box3f grown{glm::vec3(clo), glm::vec3(chi)};
     for (size_t c = 0; c < w.closed.size(); ++c) {
       if (!w.closed[c] || !w.hasColumns[c] || out[c]) continue;
-      if (!w.solids.components()[c].bounds.overlaps(grown)) continue;
+      if (!w.solids.sealedBounds(uint32_t(c)).overlaps(grown)) continue;
       for (uint32_t k = w.compStart[c]; k < w.compStart[c + 1] && !out[c]; ++k) {
         const uint32_t t = w.compTris[k];
         if (!w.tris.triangleBounds(t).overlaps(grown)) continue;
@@ -722,7 +727,7 @@ struct HorizonQuery {
     }
     for (size_t c = 0; c < out.size(); ++c)
       if (out[c] && w.hasColumns[c]) {
-        excluded.push_back(w.rectOf(w.solids.components()[c].bounds, w.window + 1));
+        excluded.push_back(w.rectOf(w.solids.sealedBounds(uint32_t(c)), w.window + 1));
         ++stats.excludedSolids;
       }
   }

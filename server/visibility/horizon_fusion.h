@@ -12,11 +12,13 @@
 // solids hide together (a row of buildings, a wall and the next wall).
 //
 // What occludes: columns of an X/Z grid (side gridSize metres) whose box
-// [base, top] no triangle touches and which lie inside a closed,
-// edge-manifold, consistently wound component of the static geometry
-// (SolidClass ClosedOutward or ClosedInward, either winding). Open,
-// non-manifold and inconsistently wound components never occlude here; they
-// still take part through the single-occluder PVS. A solid whose surface or
+// [base, top] no triangle touches and which lie inside a sealed solid of
+// the static geometry (common/world/solids.h): a parity group that is a
+// cycle modulo 2 once corners are welded and T-junctions cut within the
+// weld tolerance (either winding; row houses whose party walls are left
+// out close up together). Groups with a real hole (a missing wall) never
+// occlude here; they still take part through the single-occluder PVS. Cracks
+// narrower than the weld tolerance are taken as closed. A solid whose surface or
 // interior meets the cell (a cell that cuts into a building) does not
 // occlude anything for that cell.
 //
