@@ -262,6 +262,8 @@ Solids Solids::build(const FlatTriangles& tris, const SolidsOptions& options) {
   Solids s = classify(tris, 0.0);
   // Sealed groups: the closed parity groups of the welded topology.
   const Solids welded = options.weldTolerance > 0.0 ? classify(tris, options.weldTolerance) : s;
+  s.weldedComponentOf_ = welded.componentOf_;
+  s.weldedComponents_ = welded.components_;
   std::vector<uint32_t> sealedOfGroup(welded.groupBounds_.size(), kNoHit);
   s.sealedOf_.assign(tris.size(), kNoHit);
   for (size_t t = 0; t < tris.size(); ++t) {

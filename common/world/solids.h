@@ -41,7 +41,9 @@
 // formed as above; a group is sealed when every edge piece of it is used an
 // even number of times (a cycle modulo 2, whatever the winding or
 // manifoldness): parity along a ray then does not depend on the ray, and a
-// segment from outside to inside crosses one of its triangles. The price: a
+// segment from outside to inside crosses one of its triangles. The welded
+// components (weldedComponents()) serve back-face culling, which needs a
+// closed, manifold, consistently outward one. The price: a
 // crack narrower than the tolerance counts as closed, so a line of sight
 // through it may be taken as blocked. The inside tests above stay on the
 // exact topology: welding joins the floor and ceiling sheets of an interior
@@ -105,6 +107,9 @@ class Solids {
   size_t sealedCount() const { return sealedBounds_.size(); }
   const Box3f& sealedBounds(uint32_t sealed) const { return sealedBounds_[sealed]; }
   size_t sealedTriangles() const;
+  // The components of the welded topology, classified as components() are.
+  const std::vector<SolidComponent>& weldedComponents() const { return weldedComponents_; }
+  uint32_t weldedComponentOf(uint32_t triangle) const { return weldedComponentOf_[triangle]; }
 
   // True if `point` lies inside a solid component. `rays` must answer over
   // the same triangles this was built from. A point on a surface is outside
@@ -131,6 +136,8 @@ class Solids {
   XzGrid grid_;                       // groups by X/Z cell of their bounds
   std::vector<uint32_t> sealedOf_;    // by triangle: sealed group of the welded topology
   std::vector<Box3f> sealedBounds_;   // by sealed group
+  std::vector<uint32_t> weldedComponentOf_;
+  std::vector<SolidComponent> weldedComponents_;
 
   // Components and parity groups of the topology welded within `tol`.
   static Solids classify(const FlatTriangles& triangles, double tol);

@@ -66,25 +66,6 @@ void warnIfOutsideScene(const Scene& scene, const Box3d& fileBox, const char* op
       option, text, b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z);
 }
 
-// The occlusion horizons for `choice` (--method of cell, --fusion of bake):
-// none for "paper" and "none"; for "auto", only where the scene has solid
-// columns to build them from (cities and terrain, not interiors).
-// With `world` (parts Solids or more), they use its triangles, rays and solids.
-std::unique_ptr<HorizonFusion> horizonsFor(const Scene& scene, const std::string& choice,
-                                           const StaticWorld* world = nullptr) {
-  if (choice != "auto" && choice != "horizons") return nullptr;
-  Stopwatch clock;
-  auto horizons = world ? std::make_unique<HorizonFusion>(scene, *world)
-                        : std::make_unique<HorizonFusion>(scene);
-  spdlog::info("occlusion horizons: {} solid columns of {:.2f} m, built in {:.1f} s",
-               horizons->solidColumns(), horizons->gridSize(), clock.ms() / 1000.0);
-  if (choice == "auto" && horizons->solidColumns() == 0) {
-    spdlog::info("no solid columns: the PVS runs without occlusion horizons");
-    return nullptr;
-  }
-  return horizons;
-}
-
 int cmdCell(const std::string& spec, const SceneLimits& limits, const std::string& cellText,
             const std::string& method, const PvsOptions& options,
             const FusedPvsOptions& fusedOptions, bool asJson) {
@@ -96,7 +77,10 @@ int cmdCell(const std::string& spec, const SceneLimits& limits, const std::strin
   warnIfOutsideScene(scene, fileCell, "--cell", cellText);
   const Box3f cell = toLocal(scene, fileCell);
   EpsilonPvs pvs(scene);
-  const std::unique_ptr<HorizonFusion> horizons = horizonsFor(scene, method);
+  const std::unique_ptr<HorizonFusion> horizons =
+      makeHorizonFusion(scene, method == "auto"       ? FusionChoice::Auto
+                               : method == "horizons" ? FusionChoice::Horizons
+                                                      : FusionChoice::None);
   pvs.setFusion(horizons.get());
   const std::string used = method == "auto" ? (horizons ? "horizons" : "paper") : method;
   FusedPvsStats fusedStats;
@@ -173,7 +157,8 @@ int cmdBake(const std::string& spec, const SceneLimits& limits, const GroundChoi
   const StaticWorld world = buildStaticWorld(scene, worldOptions);
   const FreeSpace& fs = world.freeSpace;
   EpsilonPvs pvs(scene);
-  const std::unique_ptr<HorizonFusion> horizons = horizonsFor(scene, fusion, &world);
+  const std::unique_ptr<HorizonFusion> horizons =
+      makeHorizonFusion(scene, *parseFusionChoice(fusion), &world);
   pvs.setFusion(horizons.get());
   std::unique_ptr<ProgressBar> bar;
   std::mutex barMutex;  // guards creation of the bar from the first progress call

@@ -67,6 +67,11 @@ int runServerTool(int argc, char** argv) {
   app.add_option("--cell-size", worldOptions.cellSize,
                  "view cell size in metres without a database")
       ->check(positive());
+  std::string fusion = "auto";
+  app.add_option("--fusion", fusion,
+                 "without a database: occlusion horizons after the single occluders, for view "
+                 "cells: auto (where the scene has solid columns), horizons or none")
+      ->check(CLI::IsMember({"auto", "horizons", "none"}));
   app.add_option("--pvs-cache", worldOptions.pvsCacheCells, "cells whose PVS stays cached (LRU)")
       ->check(atLeast<size_t>(1));
   app.add_option("--bind", cfg.bindAddress, "address to listen on");
@@ -144,6 +149,7 @@ int runServerTool(int argc, char** argv) {
           "--pvs-db scene.db",
           scene, worldOptions.cellSize);
     worldOptions.pvsDatabase = pvsDb;
+    worldOptions.fusion = *parseFusionChoice(fusion);
     StreamWorld world(openScene(scene, sceneLimits), worldOptions);
     StreamServer server(world, cfg);
     server.start();

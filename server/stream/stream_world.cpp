@@ -57,11 +57,11 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
     if (!(options.cellSize > 0.0f)) throwInputError("--cell-size must be positive");
     StaticWorldOptions worldOptions;
     worldOptions.ground = options.ground;
-    const StaticWorld world = buildStaticWorld(scene_, worldOptions);
-    ground_ = world.ground;
+    statics_ = std::make_unique<StaticWorld>(buildStaticWorld(scene_, worldOptions));
+    ground_ = statics_->ground;
     BakeOptions bo;
     bo.cellSize = glm::vec3(options.cellSize);
-    grid_ = bakeGrid(scene_, world.freeSpace, bo);
+    grid_ = bakeGrid(scene_, statics_->freeSpace, bo);
   }
   VS_CHECK_LT(grid_.cellCount(), size_t(kCoarseKey));  // keys leave the top bit for coarse cells
   culling_ = std::make_unique<CullingScene>(scene_);
@@ -122,7 +122,10 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
       options.faceSetCacheBytes, faceListBytes, &work_);
   // Without a database every client needs the occluders at once: prepared
   // here (seconds on a big city) rather than by the first client's request.
-  if (!database_) epsilonPvs();
+  if (!database_) {
+    horizons_ = makeHorizonFusion(scene_, options.fusion, statics_.get());
+    epsilonPvs();
+  }
   spdlog::info(
       "stream world: scene '{}' ({} faces), {} x {} x {} cells of {:.1f} m, PVS {}, ready in "
       "{:.0f} ms",
@@ -137,6 +140,7 @@ const EpsilonPvs& StreamWorld::epsilonPvs() {
   std::call_once(pvsOnce_, [this] {
     Stopwatch clock;
     pvs_ = std::make_unique<EpsilonPvs>(scene_);
+    pvs_->setFusion(horizons_.get());
     spdlog::info("PVS occluders prepared in {:.0f} ms", clock.ms());
   });
   return *pvs_;
@@ -175,6 +179,7 @@ Box3f StreamWorld::pvsKeyBox(uint32_t key) const {
 FaceList StreamWorld::computeNearPvs(const FaceSetKey& k, const Box3f& box, const FaceList& near) {
   PvsOptions options;
   options.candidateFaces = &near;
+  options.fusion = !(k.cell & kCoarseKey);
   FaceList fromParent;
   if (!(k.cell & kCoarseKey)) {
     const glm::ivec3 cell = grid_.cellAt(k.cell);
@@ -200,7 +205,9 @@ FaceList StreamWorld::computeNearPvs(const FaceSetKey& k, const Box3f& box, cons
 
 FaceList StreamWorld::computePvs(uint32_t key) {
   if (key & kCoarseKey) {
-    FaceList faces = epsilonPvs().compute(pvsKeyBox(key)).faces;
+    PvsOptions coarse;
+    coarse.fusion = false;
+    FaceList faces = epsilonPvs().compute(pvsKeyBox(key), coarse).faces;
     ++coarseComputed_;
     return faces;
   }

@@ -56,6 +56,7 @@
 #include "server/stream/async_cache.h"
 #include "server/visibility/epsilon_pvs.h"
 #include "server/visibility/hierarchical_culling.h"
+#include "server/visibility/horizon_fusion.h"
 #include "server/visibility/pvs_database.h"
 #include "server/visibility/view_cell_grid.h"
 
@@ -78,6 +79,10 @@ struct StreamWorldOptions {
   // Prefetch and refinement computations that may wait for a worker; beyond
   // this the least urgent are dropped (work_queue.h).
   size_t maxQueuedPrefetch = 64;
+  // Without a database: occlusion horizons after the single occluders, for
+  // view cells (not coarse blocks, whose horizons cost several times more),
+  // as the bake does (horizon_fusion.h).
+  FusionChoice fusion = FusionChoice::Auto;
 };
 
 // Which PVS a face set is built from: a view cell's own, its coarse
@@ -207,6 +212,8 @@ class StreamWorld {
   WorkQueue work_;  // before the caches, which submit to it
   std::unique_ptr<CullingScene> culling_;
   std::once_flag pvsOnce_;
+  std::unique_ptr<StaticWorld> statics_;     // without a database: for the horizons
+  std::unique_ptr<HorizonFusion> horizons_;  // may be null
   std::unique_ptr<EpsilonPvs> pvs_;
   std::vector<wire::FaceTriangles> faces_;
   std::vector<Box3f> faceBoxes_;

@@ -124,8 +124,9 @@ namespace {
 
 // Which faces may be culled for facing away: those whose every
 // non-degenerate triangle lies in one closed, manifold, consistently outward
-// component (common/world/solids.h). Per face the component's index into
-// `bounds`, or kNoHit for a two-sided face.
+// component of the topology welded within the weld tolerance
+// (common/world/solids.h). Per face the component's index into `bounds`, or
+// kNoHit for a two-sided face.
 struct OneSidedFaces {
   std::vector<uint32_t> solidOf;  // by face ID
   std::vector<Box3f> bounds;      // by component
@@ -140,14 +141,15 @@ OneSidedFaces oneSidedFaces(const Scene& scene) {
   for (size_t t = 0; t < flat.size(); ++t) {
     const uint32_t face = flat.faceIds[t];
     if (face >= out.solidOf.size() || flat.degenerate[t]) continue;
-    const uint32_t c = solids.componentOf(uint32_t(t));
-    const bool outward = c != kNoHit && solids.components()[c].kind == SolidClass::ClosedOutward;
+    const uint32_t c = solids.weldedComponentOf(uint32_t(t));
+    const bool outward =
+        c != kNoHit && solids.weldedComponents()[c].kind == SolidClass::ClosedOutward;
     uint32_t& s = out.solidOf[face];
     s = outward && (s == kUnseen || s == c) ? c : kNoHit;
   }
   for (uint32_t& s : out.solidOf)
     if (s == kUnseen) s = kNoHit;
-  for (const SolidComponent& c : solids.components()) out.bounds.push_back(c.bounds);
+  for (const SolidComponent& c : solids.weldedComponents()) out.bounds.push_back(c.bounds);
   return out;
 }
 

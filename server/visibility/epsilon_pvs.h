@@ -23,7 +23,9 @@
 // eye on a closed solid's surface, which looks into the solid.
 //
 // Back faces (PvsOptions::backFaces, on by default): a face whose every
-// triangle belongs to a closed, manifold, consistently OUTWARD component is
+// triangle belongs to a closed, manifold, consistently OUTWARD component
+// (read with corners welded and T-junctions cut within 1 cm, so cracks
+// narrower than that count as closed: common/world/solids.h) is
 // culled when the closed cell lies strictly behind every triangle's plane
 // (by a rounding margin) and does not meet the solid's bounding box (so no
 // viewpoint of the cell lies inside the solid or on its surface). From a

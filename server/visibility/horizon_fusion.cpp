@@ -120,6 +120,7 @@
 // not tested from the next.
 #include "server/visibility/horizon_fusion.h"
 
+#include <spdlog/spdlog.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -1028,6 +1029,28 @@ HorizonFusionResult HorizonFusion::cull(const Box3f& cell,
   r.stats.culled = candidates.size() - r.faces.size();
   r.stats.timeMs = sw.ms();
   return r;
+}
+
+std::optional<FusionChoice> parseFusionChoice(const std::string& text) {
+  if (text == "auto") return FusionChoice::Auto;
+  if (text == "horizons") return FusionChoice::Horizons;
+  if (text == "none") return FusionChoice::None;
+  return std::nullopt;
+}
+
+std::unique_ptr<HorizonFusion> makeHorizonFusion(const Scene& scene, FusionChoice choice,
+                                                 const StaticWorld* world) {
+  if (choice == FusionChoice::None) return nullptr;
+  Stopwatch clock;
+  auto horizons = world ? std::make_unique<HorizonFusion>(scene, *world)
+                        : std::make_unique<HorizonFusion>(scene);
+  spdlog::info("occlusion horizons: {} solid columns of {:.2f} m, built in {:.1f} s",
+               horizons->solidColumns(), horizons->gridSize(), clock.ms() / 1000.0);
+  if (choice == FusionChoice::Auto && horizons->solidColumns() == 0) {
+    spdlog::info("no solid columns: the PVS runs without occlusion horizons");
+    return nullptr;
+  }
+  return horizons;
 }
 
 }  // namespace vistream

@@ -34,7 +34,9 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "common/core/box.h"
@@ -138,5 +140,17 @@ class HorizonFusion {
   HorizonFusionOptions options_;
   double prepareMs_ = 0.0;
 };
+
+// Whether a PVS runs the occlusion horizons (`--fusion` of the bake and the
+// server): Auto builds them and keeps them only where the scene has solid
+// columns (cities and terrain; not interiors, whose rooms are no solids).
+enum class FusionChoice : uint8_t { Auto, Horizons, None };
+// "auto", "horizons" or "none"; nothing for any other text.
+std::optional<FusionChoice> parseFusionChoice(const std::string& text);
+// The horizons a choice asks for, or null; logs their size and build time.
+// With `world` (parts Solids or more) they share its triangles, rays and
+// solids, which must outlive them.
+std::unique_ptr<HorizonFusion> makeHorizonFusion(const Scene& scene, FusionChoice choice,
+                                                 const StaticWorld* world = nullptr);
 
 }  // namespace vistream

@@ -330,6 +330,8 @@ TEST(StreamTools, HelpAndBadArgumentsGiveClearExits) {
   const fs::path scene = dir.write("street.obj", streetObj());
   ToolRun r = runTool("vistream-server", "--scene " + scene.string() + " --policy nearest");
   vistream::testing::expectFailedSaying(r, 1, "--policy");
+  r = runTool("vistream-server", "--scene " + scene.string() + " --fusion maybe");
+  vistream::testing::expectFailedSaying(r, 1, "--fusion");
   r = runTool("vistream-server",
               "--scene " + scene.string() + " --token-file " + (dir.path() / "none").string());
   vistream::testing::expectFailedSaying(r, 1, "none");

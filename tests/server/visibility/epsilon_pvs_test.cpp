@@ -782,6 +782,26 @@ TEST(EpsilonPvs, BackFacesAreCulledOnlyOnClosedOutwardSolidsAndTheGroundTruthHol
   }
 }
 
+// A LoD2 export triangulates each polygon on its own: here the roof is two
+// quads whose shared corners lie on the long top edges of the front and back
+// walls (T-junctions). Read with the weld tolerance the box is closed and
+// outward, so its far side loses its back faces as a clean box would.
+TEST(EpsilonPvs, BackFacesAreCulledOnABoxWhoseRoofCornersLieOnItsWallsEdges) {
+  const Box3f cell({-1, 1, -1}, {1, 2, 1});
+  World w;
+  testing::addGround(w.scene(), -40, -40, 40, 40);
+  const uint32_t box = w.scene().faceCount;
+  std::vector<testing::Loop> loops = testing::boxLoops({-3, 0, -15}, {3, 5, -9});
+  loops[4] = {{-3, 5, -15}, {-3, 5, -9}, {0, 5, -9}, {0, 5, -15}};
+  loops.push_back({{0, 5, -15}, {0, 5, -9}, {3, 5, -9}, {3, 5, -15}});
+  testing::addFaces(w.scene(), "box", loops);
+  const PvsResult culled = w.compute(cell, PvsOptions{});
+  EXPECT_GT(culled.stats.facesBackFacing, 0u);
+  EXPECT_FALSE(inPvs(culled, box + 2)) << "the -z face (z = -15) faces away";
+  EXPECT_TRUE(inPvs(culled, box + 3)) << "the +z face faces the cell";
+  EXPECT_TRUE(holdsGroundTruth(w, cell, culled));
+}
+
 TEST(EpsilonPvs, ACellTouchingAClosedBoxKeepsThatBoxsBackFaces) {
   // The cell's -z side lies in the plane of the box's +z face (z = -9): an
   // eye there stands on the box's surface, so the box's faces stay
