@@ -263,20 +263,10 @@ void StreamWorld::cellFaceSet(const glm::ivec3& cell, StreamPolicy policy, float
 void StreamWorld::cellFaceSet(const glm::ivec3& cell, CellLevel level, StreamPolicy policy,
                               float radius, boost::asio::thread_pool& pool,
                               std::function<void(FaceListPtr)> done, CellWork work) {
-  if (policy == StreamPolicy::Radius) level = CellLevel::Fine;
-  const uint32_t radiusCm = uint32_t(std::lround(std::max(0.0f, radius) * 100.0f));
-  if (level == CellLevel::Unculled) {
-    // The coarse block's faces within the radius: the radius policy's set
-    // for the block's box.
-    faceSetCache_->get({pvsKey(cell, CellLevel::Coarse), radiusCm, StreamPolicy::Radius},
-                       pool.get_executor(), std::move(done), work.interest, work.priority,
-                       std::move(work.dropped));
-    return;
-  }
-  const uint32_t pvs = pvsKey(cell, level);
-  const FaceSetKey key{pvs, radiusCm, policy};
-  // One stage where the face set is computed from the near faces alone.
-  if (policy == StreamPolicy::Radius || !database_) {
+  const FaceSetKey key = faceSetKey(cell, level, policy, radius);
+  // One stage where the face set is computed from the near faces alone
+  // (unculled sets are radius sets).
+  if (key.policy == StreamPolicy::Radius || !database_) {
     faceSetCache_->get(key, pool.get_executor(), std::move(done), work.interest, work.priority,
                        std::move(work.dropped));
     return;
@@ -290,7 +280,7 @@ void StreamWorld::cellFaceSet(const glm::ivec3& cell, CellLevel level, StreamPol
     if (*dropped) (*dropped)();
   };
   pvsCache_->get(
-      pvs, pool.get_executor(),
+      key.cell, pool.get_executor(),
       [this, key, &pool, done = std::move(done), weak = std::weak_ptr<const int>(work.interest),
        unconditional = work.interest == nullptr, priority = work.priority,
        onDrop](FaceListPtr p) mutable {
@@ -302,14 +292,20 @@ void StreamWorld::cellFaceSet(const glm::ivec3& cell, CellLevel level, StreamPol
       work.interest, work.priority, onDrop);
 }
 
-bool StreamWorld::hasCellFaceSet(const glm::ivec3& cell, CellLevel level, StreamPolicy policy,
-                                 float radius) const {
+// The cache key of a cell's face set. An unculled set is the coarse block's
+// faces within the radius: the radius policy's set for the block's box.
+StreamWorld::FaceSetKey StreamWorld::faceSetKey(const glm::ivec3& cell, CellLevel level,
+                                                StreamPolicy policy, float radius) const {
   if (policy == StreamPolicy::Radius) level = CellLevel::Fine;
   const uint32_t radiusCm = uint32_t(std::lround(std::max(0.0f, radius) * 100.0f));
   if (level == CellLevel::Unculled)
-    return faceSetCache_->contains(
-        {pvsKey(cell, CellLevel::Coarse), radiusCm, StreamPolicy::Radius});
-  return faceSetCache_->contains({pvsKey(cell, level), radiusCm, policy});
+    return {pvsKey(cell, CellLevel::Coarse), radiusCm, StreamPolicy::Radius};
+  return {pvsKey(cell, level), radiusCm, policy};
+}
+
+bool StreamWorld::hasCellFaceSet(const glm::ivec3& cell, CellLevel level, StreamPolicy policy,
+                                 float radius) const {
+  return faceSetCache_->contains(faceSetKey(cell, level, policy, radius));
 }
 
 FaceList StreamWorld::facesWithin(const Box3f& box, float radius) const {

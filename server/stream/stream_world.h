@@ -201,6 +201,8 @@ class StreamWorld {
       return (size_t(k.cell) * 1000003u) ^ (size_t(k.radiusCm) << 1) ^ size_t(k.policy);
     }
   };
+  FaceSetKey faceSetKey(const glm::ivec3& cell, CellLevel level, StreamPolicy policy,
+                        float radius) const;
   // The visibility face set without a database (see the policies above).
   FaceList computeNearPvs(const FaceSetKey& key, const Box3f& box, const FaceList& near);
   const EpsilonPvs& epsilonPvs();
