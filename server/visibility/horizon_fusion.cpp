@@ -776,6 +776,17 @@ struct HorizonQuery {
     const double y = s.y, lowest = double(cell.lo.y) - w.margin;
     double best = -kInf, tin = t0;
     int block = -1;
+    // Into the next column along the ray; false once it leaves the grid.
+    auto stepToNextColumn = [&] {
+      if (tx < tz) {
+        i += si;
+        tx += dtx;
+      } else {
+        j += sj;
+        tz += dtz;
+      }
+      return i >= 0 && j >= 0 && i < w.nx && j < w.nz;
+    };
     constexpr int kB = HorizonFusion::Impl::kBlock;
     while (tin < t1) {
       // A block none of whose columns can raise the horizon is walked
@@ -807,14 +818,7 @@ struct HorizonQuery {
           if (ni < 0 || nj < 0 || ni >= w.nx || nj >= w.nz) break;
           if (ni / kB == bi && nj / kB == bj) {
             tin = std::min({tx, tz, t1});
-            if (tx < tz) {
-              i += si;
-              tx += dtx;
-            } else {
-              j += sj;
-              tz += dtz;
-            }
-            if (i < 0 || j < 0 || i >= w.nx || j >= w.nz) break;
+            if (!stepToNextColumn()) break;
             block = -1;
             continue;
           }
@@ -847,14 +851,7 @@ struct HorizonQuery {
       // Nothing farther can rise above `best`: every later square starts at
       // tout or beyond and no top exceeds maxTop.
       if (w.maxTop > y && best * tout >= w.maxTop - y) break;
-      if (tx < tz) {
-        i += si;
-        tx += dtx;
-      } else {
-        j += sj;
-        tz += dtz;
-      }
-      if (i < 0 || j < 0 || i >= w.nx || j >= w.nz) break;
+      if (!stepToNextColumn()) break;
       tin = tout;
     }
   }
