@@ -135,6 +135,10 @@ TEST(SceneTool, InfoReportsTheMeshComponentsAndTheGroundDecision) {
       solids["closed_outward"]["faces"].get<int>() + solids["closed_inward"]["faces"].get<int>(),
       12);
   EXPECT_EQ(solids["open"]["faces"].get<int>(), 1);
+  // The boxes are the sealed solids; the ground quad bounds nothing.
+  EXPECT_EQ(j["sealed_solids"]["solids"].get<int>(), 2);
+  EXPECT_EQ(j["sealed_solids"]["triangles"].get<int>(), 24);
+  EXPECT_GT(j["sealed_solids"]["weld_tolerance_m"].get<double>(), 0.0);
   EXPECT_FALSE(j["ground"]["assumed"].get<bool>());
 
   // Buildings only: a plane at their lowest base (y = 0, data README),
