@@ -6,6 +6,7 @@
 #include <cstring>
 #include <numbers>
 #include <numeric>
+#include <optional>
 #include <unordered_map>
 
 #include "common/core/check.h"
@@ -202,17 +203,15 @@ std::vector<EdgeUse> edgeUses(const FlatTriangles& tris, const std::vector<uint8
     if (len > 2.0 * tol && area.overlaps(Box3f{glm::vec3(glm::min(pa, pb)) - float(tol),
                                                glm::vec3(glm::max(pa, pb)) + float(tol)})) {
       const int samples = int(std::ceil(len / step));
-      glm::ivec2 last(-1, -1);
+      // A vertex within tol of the side lies within tol + step / 2 of a sample.
+      const float reach = float(tol + 0.5 * step);
       for (int s = 0; s <= samples; ++s) {
         const glm::dvec3 q = pa + ab * (double(s) / samples);
-        const glm::ivec2 c = grid.cellOf({float(q.x), float(q.z)});
-        if (c == last) continue;
-        last = c;
-        for (int dx = -1; dx <= 1; ++dx)
-          for (int dz = -1; dz <= 1; ++dz) {
-            const glm::ivec2 cc = c + glm::ivec2(dx, dz);
-            if (cc.x < 0 || cc.y < 0 || cc.x >= grid.dims().x || cc.y >= grid.dims().y) continue;
-            for (uint32_t item : grid.itemsIn(cc)) {
+        const XzGrid::CellRange range = grid.cellsOverlapping(
+            {float(q.x) - reach, float(q.z) - reach}, {float(q.x) + reach, float(q.z) + reach});
+        for (int cz = range.lo.y; cz <= range.hi.y; ++cz)
+          for (int cx = range.lo.x; cx <= range.hi.x; ++cx) {
+            for (uint32_t item : grid.itemsIn({cx, cz})) {
               const uint32_t v = boundary[item];
               if (v == a || v == b) continue;
               const double along = glm::dot(position[v] - pa, ab) / len;
@@ -260,8 +259,16 @@ const char* solidClassName(SolidClass c) {
 Solids Solids::build(const FlatTriangles& tris, const SolidsOptions& options) {
   VS_CHECK(std::isfinite(options.weldTolerance) && options.weldTolerance >= 0.0);
   Solids s = classify(tris, 0.0);
+  // Groups by X/Z cell of their bounds, for the inside tests (exact reading).
+  Box3f all;
+  for (const Box3f& b : s.groupBounds_) all.extend(b);
+  if (!all.empty())
+    s.grid_ = XzGrid(all, std::max({all.hi.x - all.lo.x, all.hi.z - all.lo.z, 1e-3f}) / 256.0f,
+                     s.groupBounds_);
   // Sealed groups: the closed parity groups of the welded topology.
-  const Solids welded = options.weldTolerance > 0.0 ? classify(tris, options.weldTolerance) : s;
+  std::optional<Solids> weldedReading;
+  if (options.weldTolerance > 0.0) weldedReading = classify(tris, options.weldTolerance);
+  const Solids& welded = weldedReading ? *weldedReading : s;
   s.weldedComponentOf_ = welded.componentOf_;
   s.weldedComponents_ = welded.components_;
   std::vector<uint32_t> sealedOfGroup(welded.groupBounds_.size(), kNoHit);
@@ -418,13 +425,6 @@ Solids Solids::classify(const FlatTriangles& tris, double tol) {
       s.groupClosed_[s.groupOf_[c]] = 0;
     if (oddEdge[c]) s.groupSealed_[s.groupOf_[c]] = 0;
   }
-
-  // Groups by X/Z cell of their bounds.
-  Box3f all;
-  for (const Box3f& b : s.groupBounds_) all.extend(b);
-  if (!all.empty())
-    s.grid_ = XzGrid(all, std::max({all.hi.x - all.lo.x, all.hi.z - all.lo.z, 1e-3f}) / 256.0f,
-                     s.groupBounds_);
   return s;
 }
 

@@ -124,6 +124,7 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
   // here (seconds on a big city) rather than by the first client's request.
   if (!database_) {
     horizons_ = makeHorizonFusion(scene_, options.fusion, statics_.get());
+    if (!horizons_) statics_.reset();  // kept only for the horizons
     epsilonPvs();
   }
   spdlog::info(

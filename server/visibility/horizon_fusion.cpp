@@ -229,9 +229,8 @@ struct HorizonFusion::Impl {
   const Solids& solids;
   // Solids here are the sealed solids of Solids (cycles modulo 2 once
   // welded, either winding): "component" below means such a solid.
-  std::vector<uint8_t> closed;                // per sealed solid: may occlude
-  std::vector<uint8_t> hasColumns;            // per group: some column lies inside it
-  std::vector<uint32_t> compStart, compTris;  // triangles by group
+  std::vector<uint8_t> hasColumns;            // per sealed solid: some column lies inside it
+  std::vector<uint32_t> compStart, compTris;  // triangles by sealed solid
   std::vector<uint32_t> faceStart, faceTris;  // static triangles by face ID
   // The grid and its shrunk columns (proof, step 3).
   glm::dvec2 lo{0.0};
@@ -262,10 +261,7 @@ struct HorizonFusion::Impl {
         rays(*world.rays),
         solids(world.solids) {}
 
-  // The sealed solid a triangle belongs to, or kNoHit.
-  uint32_t groupOfTriangle(uint32_t t) const { return solids.sealedOf(t); }
-
-  // Closed components with odd crossing parity along `dir` from p; false if
+  // Sealed solids with odd crossing parity along `dir` from p; false if
   // the ray starts on a surface.
   bool oddComponents(const glm::vec3& p, const glm::vec3& dir, std::vector<uint32_t>& odd) const {
     thread_local std::vector<Hit> hits;
@@ -274,8 +270,8 @@ struct HorizonFusion::Impl {
     rays.allHits(Ray{p, dir, 0.0f, std::numeric_limits<float>::infinity()}, hits);
     for (const Hit& h : hits) {
       if (h.t <= 0.0f) return false;
-      const uint32_t c = groupOfTriangle(h.triangle);
-      if (c != kNoHit && closed[c]) odd.push_back(c);
+      const uint32_t c = solids.sealedOf(h.triangle);
+      if (c != kNoHit) odd.push_back(c);
     }
     std::sort(odd.begin(), odd.end());
     size_t w = 0;
@@ -315,14 +311,13 @@ struct HorizonFusion::Impl {
 
 void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
   const size_t nc = solids.sealedCount();
-  closed.assign(nc, 1);
   hasColumns.assign(nc, 0);
   // Triangles by component and by face (counting sort).
   compStart.assign(nc + 1, 0);
   faceStart.assign(size_t(scene.faceCount) + 1, 0);
   Box3f bounds;
   for (size_t t = 0; t < tris.size(); ++t) {
-    const uint32_t c = groupOfTriangle(uint32_t(t));
+    const uint32_t c = solids.sealedOf(uint32_t(t));
     if (c != kNoHit) ++compStart[c + 1];
     if (tris.faceIds[t] < scene.faceCount) ++faceStart[tris.faceIds[t] + 1];
     if (!tris.degenerate[t]) bounds.extend(tris.triangleBounds(t));
@@ -335,7 +330,7 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
     std::vector<uint32_t> cn(compStart.begin(), compStart.end() - 1);
     std::vector<uint32_t> fn(faceStart.begin(), faceStart.end() - 1);
     for (size_t t = 0; t < tris.size(); ++t) {
-      const uint32_t c = groupOfTriangle(uint32_t(t));
+      const uint32_t c = solids.sealedOf(uint32_t(t));
       if (c != kNoHit) compTris[cn[c]++] = uint32_t(t);
       if (tris.faceIds[t] < scene.faceCount) faceTris[fn[tris.faceIds[t]]++] = uint32_t(t);
     }
@@ -708,15 +703,15 @@ struct HorizonQuery {
   void excludeSolidsMeetingTheCell() {
     const double m = w.margin;
     const glm::dvec3 clo = glm::dvec3(cell.lo) - m, chi = glm::dvec3(cell.hi) + m;
-    std::vector<uint8_t> out(w.closed.size(), 0);
+    std::vector<uint8_t> out(w.hasColumns.size(), 0);
     std::vector<uint32_t> odd;
     for (const glm::vec3& d : parityDirections()) {
       if (!w.oddComponents(cell.center(), d, odd)) continue;  // on a surface: clipping finds it
       for (uint32_t c : odd) out[c] = 1;
     }
     const Box3f grown{glm::vec3(clo), glm::vec3(chi)};
-    for (size_t c = 0; c < w.closed.size(); ++c) {
-      if (!w.closed[c] || !w.hasColumns[c] || out[c]) continue;
+    for (size_t c = 0; c < w.hasColumns.size(); ++c) {
+      if (!w.hasColumns[c] || out[c]) continue;
       if (!w.solids.sealedBounds(uint32_t(c)).overlaps(grown)) continue;
       for (uint32_t k = w.compStart[c]; k < w.compStart[c + 1] && !out[c]; ++k) {
         const uint32_t t = w.compTris[k];
