@@ -4,24 +4,11 @@
 
 namespace vistream {
 
-glm::vec3 sunDirection() {
-  return glm::normalize(glm::vec3(0.35f, 0.85f, 0.4f));
-}
-
-glm::u8vec3 encodeColour(const glm::vec3& linear) {
-  glm::u8vec3 out;
-  for (int i = 0; i < 3; ++i) {
-    const float c = std::clamp(linear[i], 0.0f, 1.0f);
-    out[i] = uint8_t(std::lround(255.0f * std::pow(c, 1.0f / 2.2f)));
-  }
-  return out;
-}
-
 glm::u8vec3 shadeTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
                           const glm::vec3& diffuse) {
   const glm::vec3 n = glm::cross(b - a, c - a);
   const float len = glm::length(n);
-  const float lambert = len > 0.0f ? std::abs(glm::dot(n / len, sunDirection())) : 0.0f;
+  const float lambert = len > 0.0f ? std::abs(glm::dot(n / len, defaultSunDirection())) : 0.0f;
   return encodeColour(diffuse * (0.3f + 0.7f * lambert));
 }
 

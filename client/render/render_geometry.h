@@ -14,17 +14,14 @@
 #include <vector>
 
 #include "common/core/box.h"
+#include "common/light/lighting.h"
 #include "common/scene/scene.h"
 
 namespace vistream {
 
-// The sun of the prelit model (unit, local frame).
-glm::vec3 sunDirection();
 // The prelit colour of a triangle with the given corners and diffuse colour.
 glm::u8vec3 shadeTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
                           const glm::vec3& diffuse);
-// An 8-bit sRGB-ish encoding of a linear colour in [0, 1] (gamma 2.2, rounded).
-glm::u8vec3 encodeColour(const glm::vec3& linear);
 
 struct RenderGeometry {
   FlatTriangles triangles;           // local frame

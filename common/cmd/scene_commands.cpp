@@ -17,6 +17,7 @@
 #include "common/generate/generate.h"
 #include "common/generate/path.h"
 #include "common/generate/scene_spec.h"
+#include "common/light/lighting.h"
 #include "common/raycast/ray_query.h"
 #include "common/raycast/sampled_visibility.h"
 #include "common/scene/manifest.h"
@@ -246,6 +247,100 @@ int cmdVisible(const std::string& spec, const SceneLimits& limits, const std::st
   return 0;
 }
 
+// The scene's environment light: its HDR image, or the analytic sky.
+EnvironmentLight environmentOf(const Scene& scene) {
+  return scene.environment.hdrImage.empty() ? EnvironmentLight::sky(scene.environment.skyColor)
+                                            : EnvironmentLight::fromHdr(scene.environment.hdrImage);
+}
+
+// Mean and 95th percentile of the per-channel byte differences of two bakes.
+std::pair<double, double> colourError(const LightingGrid& a, const LightingGrid& reference) {
+  std::vector<int> d;
+  d.reserve(a.colours.size());
+  double sum = 0.0;
+  for (size_t i = 0; i < a.colours.size(); ++i) {
+    int worst = 0;
+    for (int c = 0; c < 3; ++c)
+      worst = std::max(worst, std::abs(int(a.colours[i][c]) - int(reference.colours[i][c])));
+    d.push_back(worst);
+    sum += worst;
+  }
+  if (d.empty()) return {0.0, 0.0};
+  std::nth_element(d.begin(), d.begin() + ptrdiff_t(d.size() * 95 / 100), d.end());
+  return {sum / double(d.size()), double(d[d.size() * 95 / 100])};
+}
+
+int cmdLight(const std::string& spec, const SceneLimits& limits, const LightingOptions& options,
+             const std::string& benchRays, bool asJson) {
+  std::vector<uint32_t> rayCounts;
+  if (!benchRays.empty())
+    for (double r : parseNumberList(benchRays, 0, "--bench")) {
+      if (!(r >= 0.0 && r <= 65536.0 && r == std::floor(r)))
+        throwInputError("--bench: ray counts must be whole numbers in 0..65536, got {}", r);
+      rayCounts.push_back(uint32_t(r));
+    }
+  const Scene scene = openScene(spec, limits);
+  const FlatTriangles tris = flattenScene(scene, /*staticOnly=*/true);
+  const auto rays = makeEmbreeRayQuery(tris);
+  const EnvironmentLight env = environmentOf(scene);
+  LightingStats stats;
+  const LightingGrid grid = bakeLighting(scene, tris, *rays, env, options, &stats, !asJson);
+  json j{{"scene", scene.name},
+         {"environment", env.source()},
+         {"triangles", stats.triangles},
+         {"points", stats.points},
+         {"points_per_triangle", stats.triangles ? double(stats.points) / stats.triangles : 0.0},
+         {"ao_rays", stats.aoRays},
+         {"shadow_rays", stats.shadowRays},
+         {"mean_ao", stats.meanAo},
+         {"textured_materials", stats.texturedMaterials},
+         {"warnings", stats.warnings},
+         {"bake_s", stats.seconds},
+         {"options",
+          {{"spacing_m", options.spacing},
+           {"max_level", options.maxLevel},
+           {"ao_rays", options.aoRays},
+           {"ao_distance_m", options.aoDistance},
+           {"ambient", options.ambient},
+           {"sun_intensity", options.sunIntensity}}}};
+  // Accuracy against time: each ray count against the bake above as the reference.
+  json bench = json::array();
+  for (uint32_t n : rayCounts) {
+    LightingOptions o = options;
+    o.aoRays = n;
+    LightingStats s;
+    const LightingGrid g = bakeLighting(scene, tris, *rays, env, o, &s, false);
+    const auto [mean, p95] = colourError(g, grid);
+    bench.push_back(
+        {{"ao_rays", n}, {"bake_s", s.seconds}, {"mean_error", mean}, {"p95_error", p95}});
+  }
+  if (!rayCounts.empty()) j["bench"] = bench;
+  if (asJson) {
+    std::cout << j.dump(2) << "\n";
+    return 0;
+  }
+  fmt::print("lighting of {} ({})\n", scene.name, env.source());
+  printRow("triangles", fmt::format("{}", stats.triangles));
+  printRow("lighting points",
+           fmt::format("{} ({:.1f} a triangle, {:g} m apart at most {} a side)", stats.points,
+                       j["points_per_triangle"].get<double>(), options.spacing, options.maxLevel));
+  printRow("rays", fmt::format("{} ambient occlusion, {} shadow", stats.aoRays, stats.shadowRays));
+  printRow("mean ambient occlusion", fmt::format("{:.3f}", stats.meanAo));
+  printRow("textured materials", fmt::format("{}", stats.texturedMaterials));
+  for (const auto& w : stats.warnings) printRow("warning", w);
+  printRow("bake time (s)", fmt::format("{:.2f}", stats.seconds));
+  if (!rayCounts.empty()) {
+    fmt::print("accuracy against time (reference: {} rays a point; error in 8-bit levels)\n",
+               options.aoRays);
+    fmt::print("  {:>8} {:>10} {:>12} {:>10}\n", "ao rays", "bake s", "mean error", "p95 error");
+    for (const auto& b : bench)
+      fmt::print("  {:>8} {:>10.2f} {:>12.2f} {:>10.0f}\n", b["ao_rays"].get<uint32_t>(),
+                 b["bake_s"].get<double>(), b["mean_error"].get<double>(),
+                 b["p95_error"].get<double>());
+  }
+  return 0;
+}
+
 }  // namespace
 
 int runSceneTool(int argc, char** argv) {
@@ -309,7 +404,33 @@ int runSceneTool(int argc, char** argv) {
   visible->add_flag("--json", asJson, "one JSON object on stdout: faces, stats");
   addSceneLimits(visible);
 
+  auto* light = app.add_subcommand(
+      "light", "bake the scene's prelit colours (environment, sun, ambient occlusion) and report");
+  LightingOptions lighting;
+  std::string benchRays;
+  light->add_option("--scene", scene, "SCENE")->required();
+  light->add_option("--spacing", lighting.spacing, "metres between lighting points on large faces")
+      ->check(positive());
+  light->add_option("--max-level", lighting.maxLevel, "most lighting points along a triangle side")
+      ->check(CLI::Range(1u, 255u));
+  light->add_option("--ao-rays", lighting.aoRays, "ambient occlusion rays a point (0: off)")
+      ->check(CLI::Range(0u, 65536u));
+  light
+      ->add_option("--ao-distance", lighting.aoDistance,
+                   "metres a ray must travel to count as open")
+      ->check(positive());
+  light
+      ->add_option("--sun-intensity", lighting.sunIntensity,
+                   "the sun's share of the light (0: no sun)")
+      ->check(CLI::Range(0.0f, 10.0f));
+  light->add_option("--bench", benchRays,
+                    "comma-separated ray counts to bake again and compare with this bake "
+                    "(accuracy against time)");
+  light->add_flag("--json", asJson, "one JSON object on stdout");
+  addSceneLimits(light);
+
   return runToolApp("vistream-scene", app, argc, argv, logLevel, [&]() -> int {
+    if (*light) return cmdLight(scene, limits, lighting, benchRays, asJson);
     if (*gen) return cmdGenerate(genType, preset, seed, out, asJson);
     if (*info) return cmdInfo(scene, limits, ground, asJson);
     if (*path) return cmdPath(scene, limits, ground, speed, frames, seed, fps, out);

@@ -12,7 +12,8 @@
 
 namespace vistream {
 
-// Parses `count` comma-separated finite numbers, e.g. "0,0,0,1,2,1".
+// Parses `count` comma-separated finite numbers, e.g. "0,0,0,1,2,1"; count 0
+// takes any number of them (at least one).
 inline std::vector<double> parseNumberList(std::string_view text, size_t count,
                                            std::string_view option) {
   std::vector<double> out;
@@ -31,7 +32,7 @@ inline std::vector<double> parseNumberList(std::string_view text, size_t count,
     if (comma == std::string_view::npos) break;
     pos = comma + 1;
   }
-  if (out.size() != count)
+  if (count != 0 && out.size() != count)
     throwInputError("{}: expected {} comma-separated numbers, got {} in '{}'", option, count,
                     out.size(), text);
   return out;

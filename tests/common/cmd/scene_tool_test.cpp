@@ -343,3 +343,48 @@ TEST(SceneTool, AnImplausiblyTallDynamicObjectGetsAWarningNamingTheScaleKey) {
 }
 
 }  // namespace
+
+namespace vistream {
+namespace {
+
+// Two textured quads: one material's texture is a file beside the scene, the
+// other's is missing, which must be a warning naming it and nothing worse.
+TEST(SceneTool, LightBakesATexturedSceneAndWarnsOfAMissingTexture) {
+  testing::TempDir dir;
+  {
+    std::ofstream(dir.path() / "scene.mtl") << "newmtl painted\nKd 1 1 1\nmap_Kd stripes.pgm\n"
+                                               "newmtl lost\nKd 0.5 0.5 0.5\nmap_Kd gone.png\n";
+    std::ofstream pgm(dir.path() / "stripes.pgm", std::ios::binary);
+    pgm << "P5\n2 1\n255\n";
+    pgm.put(char(255)).put(char(0));
+    std::ofstream(dir.path() / "scene.obj") << "mtllib scene.mtl\n"
+                                               "v 0 0 0\nv 10 0 0\nv 10 0 -10\nv 0 0 -10\n"
+                                               "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+                                               "usemtl painted\nf 1/1 2/2 3/3 4/4\n"
+                                               "v 20 0 0\nv 30 0 0\nv 30 0 -10\nv 20 0 -10\n"
+                                               "usemtl lost\nf 5/1 6/2 7/3 8/4\n";
+  }
+  const ToolRun r = runTool("light --scene " + (dir.path() / "scene.obj").string() +
+                            " --ao-rays 8 --bench 4 --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["triangles"].get<int>(), 4);
+  EXPECT_EQ(j["textured_materials"].get<int>(), 1);
+  ASSERT_EQ(j["warnings"].size(), 1u);
+  EXPECT_NE(j["warnings"][0].get<std::string>().find("gone.png"), std::string::npos);
+  EXPECT_NE(r.err.find("gone.png"), std::string::npos) << r.err;
+  // 10 m sides at 4 m spacing: level 4 on the sides, 15 points a triangle.
+  EXPECT_EQ(j["points"].get<int>(), 4 * 15);
+  ASSERT_EQ(j["bench"].size(), 1u);
+  EXPECT_EQ(j["bench"][0]["ao_rays"].get<int>(), 4);
+  EXPECT_EQ(j["environment"].get<std::string>(), "analytic sky");
+}
+
+TEST(SceneTool, LightRefusesABadBenchListBeforeLoading) {
+  const ToolRun r = runTool("light --scene /nonexistent/scene.obj --bench 8,x");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.err.find("--bench"), std::string::npos) << r.err;
+}
+
+}  // namespace
+}  // namespace vistream

@@ -1,0 +1,332 @@
+#include "common/light/lighting.h"
+
+#include <spdlog/spdlog.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <map>
+#include <memory>
+
+#include "common/core/check.h"
+#include "common/core/progress.h"
+#include "common/light/texture.h"
+
+namespace vistream {
+namespace {
+
+constexpr float kPi = 3.14159265358979f;
+
+float luminance(const glm::vec3& c) {
+  return glm::dot(c, glm::vec3(0.2126f, 0.7152f, 0.0722f));
+}
+
+uint64_t mix64(uint64_t x) {  // splitmix64's finaliser
+  x += 0x9e3779b97f4a7c15ull;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
+  return x ^ (x >> 31);
+}
+
+// A seed from a point's position, so points shared by neighbouring triangles
+// (same position, same normal) get the same rays.
+uint64_t pointSeed(const glm::vec3& p) {
+  uint64_t h = 0;
+  for (int a = 0; a < 3; ++a) {
+    uint32_t bits;
+    const float v = p[a] == 0.0f ? 0.0f : p[a];  // -0 and +0 alike
+    std::memcpy(&bits, &v, 4);
+    h = mix64(h ^ bits);
+  }
+  return h;
+}
+
+double unitFloat(uint64_t x) {
+  return double(x >> 11) * (1.0 / 9007199254740992.0);
+}
+
+// An orthonormal frame (t, b) around unit n (Duff et al. 2017).
+void frameOf(const glm::vec3& n, glm::vec3& t, glm::vec3& b) {
+  const float s = n.z >= 0.0f ? 1.0f : -1.0f;
+  const float a = -1.0f / (s + n.z);
+  const float c = n.x * n.y * a;
+  t = glm::vec3(1.0f + s * n.x * n.x * a, s * c, -s * n.x);
+  b = glm::vec3(c, s + n.y * n.y * a, -n.y);
+}
+
+// Offset of a ray's origin off a surface at p: above float rounding of the
+// coordinates and of the hit test, far below any feature a lighting grid
+// resolves.
+float surfaceOffset(const glm::vec3& p) {
+  const float m = std::max({std::abs(p.x), std::abs(p.y), std::abs(p.z)});
+  return 2e-3f + 4e-6f * m;
+}
+
+// Where a texture for a material's name is: absolute, or beside one of the
+// scene's source files.
+std::filesystem::path resolveTexture(const Scene& scene, const std::string& name) {
+  const std::filesystem::path p(name);
+  if (p.is_absolute()) return p;
+  std::error_code ec;
+  for (const auto& source : scene.sources) {
+    const auto candidate = source.parent_path() / p;
+    if (std::filesystem::exists(candidate, ec)) return candidate;
+  }
+  return scene.sources.empty() ? p : scene.sources.front().parent_path() / p;
+}
+
+// Per flattened static triangle: its material and texture coordinates.
+struct SurfaceTable {
+  std::vector<uint32_t> material;
+  std::vector<std::array<glm::vec2, 3>> uv;
+  std::vector<uint8_t> hasUv;
+};
+
+SurfaceTable surfacesOf(const Scene& scene) {
+  SurfaceTable s;
+  for (const Object& o : scene.objects) {
+    if (o.dynamic) continue;
+    const TriangleMesh& m = o.mesh;
+    for (size_t t = 0; t < m.triangles.size(); ++t) {
+      s.material.push_back(t < m.materials.size() ? m.materials[t] : 0u);
+      std::array<glm::vec2, 3> uv{};
+      bool has = !m.texcoords.empty();
+      for (int k = 0; k < 3 && has; ++k) {
+        const uint32_t v = m.triangles[t][k];
+        if (v < m.texcoords.size())
+          uv[size_t(k)] = m.texcoords[v];
+        else
+          has = false;
+      }
+      s.uv.push_back(uv);
+      s.hasUv.push_back(has ? 1 : 0);
+    }
+  }
+  return s;
+}
+
+}  // namespace
+
+glm::vec3 defaultSunDirection() {
+  return glm::normalize(glm::vec3(0.35f, 0.85f, 0.4f));
+}
+
+glm::u8vec3 encodeColour(const glm::vec3& linear) {
+  glm::u8vec3 out;
+  for (int i = 0; i < 3; ++i) {
+    const float c = std::isfinite(linear[i]) ? std::clamp(linear[i], 0.0f, 1.0f) : 0.0f;
+    out[i] = uint8_t(std::lround(255.0f * std::pow(c, 1.0f / 2.2f)));
+  }
+  return out;
+}
+
+glm::u8vec3 toBytes(const glm::vec3& c) {
+  glm::u8vec3 out;
+  for (int i = 0; i < 3; ++i) out[i] = uint8_t(std::lround(std::clamp(c[i], 0.0f, 255.0f)));
+  return out;
+}
+
+void LightingGrid::append(uint32_t n, const glm::u8vec3* c, size_t count) {
+  VS_CHECK(n >= 1 && n <= 255);
+  VS_CHECK_EQ(count, size_t(pointsOf(n)));
+  first.push_back(uint32_t(colours.size()));
+  level.push_back(uint8_t(n));
+  colours.insert(colours.end(), c, c + count);
+}
+
+void LightingGrid::appendFlat(glm::u8vec3 c) {
+  const glm::u8vec3 three[3] = {c, c, c};
+  append(1, three, 3);
+}
+
+glm::vec3 LightingGrid::colourAt(size_t t, float u, float v) const {
+  const uint32_t n = level[t];
+  const glm::u8vec3* g = colours.data() + first[t];
+  // Barycentrics clamped into the triangle (a hit on an edge may round out).
+  u = std::isfinite(u) ? std::clamp(u, 0.0f, 1.0f) : 0.0f;
+  v = std::isfinite(v) ? std::clamp(v, 0.0f, 1.0f - u) : 0.0f;
+  const float x = u * float(n), y = v * float(n);
+  // Cell (i, j): its lower triangle (i, j), (i + 1, j), (i, j + 1) always
+  // exists, its upper one (i + 1, j + 1), (i, j + 1), (i + 1, j) when i + j
+  // <= n - 2. A point on the grid's far edge (i + j = n) belongs to the cell
+  // before it.
+  uint32_t i = std::min(uint32_t(x), n - 1), j = std::min(uint32_t(y), n - 1);
+  if (i + j > n - 1) --i;  // i + j <= x + y <= n, and j <= n - 1 gives i >= 1 here
+  const float fx = x - float(i), fy = y - float(j);
+  auto at = [&](uint32_t a, uint32_t b) { return glm::vec3(g[pointIndex(n, a, b)]); };
+  if (fx + fy > 1.0f && i + j + 2 <= n)
+    return at(i + 1, j + 1) * (fx + fy - 1.0f) + at(i, j + 1) * (1.0f - fx) +
+           at(i + 1, j) * (1.0f - fy);
+  return at(i, j) * (1.0f - fx - fy) + at(i + 1, j) * fx + at(i, j + 1) * fy;
+}
+
+glm::u8vec3 LightingGrid::meanColour(size_t t) const {
+  const uint32_t count = pointsOf(level[t]);
+  glm::vec3 sum(0.0f);
+  for (uint32_t k = 0; k < count; ++k) sum += glm::vec3(colours[first[t] + k]);
+  return toBytes(sum / float(count));
+}
+
+double ambientOcclusion(const RayQuery& rays, const glm::vec3& p, const glm::vec3& n,
+                        uint32_t count, float distance, uint64_t seed) {
+  if (count == 0) return 1.0;
+  glm::vec3 t, b;
+  frameOf(n, t, b);
+  const glm::vec3 org = p + n * surfaceOffset(p);
+  // Stratified on a sqrt(count) x sqrt(count) grid of the unit square (the
+  // remainder at random), rotated by the seed (Cranley-Patterson), then
+  // mapped to the cosine-weighted hemisphere (Malley's method).
+  const double r1 = unitFloat(mix64(seed)), r2 = unitFloat(mix64(seed ^ 0x5851f42d4c957f2dull));
+  const uint32_t side = std::max<uint32_t>(1, uint32_t(std::sqrt(double(count))));
+  std::vector<Ray> batch(count);
+  for (uint32_t k = 0; k < count; ++k) {
+    double s1, s2;
+    if (k < side * side) {
+      s1 = (double(k % side) + 0.5) / side;
+      s2 = (double(k / side) + 0.5) / side;
+    } else {
+      s1 = unitFloat(mix64(seed + 2 * k + 1));
+      s2 = unitFloat(mix64(seed + 2 * k + 2));
+    }
+    s1 = std::fmod(s1 + r1, 1.0);
+    s2 = std::fmod(s2 + r2, 1.0);
+    const double r = std::sqrt(s1), phi = 2.0 * double(kPi) * s2;
+    const float x = float(r * std::cos(phi)), y = float(r * std::sin(phi));
+    const float z = float(std::sqrt(std::max(0.0, 1.0 - s1)));
+    batch[k] = Ray{org, t * x + b * y + n * z, 0.0f, distance};
+  }
+  std::vector<uint8_t> blocked(count);
+  rays.occludedMany(batch, blocked);
+  uint32_t open = 0;
+  for (uint8_t o : blocked) open += o ? 0u : 1u;
+  return double(open) / double(count);
+}
+
+LightingGrid bakeLighting(const Scene& scene, const FlatTriangles& triangles, const RayQuery& rays,
+                          const EnvironmentLight& environment, const LightingOptions& options,
+                          LightingStats* stats, bool progress) {
+  const auto start = std::chrono::steady_clock::now();
+  VS_CHECK(options.spacing > 0.0f && options.maxLevel >= 1 && options.maxLevel <= 255);
+  const size_t count = triangles.size();
+  const SurfaceTable surfaces = surfacesOf(scene);
+  VS_CHECK_EQ(surfaces.material.size(), count);
+
+  // Textures, once per material.
+  std::vector<std::optional<Texture>> textures(scene.materials.size());
+  LightingStats local;
+  for (size_t m = 0; m < scene.materials.size(); ++m) {
+    const std::string& name = scene.materials[m].baseColorTexture;
+    if (name.empty()) continue;
+    const auto file = resolveTexture(scene, name);
+    std::string error;
+    textures[m] = Texture::load(file, error);
+    if (textures[m]) {
+      ++local.texturedMaterials;
+    } else {
+      local.warnings.push_back(fmt::format("material {}: texture {}: {}; its diffuse colour stays",
+                                           scene.materials[m].name, file.string(), error));
+      spdlog::warn("{}", local.warnings.back());
+    }
+  }
+
+  // Levels and offsets, then every triangle's points in parallel.
+  LightingGrid grid;
+  grid.level.resize(count);
+  grid.first.resize(count);
+  uint64_t points = 0;
+  for (size_t t = 0; t < count; ++t) {
+    const glm::vec3 a = triangles.vertex(t, 0), b = triangles.vertex(t, 1),
+                    c = triangles.vertex(t, 2);
+    const float longest = std::max({glm::length(b - a), glm::length(c - b), glm::length(a - c)});
+    const float ratio = std::isfinite(longest) ? longest / options.spacing : 1.0f;
+    const uint32_t n =
+        std::clamp<uint32_t>(uint32_t(std::ceil(std::min(ratio, 255.0f))), 1u, options.maxLevel);
+    grid.level[t] = uint8_t(n);
+    grid.first[t] = uint32_t(points);
+    points += LightingGrid::pointsOf(n);
+  }
+  VS_CHECK_LE(points, uint64_t(std::numeric_limits<uint32_t>::max()));
+  grid.colours.resize(size_t(points));
+
+  const glm::vec3 sun = glm::normalize(options.sunDirection);
+  const bool sunOn = options.sunIntensity > 0.0f && std::isfinite(sun.x);
+  const float upLuminance = luminance(environment.irradiance(glm::vec3(0.0f, 1.0f, 0.0f)));
+  const float skyScale = upLuminance > 0.0f ? options.ambient / upLuminance : 0.0f;
+  std::atomic<uint64_t> shadowRays{0};
+  std::vector<double> aoSum(count, 0.0);
+  std::unique_ptr<ProgressBar> bar =
+      progress ? std::make_unique<ProgressBar>("lighting", count) : nullptr;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 64), [&](const auto& range) {
+    for (size_t t = range.begin(); t != range.end(); ++t) {
+      const glm::vec3 a = triangles.vertex(t, 0), b = triangles.vertex(t, 1),
+                      c = triangles.vertex(t, 2);
+      glm::vec3 n = glm::cross(b - a, c - a);
+      const float len = glm::length(n);
+      n = len > 0.0f && std::isfinite(len) ? n / len : glm::vec3(0.0f, 1.0f, 0.0f);
+      const uint32_t material = surfaces.material[t];
+      const glm::vec3 diffuse =
+          material < scene.materials.size() ? scene.materials[material].diffuse : glm::vec3(0.8f);
+      const Texture* texture = material < textures.size() && textures[material] && surfaces.hasUv[t]
+                                   ? &*textures[material]
+                                   : nullptr;
+      const uint32_t level = grid.level[t];
+      const auto& uv = surfaces.uv[t];
+      glm::vec2 uvLo = glm::min(uv[0], glm::min(uv[1], uv[2]));
+      glm::vec2 uvHi = glm::max(uv[0], glm::max(uv[1], uv[2]));
+      const glm::vec2 footprint = (uvHi - uvLo) / float(level);
+      const glm::vec3 sky = environment.irradiance(n) * skyScale;
+      const glm::vec3 centroid = (a + b + c) / 3.0f;
+      const float sunCos = sunOn ? std::max(0.0f, glm::dot(n, sun)) : 0.0f;
+      glm::u8vec3* out = grid.colours.data() + grid.first[t];
+      for (uint32_t j = 0; j <= level; ++j)
+        for (uint32_t i = 0; i + j <= level; ++i) {
+          const float u = float(i) / float(level), v = float(j) / float(level);
+          const glm::vec3 p = a + u * (b - a) + v * (c - a);
+          glm::vec3 albedo = diffuse;
+          if (texture) {
+            const glm::vec2 at = uv[0] + u * (uv[1] - uv[0]) + v * (uv[2] - uv[0]);
+            albedo *= level == 1 ? texture->mean(uvLo, uvHi)
+                                 : texture->mean(at - 0.5f * footprint, at + 0.5f * footprint);
+          }
+          // Rays leave from just inside the triangle: a point on its edge
+          // may lie in the plane of a wall meeting it there.
+          const glm::vec3 in = centroid - p;
+          const float inLength = glm::length(in), step = surfaceOffset(p);
+          const glm::vec3 q = inLength > 2.0f * step ? p + in * (step / inLength) : p;
+          const double ao = ambientOcclusion(rays, q, n, options.aoRays, options.aoDistance,
+                                             pointSeed(p) ^ mix64(pointSeed(n)));
+          aoSum[t] += ao;
+          float lit = 0.0f;
+          if (sunCos > 0.0f) {
+            lit = 1.0f;
+            if (options.sunShadows) {
+              const Ray shadow{q + n * surfaceOffset(q), sun, 0.0f,
+                               std::numeric_limits<float>::infinity()};
+              lit = rays.occluded(shadow) ? 0.0f : 1.0f;
+              shadowRays.fetch_add(1, std::memory_order_relaxed);
+            }
+          }
+          const glm::vec3 light = sky * float(ao) + glm::vec3(options.sunIntensity * sunCos * lit);
+          out[LightingGrid::pointIndex(level, i, j)] = encodeColour(albedo * light);
+        }
+      if (bar) bar->advance();
+    }
+  });
+  if (bar) bar->finish();
+
+  local.triangles = count;
+  local.points = points;
+  local.aoRays = points * options.aoRays;
+  local.shadowRays = shadowRays.load();
+  double ao = 0.0;
+  for (double s : aoSum) ao += s;
+  local.meanAo = points ? ao / double(points) : 1.0;
+  local.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (stats) *stats = std::move(local);
+  return grid;
+}
+
+}  // namespace vistream

@@ -1,0 +1,123 @@
+// Prelit colour that varies across a triangle: a small grid of colours per
+// triangle, baked once per scene from its materials, the environment's light,
+// a sun with hard shadows and ambient occlusion, then looked up by
+// barycentrics in every renderer (OpenGL, the software rasterizer, the ray
+// caster, the image cache), so a point has one colour whichever draws it.
+//
+// The grid: triangle (a, b, c) at level n >= 1 has a lighting point at every
+// barycentric (u, v) = (i / n, j / n) with i + j <= n, at a + u (b - a) +
+// v (c - a): (n + 1)(n + 2) / 2 points, n = ceil(longest edge / spacing)
+// capped at maxLevel. A point's colour is interpolated linearly inside the
+// grid's small triangle holding (u, v) (colourAt). Large faces are thereby
+// subdivided for lighting only: triangles, face IDs and every visibility
+// result stay as they were.
+//
+// Light at a point p with normal n (the triangle's winding normal, as glTF
+// and OBJ define its front; the back shows the same colour):
+//   colour = albedo * (ambient * E(n) / E_up * ao + sun * max(0, n . L) * lit)
+// E is the environment's irradiance (environment_light.h), E_up its
+// luminance on an up-facing surface (so an open, white, up-facing surface
+// gets `ambient` from the sky whatever the HDR image's units), ao the share
+// of cosine-weighted rays from p that travel aoDistance unblocked (Embree),
+// and lit whether a ray towards the sun escapes. The result is encoded as 8-bit
+// sRGB-like values (gamma 2.2): the colours renderers read.
+//
+// Albedo: the material's diffuse colour times its base-colour texture's mean
+// over the point's share of the triangle (texture.h: a box of the grid's
+// spacing in texture coordinates around the point).
+//
+// Thread safety: a LightingGrid is immutable once baked; bakeLighting runs
+// in parallel (TBB) and is deterministic (each point's rays are seeded by
+// the point, so a run gives the same bytes on any thread count).
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <glm/glm.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "common/light/environment_light.h"
+#include "common/raycast/ray_query.h"
+#include "common/scene/scene.h"
+
+namespace vistream {
+
+// The default sun (unit, local frame): high in the south-east.
+glm::vec3 defaultSunDirection();
+// A linear colour in [0, 1] as 8-bit values (gamma 2.2, rounded, clamped).
+glm::u8vec3 encodeColour(const glm::vec3& linear);
+
+struct LightingGrid {
+  std::vector<uint32_t> first;       // per triangle: its first colour in `colours`
+  std::vector<uint8_t> level;        // per triangle: n >= 1
+  std::vector<glm::u8vec3> colours;  // every triangle's points, row by row (j), then by i
+
+  size_t size() const { return level.size(); }
+  static constexpr uint32_t pointsOf(uint32_t n) { return (n + 1) * (n + 2) / 2; }
+  // Index of point (i, j) within a grid of level n (i + j <= n).
+  static constexpr uint32_t pointIndex(uint32_t n, uint32_t i, uint32_t j) {
+    return j * (n + 1) - j * (j - 1) / 2 + i;
+  }
+  // Appends one triangle's grid (colours.size() == pointsOf(n)).
+  void append(uint32_t n, const glm::u8vec3* colours, size_t count);
+  // One flat colour for a triangle (level 1, three equal corners).
+  void appendFlat(glm::u8vec3 c);
+
+  // The colour at barycentrics (u, v) of triangle t (weights of its vertices 1
+  // and 2), interpolated within the grid, in 0..255 per channel (unrounded).
+  glm::vec3 colourAt(size_t t, float u, float v) const;
+  // The mean of a triangle's grid colours (for a one-colour summary).
+  glm::u8vec3 meanColour(size_t t) const;
+};
+
+struct LightingOptions {
+  float spacing = 4.0f;       // metres between lighting points on large faces
+  uint32_t maxLevel = 16;     // at most 153 points a triangle
+  uint32_t aoRays = 32;       // per lighting point; 0 turns ambient occlusion off
+  float aoDistance = 20.0f;   // metres a ray must travel to count as open
+  float ambient = 0.7f;       // sky light on an open, up-facing white surface
+  float sunIntensity = 0.5f;  // 0: no sun
+  glm::vec3 sunDirection = defaultSunDirection();  // towards the sun
+  bool sunShadows = true;
+};
+
+struct LightingStats {
+  uint64_t triangles = 0, points = 0, aoRays = 0, shadowRays = 0;
+  double seconds = 0.0;
+  double meanAo = 0.0;  // over every point
+  uint32_t texturedMaterials = 0;
+  std::vector<std::string> warnings;  // textures missing or unreadable
+};
+
+// Bakes the grid of every triangle of `triangles` (a flattening of the
+// scene's static objects, flattenScene(scene, true), whose ray queries `rays`
+// answers). Progress on stderr when `progress` and stderr is a terminal.
+LightingGrid bakeLighting(const Scene& scene, const FlatTriangles& triangles, const RayQuery& rays,
+                          const EnvironmentLight& environment, const LightingOptions& options,
+                          LightingStats* stats = nullptr, bool progress = false);
+
+// The share of cosine-weighted rays from p (unit normal n) that travel
+// `distance` unblocked: `count` rays, stratified and rotated by `seed`.
+double ambientOcclusion(const RayQuery& rays, const glm::vec3& p, const glm::vec3& n,
+                        uint32_t count, float distance, uint64_t seed);
+
+// Fades a colour (0..255 per channel) towards the horizon's colour with
+// distance: c + (haze - c) * (1 - exp(-distance / scale)). The same in every
+// renderer; scale 0 turns it off.
+struct Haze {
+  glm::vec3 colour{0.0f};  // 0..255
+  float scale = 0.0f;      // metres
+
+  float amount(float distance) const {
+    return scale > 0.0f && distance > 0.0f ? 1.0f - std::exp(-distance / scale) : 0.0f;
+  }
+  glm::vec3 apply(const glm::vec3& c, float distance) const {
+    return c + (colour - c) * amount(distance);
+  }
+};
+// Rounds a 0..255 colour to bytes.
+glm::u8vec3 toBytes(const glm::vec3& c);
+
+}  // namespace vistream
