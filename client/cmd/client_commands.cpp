@@ -39,7 +39,8 @@ struct Args {
   std::string scene, host, pathFile, size = "640x480", outDir, mode = "pipeline", logLevel = "warn",
                                      token;
   SceneLimits sceneLimits;
-  GroundChoice ground;  // for --path auto
+  std::filesystem::path lightingCache;  // empty: no cache
+  GroundChoice ground;                  // for --path auto
   uint16_t port = 7070;
   bool headless = false, json = false, noCache = false, compare = false;
   std::string intake = "incremental";
@@ -379,7 +380,7 @@ int run(const Args& a) {
   std::optional<Scene> pathScene;  // connected: the local copy --path auto walks through
   if (local) {
     scene = openScene(a.scene, a.sceneLimits);
-    geometry = renderGeometryFromScene(*scene);
+    geometry = renderGeometryFromScene(*scene, {}, a.lightingCache);
     origin = scene->origin;
   } else {
     if (!a.scene.empty()) pathScene = openScene(a.scene, a.sceneLimits);
@@ -462,6 +463,7 @@ int runClientTool(int argc, char** argv) {
       "--scene", a.scene,
       "local mode: a SCENE (with --host: used only to generate --path auto). " + sceneSpecHelp());
   addSceneLimitsOption(app, a.sceneLimits);
+  addLightingCacheOption(app, a.lightingCache);
   addGroundOption(app, a.ground);
   app.add_option("--host", a.host, "connected mode: the vistream-server to stream from");
   app.add_option("--port", a.port, "the server's port")->check(tcpPort());

@@ -311,7 +311,10 @@ struct FrameRun {
         const size_t p = size_t(y) * size_t(W) + size_t(x);
         if (covered[p] == kCovered) {
           ++rep.pixels.polygon;
-          if (!glNear) out.set(x, y, r.geometry_.colours[r.ids_.ids[p]]);
+          if (!glNear)
+            out.set(x, y,
+                    r.geometry_.colourAlong(r.ids_.ids[p], camera.eye,
+                                            pixelRays.at(float(x) + 0.5f, float(y) + 0.5f)));
           continue;
         }
         const glm::vec3 dir = pixelRays.at(float(x) + 0.5f, float(y) + 0.5f);
@@ -388,8 +391,10 @@ struct FrameRun {
     Stopwatch clock;
     for (size_t k = 0; k < rays.size(); ++k) {
       const size_t i = rayOf[k];
-      const glm::u8vec3 c = hits[k].valid() ? r.geometry_.colours[hits[k].triangle]
-                                            : r.geometry_.background(camera.eye, dirs[i]);
+      const Hit& h = hits[k];
+      const glm::u8vec3 c =
+          h.valid() ? r.geometry_.colourAt(h.triangle, h.u, h.v, h.t * glm::length(dirs[i]))
+                    : r.geometry_.background(camera.eye, dirs[i]);
       hits[k].valid() ? ++rep.pixels.rayHit : ++rep.pixels.rayMiss;
       setPixel(candidates[i], c);
       if (useCache && texels[i] >= 0)

@@ -4,6 +4,7 @@
 // in the header, all of it static: this file is its only user, so the HUD
 // font lives in this translation unit.
 #include <epoxy/gl.h>
+#include <fmt/format.h>
 #include <stb/stb_easy_font.h>
 
 #include <algorithm>
@@ -90,31 +91,62 @@ std::vector<std::string> wrapHudLine(const std::string& text, float maxUnits, bo
   return packParts(fields, "  ", maxUnits, "  ", fits);
 }
 
-// The near field: each vertex carries its triangle's colour; `flat` and an
-// unorm8 attribute make the framebuffer byte equal to the byte on the CPU.
+// The near field: vertices 3t, 3t + 1, 3t + 2 are triangle t's corners
+// (the draw's indices are vertex numbers, so gl_VertexID names them), and
+// each fragment looks its colour up in the triangle's lighting grid exactly
+// as LightingGrid::colourAt and Haze::apply do on the CPU, so the framebuffer
+// byte equals the CPU's byte up to the rounding of the last float bit.
 constexpr const char* kNearVertex = R"(#version 330 core
 layout(location = 0) in vec3 position;
-layout(location = 1) in vec3 colour;
 uniform mat4 rotationProjection;
 uniform vec3 eye;
-flat out vec3 triangleColour;
+flat out int triangle;
+out vec2 bary;
 out vec3 fromEye;
 void main() {
   // Relative to the eye first, so positions far from the origin keep their precision.
   fromEye = position - eye;
   gl_Position = rotationProjection * vec4(fromEye, 1.0);
-  triangleColour = colour;
+  triangle = gl_VertexID / 3;
+  int k = gl_VertexID - 3 * triangle;
+  bary = vec2(k == 1 ? 1.0 : 0.0, k == 2 ? 1.0 : 0.0);
 }
 )";
 // Fragments beyond the near-field distance are left to the far field.
 constexpr const char* kNearFragment = R"(#version 330 core
-flat in vec3 triangleColour;
+flat in int triangle;
+in vec2 bary;
 in vec3 fromEye;
 uniform float maxDistance;
+uniform usamplerBuffer grids;   // per triangle: first colour, level
+uniform samplerBuffer colours;  // the grids' colours, RGBA8
+uniform vec3 hazeColour;        // 0..255
+uniform float hazeScale;        // metres, 0: no haze
 out vec4 fragColour;
+vec3 point(int first, int n, int i, int j) {
+  return texelFetch(colours, first + j * (n + 1) - j * (j - 1) / 2 + i).rgb * 255.0;
+}
 void main() {
-  if (length(fromEye) > maxDistance) discard;
-  fragColour = vec4(triangleColour, 1.0);
+  float distance = length(fromEye);
+  if (distance > maxDistance) discard;
+  uvec2 g = texelFetch(grids, triangle).rg;
+  int first = int(g.r), n = int(g.g);
+  float u = clamp(bary.x, 0.0, 1.0);
+  float v = clamp(bary.y, 0.0, 1.0 - u);
+  float x = u * float(n), y = v * float(n);
+  int i = min(int(x), n - 1), j = min(int(y), n - 1);
+  if (i + j > n - 1) i -= 1;
+  float fx = x - float(i), fy = y - float(j);
+  vec3 c;
+  if (fx + fy > 1.0 && i + j + 2 <= n)
+    c = point(first, n, i + 1, j + 1) * (fx + fy - 1.0) + point(first, n, i, j + 1) * (1.0 - fx) +
+        point(first, n, i + 1, j) * (1.0 - fy);
+  else
+    c = point(first, n, i, j) * (1.0 - fx - fy) + point(first, n, i + 1, j) * fx +
+        point(first, n, i, j + 1) * fy;
+  if (hazeScale > 0.0 && distance > 0.0)
+    c = c + (hazeColour - c) * (1.0 - exp(-distance / hazeScale));
+  fragColour = vec4(clamp(c, 0.0, 255.0) / 255.0, 1.0);
 }
 )";
 
@@ -222,12 +254,25 @@ struct Program {
   GLint uniform(const char* name) const { return glGetUniformLocation(id, name); }
 };
 
-struct NearVertex {
-  glm::vec3 position;
-  glm::u8vec3 colour;
-  uint8_t pad = 0;
+// A texture buffer: a buffer object read in shaders through a buffer texture.
+struct TextureBuffer {
+  Buffer buffer;
+  Texture texture;
+
+  template <class T>
+  void upload(GLenum format, const std::vector<T>& data) {
+    glBindBuffer(GL_TEXTURE_BUFFER, buffer.id);
+    glBufferData(GL_TEXTURE_BUFFER, GLsizeiptr(std::max<size_t>(1, data.size()) * sizeof(T)),
+                 data.empty() ? nullptr : data.data(), GL_STATIC_DRAW);
+    glBindTexture(GL_TEXTURE_BUFFER, texture.id);
+    glTexBuffer(GL_TEXTURE_BUFFER, format, buffer.id);
+    glBindBuffer(GL_TEXTURE_BUFFER, 0);
+  }
+  void bind(GLenum unit) const {
+    glActiveTexture(unit);
+    glBindTexture(GL_TEXTURE_BUFFER, texture.id);
+  }
 };
-static_assert(sizeof(NearVertex) == 16);
 
 // One vertex as stb_easy_font writes it.
 struct FontVertex {
@@ -245,6 +290,10 @@ struct GlRenderer::Impl {
   GLint rotationProjection = nearProgram.uniform("rotationProjection");
   GLint eye = nearProgram.uniform("eye");
   GLint maxDistance = nearProgram.uniform("maxDistance");
+  GLint grids = nearProgram.uniform("grids");
+  GLint colours = nearProgram.uniform("colours");
+  GLint hazeColour = nearProgram.uniform("hazeColour");
+  GLint hazeScale = nearProgram.uniform("hazeScale");
   GLint image = imageProgram.uniform("image");
   GLint hudViewport = hudProgram.uniform("viewport");
   GLint hudColour = hudProgram.uniform("colour");
@@ -252,6 +301,8 @@ struct GlRenderer::Impl {
   VertexArray nearArray;
   Buffer nearVertices;
   Buffer nearIndices;
+  TextureBuffer gridBuffer, colourBuffer;
+  Haze haze;
   size_t triangleCount = 0;
   std::vector<GLuint> indices;  // scratch, reused every frame
 
@@ -267,11 +318,7 @@ struct GlRenderer::Impl {
     glBindVertexArray(nearArray.id);
     glBindBuffer(GL_ARRAY_BUFFER, nearVertices.id);
     glEnableVertexAttribArray(0);
-    glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(NearVertex),
-                          reinterpret_cast<const void*>(offsetof(NearVertex, position)));
-    glEnableVertexAttribArray(1);
-    glVertexAttribPointer(1, 3, GL_UNSIGNED_BYTE, GL_TRUE, sizeof(NearVertex),
-                          reinterpret_cast<const void*>(offsetof(NearVertex, colour)));
+    glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(glm::vec3), nullptr);
     glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, nearIndices.id);  // recorded in the vertex array
 
     glBindVertexArray(hudArray.id);
@@ -327,6 +374,13 @@ struct GlRenderer::Impl {
     glUniformMatrix4fv(rotationProjection, 1, GL_FALSE, &rp[0][0]);
     glUniform3f(eye, camera.eye.x, camera.eye.y, camera.eye.z);
     glUniform1f(maxDistance, std::isfinite(nearDistance) ? nearDistance : 3.0e38f);
+    glUniform1i(grids, 1);
+    glUniform1i(colours, 2);
+    glUniform3f(hazeColour, haze.colour.r, haze.colour.g, haze.colour.b);
+    glUniform1f(hazeScale, haze.scale);
+    gridBuffer.bind(GL_TEXTURE1);
+    colourBuffer.bind(GL_TEXTURE2);
+    glActiveTexture(GL_TEXTURE0);
     glEnable(GL_DEPTH_TEST);
     glDepthFunc(GL_LESS);
     glDrawElements(GL_TRIANGLES, GLsizei(indices.size()), GL_UNSIGNED_INT, nullptr);
@@ -403,13 +457,24 @@ GlRenderer::~GlRenderer() = default;
 void GlRenderer::upload(const RenderGeometry& geometry) {
   const size_t n = geometry.size();
   VS_CHECK_EQ(geometry.triangles.positions.size(), 3 * n);
-  VS_CHECK_EQ(geometry.colours.size(), n);
-  std::vector<NearVertex> vertices(3 * n);
-  for (size_t i = 0; i < vertices.size(); ++i)
-    vertices[i] = NearVertex{geometry.triangles.positions[i], geometry.colours[i / 3]};
+  const LightingGrid& lighting = geometry.lighting;
+  VS_CHECK_EQ(lighting.size(), n);
   glBindBuffer(GL_ARRAY_BUFFER, impl_->nearVertices.id);
-  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(vertices.size() * sizeof(NearVertex)), vertices.data(),
-               GL_STATIC_DRAW);
+  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(std::max<size_t>(1, 3 * n) * sizeof(glm::vec3)),
+               n ? geometry.triangles.positions.data() : nullptr, GL_STATIC_DRAW);
+  std::vector<glm::uvec2> grids(n);
+  for (size_t t = 0; t < n; ++t) grids[t] = glm::uvec2(lighting.first[t], lighting.level[t]);
+  std::vector<glm::u8vec4> colours(lighting.colours.size());
+  for (size_t i = 0; i < colours.size(); ++i) colours[i] = glm::u8vec4(lighting.colours[i], 255);
+  GLint maxTexels = 0;
+  glGetIntegerv(GL_MAX_TEXTURE_BUFFER_SIZE, &maxTexels);
+  if (size_t(maxTexels) < std::max(grids.size(), colours.size()))
+    throw std::runtime_error(fmt::format(
+        "OpenGL: {} lighting colours exceed this driver's texture buffer limit of {} texels",
+        colours.size(), maxTexels));
+  impl_->gridBuffer.upload(GL_RG32UI, grids);
+  impl_->colourBuffer.upload(GL_RGBA8, colours);
+  impl_->haze = geometry.haze;
   impl_->triangleCount = n;
 }
 

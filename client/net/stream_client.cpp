@@ -31,6 +31,8 @@ namespace {
 struct HeldFace {
   uint16_t material = 0;
   std::vector<glm::vec3> corners;
+  std::vector<uint8_t> levels;       // per triangle, when the server sent lighting
+  std::vector<glm::u8vec3> colours;  // the grids, one after another
 };
 }  // namespace
 
@@ -50,7 +52,8 @@ struct StreamClient::Impl : PeerHandler {
   WelcomeGrid grid;
   std::vector<glm::vec3> materials;
   glm::vec3 sky{0.55f, 0.7f, 0.9f};
-  std::optional<float> groundY;  // local frame; an assumed ground plane (Welcome)
+  std::optional<Backdrop> backdrop;  // the baked lighting's (Welcome), if it sent one
+  std::optional<float> groundY;      // local frame; an assumed ground plane (Welcome)
   std::map<uint32_t, HeldFace> faces;
   std::set<glm::ivec3, IvecLess> ready;
   glm::ivec3 poseCell{0};
@@ -70,25 +73,41 @@ struct StreamClient::Impl : PeerHandler {
       replaceAll = true;
     }
   }
-  // Appends a held face's triangles (called with `mutex` held).
-  void appendFace(RenderGeometry& g, std::vector<uint16_t>& material, uint32_t id,
-                  const HeldFace& f) const {
-    for (size_t i = 0; i + 2 < f.corners.size(); i += 3) {
-      for (int k = 0; k < 3; ++k) g.triangles.positions.push_back(f.corners[i + size_t(k)]);
+  // Appends a held face's triangles with their colours: the lighting grids
+  // the server sent, or flat from the material (called with `mutex` held).
+  void appendFace(RenderGeometry& g, uint32_t id, const HeldFace& f) const {
+    const size_t triangles = f.corners.size() / 3;
+    const bool lit = f.levels.size() == triangles;
+    const glm::vec3 diffuse =
+        f.material < materials.size() ? materials[f.material] : glm::vec3(0.8f);
+    size_t at = 0;
+    for (size_t t = 0; t < triangles; ++t) {
+      const glm::vec3* c = f.corners.data() + 3 * t;
+      for (int k = 0; k < 3; ++k) {
+        g.triangles.positions.push_back(c[k]);
+        g.bounds.extend(c[k]);
+      }
       g.triangles.faceIds.push_back(id);
       g.triangles.objectIds.push_back(0);
-      g.triangles.degenerate.push_back(
-          isDegenerateTriangle(f.corners[i], f.corners[i + 1], f.corners[i + 2]) ? 1 : 0);
-      material.push_back(f.material);
+      g.triangles.degenerate.push_back(isDegenerateTriangle(c[0], c[1], c[2]) ? 1 : 0);
+      if (lit) {
+        const uint32_t n = f.levels[t];
+        g.lighting.append(n, f.colours.data() + at, LightingGrid::pointsOf(n));
+        at += LightingGrid::pointsOf(n);
+      } else {
+        g.lighting.appendFlat(shadeTriangle(c[0], c[1], c[2], diffuse));
+      }
     }
   }
-  // Colours, sky and ground of geometry assembled by appendFace (`mutex` held).
-  void finishGeometry(RenderGeometry& g, const std::vector<uint16_t>& material) const {
-    g.sky = encodeColour(sky);
+  // Sky, ground and haze of geometry assembled by appendFace (`mutex` held).
+  void finishGeometry(RenderGeometry& g) const {
+    if (backdrop) {
+      setBackdrop(g, *backdrop);
+    } else {
+      g.sky = encodeColour(sky);
+      g.haze = Haze{};
+    }
     g.groundY = groundY;
-    recolour(g, [&](size_t t) {
-      return material[t] < materials.size() ? materials[material[t]] : glm::vec3(0.8f);
-    });
   }
   size_t trianglesHeld = 0, maxTriangles = 0;
 
@@ -157,6 +176,14 @@ struct StreamClient::Impl : PeerHandler {
         if (isFinite(w.environment_colour()))
           sky = glm::clamp(fromWire(*w.environment_colour()), 0.0f, 1.0f);
         if (w.has_ground() && std::isfinite(w.ground_y())) groundY = w.ground_y();
+        if (w.sky_rgb() && w.ground_rgb() && std::isfinite(w.haze_distance_m()) &&
+            w.haze_distance_m() >= 0.0f) {
+          Backdrop b;
+          b.sky = {w.sky_rgb()->r(), w.sky_rgb()->g(), w.sky_rgb()->b()};
+          b.ground = {w.ground_rgb()->r(), w.ground_rgb()->g(), w.ground_rgb()->b()};
+          b.haze = Haze{glm::vec3(b.sky), w.haze_distance_m()};
+          backdrop = b;
+        }
         if (w.materials())
           for (const MaterialInfo* m : *w.materials())
             materials.push_back(m && isFinite(m->diffuse())
@@ -180,16 +207,26 @@ struct StreamClient::Impl : PeerHandler {
     bool tooMuch = false;
     {
       std::lock_guard lock(mutex);
-      size_t index = 0;
+      size_t index = 0, triangle = 0, colour = 0;
       for (size_t f = 0; f < g.faces.size(); ++f) {
         HeldFace& h = faces[g.faces[f]];
         noteChanged(g.faces[f]);
         trianglesHeld -= h.corners.size() / 3;
         h.material = g.materials[f];
         h.corners.clear();
-        for (uint16_t t = 0; t < g.triangleCounts[f]; ++t, index += 3)
+        h.levels.clear();
+        h.colours.clear();
+        for (uint16_t t = 0; t < g.triangleCounts[f]; ++t, index += 3) {
           for (int k = 0; k < 3; ++k)
             h.corners.push_back(g.positions[g.indices[index + size_t(k)]]);
+          if (!g.levels.empty()) {  // one level a triangle, grids in order (decodeGeometry)
+            const uint32_t n = g.levels[triangle++];
+            h.levels.push_back(uint8_t(n));
+            h.colours.insert(h.colours.end(), g.colours.begin() + ptrdiff_t(colour),
+                             g.colours.begin() + ptrdiff_t(colour + LightingGrid::pointsOf(n)));
+            colour += LightingGrid::pointsOf(n);
+          }
+        }
         trianglesHeld += h.corners.size() / 3;
       }
       tooMuch = trianglesHeld > maxTriangles;
@@ -325,9 +362,8 @@ bool StreamClient::waitForCell(double timeoutS) {
 RenderGeometry StreamClient::snapshot() const {
   std::lock_guard lock(impl_->mutex);
   RenderGeometry g;
-  std::vector<uint16_t> material;
-  for (const auto& [id, f] : impl_->faces) impl_->appendFace(g, material, id, f);
-  impl_->finishGeometry(g, material);
+  for (const auto& [id, f] : impl_->faces) impl_->appendFace(g, id, f);
+  impl_->finishGeometry(g);
   return g;
 }
 
@@ -335,18 +371,17 @@ GeometryDelta StreamClient::takeDelta() {
   Impl& s = *impl_;
   std::lock_guard lock(s.mutex);
   GeometryDelta d;
-  std::vector<uint16_t> material;
   d.replaceAll = s.replaceAll;
   if (s.replaceAll) {
-    for (const auto& [id, f] : s.faces) s.appendFace(d.added, material, id, f);
+    for (const auto& [id, f] : s.faces) s.appendFace(d.added, id, f);
   } else {
     d.removed.assign(s.changedFaces.begin(), s.changedFaces.end());
     std::sort(d.removed.begin(), d.removed.end());
     for (const uint32_t id : d.removed)
       if (const auto it = s.faces.find(id); it != s.faces.end())
-        s.appendFace(d.added, material, id, it->second);
+        s.appendFace(d.added, id, it->second);
   }
-  s.finishGeometry(d.added, material);
+  s.finishGeometry(d.added);
   s.changedFaces.clear();
   s.replaceAll = false;
   d.version = s.version;

@@ -2,6 +2,8 @@
 
 #include <cmath>
 
+#include "common/light/lighting_cache.h"
+
 namespace vistream {
 
 glm::u8vec3 shadeTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
@@ -12,23 +14,45 @@ glm::u8vec3 shadeTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec
   return encodeColour(diffuse * (0.3f + 0.7f * lambert));
 }
 
-RenderGeometry renderGeometryFromScene(const Scene& scene) {
+glm::u8vec3 RenderGeometry::background(const glm::vec3& eye, const glm::vec3& dir) const {
+  if (!groundY || !(dir.y < 0.0f) || !(eye.y > *groundY)) return sky;
+  const float distance = (eye.y - *groundY) / -dir.y * glm::length(dir);
+  return toBytes(haze.apply(glm::vec3(ground), distance));
+}
+
+glm::u8vec3 RenderGeometry::colourAlong(size_t t, const glm::vec3& eye,
+                                        const glm::vec3& dir) const {
+  // The ray's barycentrics on the triangle's plane (Moeller and Trumbore,
+  // without the bounds test: the rasterizer already chose the triangle).
+  const glm::vec3 a = triangles.vertex(t, 0);
+  const glm::vec3 e1 = triangles.vertex(t, 1) - a, e2 = triangles.vertex(t, 2) - a;
+  const glm::vec3 p = glm::cross(dir, e2);
+  const float det = glm::dot(e1, p);
+  if (!(std::abs(det) > 0.0f)) {  // seen edge-on: the centre, at its distance
+    const glm::vec3 centre = a + (e1 + e2) / 3.0f;
+    return colourAt(t, 1.0f / 3.0f, 1.0f / 3.0f, glm::length(centre - eye));
+  }
+  const glm::vec3 s = eye - a, q = glm::cross(s, e1);
+  const float u = glm::dot(s, p) / det, v = glm::dot(dir, q) / det;
+  const float along = glm::dot(e2, q) / det;
+  return colourAt(t, u, v, std::abs(along) * glm::length(dir));
+}
+
+void setBackdrop(RenderGeometry& g, const Backdrop& backdrop) {
+  g.sky = backdrop.sky;
+  g.ground = backdrop.ground;
+  g.haze = backdrop.haze;
+}
+
+RenderGeometry renderGeometryFromScene(const Scene& scene, const LightingOptions& options,
+                                       const std::filesystem::path& lightingCache) {
   RenderGeometry g;
   g.triangles = flattenScene(scene, /*staticOnly=*/true);
-  // Material of each flattened triangle, in the same order flattenScene emits them.
-  std::vector<uint32_t> material;
-  material.reserve(g.triangles.size());
-  for (const Object& o : scene.objects) {
-    if (o.dynamic) continue;
-    for (size_t t = 0; t < o.mesh.triangles.size(); ++t)
-      material.push_back(t < o.mesh.materials.size() ? o.mesh.materials[t] : 0u);
-  }
-  const glm::vec3 sky = scene.environment.skyColor;
-  g.sky = encodeColour(sky);
-  recolour(g, [&](size_t t) {
-    const uint32_t m = t < material.size() ? material[t] : 0u;
-    return m < scene.materials.size() ? scene.materials[m].diffuse : glm::vec3(0.8f);
-  });
+  SceneLighting lit = lightScene(scene, g.triangles, options, lightingCache);
+  setBackdrop(g, lit.backdrop);
+  g.lighting = std::move(lit.load.grid);
+  for (size_t t = 0; t < g.triangles.size(); ++t)
+    for (int k = 0; k < 3; ++k) g.bounds.extend(g.triangles.vertex(t, k));
   return g;
 }
 

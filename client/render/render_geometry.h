@@ -1,11 +1,12 @@
-// The triangles a client holds, with the one colour each is drawn in.
+// The triangles a client holds, with the colours they are drawn in.
 //
-// Shading is prelit and flat, as in the thesis's implementation (section
-// 4.6): each triangle gets one 8-bit colour, its material's diffuse colour
-// times (ambient + diffuse * |n . L|) for a fixed sun direction, computed
-// once here. The OpenGL near field, the software rasterizer and the ray
-// caster all read these bytes, so a far-field pixel and a near-field pixel of
-// the same triangle are identical and the border does not show.
+// Shading is prelit: every triangle carries a small grid of colours
+// (common/light/lighting.h), baked once from its materials, the
+// environment's light, the sun and ambient occlusion, and looked up by
+// barycentrics. The OpenGL near field, the software rasterizer and the ray
+// caster all read these bytes with the same interpolation and the same
+// distance haze, so a far-field pixel and a near-field pixel of the same
+// point are the same colour and the border does not show.
 #pragma once
 
 #include <cstdint>
@@ -19,39 +20,54 @@
 
 namespace vistream {
 
-// The prelit colour of a triangle with the given corners and diffuse colour.
+// A flat colour for a triangle with no baked lighting (streamed faces until
+// the wire carries their colours, test scenes): its material's diffuse colour
+// times (ambient + diffuse * |n . L|) for the default sun.
 glm::u8vec3 shadeTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
                           const glm::vec3& diffuse);
 
 struct RenderGeometry {
-  FlatTriangles triangles;           // local frame
-  std::vector<glm::u8vec3> colours;  // per triangle
-  glm::u8vec3 sky{140, 180, 230};    // background for pixels that see nothing
+  FlatTriangles triangles;         // local frame
+  LightingGrid lighting;           // per triangle: its colours (lighting.h)
+  Haze haze;                       // fading towards the horizon colour with distance
+  glm::u8vec3 sky{140, 180, 230};  // background for pixels that see nothing
   // An assumed ground plane (static_world.h) at this local height: pixels
   // that see nothing below the horizon show `ground` instead of the sky.
   std::optional<float> groundY;
   glm::u8vec3 ground{118, 112, 100};
-  // The background a ray from `eye` along `dir` meets when it hits no triangle.
-  glm::u8vec3 background(const glm::vec3& eye, const glm::vec3& dir) const {
-    return groundY && dir.y < 0.0f && eye.y > *groundY ? ground : sky;
+  // The background a ray from `eye` along `dir` meets when it hits no
+  // triangle: the sky, or the assumed ground (hazed by its distance).
+  glm::u8vec3 background(const glm::vec3& eye, const glm::vec3& dir) const;
+  // The colour of triangle t at barycentrics (u, v) seen from `distance` metres.
+  glm::u8vec3 colourAt(size_t t, float u, float v, float distance) const {
+    return toBytes(haze.apply(lighting.colourAt(t, u, v), distance));
   }
+  // The same for the point where the ray from `eye` along `dir` meets
+  // triangle t's plane (barycentrics computed here, as a rasterizer would).
+  glm::u8vec3 colourAlong(size_t t, const glm::vec3& eye, const glm::vec3& dir) const;
   Box3f bounds;
 
   size_t size() const { return triangles.size(); }
 };
 
-// Every triangle of the scene's static objects, coloured from its materials.
-RenderGeometry renderGeometryFromScene(const Scene& scene);
-// Recomputes bounds and colours after `triangles` changed; `diffuse` gives a
-// triangle's diffuse colour.
+// Every triangle of the scene's static objects with its baked lighting
+// (bakeLighting with `options`, the scene's environment light) and haze.
+// The bake is read from or written to `lightingCache` (lighting_cache.h;
+// empty: no cache).
+RenderGeometry renderGeometryFromScene(const Scene& scene, const LightingOptions& options = {},
+                                       const std::filesystem::path& lightingCache = {});
+// Takes the sky, ground and haze of a backdrop.
+void setBackdrop(RenderGeometry& g, const Backdrop& backdrop);
+// Recomputes bounds and gives every triangle one flat colour after
+// `triangles` changed; `diffuse` gives a triangle's diffuse colour.
 template <class DiffuseOf>
 void recolour(RenderGeometry& g, DiffuseOf&& diffuse) {
-  g.colours.resize(g.triangles.size());
+  g.lighting = LightingGrid{};
   g.bounds = Box3f{};
   for (size_t t = 0; t < g.triangles.size(); ++t) {
     const glm::vec3 a = g.triangles.vertex(t, 0), b = g.triangles.vertex(t, 1),
                     c = g.triangles.vertex(t, 2);
-    g.colours[t] = shadeTriangle(a, b, c, diffuse(t));
+    g.lighting.appendFlat(shadeTriangle(a, b, c, diffuse(t)));
     g.bounds.extend(a);
     g.bounds.extend(b);
     g.bounds.extend(c);

@@ -24,7 +24,7 @@ GeometryChange StreamedGeometry::apply(const GeometryDelta& delta) {
     faces_.erase(it);
   }
   const RenderGeometry& a = delta.added;
-  VS_CHECK_EQ(a.colours.size(), a.size());
+  VS_CHECK_EQ(a.lighting.size(), a.size());
   change.firstAdded = uint32_t(geometry_.size());
   FlatTriangles& to = geometry_.triangles;
   for (size_t t = 0; t < a.size();) {
@@ -51,11 +51,12 @@ GeometryChange StreamedGeometry::apply(const GeometryDelta& delta) {
       to.faceIds.push_back(face);
       to.objectIds.push_back(a.triangles.objectIds[t]);
       to.degenerate.push_back(a.triangles.degenerate[t]);
-      geometry_.colours.push_back(a.colours[t]);
+      geometry_.lighting.appendFrom(a.lighting, t);
       alive_.push_back(1);
     }
   }
   geometry_.sky = a.sky;
+  geometry_.haze = a.haze;
   geometry_.groundY = a.groundY;
   geometry_.ground = a.ground;
   return change;
@@ -64,6 +65,7 @@ GeometryChange StreamedGeometry::apply(const GeometryDelta& delta) {
 RenderGeometry StreamedGeometry::compacted() const {
   RenderGeometry g;
   g.sky = geometry_.sky;
+  g.haze = geometry_.haze;
   g.groundY = geometry_.groundY;
   g.ground = geometry_.ground;
   const FlatTriangles& from = geometry_.triangles;
@@ -77,7 +79,7 @@ RenderGeometry StreamedGeometry::compacted() const {
     to.faceIds.push_back(from.faceIds[t]);
     to.objectIds.push_back(from.objectIds[t]);
     to.degenerate.push_back(from.degenerate[t]);
-    g.colours.push_back(geometry_.colours[t]);
+    g.lighting.appendFrom(geometry_.lighting, t);
   }
   return g;
 }

@@ -23,6 +23,7 @@
 
 #include "common/core/error.h"
 #include "common/core/log.h"
+#include "common/light/lighting_cache.h"
 #include "common/scene/scene_loader.h"
 #include "common/world/static_world.h"
 
@@ -235,6 +236,19 @@ inline void addGroundOption(CLI::App& app, GroundChoice& ground) {
                        : "expected auto, none or a height in metres, got '" + text + "'";
           },
           "auto|none|Y"));
+}
+
+// --lighting-cache DIR: where baked lighting is kept (lighting_cache.h);
+// "none" bakes at every start. `dir` starts as the default directory.
+inline void addLightingCacheOption(CLI::App& app, std::filesystem::path& dir) {
+  dir = defaultLightingCacheDir();
+  app.add_option_function<std::string>(
+         "--lighting-cache",
+         [&dir](const std::string& text) {
+           dir = text == "none" ? std::filesystem::path() : std::filesystem::path(text);
+         },
+         "directory for baked lighting, read back on later starts; none: bake every time")
+      ->default_str(dir.string());
 }
 
 }  // namespace vistream

@@ -247,12 +247,6 @@ int cmdVisible(const std::string& spec, const SceneLimits& limits, const std::st
   return 0;
 }
 
-// The scene's environment light: its HDR image, or the analytic sky.
-EnvironmentLight environmentOf(const Scene& scene) {
-  return scene.environment.hdrImage.empty() ? EnvironmentLight::sky(scene.environment.skyColor)
-                                            : EnvironmentLight::fromHdr(scene.environment.hdrImage);
-}
-
 // Mean and 95th percentile of the per-channel byte differences of two bakes.
 std::pair<double, double> colourError(const LightingGrid& a, const LightingGrid& reference) {
   std::vector<int> d;
@@ -282,7 +276,7 @@ int cmdLight(const std::string& spec, const SceneLimits& limits, const LightingO
   const Scene scene = openScene(spec, limits);
   const FlatTriangles tris = flattenScene(scene, /*staticOnly=*/true);
   const auto rays = makeEmbreeRayQuery(tris);
-  const EnvironmentLight env = environmentOf(scene);
+  const EnvironmentLight env = EnvironmentLight::of(scene.environment);
   LightingStats stats;
   const LightingGrid grid = bakeLighting(scene, tris, *rays, env, options, &stats, !asJson);
   json j{{"scene", scene.name},
@@ -302,7 +296,7 @@ int cmdLight(const std::string& spec, const SceneLimits& limits, const LightingO
            {"ao_rays", options.aoRays},
            {"ao_distance_m", options.aoDistance},
            {"ambient", options.ambient},
-           {"sun_intensity", options.sunIntensity}}}};
+           {"sun_intensity", options.sunIntensity.value_or(scene.environment.sunIntensity)}}}};
   // Accuracy against time: each ray count against the bake above as the reference.
   json bench = json::array();
   for (uint32_t n : rayCounts) {

@@ -103,6 +103,10 @@ EnvironmentLight EnvironmentLight::sky(const glm::vec3& skyColour) {
   return project(radiance, 256, "analytic sky");
 }
 
+EnvironmentLight EnvironmentLight::of(const Environment& environment) {
+  return environment.hdrImage.empty() ? sky(environment.skyColor) : fromHdr(environment.hdrImage);
+}
+
 glm::vec3 EnvironmentLight::irradiance(const glm::vec3& n) const {
   const auto y = shBasis(n);
   glm::vec3 e(0.0f);

@@ -28,6 +28,8 @@
 #include <glm/glm.hpp>
 #include <string>
 
+#include "common/scene/scene.h"
+
 namespace vistream {
 
 // The 9 real spherical harmonics of orders 0..2 at unit direction d.
@@ -44,6 +46,8 @@ class EnvironmentLight {
   static EnvironmentLight fromHdr(const std::filesystem::path& file);
   // The analytic sky for a scene without an HDR image.
   static EnvironmentLight sky(const glm::vec3& skyColour);
+  // A scene's: its HDR image, or the analytic sky of its sky colour.
+  static EnvironmentLight of(const Environment& environment);
 
   // Irradiance (linear RGB, the radiance's units times steradians) on a
   // surface with unit normal n. Clamped at 0 (order 2 can ring negative on

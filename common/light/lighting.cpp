@@ -111,7 +111,7 @@ SurfaceTable surfacesOf(const Scene& scene) {
 }  // namespace
 
 glm::vec3 defaultSunDirection() {
-  return glm::normalize(glm::vec3(0.35f, 0.85f, 0.4f));
+  return Environment{}.sunDirection;
 }
 
 glm::u8vec3 encodeColour(const glm::vec3& linear) {
@@ -140,6 +140,11 @@ void LightingGrid::append(uint32_t n, const glm::u8vec3* c, size_t count) {
 void LightingGrid::appendFlat(glm::u8vec3 c) {
   const glm::u8vec3 three[3] = {c, c, c};
   append(1, three, 3);
+}
+
+void LightingGrid::appendFrom(const LightingGrid& from, size_t t) {
+  const uint32_t n = from.level[t];
+  append(n, from.colours.data() + from.first[t], pointsOf(n));
 }
 
 glm::vec3 LightingGrid::colourAt(size_t t, float u, float v) const {
@@ -205,6 +210,27 @@ double ambientOcclusion(const RayQuery& rays, const glm::vec3& p, const glm::vec
   return double(open) / double(count);
 }
 
+float skyExposure(const EnvironmentLight& environment, const LightingOptions& options) {
+  const float up = luminance(environment.irradiance(glm::vec3(0.0f, 1.0f, 0.0f)));
+  return up > 0.0f && std::isfinite(up) ? options.ambient / up : 0.0f;
+}
+
+glm::u8vec3 horizonColour(const EnvironmentLight& environment, const LightingOptions& options) {
+  return encodeColour(environment.horizonRadiance() * (kPi * skyExposure(environment, options)));
+}
+
+Backdrop backdropOf(const Scene& scene, const EnvironmentLight& environment,
+                    const LightingOptions& options) {
+  Backdrop b;
+  b.sky = horizonColour(environment, options);
+  b.haze = Haze{glm::vec3(b.sky), scene.environment.hazeDistance};
+  const float sunIntensity = options.sunIntensity.value_or(scene.environment.sunIntensity);
+  const glm::vec3 sun = options.sunDirection.value_or(scene.environment.sunDirection);
+  const float sunLight = sunIntensity * std::max(0.0f, glm::normalize(sun).y);
+  b.ground = encodeColour(glm::vec3(0.30f, 0.28f, 0.25f) * (options.ambient + sunLight));
+  return b;
+}
+
 LightingGrid bakeLighting(const Scene& scene, const FlatTriangles& triangles, const RayQuery& rays,
                           const EnvironmentLight& environment, const LightingOptions& options,
                           LightingStats* stats, bool progress) {
@@ -251,10 +277,11 @@ LightingGrid bakeLighting(const Scene& scene, const FlatTriangles& triangles, co
   VS_CHECK_LE(points, uint64_t(std::numeric_limits<uint32_t>::max()));
   grid.colours.resize(size_t(points));
 
-  const glm::vec3 sun = glm::normalize(options.sunDirection);
-  const bool sunOn = options.sunIntensity > 0.0f && std::isfinite(sun.x);
-  const float upLuminance = luminance(environment.irradiance(glm::vec3(0.0f, 1.0f, 0.0f)));
-  const float skyScale = upLuminance > 0.0f ? options.ambient / upLuminance : 0.0f;
+  const glm::vec3 sun =
+      glm::normalize(options.sunDirection.value_or(scene.environment.sunDirection));
+  const float sunIntensity = options.sunIntensity.value_or(scene.environment.sunIntensity);
+  const bool sunOn = sunIntensity > 0.0f && std::isfinite(sun.x);
+  const float skyScale = skyExposure(environment, options);
   std::atomic<uint64_t> shadowRays{0};
   std::vector<double> aoSum(count, 0.0);
   std::unique_ptr<ProgressBar> bar =
@@ -309,7 +336,7 @@ LightingGrid bakeLighting(const Scene& scene, const FlatTriangles& triangles, co
               shadowRays.fetch_add(1, std::memory_order_relaxed);
             }
           }
-          const glm::vec3 light = sky * float(ao) + glm::vec3(options.sunIntensity * sunCos * lit);
+          const glm::vec3 light = sky * float(ao) + glm::vec3(sunIntensity * sunCos * lit);
           out[LightingGrid::pointIndex(level, i, j)] = encodeColour(albedo * light);
         }
       if (bar) bar->advance();

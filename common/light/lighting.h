@@ -44,7 +44,7 @@
 
 namespace vistream {
 
-// The default sun (unit, local frame): high in the south-east.
+// The default sun (unit, local frame): high in the south-east (Environment's).
 glm::vec3 defaultSunDirection();
 // A linear colour in [0, 1] as 8-bit values (gamma 2.2, rounded, clamped).
 glm::u8vec3 encodeColour(const glm::vec3& linear);
@@ -64,6 +64,8 @@ struct LightingGrid {
   void append(uint32_t n, const glm::u8vec3* colours, size_t count);
   // One flat colour for a triangle (level 1, three equal corners).
   void appendFlat(glm::u8vec3 c);
+  // Appends a copy of triangle t's grid of `from`.
+  void appendFrom(const LightingGrid& from, size_t t);
 
   // The colour at barycentrics (u, v) of triangle t (weights of its vertices 1
   // and 2), interpolated within the grid, in 0..255 per channel (unrounded).
@@ -73,13 +75,14 @@ struct LightingGrid {
 };
 
 struct LightingOptions {
-  float spacing = 4.0f;       // metres between lighting points on large faces
-  uint32_t maxLevel = 16;     // at most 153 points a triangle
-  uint32_t aoRays = 32;       // per lighting point; 0 turns ambient occlusion off
-  float aoDistance = 20.0f;   // metres a ray must travel to count as open
-  float ambient = 0.7f;       // sky light on an open, up-facing white surface
-  float sunIntensity = 0.5f;  // 0: no sun
-  glm::vec3 sunDirection = defaultSunDirection();  // towards the sun
+  float spacing = 4.0f;      // metres between lighting points on large faces
+  uint32_t maxLevel = 16;    // at most 153 points a triangle
+  uint32_t aoRays = 32;      // per lighting point; 0 turns ambient occlusion off
+  float aoDistance = 20.0f;  // metres a ray must travel to count as open
+  float ambient = 0.7f;      // sky light on an open, up-facing white surface
+  // The sun: the scene's (Environment::sunDirection, sunIntensity) unless set.
+  std::optional<float> sunIntensity;      // 0: no sun
+  std::optional<glm::vec3> sunDirection;  // towards the sun
   bool sunShadows = true;
 };
 
@@ -90,6 +93,13 @@ struct LightingStats {
   uint32_t texturedMaterials = 0;
   std::vector<std::string> warnings;  // textures missing or unreadable
 };
+
+// The factor from the environment's irradiance to the bake's light: an open,
+// up-facing white surface gets options.ambient from the sky.
+float skyExposure(const EnvironmentLight& environment, const LightingOptions& options);
+// The 8-bit colour of the sky near the horizon at that exposure (a uniform
+// sky of radiance L gives irradiance pi L): the background and haze colour.
+glm::u8vec3 horizonColour(const EnvironmentLight& environment, const LightingOptions& options);
 
 // Bakes the grid of every triangle of `triangles` (a flattening of the
 // scene's static objects, flattenScene(scene, true), whose ray queries `rays`
@@ -119,5 +129,16 @@ struct Haze {
 };
 // Rounds a 0..255 colour to bytes.
 glm::u8vec3 toBytes(const glm::vec3& c);
+
+// What a renderer shows where no triangle is: the sky's colour near the
+// horizon (horizonColour), an assumed ground plane's colour lit like an open,
+// up-facing surface, and the haze towards the sky colour.
+struct Backdrop {
+  glm::u8vec3 sky{140, 180, 230};
+  glm::u8vec3 ground{118, 112, 100};
+  Haze haze;
+};
+Backdrop backdropOf(const Scene& scene, const EnvironmentLight& environment,
+                    const LightingOptions& options = {});
 
 }  // namespace vistream

@@ -50,7 +50,10 @@ std::string manifestFormatHelp() {
     "environment": {                     optional
       "hdr": "sky.hdr",                    equirectangular Radiance HDR (#?RADIANCE header)
       "sky": "auto",                       auto (from the geometry), open or none
-      "sky_color": [0.55, 0.7, 0.9]        linear RGB
+      "sky_color": [0.55, 0.7, 0.9],       linear RGB (the analytic sky's zenith without an hdr)
+      "sun": {"direction": [0.35, 0.85, 0.4],  towards the sun (normalised), Y up
+              "intensity": 0.5},               its share of the light; "sun": "none" for no sun
+      "haze_distance": 800                 metres at which haze hides 63% of a colour; 0: none
     },
     "near_field_radius": 150             metres: the client's near-field distance d
   }
@@ -167,7 +170,7 @@ Scene loadManifest(const std::filesystem::path& path, const SceneLimits& limits)
     const json& e = j["environment"];
     const std::string where = file + ": environment";
     if (!e.is_object()) throwInputError("{}: must be an object", where);
-    rejectUnknownKeys(e, {"hdr", "sky", "sky_color"}, where);
+    rejectUnknownKeys(e, {"hdr", "sky", "sky_color", "sun", "haze_distance"}, where);
     if (e.contains("hdr")) {
       if (!e["hdr"].is_string()) throwInputError("{}.hdr: must be a path", where);
       scene.environment.hdrImage = dir / e["hdr"].get<std::string>();
@@ -189,6 +192,35 @@ Scene loadManifest(const std::filesystem::path& path, const SceneLimits& limits)
     }
     if (e.contains("sky_color"))
       scene.environment.skyColor = glm::vec3(readVec3(e["sky_color"], where + ".sky_color"));
+    if (e.contains("sun")) {
+      const json& sun = e["sun"];
+      if (sun.is_string() && sun.get<std::string>() == "none") {
+        scene.environment.sunIntensity = 0.0f;
+      } else if (sun.is_object()) {
+        rejectUnknownKeys(sun, {"direction", "intensity"}, where + ".sun");
+        if (sun.contains("direction")) {
+          const glm::dvec3 d = readVec3(sun["direction"], where + ".sun.direction");
+          if (!(glm::length(d) > 1e-9))
+            throwInputError("{}.sun.direction: must not be zero", where);
+          scene.environment.sunDirection = glm::vec3(glm::normalize(d));
+        }
+        if (sun.contains("intensity")) {
+          const json& k = sun["intensity"];
+          if (!k.is_number() || !(k.get<double>() >= 0.0 && k.get<double>() <= 10.0))
+            throwInputError("{}.sun.intensity: expected a number in [0, 10]", where);
+          scene.environment.sunIntensity = k.get<float>();
+        }
+      } else {
+        throwInputError(
+            "{}.sun: expected {{\"direction\": [x, y, z], \"intensity\": k}} or \"none\"", where);
+      }
+    }
+    if (e.contains("haze_distance")) {
+      const json& h = e["haze_distance"];
+      if (!h.is_number() || !(h.get<double>() >= 0.0 && h.get<double>() <= 1e7))
+        throwInputError("{}.haze_distance: expected metres in [0, 1e7] (0: no haze)", where);
+      scene.environment.hazeDistance = h.get<float>();
+    }
   }
 
   if (!j.contains("geometry") || !j["geometry"].is_array() || j["geometry"].empty())

@@ -110,6 +110,11 @@ struct Environment {
   std::filesystem::path hdrImage;  // equirectangular Radiance HDR, empty if none
   SkyMode sky = SkyMode::Auto;
   glm::vec3 skyColor{0.55f, 0.7f, 0.9f};
+  // The sun of the baked lighting (common/light/lighting.h): towards the sun,
+  // unit, local frame; intensity 0 means no sun.
+  glm::vec3 sunDirection = glm::normalize(glm::vec3(0.35f, 0.85f, 0.4f));
+  float sunIntensity = 0.5f;
+  float hazeDistance = 800.0f;     // metres at which haze hides 63% of a colour; 0: no haze
   float nearFieldRadius = 150.0f;  // metres; the client's near-field distance d
 };
 

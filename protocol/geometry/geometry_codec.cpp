@@ -31,6 +31,15 @@ static_assert(sizeof(GridVertex) == 12);
 // 7% for 2 to 60 times.
 constexpr int kZstdLevel = 3;
 
+// A lighting grid of level n (common/light/lighting.h, LightingGrid): its
+// point count and the index of point (i, j).
+constexpr uint32_t pointsOfLevel(uint32_t n) {
+  return (n + 1) * (n + 2) / 2;
+}
+constexpr uint32_t pointIndexOf(uint32_t n, uint32_t i, uint32_t j) {
+  return j * (n + 1) - j * (j - 1) / 2 + i;
+}
+
 // ---- writing -------------------------------------------------------------------
 
 void putVarint(std::vector<uint8_t>& out, uint64_t v) {
@@ -127,6 +136,7 @@ bool readRuns(PayloadReader& r, size_t count, uint64_t max, const char* field,
 
 // A batch as integers: what both codings write.
 struct IndexedBatch {
+  std::vector<uint32_t> order;  // input faces in the order written (sorted by ID)
   std::vector<uint32_t> faces;
   std::vector<uint16_t> materials;
   std::vector<uint16_t> triangleCounts;
@@ -142,6 +152,7 @@ IndexedBatch indexBatch(std::span<const FaceTriangles> input, const Quantization
   std::stable_sort(order.begin(), order.end(),
                    [&](uint32_t a, uint32_t b) { return input[a].face < input[b].face; });
   IndexedBatch b;
+  b.order = order;
   std::vector<GridVertex> corners;
   const double maxQ = double(std::numeric_limits<uint32_t>::max());
   for (uint32_t i : order) {
@@ -234,6 +245,62 @@ std::vector<uint8_t> compressed(const std::vector<uint8_t>& raw) {
       ZSTD_compressCCtx(context.get(), out.data(), out.size(), raw.data(), raw.size(), kZstdLevel);
   VS_CHECK(!ZSTD_isError(n));  // the bound holds for any input
   out.resize(n);
+  return out;
+}
+
+// ---- lighting -------------------------------------------------------------------------
+
+// The prediction of grid point (i, j) of a level-n grid from the points
+// before it (row by row), or of the first point from `previous`.
+glm::ivec3 predictPoint(const glm::u8vec3* g, uint32_t n, uint32_t i, uint32_t j,
+                        glm::u8vec3 previous) {
+  auto at = [&](uint32_t a, uint32_t b) { return glm::ivec3(g[pointIndexOf(n, a, b)]); };
+  if (i > 0 && j > 0) return glm::clamp(at(i - 1, j) + at(i, j - 1) - at(i - 1, j - 1), 0, 255);
+  if (i > 0) return at(i - 1, j);
+  if (j > 0) return at(i, j - 1);
+  return glm::ivec3(previous);
+}
+
+// The lighting section of a batch (layout in the schema), or nothing when
+// some face has no lighting.
+std::vector<uint8_t> lightingSection(std::span<const FaceTriangles> input, const IndexedBatch& b) {
+  for (uint32_t i : b.order) {
+    const FaceTriangles& f = input[i];
+    const size_t triangles = std::min<size_t>(f.corners.size() / 3, 65535);
+    if (f.levels.size() < triangles || f.levels.empty()) return {};
+  }
+  std::vector<uint8_t> raw;
+  glm::u8vec3 previous(0);
+  for (uint32_t i : b.order) {
+    const FaceTriangles& f = input[i];
+    const size_t triangles = std::min<size_t>(f.corners.size() / 3, 65535);
+    size_t at = 0;
+    for (size_t t = 0; t < triangles; ++t) {
+      const uint32_t n = f.levels[t];
+      VS_CHECK(n >= 1);
+      VS_CHECK_LE(at + pointsOfLevel(n), f.colours.size());
+      putVarint(raw, n);
+      const glm::u8vec3* g = f.colours.data() + at;
+      for (uint32_t j = 0; j <= n; ++j)
+        for (uint32_t k = 0; k + j <= n; ++k) {
+          const glm::ivec3 p = predictPoint(g, n, k, j, previous);
+          const glm::u8vec3 c = g[pointIndexOf(n, k, j)];
+          for (int a = 0; a < 3; ++a) raw.push_back(uint8_t(int(c[a]) - p[a]));
+        }
+      previous = g[0];
+      at += pointsOfLevel(n);
+    }
+  }
+  std::vector<uint8_t> z = compressed(raw);
+  std::vector<uint8_t> out;
+  out.reserve(1 + std::min(z.size(), raw.size()));
+  if (z.size() < raw.size()) {
+    out.push_back(1);
+    out.insert(out.end(), z.begin(), z.end());
+  } else {
+    out.push_back(0);
+    out.insert(out.end(), raw.begin(), raw.end());
+  }
   return out;
 }
 
@@ -360,15 +427,88 @@ GeometryT encodeGeometry(std::span<const FaceTriangles> faces, const Quantizatio
   // and neither always wins: on city1's batches Varint + zstd was the
   // smaller up to 10,000 faces, on delfshaven's Meshopt from 300 faces on.
   if (codings.varint) consider(GeometryCodec::Varint, varintPayload(batch, head));
+  best.lighting = lightingSection(faces, batch);
   return best;
 }
 
 bool decodeGeometry(const Geometry& g, const QuantizationGrid& grid, DecodedGeometry& out,
                     std::string& error) {
   const auto* payload = g.payload();
-  return decodeGeometryPayload(payload ? std::span<const uint8_t>(payload->data(), payload->size())
-                                       : std::span<const uint8_t>(),
-                               g.codec(), g.compression(), grid, out, error);
+  if (!decodeGeometryPayload(payload ? std::span<const uint8_t>(payload->data(), payload->size())
+                                     : std::span<const uint8_t>(),
+                             g.codec(), g.compression(), grid, out, error))
+    return false;
+  const auto* lighting = g.lighting();
+  if (!lighting || lighting->size() == 0) return true;
+  size_t triangles = 0;
+  for (uint16_t t : out.triangleCounts) triangles += t;
+  if (!decodeGeometryLighting(std::span<const uint8_t>(lighting->data(), lighting->size()),
+                              triangles, out, error)) {
+    out = {};
+    return false;
+  }
+  return true;
+}
+
+bool decodeGeometryLighting(std::span<const uint8_t> bytes, size_t triangles, DecodedGeometry& out,
+                            std::string& error) {
+  out.levels.clear();
+  out.colours.clear();
+  auto fail = [&](std::string text) {
+    error = "geometry lighting: " + std::move(text);
+    out.levels.clear();
+    out.colours.clear();
+    return false;
+  };
+  if (bytes.empty()) return fail("no format byte");
+  std::vector<uint8_t> decompressed;
+  std::span<const uint8_t> raw = bytes.subspan(1);
+  if (bytes[0] == 1) {
+    const unsigned long long size = ZSTD_getFrameContentSize(raw.data(), raw.size());
+    if (size == ZSTD_CONTENTSIZE_ERROR || size == ZSTD_CONTENTSIZE_UNKNOWN)
+      return fail("not a zstd frame stating its size");
+    // A level takes at most 2 bytes, a colour 3: beyond that the size is a lie.
+    if (size > 3 * kMaxGeometryColours + 2 * uint64_t(triangles))
+      return fail(fmt::format("decompresses to {} bytes, more than {} triangles can hold", size,
+                              triangles));
+    decompressed.resize(size_t(size));
+    const size_t n =
+        ZSTD_decompress(decompressed.data(), decompressed.size(), raw.data(), raw.size());
+    if (ZSTD_isError(n) || n != decompressed.size())
+      return fail("does not decompress to the size it states");
+    raw = decompressed;
+  } else if (bytes[0] != 0) {
+    return fail(fmt::format("unknown format {}", unsigned(bytes[0])));
+  }
+  PayloadReader r(raw);
+  out.levels.reserve(std::min(triangles, raw.size()));
+  glm::u8vec3 previous(0);
+  for (size_t t = 0; t < triangles; ++t) {
+    const auto n = r.varint("a level", 255);
+    if (!n) return fail(r.error());
+    if (*n == 0) return fail("a level of 0");
+    const uint32_t points = pointsOfLevel(uint32_t(*n));
+    if (uint64_t(points) * 3 > r.remaining())
+      return fail(fmt::format("a grid of level {} needs {} bytes, {} are left", *n, points * 3,
+                              r.remaining()));
+    if (out.colours.size() + points > kMaxGeometryColours)
+      return fail(fmt::format("more than {} colours", kMaxGeometryColours));
+    const auto residuals = r.bytes("a grid", uint64_t(points) * 3);
+    const size_t first = out.colours.size();
+    out.colours.resize(first + points);
+    glm::u8vec3* g = out.colours.data() + first;
+    size_t k = 0;
+    for (uint32_t j = 0; j <= *n; ++j)
+      for (uint32_t i = 0; i + j <= *n; ++i, ++k) {
+        const glm::ivec3 p = predictPoint(g, uint32_t(*n), i, j, previous);
+        glm::u8vec3& c = g[pointIndexOf(uint32_t(*n), i, j)];
+        for (int a = 0; a < 3; ++a) c[a] = uint8_t(p[a] + (*residuals)[3 * k + size_t(a)]);
+      }
+    previous = g[0];
+    out.levels.push_back(uint8_t(*n));
+  }
+  if (r.remaining() != 0) return fail(fmt::format("{} bytes after the last grid", r.remaining()));
+  return true;
 }
 
 bool decodeGeometryPayload(std::span<const uint8_t> payload, GeometryCodec codec,

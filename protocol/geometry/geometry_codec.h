@@ -62,6 +62,12 @@ struct FaceTriangles {
   uint32_t face = 0;
   uint16_t material = 0;
   std::vector<glm::vec3> corners;  // 3 per triangle (a trailing 1 or 2 are ignored), local frame
+  // The prelit colour grids of its triangles (common/light/lighting.h): a
+  // level per triangle and their colours one grid after another; both empty
+  // when the face has no baked lighting. A batch carries lighting only when
+  // every face of it has some.
+  std::vector<uint8_t> levels;
+  std::vector<glm::u8vec3> colours;
 };
 
 // Limits a decoder accepts (far above what a server sends in one message).
@@ -90,7 +96,17 @@ struct DecodedGeometry {
   std::vector<uint16_t> triangleCounts;
   std::vector<glm::vec3> positions;  // per vertex, local frame
   std::vector<uint32_t> indices;     // 3 per triangle, face by face, each < positions.size()
+  // Per triangle its lighting grid's level, and the grids' colours in order;
+  // both empty when the message carries no lighting.
+  std::vector<uint8_t> levels;
+  std::vector<glm::u8vec3> colours;
 };
+inline constexpr uint64_t kMaxGeometryColours = 1u << 24;  // after decompression, a message
+
+// The lighting section alone (for fuzzing): fills out.levels and out.colours
+// for `triangles` triangles.
+bool decodeGeometryLighting(std::span<const uint8_t> bytes, size_t triangles, DecodedGeometry& out,
+                            std::string& error);
 
 // Decodes a verified Geometry table with the session's grid (from Welcome).
 // Returns false and sets `error` on anything inconsistent.

@@ -72,6 +72,10 @@ int runServerTool(int argc, char** argv) {
                  "without a database: occlusion horizons after the single occluders, for view "
                  "cells: auto (where the scene has solid columns), horizons or none")
       ->check(CLI::IsMember({"auto", "horizons", "none"}));
+  addLightingCacheOption(app, worldOptions.lightingCache);
+  bool noLighting = false;
+  app.add_flag("--no-lighting", noLighting,
+               "send faces without their baked colours (clients draw them flat)");
   app.add_option("--pvs-cache", worldOptions.pvsCacheCells, "cells whose PVS stays cached (LRU)")
       ->check(atLeast<size_t>(1));
   app.add_option("--bind", cfg.bindAddress, "address to listen on");
@@ -150,6 +154,7 @@ int runServerTool(int argc, char** argv) {
           scene, worldOptions.cellSize);
     worldOptions.pvsDatabase = pvsDb;
     worldOptions.fusion = *parseFusionChoice(fusion);
+    worldOptions.lighting = !noLighting;
     StreamWorld world(openScene(scene, sceneLimits), worldOptions);
     StreamServer server(world, cfg);
     server.start();

@@ -238,6 +238,12 @@ void Session::onHello(const Hello& hello) {
     w.has_ground = true;
     w.ground_y = *g;
   }
+  if (const auto& backdrop = world_.backdrop()) {
+    w.sky_rgb = std::make_unique<Rgb8>(backdrop->sky.r, backdrop->sky.g, backdrop->sky.b);
+    w.ground_rgb =
+        std::make_unique<Rgb8>(backdrop->ground.r, backdrop->ground.g, backdrop->ground.b);
+    w.haze_distance_m = backdrop->haze.scale;
+  }
   const QuantizationGrid quantization = QuantizationGrid::forBounds(b);  // as every Geometry's
   w.quant_origin = std::make_unique<Vec3d>(toWire(quantization.origin));
   w.quant_step = quantization.step;

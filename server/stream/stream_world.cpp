@@ -8,6 +8,7 @@
 #include "common/core/check.h"
 #include "common/core/error.h"
 #include "common/core/timer.h"
+#include "common/light/lighting_cache.h"
 #include "common/raycast/ray_query.h"
 #include "common/world/free_space.h"
 #include "common/world/static_world.h"
@@ -66,15 +67,31 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
   VS_CHECK_LT(grid_.cellCount(), size_t(kCoarseKey));  // keys leave the top bit for coarse cells
   culling_ = std::make_unique<CullingScene>(scene_);
 
-  // Per-face triangles and bounds, in face-ID order.
+  // Baked lighting of the static triangles, in flattenScene's order.
+  std::optional<SceneLighting> lit;
+  if (options.lighting) {
+    lit = lightScene(scene_, flattenScene(scene_, /*staticOnly=*/true), options.lightingOptions,
+                     options.lightingCache);
+    backdrop_ = lit->backdrop;
+  }
+  // Per-face triangles, colours and bounds, in face-ID order.
   faces_.resize(scene_.faceCount);
   faceBoxes_.resize(scene_.faceCount);
   for (uint32_t i = 0; i < scene_.faceCount; ++i) faces_[i].face = i;
+  size_t flat = 0;  // the static triangle's index in the lighting grid
   for (const Object& o : scene_.objects) {
     for (size_t t = 0; t < o.mesh.triangles.size(); ++t) {
       const uint32_t id = o.mesh.faceIds[t];
+      const size_t lightIndex = o.dynamic ? SIZE_MAX : flat++;
       if (id >= faces_.size()) continue;
       wire::FaceTriangles& f = faces_[id];
+      if (lit && lightIndex != SIZE_MAX) {
+        const LightingGrid& g = lit->load.grid;
+        const uint8_t n = g.level[lightIndex];
+        f.levels.push_back(n);
+        f.colours.insert(f.colours.end(), g.colours.begin() + g.first[lightIndex],
+                         g.colours.begin() + g.first[lightIndex] + LightingGrid::pointsOf(n));
+      }
       f.material = uint16_t(
           t < o.mesh.materials.size() ? std::min<uint32_t>(o.mesh.materials[t], 65535) : 0);
       for (int k = 0; k < 3; ++k) {

@@ -49,6 +49,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "common/light/lighting.h"
 #include "common/scene/scene.h"
 #include "common/spatial/xz_grid.h"
 #include "common/world/static_world.h"
@@ -83,6 +84,12 @@ struct StreamWorldOptions {
   // view cells (not coarse blocks, whose horizons cost several times more),
   // as the bake does (horizon_fusion.h).
   FusionChoice fusion = FusionChoice::Auto;
+  // Baked lighting streamed with every face (common/light/lighting.h): on by
+  // default, read from or written to `lightingCache` (empty: bake without a
+  // cache). Off: faces travel without colours and clients draw them flat.
+  bool lighting = true;
+  LightingOptions lightingOptions;
+  std::filesystem::path lightingCache;
 };
 
 // Which PVS a face set is built from: a view cell's own, its coarse
@@ -118,10 +125,14 @@ class StreamWorld {
   const CullingScene& culling() const { return *culling_; }
   uint32_t faceCount() const { return scene_.faceCount; }
   const wire::FaceTriangles& face(uint32_t id) const { return faces_[id]; }
-  // What a client holding the face stores: its decoded triangles and ID.
+  // What a client holding the face stores: its decoded triangles, colours and ID.
   uint32_t faceBytes(uint32_t id) const {
-    return uint32_t(faces_[id].corners.size() * sizeof(glm::vec3) + 8);
+    return uint32_t(faces_[id].corners.size() * sizeof(glm::vec3) +
+                    faces_[id].colours.size() * sizeof(glm::u8vec3) + faces_[id].levels.size() + 8);
   }
+  // The sky, ground and haze of the baked lighting (sent in Welcome); nothing
+  // when lighting is off.
+  const std::optional<Backdrop>& backdrop() const { return backdrop_; }
   glm::vec3 faceCentre(uint32_t id) const { return faceBoxes_[id].center(); }
 
   // The cell holding a local-frame point (clamped to the grid), or nothing
@@ -218,6 +229,7 @@ class StreamWorld {
   std::unique_ptr<HorizonFusion> horizons_;  // may be null
   std::unique_ptr<EpsilonPvs> pvs_;
   std::vector<wire::FaceTriangles> faces_;
+  std::optional<Backdrop> backdrop_;
   std::vector<Box3f> faceBoxes_;
   // Faces by X/Z cell of their bounding boxes (no cells for an empty scene).
   XzGrid faceGrid_;

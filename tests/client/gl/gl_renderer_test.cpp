@@ -42,7 +42,7 @@ void addTriangle(RenderGeometry& g, glm::vec3 a, glm::vec3 b, glm::vec3 c, glm::
   t.faceIds.push_back(uint32_t(t.faceIds.size()));
   t.objectIds.push_back(0);
   t.degenerate.push_back(isDegenerateTriangle(a, b, c) ? 1 : 0);
-  g.colours.push_back(colour);
+  g.lighting.appendFlat(colour);
 }
 
 // An axis-aligned rectangle at depth z (two triangles).
@@ -116,10 +116,10 @@ TEST_F(GlFrame, ShowsEachTrianglesCpuColourAndTheFarFieldElsewhereWithTheNearerQ
   recolour(g, [](size_t t) {
     return t < 2 ? glm::vec3(0.8f, 0.1f, 0.1f) : glm::vec3(0.1f, 0.7f, 0.2f);
   });
-  const glm::u8vec3 nearColour = g.colours[0], farColour = g.colours[2];
+  const glm::u8vec3 nearColour = g.lighting.meanColour(0), farColour = g.lighting.meanColour(2);
   ASSERT_NE(nearColour, farColour);
-  ASSERT_EQ(g.colours[1], nearColour);
-  ASSERT_EQ(g.colours[3], farColour);
+  ASSERT_EQ(g.lighting.meanColour(1), nearColour);
+  ASSERT_EQ(g.lighting.meanColour(3), farColour);
 
   ImageRgb8 farField(kWidth, kHeight);
   for (int y = 0; y < kHeight; ++y)
@@ -151,10 +151,10 @@ TEST_F(GlFrame, ReadBackPutsRowZeroAtTheTop) {
   int upper = 0, lower = 0;
   for (int y = 0; y < kHeight; ++y)
     for (int x = 0; x < kWidth; ++x)
-      if (frame.at(x, y) == g.colours[0]) ++(y < kHeight / 2 ? upper : lower);
+      if (frame.at(x, y) == g.lighting.meanColour(0)) ++(y < kHeight / 2 ? upper : lower);
   EXPECT_GT(upper, kWidth * kHeight / 4);
   EXPECT_EQ(lower, 0);
-  EXPECT_EQ(frame.at(kWidth / 2, 0), g.colours[0]);
+  EXPECT_EQ(frame.at(kWidth / 2, 0), g.lighting.meanColour(0));
   EXPECT_EQ(frame.at(kWidth / 2, kHeight - 1), background);
 }
 
@@ -192,6 +192,17 @@ RandomScene randomScene(const Camera& camera) {
     addTriangle(s.g, a, b, c, {uint8_t(red(rng)), uint8_t(byte(rng)), uint8_t(byte(rng))});
     if (t % 4 != 0) s.near.push_back(uint32_t(t));
   }
+  // Colours that vary across each triangle (a grid of level 1 to 4 of random
+  // colours) and haze, so the shader's lookup and fading are what is compared.
+  s.g.lighting = LightingGrid{};
+  std::uniform_int_distribution<uint32_t> level(1, 4);
+  for (int t = 0; t < 200; ++t) {
+    const uint32_t n = level(rng);
+    std::vector<glm::u8vec3> points(LightingGrid::pointsOf(n));
+    for (auto& p : points) p = {uint8_t(red(rng)), uint8_t(byte(rng)), uint8_t(byte(rng))};
+    s.g.lighting.append(n, points.data(), points.size());
+  }
+  s.g.haze = Haze{glm::vec3(40.0f, 60.0f, 80.0f), 25.0f};
   return s;
 }
 
@@ -203,11 +214,15 @@ TEST_F(GlFrame, MatchesTheSoftwareRasterizerExceptOnAFewEdgePixels) {
   SoftwareRasterizer soft;
   IdBuffer ids;
   soft.draw(camera_, s.g.triangles, s.near, ids);
+  const Camera::PixelRays rays = camera_.pixelRays();
   int drawn = 0;
   const auto [count, first] = mismatches(frame, [&](int x, int y) {
     const uint32_t id = ids.at(x, y);
     drawn += id != kNoTriangle;
-    return std::optional(id == kNoTriangle ? s.background : s.g.colours[id]);
+    return std::optional(
+        id == kNoTriangle
+            ? s.background
+            : s.g.colourAlong(id, camera_.eye, rays.at(float(x) + 0.5f, float(y) + 0.5f)));
   });
   RecordProperty("differingPixels", count);
   EXPECT_GT(drawn, kWidth * kHeight / 4) << "the scene should cover much of the frame";

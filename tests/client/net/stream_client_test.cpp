@@ -100,7 +100,7 @@ TEST(StreamClient, RefusesAFrameThatNamesAPayloadButCarriesNone) {
 TEST(StreamClient, EndsTheSessionWhenTheServerSendsMoreTrianglesThanItsLimit) {
   std::vector<FaceTriangles> faces;
   for (uint32_t f = 0; f < 20; ++f)
-    faces.push_back({f, 0, {{float(f), 0, 0}, {float(f) + 1, 0, 0}, {float(f), 1, 0}}});
+    faces.push_back({f, 0, {{float(f), 0, 0}, {float(f) + 1, 0, 0}, {float(f), 1, 0}}, {}, {}});
   ScriptedServer server(
       {encodeMessage(goodWelcome()), encodeMessage(encodeGeometry(faces, QuantizationGrid{}))});
   StreamClientOptions o = to(server);
@@ -115,7 +115,7 @@ TEST(StreamClient, EndsTheSessionWhenTheServerSendsMoreTrianglesThanItsLimit) {
 TEST(StreamClient, HoldsWhatAWellBehavedServerSends) {
   std::vector<FaceTriangles> faces;
   for (uint32_t f = 0; f < 5; ++f)
-    faces.push_back({f, 0, {{float(f), 0, 0}, {float(f) + 1, 0, 0}, {float(f), 1, 0}}});
+    faces.push_back({f, 0, {{float(f), 0, 0}, {float(f) + 1, 0, 0}, {float(f), 1, 0}}, {}, {}});
   ScriptedServer server(
       {encodeMessage(goodWelcome()), encodeMessage(encodeGeometry(faces, QuantizationGrid{}))});
   StreamClient client(to(server));
@@ -170,7 +170,8 @@ std::vector<std::pair<uint32_t, std::array<float, 9>>> facesIn(const RenderGeome
 
 TEST(StreamClient, DeltasTakenUpInTurnHoldWhatTheSnapshotHolds) {
   auto face = [](uint32_t f, float y) {
-    return FaceTriangles{f, 0, {{float(f), y, 0}, {float(f) + 1, y, 0}, {float(f), y + 1, 0}}};
+    return FaceTriangles{
+        f, 0, {{float(f), y, 0}, {float(f) + 1, y, 0}, {float(f), y + 1, 0}}, {}, {}};
   };
   std::vector<FaceTriangles> first;
   for (uint32_t f = 0; f < 10; ++f) first.push_back(face(f, 0.0f));
@@ -192,7 +193,8 @@ TEST(StreamClient, DeltasTakenUpInTurnHoldWhatTheSnapshotHolds) {
 
 TEST(StreamClient, DeltasCarryEvictionsAndFacesSentAgain) {
   auto face = [](uint32_t f, float y) {
-    return FaceTriangles{f, 0, {{float(f), y, 0}, {float(f) + 1, y, 0}, {float(f), y + 1, 0}}};
+    return FaceTriangles{
+        f, 0, {{float(f), y, 0}, {float(f) + 1, y, 0}, {float(f), y + 1, 0}}, {}, {}};
   };
   std::vector<FaceTriangles> first;
   for (uint32_t f = 0; f < 10; ++f) first.push_back(face(f, 0.0f));

@@ -25,7 +25,7 @@ GeometryDelta adding(const std::map<uint32_t, int>& faces, int triangles = 2) {
       d.added.triangles.faceIds.push_back(face);
       d.added.triangles.objectIds.push_back(0);
       d.added.triangles.degenerate.push_back(0);
-      d.added.colours.push_back(glm::u8vec3(uint8_t(face), uint8_t(version), 0));
+      d.added.lighting.appendFlat(glm::u8vec3(uint8_t(face), uint8_t(version), 0));
     }
   return d;
 }

@@ -232,7 +232,7 @@ TEST(GeometryCodec, RoundTripsRealFacesOfCity1AndDelfshaven) {
 
 TEST(GeometryCodec, CornersOutsideTheGridAreClampedOntoIt) {
   const QuantizationGrid grid{glm::dvec3(0.0), 1e-3};
-  const std::vector<FaceTriangles> faces = {{5, 1, {{-1, 2, 3}, {1, -2, 3}, {1, 2, -3}}}};
+  const std::vector<FaceTriangles> faces = {{5, 1, {{-1, 2, 3}, {1, -2, 3}, {1, 2, -3}}, {}, {}}};
   const DecodedGeometry g = roundTrip(faces, grid);
   ASSERT_EQ(g.indices.size(), 3u);
   for (uint32_t i : g.indices)
