@@ -52,7 +52,7 @@ glm::ivec2 parseImageSize(const std::string& text, const char* option) {
   return {w, h};
 }
 
-ImageDifference compareImages(const ImageRgb8& a, const ImageRgb8& b) {
+ImageDifference compareImages(const ImageRgb8& a, const ImageRgb8& b, int tolerance) {
   VS_CHECK_EQ(a.width, b.width);  // the caller's contract: images of one camera
   VS_CHECK_EQ(a.height, b.height);
   ImageDifference d;
@@ -60,15 +60,20 @@ ImageDifference compareImages(const ImageRgb8& a, const ImageRgb8& b) {
   size_t differing = 0;
   double sum = 0.0;
   for (size_t p = 0; p < n; ++p) {
-    int e = 0;
-    for (int c = 0; c < 3; ++c)
-      e += std::abs(int(a.pixels[3 * p + size_t(c)]) - int(b.pixels[3 * p + size_t(c)]));
-    differing += e > 0;
+    int e = 0, worst = 0;
+    for (int c = 0; c < 3; ++c) {
+      const int diff =
+          std::abs(int(a.pixels[3 * p + size_t(c)]) - int(b.pixels[3 * p + size_t(c)]));
+      e += diff;
+      worst = std::max(worst, diff);
+    }
+    differing += worst > tolerance;
     sum += double(e) / (3.0 * 255.0);
   }
   for (int y = 1; y + 1 < b.height; ++y)
     for (int x = 1; x + 1 < b.width; ++x) {
-      if (a.at(x, y) == b.at(x, y)) continue;
+      const glm::ivec3 gap = glm::abs(glm::ivec3(a.at(x, y)) - glm::ivec3(b.at(x, y)));
+      if (std::max({gap.x, gap.y, gap.z}) <= tolerance) continue;
       bool uniform = true;
       for (int dy = -1; dy <= 1 && uniform; ++dy)
         for (int dx = -1; dx <= 1; ++dx) uniform = uniform && b.at(x + dx, y + dy) == b.at(x, y);

@@ -169,6 +169,7 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
   uint64_t missesWhilePending = 0;
   std::vector<Hit> scratch_;  // seenTriangle's
   uint64_t misses = 0, checks = 0, geometryFrames = 0, facesReceived = 0, cellEntries = 0;
+  uint64_t lightingBytes = 0;  // Geometry.lighting: the colours' share of Geometry bytes
   // Cell entries that found their cell ready, and the waits of those that
   // did not (entry to CellReady, or to the end of the walk if it never came).
   uint64_t cellEntriesReady = 0;
@@ -245,6 +246,7 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
     std::string error;
     if (!decodeGeometry(geometry, grid_.quantization, g, error)) return finish(error, "bad_frame");
     ++geometryFrames;
+    if (const auto* lighting = geometry.lighting()) lightingBytes += lighting->size();
     for (uint32_t f : g.faces)
       if ((f >> 6) < held_.size()) {
         held_[f >> 6] |= uint64_t(1) << (f & 63);
@@ -468,7 +470,7 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
 
   std::vector<double> latencies, waits, initial, cpu, bytesPerS;
   uint64_t misses = 0, checks = 0, entries = 0, entriesReady = 0, frames = 0, faces = 0,
-           totalBytes = 0, pendingMisses = 0;
+           lighting = 0, totalBytes = 0, pendingMisses = 0;
   size_t loaded = 0, failed = 0;
   std::string firstError, firstFailure;
   auto failedClients = nlohmann::json::array(), cutOffClients = nlohmann::json::array();
@@ -519,6 +521,7 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
     entries += c->cellEntries;
     entriesReady += c->cellEntriesReady;
     frames += c->geometryFrames;
+    lighting += c->lightingBytes;
     faces += c->facesReceived;
     totalBytes += c->bytesReceived();
   }
@@ -559,6 +562,7 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
                  {"bytes_per_face", faces ? double(totalBytes) / double(faces) : 0.0},
                  {"geometry_bytes_per_face",
                   faces ? double(typeBytes[size_t(Payload::Geometry)]) / double(faces) : 0.0},
+                 {"lighting_bytes_per_face", faces ? double(lighting) / double(faces) : 0.0},
                  {"bytes_received", totalBytes},
                  {"bytes_by_type", bytesByType},
                  {"frames_by_type", framesByType},

@@ -283,6 +283,7 @@ int cmdLight(const std::string& spec, const SceneLimits& limits, const LightingO
          {"environment", env.source()},
          {"triangles", stats.triangles},
          {"points", stats.points},
+         {"points_computed", stats.fullPoints},
          {"points_per_triangle", stats.triangles ? double(stats.points) / stats.triangles : 0.0},
          {"ao_rays", stats.aoRays},
          {"shadow_rays", stats.shadowRays},
@@ -293,6 +294,7 @@ int cmdLight(const std::string& spec, const SceneLimits& limits, const LightingO
          {"options",
           {{"spacing_m", options.spacing},
            {"max_level", options.maxLevel},
+           {"tolerance", options.tolerance},
            {"ao_rays", options.aoRays},
            {"ao_distance_m", options.aoDistance},
            {"ambient", options.ambient},
@@ -407,6 +409,10 @@ int runSceneTool(int argc, char** argv) {
       ->check(positive());
   light->add_option("--max-level", lighting.maxLevel, "most lighting points along a triangle side")
       ->check(CLI::Range(1u, 255u));
+  light
+      ->add_option("--tolerance", lighting.tolerance,
+                   "8-bit levels a coarser grid may differ from the full one (0: keep every point)")
+      ->check(CLI::Range(0.0f, 255.0f));
   light->add_option("--ao-rays", lighting.aoRays, "ambient occlusion rays a point (0: off)")
       ->check(CLI::Range(0u, 65536u));
   light

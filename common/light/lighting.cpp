@@ -108,6 +108,38 @@ SurfaceTable surfacesOf(const Scene& scene) {
   return s;
 }
 
+// c rounded to the nearest multiple of `step` (255 where that passes 255).
+glm::u8vec3 posterize(glm::u8vec3 c, uint32_t step) {
+  if (step <= 1) return c;
+  for (int a = 0; a < 3; ++a)
+    c[a] = uint8_t(std::min<uint32_t>(255, (uint32_t(c[a]) + step / 2) / step * step));
+  return c;
+}
+
+// The coarsest level m dividing n whose grid (every (n / m)-th point of the
+// level-n grid g) reproduces every point of g within `tolerance` per channel.
+uint32_t coarsestWithin(const glm::u8vec3* g, uint32_t n, float tolerance) {
+  std::vector<glm::u8vec3> coarse;
+  for (uint32_t m = 1; m < n; ++m) {
+    if (n % m != 0) continue;
+    const uint32_t k = n / m;
+    coarse.resize(LightingGrid::pointsOf(m));
+    for (uint32_t j = 0; j <= m; ++j)
+      for (uint32_t i = 0; i + j <= m; ++i)
+        coarse[LightingGrid::pointIndex(m, i, j)] = g[LightingGrid::pointIndex(n, k * i, k * j)];
+    bool within = true;
+    for (uint32_t j = 0; j <= n && within; ++j)
+      for (uint32_t i = 0; i + j <= n && within; ++i) {
+        const glm::vec3 c =
+            LightingGrid::interpolate(coarse.data(), m, float(i) / float(n), float(j) / float(n));
+        const glm::vec3 d = glm::abs(c - glm::vec3(g[LightingGrid::pointIndex(n, i, j)]));
+        within = std::max({d.r, d.g, d.b}) <= tolerance;
+      }
+    if (within) return m;
+  }
+  return n;
+}
+
 }  // namespace
 
 glm::vec3 defaultSunDirection() {
@@ -148,8 +180,10 @@ void LightingGrid::appendFrom(const LightingGrid& from, size_t t) {
 }
 
 glm::vec3 LightingGrid::colourAt(size_t t, float u, float v) const {
-  const uint32_t n = level[t];
-  const glm::u8vec3* g = colours.data() + first[t];
+  return interpolate(colours.data() + first[t], level[t], u, v);
+}
+
+glm::vec3 LightingGrid::interpolate(const glm::u8vec3* g, uint32_t n, float u, float v) {
   // Barycentrics clamped into the triangle (a hit on an edge may round out).
   u = std::isfinite(u) ? std::clamp(u, 0.0f, 1.0f) : 0.0f;
   v = std::isfinite(v) ? std::clamp(v, 0.0f, 1.0f - u) : 0.0f;
@@ -236,6 +270,8 @@ LightingGrid bakeLighting(const Scene& scene, const FlatTriangles& triangles, co
                           LightingStats* stats, bool progress) {
   const auto start = std::chrono::steady_clock::now();
   VS_CHECK(options.spacing > 0.0f && options.maxLevel >= 1 && options.maxLevel <= 255);
+  VS_CHECK(options.colourStep >= 1 && options.colourStep <= 16 &&
+           (options.colourStep & (options.colourStep - 1)) == 0);
   const size_t count = triangles.size();
   const SurfaceTable surfaces = surfacesOf(scene);
   VS_CHECK_EQ(surfaces.material.size(), count);
@@ -284,6 +320,7 @@ LightingGrid bakeLighting(const Scene& scene, const FlatTriangles& triangles, co
   const float skyScale = skyExposure(environment, options);
   std::atomic<uint64_t> shadowRays{0};
   std::vector<double> aoSum(count, 0.0);
+  std::vector<uint8_t> chosen(count, 1);
   std::unique_ptr<ProgressBar> bar =
       progress ? std::make_unique<ProgressBar>("lighting", count) : nullptr;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 64), [&](const auto& range) {
@@ -337,20 +374,44 @@ LightingGrid bakeLighting(const Scene& scene, const FlatTriangles& triangles, co
             }
           }
           const glm::vec3 light = sky * float(ao) + glm::vec3(sunIntensity * sunCos * lit);
-          out[LightingGrid::pointIndex(level, i, j)] = encodeColour(albedo * light);
+          out[LightingGrid::pointIndex(level, i, j)] =
+              posterize(encodeColour(albedo * light), options.colourStep);
         }
+      chosen[t] = uint8_t(coarsestWithin(out, level, options.tolerance));
       if (bar) bar->advance();
     }
   });
   if (bar) bar->finish();
 
+  // Each triangle keeps the coarsest grid that stays within the tolerance:
+  // its points are among the full grid's, moved to the front of its slot.
+  LightingGrid kept;
+  kept.level.reserve(count);
+  kept.first.reserve(count);
+  uint64_t keptPoints = 0;
+  for (size_t t = 0; t < count; ++t) keptPoints += LightingGrid::pointsOf(chosen[t]);
+  kept.colours.reserve(size_t(keptPoints));
+  std::vector<glm::u8vec3> coarse;
+  for (size_t t = 0; t < count; ++t) {
+    const uint32_t n = grid.level[t], m = chosen[t], k = n / m;
+    const glm::u8vec3* full = grid.colours.data() + grid.first[t];
+    coarse.resize(LightingGrid::pointsOf(m));
+    for (uint32_t j = 0; j <= m; ++j)
+      for (uint32_t i = 0; i + j <= m; ++i)
+        coarse[LightingGrid::pointIndex(m, i, j)] = full[LightingGrid::pointIndex(n, k * i, k * j)];
+    kept.append(m, coarse.data(), coarse.size());
+  }
+  local.fullPoints = points;
+  points = keptPoints;
+  grid = std::move(kept);
+
   local.triangles = count;
   local.points = points;
-  local.aoRays = points * options.aoRays;
+  local.aoRays = local.fullPoints * options.aoRays;
   local.shadowRays = shadowRays.load();
   double ao = 0.0;
   for (double s : aoSum) ao += s;
-  local.meanAo = points ? ao / double(points) : 1.0;
+  local.meanAo = local.fullPoints ? ao / double(local.fullPoints) : 1.0;
   local.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (stats) *stats = std::move(local);
   return grid;

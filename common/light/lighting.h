@@ -70,14 +70,23 @@ struct LightingGrid {
   // The colour at barycentrics (u, v) of triangle t (weights of its vertices 1
   // and 2), interpolated within the grid, in 0..255 per channel (unrounded).
   glm::vec3 colourAt(size_t t, float u, float v) const;
+  // The same on one grid `g` of level n.
+  static glm::vec3 interpolate(const glm::u8vec3* g, uint32_t n, float u, float v);
   // The mean of a triangle's grid colours (for a one-colour summary).
   glm::u8vec3 meanColour(size_t t) const;
 };
 
 struct LightingOptions {
-  float spacing = 4.0f;      // metres between lighting points on large faces
-  uint32_t maxLevel = 16;    // at most 153 points a triangle
-  uint32_t aoRays = 32;      // per lighting point; 0 turns ambient occlusion off
+  float spacing = 8.0f;   // metres between lighting points on large faces
+  uint32_t maxLevel = 8;  // at most 45 points a triangle
+  // A triangle keeps the coarsest grid (a level dividing its own) that
+  // reproduces all its points within this many 8-bit levels per channel.
+  float tolerance = 4.0f;
+  // Colours are rounded to multiples of this (and 255 kept): 4 changes a
+  // colour by at most 2 levels and makes a streamed grid about a third
+  // smaller (protocol: Geometry.lighting codes the multiples). 1: exact.
+  uint32_t colourStep = 4;
+  uint32_t aoRays = 48;      // per lighting point; 0 turns ambient occlusion off
   float aoDistance = 20.0f;  // metres a ray must travel to count as open
   float ambient = 0.7f;      // sky light on an open, up-facing white surface
   // The sun: the scene's (Environment::sunDirection, sunIntensity) unless set.
@@ -87,7 +96,10 @@ struct LightingOptions {
 };
 
 struct LightingStats {
-  uint64_t triangles = 0, points = 0, aoRays = 0, shadowRays = 0;
+  uint64_t triangles = 0;
+  uint64_t fullPoints = 0;  // lighting points computed
+  uint64_t points = 0;      // kept after simplification (tolerance)
+  uint64_t aoRays = 0, shadowRays = 0;
   double seconds = 0.0;
   double meanAo = 0.0;  // over every point
   uint32_t texturedMaterials = 0;

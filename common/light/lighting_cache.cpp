@@ -142,6 +142,8 @@ uint64_t lightingKey(const Scene& scene, const FlatTriangles& triangles,
   f.value(options.aoDistance);
   f.value(options.ambient);
   f.value(options.sunShadows);
+  f.value(options.tolerance);
+  f.value(options.colourStep);
   return f.h;
 }
 

@@ -39,6 +39,7 @@ constexpr uint32_t pointsOfLevel(uint32_t n) {
 constexpr uint32_t pointIndexOf(uint32_t n, uint32_t i, uint32_t j) {
   return j * (n + 1) - j * (j - 1) / 2 + i;
 }
+constexpr uint32_t kMaxColourStep = 16;
 
 // ---- writing -------------------------------------------------------------------
 
@@ -255,7 +256,9 @@ std::vector<uint8_t> compressed(const std::vector<uint8_t>& raw) {
 glm::ivec3 predictPoint(const glm::u8vec3* g, uint32_t n, uint32_t i, uint32_t j,
                         glm::u8vec3 previous) {
   auto at = [&](uint32_t a, uint32_t b) { return glm::ivec3(g[pointIndexOf(n, a, b)]); };
-  if (i > 0 && j > 0) return glm::clamp(at(i - 1, j) + at(i, j - 1) - at(i - 1, j - 1), 0, 255);
+  // Lighting grids carry ray-sampling noise, which a plane through three
+  // neighbours would triple; the mean of two halves it.
+  if (i > 0 && j > 0) return (at(i - 1, j) + at(i, j - 1) + 1) / 2;
   if (i > 0) return at(i - 1, j);
   if (j > 0) return at(i, j - 1);
   return glm::ivec3(previous);
@@ -269,8 +272,18 @@ std::vector<uint8_t> lightingSection(std::span<const FaceTriangles> input, const
     const size_t triangles = std::min<size_t>(f.corners.size() / 3, 65535);
     if (f.levels.size() < triangles || f.levels.empty()) return {};
   }
+  // The coarsest step whose lattice (multiples of it, and 255) holds every
+  // colour: baked colours are posterized (LightingOptions::colourStep), and
+  // coding their lattice index instead of the byte shrinks the residuals.
+  uint32_t step = kMaxColourStep;
+  for (uint32_t i : b.order)
+    for (const glm::u8vec3& c : input[i].colours)
+      for (int a = 0; a < 3; ++a)
+        while (step > 1 && c[a] != 255 && c[a] % step != 0) step /= 2;
   std::vector<uint8_t> raw;
+  putVarint(raw, step);
   glm::u8vec3 previous(0);
+  std::vector<glm::u8vec3> index;  // a grid's lattice indices
   for (uint32_t i : b.order) {
     const FaceTriangles& f = input[i];
     const size_t triangles = std::min<size_t>(f.corners.size() / 3, 65535);
@@ -280,12 +293,19 @@ std::vector<uint8_t> lightingSection(std::span<const FaceTriangles> input, const
       VS_CHECK(n >= 1);
       VS_CHECK_LE(at + pointsOfLevel(n), f.colours.size());
       putVarint(raw, n);
-      const glm::u8vec3* g = f.colours.data() + at;
+      index.resize(pointsOfLevel(n));
+      for (size_t k = 0; k < index.size(); ++k)
+        index[k] = glm::u8vec3((glm::uvec3(f.colours[at + k]) + step / 2) / step);
+      const glm::u8vec3* g = index.data();
       for (uint32_t j = 0; j <= n; ++j)
         for (uint32_t k = 0; k + j <= n; ++k) {
-          const glm::ivec3 p = predictPoint(g, n, k, j, previous);
-          const glm::u8vec3 c = g[pointIndexOf(n, k, j)];
-          for (int a = 0; a < 3; ++a) raw.push_back(uint8_t(int(c[a]) - p[a]));
+          // Green's residual, then red's and blue's minus green's: light
+          // scales the three channels together, so those are mostly 0.
+          const glm::ivec3 r =
+              glm::ivec3(g[pointIndexOf(n, k, j)]) - predictPoint(g, n, k, j, previous);
+          raw.push_back(uint8_t(r.g));
+          raw.push_back(uint8_t(r.r - r.g));
+          raw.push_back(uint8_t(r.b - r.g));
         }
       previous = g[0];
       at += pointsOfLevel(n);
@@ -481,8 +501,13 @@ bool decodeGeometryLighting(std::span<const uint8_t> bytes, size_t triangles, De
     return fail(fmt::format("unknown format {}", unsigned(bytes[0])));
   }
   PayloadReader r(raw);
+  const auto step = r.varint("the colour step", kMaxColourStep);
+  if (!step) return fail(r.error());
+  if (*step == 0 || (*step & (*step - 1)) != 0)
+    return fail(fmt::format("a colour step of {}, not a power of 2", *step));
   out.levels.reserve(std::min(triangles, raw.size()));
   glm::u8vec3 previous(0);
+  std::vector<glm::u8vec3> index;
   for (size_t t = 0; t < triangles; ++t) {
     const auto n = r.varint("a level", 255);
     if (!n) return fail(r.error());
@@ -494,17 +519,23 @@ bool decodeGeometryLighting(std::span<const uint8_t> bytes, size_t triangles, De
     if (out.colours.size() + points > kMaxGeometryColours)
       return fail(fmt::format("more than {} colours", kMaxGeometryColours));
     const auto residuals = r.bytes("a grid", uint64_t(points) * 3);
-    const size_t first = out.colours.size();
-    out.colours.resize(first + points);
-    glm::u8vec3* g = out.colours.data() + first;
+    index.resize(points);
+    glm::u8vec3* g = index.data();
     size_t k = 0;
     for (uint32_t j = 0; j <= *n; ++j)
       for (uint32_t i = 0; i + j <= *n; ++i, ++k) {
         const glm::ivec3 p = predictPoint(g, uint32_t(*n), i, j, previous);
+        const uint8_t* e = residuals->data() + 3 * k;
+        const int green = int(int8_t(e[0]));
         glm::u8vec3& c = g[pointIndexOf(uint32_t(*n), i, j)];
-        for (int a = 0; a < 3; ++a) c[a] = uint8_t(p[a] + (*residuals)[3 * k + size_t(a)]);
+        c.g = uint8_t(p.g + green);
+        c.r = uint8_t(p.r + green + e[1]);
+        c.b = uint8_t(p.b + green + e[2]);
       }
     previous = g[0];
+    for (const glm::u8vec3& q : index)  // lattice index to colour; 255 tops the lattice
+      out.colours.push_back(
+          glm::u8vec3(glm::min(glm::uvec3(q) * uint32_t(*step), glm::uvec3(255))));
     out.levels.push_back(uint8_t(*n));
   }
   if (r.remaining() != 0) return fail(fmt::format("{} bytes after the last grid", r.remaining()));

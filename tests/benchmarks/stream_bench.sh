@@ -52,7 +52,8 @@ for d, p in ((v, "visibility"), (r, "radius")):
     by_type = sorted(d.get("bytes_by_type", {}).items(), key=lambda kv: -kv[1])
     share = " ".join(f"{k} {b / total * d['bytes_per_client_per_s']:.0f}" for k, b in by_type)
     print(f"  {p:<10} bytes/cl/s by type: {share}; Geometry bytes/face "
-          f"{d.get('geometry_bytes_per_face', 0):.1f}")
+          f"{d.get('geometry_bytes_per_face', 0):.1f}, of which lighting "
+          f"{d.get('lighting_bytes_per_face', 0):.1f}")
     if d["errors"]:
         print(f"  {p}: {d['errors']} errors, first: {d['first_error']}")
 PY

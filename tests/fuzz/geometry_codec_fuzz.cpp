@@ -2,6 +2,8 @@
 // refuse any bytes with an error or decode them to a batch that keeps its own
 // bounds, never crash, hang or allocate without bound. The first byte picks
 // the codec (bit 0) and the compression (bit 1), the rest is the payload, so
+// (bit 2 set: the rest is a lighting section, its second byte the triangle
+// count)
 // the fuzzer reaches the varints, zstd and meshoptimizer's decoders without a
 // FlatBuffer around them (frame_decoder_fuzz covers that way in).
 #include <cstddef>
@@ -15,6 +17,19 @@
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace vistream::wire;
   if (size == 0) return 0;
+  if (data[0] & 4) {  // the lighting section, for data[1] triangles
+    if (size < 2) return 0;
+    DecodedGeometry lit;
+    std::string why;
+    if (!decodeGeometryLighting(std::span(data + 2, size - 2), data[1], lit, why)) {
+      if (why.empty() || !lit.colours.empty()) std::abort();
+      return 0;
+    }
+    size_t points = 0;
+    for (uint8_t n : lit.levels) points += (size_t(n) + 1) * (size_t(n) + 2) / 2;
+    if (lit.levels.size() != data[1] || lit.colours.size() != points) std::abort();
+    return 0;
+  }
   const GeometryCodec codec = data[0] & 1 ? GeometryCodec::Varint : GeometryCodec::Meshopt;
   const GeometryCompression compression =
       data[0] & 2 ? GeometryCompression::Zstd : GeometryCompression::None;

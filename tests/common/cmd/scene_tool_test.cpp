@@ -365,7 +365,7 @@ TEST(SceneTool, LightBakesATexturedSceneAndWarnsOfAMissingTexture) {
                                                "usemtl lost\nf 5/1 6/2 7/3 8/4\n";
   }
   const ToolRun r = runTool("light --scene " + (dir.path() / "scene.obj").string() +
-                            " --ao-rays 8 --bench 4 --json");
+                            " --spacing 4 --tolerance 0 --ao-rays 8 --bench 4 --json");
   ASSERT_EQ(r.status, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);
   EXPECT_EQ(j["triangles"].get<int>(), 4);
@@ -374,7 +374,9 @@ TEST(SceneTool, LightBakesATexturedSceneAndWarnsOfAMissingTexture) {
   EXPECT_NE(j["warnings"][0].get<std::string>().find("gone.png"), std::string::npos);
   EXPECT_NE(r.err.find("gone.png"), std::string::npos) << r.err;
   // 10 m sides at 4 m spacing: level 4 on the sides, 15 points a triangle.
-  EXPECT_EQ(j["points"].get<int>(), 4 * 15);
+  EXPECT_EQ(j["points_computed"].get<int>(), 4 * 15);
+  // The lost texture's quad is evenly lit: its triangles keep their corners alone.
+  EXPECT_EQ(j["points"].get<int>(), 2 * 15 + 2 * 3);
   ASSERT_EQ(j["bench"].size(), 1u);
   EXPECT_EQ(j["bench"][0]["ao_rays"].get<int>(), 4);
   EXPECT_EQ(j["environment"].get<std::string>(), "analytic sky");

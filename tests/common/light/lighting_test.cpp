@@ -82,6 +82,10 @@ TEST(BakeLighting, TheFloorsInsideCornerGetsAQuarterOfTheSkyAndAShadow) {
   const CornerBake corner;
   const FlatTriangles& tris = corner.tris;
   LightingOptions o;
+  o.spacing = 4.0f;
+  o.maxLevel = 16;
+  o.tolerance = 0.0f;  // keep every point
+  o.colourStep = 1;    // exact bytes
   o.aoRays = 1024;
   o.ambient = 0.7f;
   o.sunIntensity = 0.2f;
@@ -107,6 +111,7 @@ TEST(BakeLighting, NoAmbientOcclusionRaysMeansAnOpenSkyEverywhere) {
   LightingOptions o;
   o.aoRays = 0;
   o.sunIntensity = 0.0f;
+  o.colourStep = 1;
   LightingStats stats;
   const LightingGrid grid = corner.bake(o, &stats);
   EXPECT_EQ(bakedColourAt(grid, corner.tris, {0, 0, 0}).g, expectedByte(o.ambient));
@@ -120,6 +125,40 @@ TEST(BakeLighting, IsTheSameOnOneThreadAsOnMany) {
   LightingGrid b;
   tbb::task_arena(1).execute([&] { b = corner.bake({}); });
   EXPECT_EQ(a.colours, b.colours);
+}
+
+TEST(BakeLighting, PosterizesToTheColourStepAndSimplifiesWithinTheTolerance) {
+  const CornerBake corner;
+  LightingOptions exact;
+  exact.colourStep = 1;
+  exact.tolerance = 0.0f;
+  LightingStats full;
+  const LightingGrid reference = corner.bake(exact, &full);
+  LightingOptions o;  // the defaults: step 4, tolerance 4
+  LightingStats kept;
+  const LightingGrid g = corner.bake(o, &kept);
+  for (const glm::u8vec3& c : g.colours)
+    for (int a = 0; a < 3; ++a) EXPECT_TRUE(c[a] % 4 == 0 || c[a] == 255) << int(c[a]);
+  EXPECT_EQ(kept.fullPoints, full.points);
+  // Everywhere on every triangle, the coarse grid stays within tolerance plus
+  // posterizing (2 levels) of the exact bake.
+  for (size_t t = 0; t < corner.tris.size(); ++t)
+    for (float u : {0.0f, 0.1f, 0.33f, 0.5f, 0.9f})
+      for (float v : {0.0f, 0.05f, 0.25f, 0.5f}) {
+        if (u + v > 1.0f) continue;
+        const glm::vec3 d = glm::abs(g.colourAt(t, u, v) - reference.colourAt(t, u, v));
+        EXPECT_LE(std::max({d.r, d.g, d.b}), o.tolerance + 2.0f + 0.01f)
+            << t << " " << u << " " << v;
+      }
+  // Without occlusion or sun a uniform sky lights every point alike: each
+  // triangle keeps the coarsest grid, its three corners.
+  LightingOptions flat;
+  flat.aoRays = 0;
+  flat.sunIntensity = 0.0f;
+  LightingStats plain;
+  corner.bake(flat, &plain);
+  EXPECT_GT(plain.fullPoints, 3 * corner.tris.size());
+  EXPECT_EQ(plain.points, 3 * corner.tris.size());
 }
 
 // Interpolation inside the grid reproduces any colour linear in (u, v)

@@ -547,3 +547,110 @@ TEST(GeometryCodec, RefusesZstdFramesThatHoldMoreThanTheyClaimOrDoNotSay) {
 
 }  // namespace
 }  // namespace vistream::wire
+
+namespace vistream::wire {
+namespace {
+
+// Faces of 1 to 3 triangles, each with a lighting grid of level 1 to 8 whose
+// colours are random bytes, or random multiples of `step` (and 255).
+std::vector<FaceTriangles> litFaces(uint32_t seed, uint32_t step) {
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> byte(0, 255), level(1, 8), count(1, 3);
+  std::vector<FaceTriangles> faces;
+  for (uint32_t f = 0; f < 40; ++f) {
+    FaceTriangles face{(f * 7919u) % 1000u, 0, {}, {}, {}};
+    for (int t = count(rng); t > 0; --t) {
+      for (int k = 0; k < 3; ++k)
+        face.corners.push_back(glm::vec3(float(byte(rng)), float(byte(rng)), float(f)));
+      const uint32_t n = uint32_t(level(rng));
+      face.levels.push_back(uint8_t(n));
+      for (uint32_t p = 0; p < (n + 1) * (n + 2) / 2; ++p) {
+        glm::u8vec3 c(uint8_t(byte(rng)), uint8_t(byte(rng)), uint8_t(byte(rng)));
+        for (int a = 0; a < 3; ++a)
+          c[a] = uint8_t(std::min(255u, (uint32_t(c[a]) + step / 2) / step * step));
+        face.colours.push_back(c);
+      }
+    }
+    faces.push_back(std::move(face));
+  }
+  return faces;
+}
+
+// The decoded grids are the input's, face by face in ID order.
+void expectSameLighting(std::vector<FaceTriangles> input, const DecodedGeometry& g) {
+  std::stable_sort(input.begin(), input.end(),
+                   [](const FaceTriangles& a, const FaceTriangles& b) { return a.face < b.face; });
+  std::vector<uint8_t> levels;
+  std::vector<glm::u8vec3> colours;
+  for (const FaceTriangles& f : input) {
+    levels.insert(levels.end(), f.levels.begin(), f.levels.end());
+    colours.insert(colours.end(), f.colours.begin(), f.colours.end());
+  }
+  EXPECT_EQ(g.levels, levels);
+  EXPECT_EQ(g.colours, colours);
+}
+
+TEST(GeometryLighting, RandomGridsRoundTripExactlyAtEveryColourStep) {
+  const QuantizationGrid grid{glm::dvec3(0.0), 1e-3};
+  for (uint32_t step : {1u, 2u, 4u, 16u}) {
+    const auto faces = litFaces(step, step);
+    const DecodedGeometry g = roundTrip(faces, grid);
+    expectSameLighting(faces, g);
+  }
+}
+
+TEST(GeometryLighting, ABatchWithAFaceWithoutLightingCarriesNone) {
+  auto faces = litFaces(3, 4);
+  faces[5].levels.clear();
+  faces[5].colours.clear();
+  const GeometryT g = encodeGeometry(faces, QuantizationGrid{});
+  EXPECT_TRUE(g.lighting.empty());
+  const DecodedGeometry d = roundTrip(faces, QuantizationGrid{});
+  EXPECT_TRUE(d.levels.empty());
+  EXPECT_TRUE(d.colours.empty());
+}
+
+TEST(GeometryLighting, EveryTruncationAndABadHeaderAreRefusedWithAReason) {
+  const auto faces = litFaces(4, 4);
+  const GeometryT g = encodeGeometry(faces, QuantizationGrid{});
+  size_t triangles = 0;
+  for (const auto& f : faces) triangles += f.levels.size();
+  ASSERT_FALSE(g.lighting.empty());
+  DecodedGeometry out;
+  std::string error;
+  ASSERT_TRUE(decodeGeometryLighting(g.lighting, triangles, out, error)) << error;
+  for (size_t n = 0; n < g.lighting.size(); n += std::max<size_t>(1, g.lighting.size() / 50)) {
+    error.clear();
+    EXPECT_FALSE(decodeGeometryLighting(std::span(g.lighting.data(), n), triangles, out, error))
+        << n;
+    EXPECT_FALSE(error.empty());
+    EXPECT_TRUE(out.colours.empty());
+  }
+  // One triangle more than the bytes hold, an unknown format, a step of 3.
+  EXPECT_FALSE(decodeGeometryLighting(g.lighting, triangles + 1, out, error));
+  std::vector<uint8_t> bad = g.lighting;
+  bad[0] = 7;
+  EXPECT_FALSE(decodeGeometryLighting(bad, triangles, out, error));
+  EXPECT_NE(error.find("format"), std::string::npos) << error;
+  const std::vector<uint8_t> step3 = {0, 3, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0};
+  EXPECT_FALSE(decodeGeometryLighting(step3, 1, out, error));
+  EXPECT_NE(error.find("power of 2"), std::string::npos) << error;
+}
+
+TEST(GeometryLighting, ARawSectionWrittenByHandDecodesAsTheSchemaSays) {
+  // Raw format, step 4, one triangle of level 1: lattice indices (10, 20, 30)
+  // coded as green 20 and red, blue minus green (-10, +10); the next point is
+  // predicted from the one before it: residual 0 repeats it, then +1 green.
+  const std::vector<uint8_t> bytes = {0, 4, 1, 20, uint8_t(-10), 10, 0, 0, 0, 1, 0, 0};
+  DecodedGeometry out;
+  std::string error;
+  ASSERT_TRUE(decodeGeometryLighting(bytes, 1, out, error)) << error;
+  ASSERT_EQ(out.levels, std::vector<uint8_t>{1});
+  ASSERT_EQ(out.colours.size(), 3u);
+  EXPECT_EQ(out.colours[0], glm::u8vec3(40, 80, 120));
+  EXPECT_EQ(out.colours[1], glm::u8vec3(40, 80, 120));
+  EXPECT_EQ(out.colours[2], glm::u8vec3(44, 84, 124));
+}
+
+}  // namespace
+}  // namespace vistream::wire
