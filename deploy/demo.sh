@@ -89,5 +89,20 @@ echo "==    image cache and ray casting (Wimmer 2001, chapter 4); PNG frames in 
 kill -INT $server
 wait $server || true
 trap - EXIT
+
+echo
+echo "== 9. a contact sheet: frames of city1 and of the real city model (../shared/data/delfshaven.obj),"
+echo "==    lit by the baked environment light, sun shadows and ambient occlusion, with distance haze =="
+sheet="$work/frames/contact_sheet.png"
+rm -f "$sheet"
+"$bin/vistream-client" --scene city1 --headless --path "$work/walk.csv" --frames 120 --size 320x240 \
+  --sheet "$sheet" --log-level warn > /dev/null
+delfshaven=../shared/data/delfshaven.obj
+if [ -f "$delfshaven" ]; then
+  "$bin/vistream-scene" path --scene "$delfshaven" --frames 300 --seed 3 --out "$work/delfshaven.csv" --log-level error
+  "$bin/vistream-client" --scene "$delfshaven" --headless --path "$work/delfshaven.csv" --frames 120 \
+    --size 320x240 --sheet "$sheet" --log-level error > /dev/null
+fi
+echo "contact sheet: $sheet"
 echo "server log (last lines):"
 tail -n 4 "$work/server.log"

@@ -147,6 +147,10 @@ nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const Pip
     if (f.compared)
       j["error"] = {{"differing_fraction", f.difference.differingFraction},
                     {"mean_colour_error", f.difference.meanColourError}};
+    if (f.contrast) {
+      j["distinct_colours"] = f.contrast->distinctColours;
+      j["luminance_std"] = f.contrast->luminanceStd;
+    }
     perFrame.push_back(std::move(j));
     ++why["far_field"][f.report.farFieldWhy];
     ++why["horizon_tracing"][f.report.horizonWhy];
@@ -188,6 +192,22 @@ nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const Pip
       {"stages", stages},
       {"per_frame", perFrame},
   };
+  std::vector<double> colours, spread;
+  for (const FrameRecord& f : frames)
+    if (f.contrast) {
+      colours.push_back(double(f.contrast->distinctColours));
+      spread.push_back(f.contrast->luminanceStd);
+    }
+  if (!colours.empty()) {
+    auto median = [](std::vector<double> v) {
+      std::nth_element(v.begin(), v.begin() + ptrdiff_t(v.size() / 2), v.end());
+      return v[v.size() / 2];
+    };
+    out["contrast"] = {{"min_distinct_colours", *std::min_element(colours.begin(), colours.end())},
+                       {"median_distinct_colours", median(colours)},
+                       {"min_luminance_std", *std::min_element(spread.begin(), spread.end())},
+                       {"median_luminance_std", median(spread)}};
+  }
   if (m.compared)
     out["error"] = {{"frames_compared", m.compared},
                     {"mean_differing_fraction", m.differing},

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -50,6 +51,7 @@ struct FrameRecord {
   double wallMs = 0.0;
   bool compared = false;
   ImageDifference difference;
+  std::optional<ImageContrast> contrast;  // of the frame drawn, when measured
 };
 
 // The headless JSON contract: frames, mean_frame_ms, pixels (means of

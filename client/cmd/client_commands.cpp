@@ -37,7 +37,7 @@ namespace {
 
 struct Args {
   std::string scene, host, pathFile, size = "640x480", outDir, mode = "pipeline", logLevel = "warn",
-                                     token;
+                                     token, sheetFile;
   SceneLimits sceneLimits;
   std::filesystem::path lightingCache;  // empty: no cache
   GroundChoice ground;                  // for --path auto
@@ -100,6 +100,43 @@ PipelineOptions pipelineOptions(const Args& a, const Scene* scene, RenderMode mo
   }
   return o;
 }
+
+// --sheet FILE: four frames evenly spaced along the walk, side by side in one
+// row; a FILE already holding a sheet of the same width gets the row below
+// its own, so several runs (scenes) make one contact sheet.
+class ContactSheetRow {
+ public:
+  ContactSheetRow(std::string file, size_t frames) : file_(std::move(file)) {
+    if (file_.empty() || frames == 0) return;
+    for (size_t k = 0; k < kTiles; ++k)
+      picks_.push_back(frames == 1 ? 0 : k * (frames - 1) / (kTiles - 1));
+  }
+  void offer(size_t frame, const ImageRgb8& image) {
+    if (std::find(picks_.begin(), picks_.end(), frame) != picks_.end() && tiles_.size() < kTiles)
+      tiles_.push_back(image);
+  }
+  void write() const {
+    if (file_.empty() || tiles_.empty()) return;
+    ImageRgb8 sheet = contactSheet(tiles_, int(kTiles));
+    std::error_code ec;
+    if (std::filesystem::exists(file_, ec)) {
+      try {
+        const ImageRgb8 before = readPng(file_);
+        if (before.width == sheet.width) sheet = stackImages(before, sheet);
+      } catch (const InputError&) {
+        // Not a sheet of ours: replaced.
+      }
+    }
+    writePng(sheet, file_);
+    spdlog::info("contact sheet row written to {}", file_);
+  }
+
+ private:
+  static constexpr size_t kTiles = 4;
+  std::string file_;
+  std::vector<size_t> picks_;
+  std::vector<ImageRgb8> tiles_;
+};
 
 // What a connected walk received and how long it waited for geometry.
 struct ConnectionFigures {
@@ -231,6 +268,7 @@ int runHeadless(const Args& a, LiveGeometry& live, const std::vector<Camera>& ca
                 glm::ivec2 size, StreamClient* net, ConnectionFigures& connection) {
   std::vector<FrameRecord> records;
   ImageRgb8 image, refImage;
+  ContactSheetRow sheet(a.sheetFile, cameras.size());
   ProgressBar bar(
       fmt::format("rendering {} frames ({})", cameras.size(), renderModeName(live.options.mode)),
       cameras.size());
@@ -261,10 +299,13 @@ int runHeadless(const Args& a, LiveGeometry& live, const std::vector<Camera>& ca
       r.difference = compareImages(image, refImage);
     }
     if (!a.outDir.empty()) writePng(image, std::filesystem::path(a.outDir) / frameName(i));
+    r.contrast = imageContrast(image);
+    sheet.offer(i, image);
     records.push_back(r);
     bar.advance();
   }
   bar.finish();
+  sheet.write();
   if (net) connection.bytesReceived = net->bytesReceived();
   printSummary(a, records, live.options, size, net ? &connection : nullptr);
   return 0;
@@ -287,6 +328,7 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
   std::vector<uint32_t> near;
   std::vector<FrameRecord> records;
   if (!cameras.empty()) {
+    ContactSheetRow sheet(a.sheetFile, cameras.size());
     for (size_t i = 0; i < cameras.size() && !window.shouldClose(); ++i) {
       if (net) {
         net->sendPose(cameras[i].eye, cameras[i].yawDeg, cameras[i].pitchDeg);
@@ -302,13 +344,18 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
       r.frame = i;
       r.report = live.renderer->renderFarField(cameras[i], farImage, near);
       gl.draw(cameras[i], farImage, near, live.renderer->polygonDistance());
-      if (!a.outDir.empty())
-        writePng(gl.readBack(size.x, size.y), std::filesystem::path(a.outDir) / frameName(i));
+      if (!a.outDir.empty() || !a.sheetFile.empty()) {
+        const ImageRgb8 frame = gl.readBack(size.x, size.y);
+        if (!a.outDir.empty()) writePng(frame, std::filesystem::path(a.outDir) / frameName(i));
+        r.contrast = imageContrast(frame);
+        sheet.offer(i, frame);
+      }
       window.swapBuffers();
       Camera ignored = cameras[i];
       window.navigate(ignored, 0.0, 0.0f);
       records.push_back(r);
     }
+    sheet.write();
     printSummary(a, records, o, size);
     return 0;
   }
@@ -477,6 +524,9 @@ int runClientTool(int argc, char** argv) {
   app.add_option("--size", a.size, "image size WIDTHxHEIGHT");
   app.add_option("--fov", a.vfov, "vertical field of view, degrees")->check(between(1.0, 170.0));
   app.add_option("--out", a.outDir, "write DIR/frame_00000.png, ...");
+  app.add_option("--sheet", a.sheetFile,
+                 "contact sheet: a PNG row of 4 frames evenly spaced along the path, added "
+                 "below the rows FILE already holds");
   app.add_flag("--json", a.json,
                "print one JSON object (frames, mean_frame_ms, pixels, per_frame, ...)");
   app.add_option("--mode", a.mode, "pipeline | raycast-all | geometry-all");

@@ -3,6 +3,10 @@
 #include <stb_image.h>
 #include <stb_image_write.h>
 
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
 #include "common/core/check.h"
 #include "common/core/error.h"
 
@@ -56,6 +60,56 @@ ImageRgb8 readPng(const std::filesystem::path& path) {
   img.pixels.assign(data, data + size_t(w) * size_t(h) * 3);
   stbi_image_free(data);
   return img;
+}
+
+ImageContrast imageContrast(const ImageRgb8& image) {
+  ImageContrast c;
+  const size_t n = size_t(image.width) * size_t(image.height);
+  if (n == 0) return c;
+  std::vector<uint32_t> colours(n);
+  double sum = 0.0, sum2 = 0.0;
+  for (size_t p = 0; p < n; ++p) {
+    const uint8_t* px = image.pixels.data() + 3 * p;
+    colours[p] = uint32_t(px[0]) << 16 | uint32_t(px[1]) << 8 | px[2];
+    const double y = 0.2126 * px[0] + 0.7152 * px[1] + 0.0722 * px[2];
+    sum += y;
+    sum2 += y * y;
+  }
+  std::sort(colours.begin(), colours.end());
+  c.distinctColours = size_t(std::unique(colours.begin(), colours.end()) - colours.begin());
+  const double mean = sum / double(n);
+  c.luminanceStd = std::sqrt(std::max(0.0, sum2 / double(n) - mean * mean));
+  return c;
+}
+
+ImageRgb8 contactSheet(const std::vector<ImageRgb8>& tiles, int columns, int gap,
+                       glm::u8vec3 background) {
+  if (tiles.empty() || columns < 1) return {};
+  const int w = tiles[0].width, h = tiles[0].height;
+  const int cols = std::min<int>(columns, int(tiles.size()));
+  const int rows = int((tiles.size() + size_t(cols) - 1) / size_t(cols));
+  ImageRgb8 sheet(gap + cols * (w + gap), gap + rows * (h + gap), background);
+  for (size_t k = 0; k < tiles.size(); ++k) {
+    VS_CHECK(tiles[k].width == w && tiles[k].height == h);
+    const int x0 = gap + int(k % size_t(cols)) * (w + gap),
+              y0 = gap + int(k / size_t(cols)) * (h + gap);
+    for (int y = 0; y < h; ++y)
+      std::memcpy(sheet.pixels.data() + 3 * (size_t(y0 + y) * size_t(sheet.width) + size_t(x0)),
+                  tiles[k].pixels.data() + 3 * size_t(y) * size_t(w), 3 * size_t(w));
+  }
+  return sheet;
+}
+
+ImageRgb8 stackImages(const ImageRgb8& top, const ImageRgb8& bottom, glm::u8vec3 background) {
+  ImageRgb8 out(std::max(top.width, bottom.width), top.height + bottom.height, background);
+  auto paste = [&](const ImageRgb8& im, int y0) {
+    for (int y = 0; y < im.height; ++y)
+      std::memcpy(out.pixels.data() + 3 * size_t(y0 + y) * size_t(out.width),
+                  im.pixels.data() + 3 * size_t(y) * size_t(im.width), 3 * size_t(im.width));
+  };
+  paste(top, 0);
+  paste(bottom, top.height);
+  return out;
 }
 
 }  // namespace vistream

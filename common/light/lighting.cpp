@@ -108,6 +108,44 @@ SurfaceTable surfacesOf(const Scene& scene) {
   return s;
 }
 
+// The albedo of a face without a material, by its orientation (lighting.h).
+glm::vec3 orientationColour(const glm::vec3& n) {
+  if (n.y > 0.7071f) return {0.42f, 0.17f, 0.12f};   // roofs: red tiles
+  if (n.y < -0.7071f) return {0.45f, 0.45f, 0.45f};  // undersides
+  return {0.72f, 0.64f, 0.52f};                      // walls: light stone
+}
+
+// Gives every buried point of a level-n grid (buried[k]) the mean of its open
+// grid neighbours, spreading inwards until none is left (or none is open).
+void fillBuried(glm::u8vec3* g, uint32_t n, std::vector<uint8_t>& buried) {
+  const int di[6] = {1, -1, 0, 0, 1, -1}, dj[6] = {0, 0, 1, -1, -1, 1};
+  for (bool changed = true; changed;) {
+    changed = false;
+    std::vector<std::pair<uint32_t, glm::u8vec3>> filled;
+    for (uint32_t j = 0; j <= n; ++j)
+      for (uint32_t i = 0; i + j <= n; ++i) {
+        const uint32_t k = LightingGrid::pointIndex(n, i, j);
+        if (!buried[k]) continue;
+        glm::vec3 sum(0.0f);
+        int count = 0;
+        for (int e = 0; e < 6; ++e) {
+          const int a = int(i) + di[e], b = int(j) + dj[e];
+          if (a < 0 || b < 0 || a + b > int(n)) continue;
+          const uint32_t m = LightingGrid::pointIndex(n, uint32_t(a), uint32_t(b));
+          if (buried[m]) continue;
+          sum += glm::vec3(g[m]);
+          ++count;
+        }
+        if (count > 0) filled.emplace_back(k, toBytes(sum / float(count)));
+      }
+    for (const auto& [k, c] : filled) {
+      g[k] = c;
+      buried[k] = 0;
+      changed = true;
+    }
+  }
+}
+
 // c rounded to the nearest multiple of `step` (255 where that passes 255).
 glm::u8vec3 posterize(glm::u8vec3 c, uint32_t step) {
   if (step <= 1) return c;
@@ -331,8 +369,10 @@ LightingGrid bakeLighting(const Scene& scene, const FlatTriangles& triangles, co
       const float len = glm::length(n);
       n = len > 0.0f && std::isfinite(len) ? n / len : glm::vec3(0.0f, 1.0f, 0.0f);
       const uint32_t material = surfaces.material[t];
-      const glm::vec3 diffuse =
-          material < scene.materials.size() ? scene.materials[material].diffuse : glm::vec3(0.8f);
+      const glm::vec3 diffuse = material >= scene.materials.size() ? glm::vec3(0.8f)
+                                : scene.materials[material].unassigned
+                                    ? orientationColour(n)
+                                    : scene.materials[material].diffuse;
       const Texture* texture = material < textures.size() && textures[material] && surfaces.hasUv[t]
                                    ? &*textures[material]
                                    : nullptr;
@@ -345,6 +385,7 @@ LightingGrid bakeLighting(const Scene& scene, const FlatTriangles& triangles, co
       const glm::vec3 centroid = (a + b + c) / 3.0f;
       const float sunCos = sunOn ? std::max(0.0f, glm::dot(n, sun)) : 0.0f;
       glm::u8vec3* out = grid.colours.data() + grid.first[t];
+      std::vector<uint8_t> buried(LightingGrid::pointsOf(level), 0);
       for (uint32_t j = 0; j <= level; ++j)
         for (uint32_t i = 0; i + j <= level; ++i) {
           const float u = float(i) / float(level), v = float(j) / float(level);
@@ -363,6 +404,7 @@ LightingGrid bakeLighting(const Scene& scene, const FlatTriangles& triangles, co
           const double ao = ambientOcclusion(rays, q, n, options.aoRays, options.aoDistance,
                                              pointSeed(p) ^ mix64(pointSeed(n)));
           aoSum[t] += ao;
+          buried[LightingGrid::pointIndex(level, i, j)] = options.aoRays > 0 && ao == 0.0;
           float lit = 0.0f;
           if (sunCos > 0.0f) {
             lit = 1.0f;
@@ -374,9 +416,11 @@ LightingGrid bakeLighting(const Scene& scene, const FlatTriangles& triangles, co
             }
           }
           const glm::vec3 light = sky * float(ao) + glm::vec3(sunIntensity * sunCos * lit);
-          out[LightingGrid::pointIndex(level, i, j)] =
-              posterize(encodeColour(albedo * light), options.colourStep);
+          out[LightingGrid::pointIndex(level, i, j)] = encodeColour(albedo * light);
         }
+      fillBuried(out, level, buried);
+      for (uint32_t k = 0; k < LightingGrid::pointsOf(level); ++k)
+        out[k] = posterize(out[k], options.colourStep);
       chosen[t] = uint8_t(coarsestWithin(out, level, options.tolerance));
       if (bar) bar->advance();
     }

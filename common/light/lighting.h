@@ -24,7 +24,16 @@
 //
 // Albedo: the material's diffuse colour times its base-colour texture's mean
 // over the point's share of the triangle (texture.h: a box of the grid's
-// spacing in texture coordinates around the point).
+// spacing in texture coordinates around the point). Faces their source gave
+// no material (Material::unassigned, e.g. a city model's bare OBJ) take a
+// colour by orientation, as city viewers colour roof and wall surfaces: roofs
+// (normal within 45 degrees of up) tile red, walls light stone, undersides grey.
+//
+// Buried points: a point whose every ambient-occlusion ray is blocked (a
+// ground triangle running under a building, a wall sunk into the ground) is
+// seen from nowhere, so its colour would only darken its visible neighbours
+// through interpolation; it takes the mean colour of the grid points around
+// it that are open.
 //
 // Thread safety: a LightingGrid is immutable once baked; bakeLighting runs
 // in parallel (TBB) and is deterministic (each point's rays are seeded by
@@ -86,9 +95,9 @@ struct LightingOptions {
   // colour by at most 2 levels and makes a streamed grid about a third
   // smaller (protocol: Geometry.lighting codes the multiples). 1: exact.
   uint32_t colourStep = 4;
-  uint32_t aoRays = 48;      // per lighting point; 0 turns ambient occlusion off
-  float aoDistance = 20.0f;  // metres a ray must travel to count as open
-  float ambient = 0.7f;      // sky light on an open, up-facing white surface
+  uint32_t aoRays = 48;     // per lighting point; 0 turns ambient occlusion off
+  float aoDistance = 3.0f;  // metres a ray must travel to count as open
+  float ambient = 0.7f;     // sky light on an open, up-facing white surface
   // The sun: the scene's (Environment::sunDirection, sunIntensity) unless set.
   std::optional<float> sunIntensity;      // 0: no sun
   std::optional<glm::vec3> sunDirection;  // towards the sun

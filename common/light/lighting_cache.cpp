@@ -13,7 +13,7 @@ namespace {
 
 constexpr char kMagic[8] = {'V', 'S', 'L', 'I', 'G', 'H', 'T', '1'};
 // Bump when the bake's arithmetic changes, so old files are not read.
-constexpr uint64_t kBakeVersion = 1;
+constexpr uint64_t kBakeVersion = 2;
 
 struct Fnv {
   uint64_t h = 1469598103934665603ull;
@@ -129,6 +129,7 @@ uint64_t lightingKey(const Scene& scene, const FlatTriangles& triangles,
   f.bytes(triangles.positions.data(), triangles.positions.size() * sizeof(glm::vec3));
   for (const Material& m : scene.materials) {
     f.value(m.diffuse);
+    f.value(m.unassigned);
     f.text(m.baseColorTexture);
   }
   const Environment& e = scene.environment;

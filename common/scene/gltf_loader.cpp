@@ -388,7 +388,7 @@ class GltfSceneBuilder {
       scene_.materials.push_back(mat);
     }
     defaultMaterial_ = uint32_t(scene_.materials.size());
-    scene_.materials.push_back(Material::named("default"));
+    scene_.materials.push_back(Material::unassignedDefault());
   }
 
   // Nodes: hierarchy and rest transforms, kept for skins and animations.

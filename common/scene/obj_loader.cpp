@@ -256,7 +256,7 @@ Scene loadObjFromMemory(std::string_view objText, const std::string& displayName
   scene.name = displayName;
   for (const auto& m : reader.GetMaterials()) scene.materials.push_back(toMaterial(m));
   const uint32_t defaultMaterial = uint32_t(scene.materials.size());
-  scene.materials.push_back(Material::named("default"));
+  scene.materials.push_back(Material::unassignedDefault());
 
   // Local origin at the centre of the bounds of all vertices.
   Box3d bounds;

@@ -76,7 +76,7 @@ FlatTriangles flattenScene(const Scene& scene, bool staticOnly) {
 }
 
 void finalizeScene(Scene& scene) {
-  if (scene.materials.empty()) scene.materials.push_back(Material::named("default"));
+  if (scene.materials.empty()) scene.materials.push_back(Material::unassignedDefault());
   SceneDiagnostics& d = scene.diagnostics;
   d.degenerateTriangles = d.repeatedVertexTriangles = d.zeroAreaTriangles = 0;
   uint32_t maxFace = 0;

@@ -33,10 +33,19 @@ struct Material {
   glm::vec3 diffuse{0.8f, 0.8f, 0.8f};          // linear RGB, what every renderer shades with
   glm::vec4 baseColor{0.8f, 0.8f, 0.8f, 1.0f};  // glTF baseColorFactor (RGBA)
   std::string baseColorTexture;                 // file path or glTF image name; empty if none
+  // The loader's stand-in for faces the source gave no material: the lighting
+  // colours them by orientation instead (common/light/lighting.h).
+  bool unassigned = false;
 
   static Material named(std::string name) {
     Material m;
     m.name = std::move(name);
+    return m;
+  }
+  // The stand-in for faces without a material in their source.
+  static Material unassignedDefault() {
+    Material m = named("default");
+    m.unassigned = true;
     return m;
   }
   // A plain diffuse material (base colour the same, opaque).

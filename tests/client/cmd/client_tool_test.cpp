@@ -273,4 +273,32 @@ TEST(ClientTool, ConnectedHeadlessWalksPathAutoThroughALocalCopyAndReportsWhatIt
   EXPECT_NE(read("both.err").find("--scene with --host"), std::string::npos) << read("both.err");
 }
 
+// The lit frames of the real city model and of city1 along generated walks
+// (the measure): hundreds of colours, none nearly uniform; and
+// --sheet adds one row of 4 frames a run to the same PNG.
+TEST(ClientTool, LitFramesOfRealAndGeneratedCitiesAreNeverNearlyUniform) {
+  vistream::testing::TempDir dir;
+  const std::string delfshaven = std::string(VISTREAM_SHARED_DIR) + "/data/delfshaven.obj";
+  const std::string sheet = (dir.path() / "sheet.png").string();
+  const auto walk =
+      runTool("vistream-scene", "path --scene " + delfshaven + " --frames 300 --seed 3 --out " +
+                                    (dir.path() / "walk.csv").string());
+  ASSERT_EQ(walk.status, 0) << walk.err;
+  int rows = 0;
+  for (const std::string& args : {std::string("--scene city1 --path auto --frames 24"),
+                                  "--scene " + delfshaven + " --path " +
+                                      (dir.path() / "walk.csv").string() + " --frames 24"}) {
+    const auto r =
+        runTool("vistream-client", args + " --headless --size 320x240 --json --sheet " + sheet);
+    ASSERT_EQ(r.status, 0) << r.err;
+    const auto j = nlohmann::json::parse(r.out);
+    EXPECT_GE(j["contrast"]["min_distinct_colours"].get<double>(), 100.0) << args;
+    EXPECT_GE(j["contrast"]["min_luminance_std"].get<double>(), 10.0) << args;
+    ++rows;
+    const vistream::ImageRgb8 png = vistream::readPng(sheet);
+    EXPECT_EQ(png.width, 4 + 4 * (320 + 4));
+    EXPECT_EQ(png.height, rows * (4 + 240 + 4));
+  }
+}
+
 }  // namespace

@@ -37,5 +37,37 @@ TEST(PngImage, ReadingAFileThatIsNotAnImageNamesTheFile) {
   std::filesystem::remove(path);
 }
 
+// Half black, half white (luminance 0 and 255): two colours, and a
+// standard deviation of half the range, 127.5.
+TEST(ImageContrast, CountsDistinctColoursAndTheLuminanceSpread) {
+  ImageRgb8 img(4, 2, {0, 0, 0});
+  for (int x = 0; x < 4; ++x) img.set(x, 1, {255, 255, 255});
+  const ImageContrast c = imageContrast(img);
+  EXPECT_EQ(c.distinctColours, 2u);
+  EXPECT_NEAR(c.luminanceStd, 127.5, 1e-6);
+  const ImageContrast flat = imageContrast(ImageRgb8(5, 5, {10, 20, 30}));
+  EXPECT_EQ(flat.distinctColours, 1u);
+  EXPECT_NEAR(flat.luminanceStd, 0.0, 1e-9);
+}
+
+TEST(ContactSheet, TilesFramesInRowsWithGapsAndStacksSheets) {
+  std::vector<ImageRgb8> tiles;
+  for (uint8_t k = 0; k < 5; ++k) tiles.emplace_back(3, 2, glm::u8vec3(k * 50, 1, 2));
+  const ImageRgb8 sheet = contactSheet(tiles, 4, 1, {9, 9, 9});
+  EXPECT_EQ(sheet.width, 1 + 4 * (3 + 1));
+  EXPECT_EQ(sheet.height, 1 + 2 * (2 + 1));
+  EXPECT_EQ(sheet.at(0, 0), glm::u8vec3(9, 9, 9));            // the border
+  EXPECT_EQ(sheet.at(1, 1), glm::u8vec3(0, 1, 2));            // tile 0
+  EXPECT_EQ(sheet.at(1 + 3 * 4, 2), glm::u8vec3(150, 1, 2));  // tile 3, end of row 1
+  EXPECT_EQ(sheet.at(1, 1 + 3), glm::u8vec3(200, 1, 2));      // tile 4 starts row 2
+  EXPECT_EQ(sheet.at(5, 1 + 3), glm::u8vec3(9, 9, 9));        // nothing beside it
+  const ImageRgb8 both = stackImages(sheet, ImageRgb8(2, 1, {7, 7, 7}), {9, 9, 9});
+  EXPECT_EQ(both.width, sheet.width);
+  EXPECT_EQ(both.height, sheet.height + 1);
+  EXPECT_EQ(both.at(1, sheet.height), glm::u8vec3(7, 7, 7));
+  EXPECT_EQ(both.at(2, sheet.height), glm::u8vec3(9, 9, 9));
+  EXPECT_EQ(contactSheet({}, 4).width, 0);
+}
+
 }  // namespace
 }  // namespace vistream
