@@ -1,6 +1,7 @@
 #include "client/farfield/pipeline.h"
 
 #include <fmt/format.h>
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -306,15 +307,33 @@ struct FrameRun {
   void classifyPixels() {
     const std::vector<uint8_t>& covered = r.covered_;
     const Camera::PixelRays pixelRays = camera.pixelRays();
+    // Polygon pixels: each looks its colour up in its triangle's grid (rows
+    // in parallel: the lookups are most of this stage's work).
+    if (!glNear) {
+      std::vector<EyeTriangle>& seen = r.seen_;
+      if (seen.size() < r.geometry_.size()) seen.resize(r.geometry_.size());
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, r.near_.size(), 1024),
+                        [&](const tbb::blocked_range<size_t>& range) {
+                          for (size_t i = range.begin(); i != range.end(); ++i)
+                            seen[r.near_[i]] =
+                                EyeTriangle::of(r.geometry_.triangles, r.near_[i], camera.eye);
+                        });
+      tbb::parallel_for(tbb::blocked_range<int>(0, H, 8), [&](const tbb::blocked_range<int>& rows) {
+        for (int y = rows.begin(); y != rows.end(); ++y)
+          for (int x = 0; x < W; ++x) {
+            const size_t p = size_t(y) * size_t(W) + size_t(x);
+            if (covered[p] == kCovered)
+              out.set(x, y,
+                      r.geometry_.colourAlong(r.ids_.ids[p], seen[r.ids_.ids[p]],
+                                              pixelRays.at(float(x) + 0.5f, float(y) + 0.5f)));
+          }
+      });
+    }
     for (int y = 0; y < H; ++y)
       for (int x = 0; x < W; ++x) {
         const size_t p = size_t(y) * size_t(W) + size_t(x);
         if (covered[p] == kCovered) {
           ++rep.pixels.polygon;
-          if (!glNear)
-            out.set(x, y,
-                    r.geometry_.colourAlong(r.ids_.ids[p], camera.eye,
-                                            pixelRays.at(float(x) + 0.5f, float(y) + 0.5f)));
           continue;
         }
         const glm::vec3 dir = pixelRays.at(float(x) + 0.5f, float(y) + 0.5f);

@@ -206,6 +206,7 @@ class FrameRenderer {
   std::unique_ptr<PanoramicCache> cache_;
   SoftwareRasterizer raster_;
   IdBuffer ids_;
+  std::vector<EyeTriangle> seen_;  // per triangle, set up for the frame's eye (near field only)
   std::vector<uint8_t> covered_;
   std::vector<uint32_t> near_, stamp_;
   uint32_t stampValue_ = 0;

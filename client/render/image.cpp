@@ -66,17 +66,19 @@ ImageContrast imageContrast(const ImageRgb8& image) {
   ImageContrast c;
   const size_t n = size_t(image.width) * size_t(image.height);
   if (n == 0) return c;
-  std::vector<uint32_t> colours(n);
+  std::vector<uint64_t> seen(size_t(1) << 18, 0);  // a bit per 24-bit colour
   double sum = 0.0, sum2 = 0.0;
   for (size_t p = 0; p < n; ++p) {
     const uint8_t* px = image.pixels.data() + 3 * p;
-    colours[p] = uint32_t(px[0]) << 16 | uint32_t(px[1]) << 8 | px[2];
+    const uint32_t colour = uint32_t(px[0]) << 16 | uint32_t(px[1]) << 8 | px[2];
+    uint64_t& word = seen[colour >> 6];
+    const uint64_t bit = uint64_t(1) << (colour & 63);
+    c.distinctColours += (word & bit) == 0;
+    word |= bit;
     const double y = 0.2126 * px[0] + 0.7152 * px[1] + 0.0722 * px[2];
     sum += y;
     sum2 += y * y;
   }
-  std::sort(colours.begin(), colours.end());
-  c.distinctColours = size_t(std::unique(colours.begin(), colours.end()) - colours.begin());
   const double mean = sum / double(n);
   c.luminanceStd = std::sqrt(std::max(0.0, sum2 / double(n) - mean * mean));
   return c;

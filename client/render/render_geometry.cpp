@@ -20,22 +20,27 @@ glm::u8vec3 RenderGeometry::background(const glm::vec3& eye, const glm::vec3& di
   return toBytes(haze.apply(glm::vec3(ground), distance));
 }
 
-glm::u8vec3 RenderGeometry::colourAlong(size_t t, const glm::vec3& eye,
-                                        const glm::vec3& dir) const {
-  // The ray's barycentrics on the triangle's plane (Moeller and Trumbore,
-  // without the bounds test: the rasterizer already chose the triangle).
+EyeTriangle EyeTriangle::of(const FlatTriangles& triangles, size_t t, const glm::vec3& eye) {
   const glm::vec3 a = triangles.vertex(t, 0);
   const glm::vec3 e1 = triangles.vertex(t, 1) - a, e2 = triangles.vertex(t, 2) - a;
-  const glm::vec3 p = glm::cross(dir, e2);
-  const float det = glm::dot(e1, p);
-  if (!(std::abs(det) > 0.0f)) {  // seen edge-on: the centre, at its distance
-    const glm::vec3 centre = a + (e1 + e2) / 3.0f;
-    return colourAt(t, 1.0f / 3.0f, 1.0f / 3.0f, glm::length(centre - eye));
-  }
-  const glm::vec3 s = eye - a, q = glm::cross(s, e1);
-  const float u = glm::dot(s, p) / det, v = glm::dot(dir, q) / det;
-  const float along = glm::dot(e2, q) / det;
-  return colourAt(t, u, v, std::abs(along) * glm::length(dir));
+  const glm::vec3 s = eye - a;
+  EyeTriangle e;
+  e.normal = glm::cross(e2, e1);
+  e.toU = glm::cross(e2, s);
+  e.toV = glm::cross(s, e1);
+  e.along = glm::dot(e2, e.toV);
+  e.centreDistance = glm::length(a + (e1 + e2) / 3.0f - eye);
+  return e;
+}
+
+glm::u8vec3 RenderGeometry::colourAlong(size_t t, const EyeTriangle& seen,
+                                        const glm::vec3& dir) const {
+  const float det = glm::dot(dir, seen.normal);
+  if (!(std::abs(det) > 0.0f))  // seen edge-on: the centre, at its distance
+    return colourAt(t, 1.0f / 3.0f, 1.0f / 3.0f, seen.centreDistance);
+  const float inv = 1.0f / det;
+  const float u = glm::dot(dir, seen.toU) * inv, v = glm::dot(dir, seen.toV) * inv;
+  return colourAt(t, u, v, std::abs(seen.along * inv) * glm::length(dir));
 }
 
 void setBackdrop(RenderGeometry& g, const Backdrop& backdrop) {

@@ -26,6 +26,20 @@ namespace vistream {
 glm::u8vec3 shadeTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
                           const glm::vec3& diffuse);
 
+// One triangle as seen from one eye: what turns a ray direction into the
+// barycentrics and distance of the point it meets on the triangle's plane
+// with three dot products (Moeller and Trumbore's test, its eye-dependent
+// cross products done once), so a frame sets it up per triangle, not per pixel.
+struct EyeTriangle {
+  glm::vec3 normal{0.0f};       // (c - a) x (b - a): dir . normal is the determinant
+  glm::vec3 toU{0.0f};          // (c - a) x (eye - a)
+  glm::vec3 toV{0.0f};          // (eye - a) x (b - a)
+  float along = 0.0f;           // (c - a) . toV: the distance numerator
+  float centreDistance = 0.0f;  // for a triangle seen edge-on
+
+  static EyeTriangle of(const FlatTriangles& triangles, size_t t, const glm::vec3& eye);
+};
+
 struct RenderGeometry {
   FlatTriangles triangles;         // local frame
   LightingGrid lighting;           // per triangle: its colours (lighting.h)
@@ -44,7 +58,11 @@ struct RenderGeometry {
   }
   // The same for the point where the ray from `eye` along `dir` meets
   // triangle t's plane (barycentrics computed here, as a rasterizer would).
-  glm::u8vec3 colourAlong(size_t t, const glm::vec3& eye, const glm::vec3& dir) const;
+  glm::u8vec3 colourAlong(size_t t, const glm::vec3& eye, const glm::vec3& dir) const {
+    return colourAlong(t, EyeTriangle::of(triangles, t, eye), dir);
+  }
+  // The same with the triangle set up for the eye once (a frame's pixels).
+  glm::u8vec3 colourAlong(size_t t, const EyeTriangle& seen, const glm::vec3& dir) const;
   Box3f bounds;
 
   size_t size() const { return triangles.size(); }

@@ -194,8 +194,8 @@ glm::u8vec3 encodeColour(const glm::vec3& linear) {
 }
 
 glm::u8vec3 toBytes(const glm::vec3& c) {
-  glm::u8vec3 out;
-  for (int i = 0; i < 3; ++i) out[i] = uint8_t(std::lround(std::clamp(c[i], 0.0f, 255.0f)));
+  glm::u8vec3 out;  // round half up (the values are never negative once clamped)
+  for (int i = 0; i < 3; ++i) out[i] = uint8_t(std::clamp(c[i], 0.0f, 255.0f) + 0.5f);
   return out;
 }
 
