@@ -41,14 +41,14 @@ struct EyeTriangle {
 };
 
 struct RenderGeometry {
-  FlatTriangles triangles;         // local frame
-  LightingGrid lighting;           // per triangle: its colours (lighting.h)
-  Haze haze;                       // fading towards the horizon colour with distance
-  glm::u8vec3 sky{140, 180, 230};  // background for pixels that see nothing
+  FlatTriangles triangles;           // local frame
+  LightingGrid lighting;             // per triangle: its colours (lighting.h)
+  Haze haze;                         // fading towards the horizon colour with distance
+  glm::u8vec3 sky = Backdrop{}.sky;  // background for pixels that see nothing
   // An assumed ground plane (static_world.h) at this local height: pixels
   // that see nothing below the horizon show `ground` instead of the sky.
   std::optional<float> groundY;
-  glm::u8vec3 ground{118, 112, 100};
+  glm::u8vec3 ground = Backdrop{}.ground;
   // The background a ray from `eye` along `dir` meets when it hits no
   // triangle: the sky, or the assumed ground (hazed by its distance).
   glm::u8vec3 background(const glm::vec3& eye, const glm::vec3& dir) const;

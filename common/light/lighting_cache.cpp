@@ -149,9 +149,8 @@ uint64_t lightingKey(const Scene& scene, const FlatTriangles& triangles,
 }
 
 LightingLoad loadOrBakeLighting(const Scene& scene, const FlatTriangles& triangles,
-                                const RayQuery& rays, const EnvironmentLight& environment,
-                                const LightingOptions& options, const std::filesystem::path& dir,
-                                bool progress) {
+                                const EnvironmentLight& environment, const LightingOptions& options,
+                                const std::filesystem::path& dir, bool progress) {
   LightingLoad out;
   uint64_t key = 0;
   if (!dir.empty()) {
@@ -167,7 +166,8 @@ LightingLoad loadOrBakeLighting(const Scene& scene, const FlatTriangles& triangl
       return out;
     }
   }
-  out.grid = bakeLighting(scene, triangles, rays, environment, options, &out.stats, progress);
+  const auto rays = makeEmbreeRayQuery(triangles);  // a cache hit needs none
+  out.grid = bakeLighting(scene, triangles, *rays, environment, options, &out.stats, progress);
   spdlog::info("lighting baked in {:.2f} s ({} points, {} rays)", out.stats.seconds,
                out.stats.points, out.stats.aoRays + out.stats.shadowRays);
   if (!dir.empty() && !writeCache(out.file, key, out.grid)) {
@@ -185,8 +185,7 @@ SceneLighting lightScene(const Scene& scene, const FlatTriangles& triangles,
   SceneLighting out;
   out.backdrop = backdropOf(scene, light, options);
   out.environment = light.source();
-  const auto rays = makeEmbreeRayQuery(triangles);
-  out.load = loadOrBakeLighting(scene, triangles, *rays, light, options, cacheDir, progress);
+  out.load = loadOrBakeLighting(scene, triangles, light, options, cacheDir, progress);
   return out;
 }
 

@@ -37,13 +37,13 @@ struct LightingLoad {
   LightingStats stats;         // of the bake (zero when read from the cache)
 };
 
-// Reads the bake from `dir` if there, else bakes (bakeLighting) and writes it
-// there. An empty `dir` bakes without caching; a directory that cannot be
-// written only costs a warning.
+// Reads the bake from `dir` if there, else bakes (bakeLighting, over an
+// Embree query of `triangles` built only then) and writes it there. An empty
+// `dir` bakes without caching; a directory that cannot be written only costs
+// a warning.
 LightingLoad loadOrBakeLighting(const Scene& scene, const FlatTriangles& triangles,
-                                const RayQuery& rays, const EnvironmentLight& environment,
-                                const LightingOptions& options, const std::filesystem::path& dir,
-                                bool progress = false);
+                                const EnvironmentLight& environment, const LightingOptions& options,
+                                const std::filesystem::path& dir, bool progress = false);
 
 // A scene's whole lighting: the grids of `triangles` (its static triangles,
 // flattenScene(scene, true)) through the cache, and its backdrop, lit by its
