@@ -65,19 +65,6 @@ float surfaceOffset(const glm::vec3& p) {
   return 2e-3f + 4e-6f * m;
 }
 
-// Where a texture for a material's name is: absolute, or beside one of the
-// scene's source files.
-std::filesystem::path resolveTexture(const Scene& scene, const std::string& name) {
-  const std::filesystem::path p(name);
-  if (p.is_absolute()) return p;
-  std::error_code ec;
-  for (const auto& source : scene.sources) {
-    const auto candidate = source.parent_path() / p;
-    if (std::filesystem::exists(candidate, ec)) return candidate;
-  }
-  return scene.sources.empty() ? p : scene.sources.front().parent_path() / p;
-}
-
 // Per flattened static triangle: its material and texture coordinates.
 struct SurfaceTable {
   std::vector<uint32_t> material;
@@ -315,22 +302,9 @@ LightingGrid bakeLighting(const Scene& scene, const FlatTriangles& triangles, co
   VS_CHECK_EQ(surfaces.material.size(), count);
 
   // Textures, once per material.
-  std::vector<std::optional<Texture>> textures(scene.materials.size());
   LightingStats local;
-  for (size_t m = 0; m < scene.materials.size(); ++m) {
-    const std::string& name = scene.materials[m].baseColorTexture;
-    if (name.empty()) continue;
-    const auto file = resolveTexture(scene, name);
-    std::string error;
-    textures[m] = Texture::load(file, error);
-    if (textures[m]) {
-      ++local.texturedMaterials;
-    } else {
-      local.warnings.push_back(fmt::format("material {}: texture {}: {}; its diffuse colour stays",
-                                           scene.materials[m].name, file.string(), error));
-      spdlog::warn("{}", local.warnings.back());
-    }
-  }
+  const std::vector<std::optional<Texture>> textures = loadMaterialTextures(scene, local.warnings);
+  for (const auto& texture : textures) local.texturedMaterials += texture.has_value();
 
   // Levels and offsets, then every triangle's points in parallel.
   LightingGrid grid;

@@ -8,12 +8,14 @@
 #include <cstring>
 #include <fstream>
 
+#include "common/light/texture.h"
+
 namespace vistream {
 namespace {
 
 constexpr char kMagic[8] = {'V', 'S', 'L', 'I', 'G', 'H', 'T', '1'};
 // Bump when the bake's arithmetic changes, so old files are not read.
-constexpr uint64_t kBakeVersion = 2;
+constexpr uint64_t kBakeVersion = 3;
 
 struct Fnv {
   uint64_t h = 1469598103934665603ull;
@@ -131,6 +133,17 @@ uint64_t lightingKey(const Scene& scene, const FlatTriangles& triangles,
     f.value(m.diffuse);
     f.value(m.unassigned);
     f.text(m.baseColorTexture);
+    if (m.baseColorImage) f.bytes(m.baseColorImage->data(), m.baseColorImage->size());
+    if (const auto file = materialTexturePath(scene, m); !file.empty()) fileStamp(f, file);
+  }
+  // What the textures are sampled by: each static triangle's material and
+  // texture coordinates.
+  for (const Object& o : scene.objects) {
+    if (o.dynamic) continue;
+    f.bytes(o.mesh.materials.data(), o.mesh.materials.size() * sizeof(uint32_t));
+    f.bytes(o.mesh.texcoords.data(), o.mesh.texcoords.size() * sizeof(glm::vec2));
+    if (!o.mesh.texcoords.empty())
+      f.bytes(o.mesh.triangles.data(), o.mesh.triangles.size() * sizeof(glm::uvec3));
   }
   const Environment& e = scene.environment;
   if (!e.hdrImage.empty()) fileStamp(f, e.hdrImage);

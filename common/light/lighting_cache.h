@@ -2,13 +2,14 @@
 // start (server or local client) reads it back.
 //
 // Where: `dir`/<scene name>-<key>.light, where the key is a 64-bit hash of
-// everything the bake reads: the static triangles, the materials (colours and
-// texture file names and sizes), the environment (HDR file name, size and
-// modification time, sky colour, sun) and the LightingOptions, plus the file
-// format's version. A changed scene or option therefore never reads a stale
-// bake; it bakes again under a new name. The default directory is
-// $VISTREAM_CACHE_DIR, else $XDG_CACHE_HOME/vistream, else ~/.cache/vistream
-// (a scene's own folder may be read-only, as ../shared/data is).
+// everything the bake reads: the static triangles with their materials and
+// texture coordinates, the materials (colours; texture files by name, size
+// and modification time; images inside the scene file by their bytes), the
+// environment (HDR file name, size and modification time, sky colour, sun)
+// and the LightingOptions, plus the bake's version. A changed scene or option therefore never reads
+// a stale bake; it bakes again under a new name. The default directory is $VISTREAM_CACHE_DIR, else
+// $XDG_CACHE_HOME/vistream, else ~/.cache/vistream (a scene's own folder may be read-only, as
+// ../shared/data is).
 //
 // File: "VSLIGHT1", the key, triangle and colour counts (uint64, little
 // endian), the levels (one byte a triangle), the colours (3 bytes each), an

@@ -1,10 +1,14 @@
 #include "common/light/texture.h"
 
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
 #include <stb_image.h>
 
 #include <algorithm>
 #include <cmath>
 #include <memory>
+
+#include "common/scene/scene.h"
 
 namespace vistream {
 namespace {
@@ -152,6 +156,44 @@ glm::vec3 Texture::mean(glm::vec2 lo, glm::vec2 hi) const {
 glm::vec3 Texture::mean() const {
   if (width_ == 0 || height_ == 0) return glm::vec3(0.8f);
   return glm::vec3(sat(width_, height_) / (double(width_) * double(height_)));
+}
+
+std::filesystem::path materialTexturePath(const Scene& scene, const Material& material) {
+  if (material.baseColorTexture.empty() || material.baseColorImage) return {};
+  const std::filesystem::path p(material.baseColorTexture);
+  if (p.is_absolute()) return p;
+  std::error_code ec;
+  for (const auto& source : scene.sources) {
+    const auto candidate = source.parent_path() / p;
+    if (std::filesystem::exists(candidate, ec)) return candidate;
+  }
+  return scene.sources.empty() ? p : scene.sources.front().parent_path() / p;
+}
+
+std::vector<std::optional<Texture>> loadMaterialTextures(const Scene& scene,
+                                                         std::vector<std::string>& warnings) {
+  std::vector<std::optional<Texture>> textures(scene.materials.size());
+  for (size_t m = 0; m < scene.materials.size(); ++m) {
+    const Material& material = scene.materials[m];
+    if (material.baseColorTexture.empty()) continue;
+    std::string error, where;
+    if (material.baseColorImage) {
+      textures[m] = Texture::decode(*material.baseColorImage, error);
+      where = fmt::format(
+          "{} (inside {})", material.baseColorTexture,
+          scene.sources.empty() ? std::string("the scene file") : scene.sources.front().string());
+    } else {
+      const auto file = materialTexturePath(scene, material);
+      textures[m] = Texture::load(file, error);
+      where = file.string();
+    }
+    if (!textures[m]) {
+      warnings.push_back(fmt::format("material {}: texture {}: {}; its diffuse colour stays",
+                                     material.name, where, error));
+      spdlog::warn("{}", warnings.back());
+    }
+  }
+  return textures;
 }
 
 }  // namespace vistream

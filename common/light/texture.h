@@ -55,4 +55,19 @@ class Texture {
 // 8-bit sRGB to linear, per channel.
 float srgbToLinear(uint8_t c);
 
+struct Material;
+struct Scene;
+
+// Where a material's texture file is: its name when absolute, else beside
+// the first of the scene's source files that has it. Empty for a material
+// without a texture or with its image inside the scene file.
+std::filesystem::path materialTexturePath(const Scene& scene, const Material& material);
+
+// Every material's base-colour texture, decoded from the scene file's own
+// bytes or from its file; nothing where a material has none. A texture that
+// is missing or cannot be decoded adds a warning (naming the material and
+// the file) to `warnings` and logs it: its material keeps its diffuse colour.
+std::vector<std::optional<Texture>> loadMaterialTextures(const Scene& scene,
+                                                         std::vector<std::string>& warnings);
+
 }  // namespace vistream

@@ -95,9 +95,16 @@ bool readLimitedFile(std::vector<unsigned char>* out, std::string* err, const st
   }
 }
 
-// Keeps image references without decoding pixels.
-bool keepImageUndecoded(tinygltf::Image*, const int, std::string*, std::string*, int, int,
-                        const unsigned char*, int, void*) {
+// Decodes no pixels (the lighting bake does, common/light/texture.h). An
+// image given as a data URI has no other home, so its encoded bytes are kept
+// in `image`; a buffer view's are read later with checked bounds
+// (embeddedImage), and an external file is read again by name.
+bool keepImageUndecoded(tinygltf::Image* image, const int, std::string*, std::string*, int, int,
+                        const unsigned char* bytes, int size, void*) {
+  if (image->bufferView < 0 && image->uri.empty() && bytes && size > 0) {
+    image->image.assign(bytes, bytes + size);
+    image->as_is = true;
+  }
   return true;
 }
 
@@ -383,12 +390,35 @@ class GltfSceneBuilder {
           mat.baseColorTexture =
               !img.uri.empty() ? img.uri
                                : (!img.name.empty() ? img.name : fmt::format("image_{}", src));
+          if (img.uri.empty()) mat.baseColorImage = embeddedImage(img, size_t(src));
         }
       }
       scene_.materials.push_back(mat);
     }
     defaultMaterial_ = uint32_t(scene_.materials.size());
     scene_.materials.push_back(Material::unassignedDefault());
+  }
+
+  // The encoded bytes of an image the file holds (a buffer view or a data
+  // URI); null, with a warning, when its buffer view lies outside its buffer.
+  std::shared_ptr<const std::vector<uint8_t>> embeddedImage(const tinygltf::Image& img,
+                                                            size_t index) const {
+    if (img.bufferView < 0)
+      return img.image.empty() ? nullptr : std::make_shared<const std::vector<uint8_t>>(img.image);
+    const auto& views = model_.bufferViews;
+    if (size_t(img.bufferView) < views.size()) {
+      const tinygltf::BufferView& view = views[size_t(img.bufferView)];
+      if (view.buffer >= 0 && size_t(view.buffer) < model_.buffers.size()) {
+        const auto& data = model_.buffers[size_t(view.buffer)].data;
+        if (view.byteOffset <= data.size() && view.byteLength <= data.size() - view.byteOffset)
+          return std::make_shared<const std::vector<uint8_t>>(
+              data.begin() + std::ptrdiff_t(view.byteOffset),
+              data.begin() + std::ptrdiff_t(view.byteOffset + view.byteLength));
+      }
+    }
+    spdlog::warn("{}: image {} lies outside its buffer; its material keeps its base colour", file_,
+                 index);
+    return nullptr;
   }
 
   // Nodes: hierarchy and rest transforms, kept for skins and animations.

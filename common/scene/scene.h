@@ -20,6 +20,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <glm/glm.hpp>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -33,6 +34,10 @@ struct Material {
   glm::vec3 diffuse{0.8f, 0.8f, 0.8f};          // linear RGB, what every renderer shades with
   glm::vec4 baseColor{0.8f, 0.8f, 0.8f, 1.0f};  // glTF baseColorFactor (RGBA)
   std::string baseColorTexture;                 // file path or glTF image name; empty if none
+  // The encoded bytes (PNG, JPEG) of a base-colour image the scene file holds
+  // itself (a glb buffer view, a data URI); null when baseColorTexture names
+  // a file. Shared: copies of a scene do not copy images.
+  std::shared_ptr<const std::vector<uint8_t>> baseColorImage;
   // The loader's stand-in for faces the source gave no material: the lighting
   // colours them by orientation instead (common/light/lighting.h).
   bool unassigned = false;

@@ -4,6 +4,7 @@
 
 #include <fstream>
 
+#include "common/scene/scene_loader.h"
 #include "tests/common/support/temp_dir.h"
 
 namespace vistream {
@@ -80,6 +81,58 @@ TEST(Texture, AMissingOrCorruptFileIsAnErrorNotACrash) {
   EXPECT_FALSE(error.empty());
   const uint8_t bytes[] = {1, 2, 3};
   EXPECT_FALSE(Texture::decode(bytes, error));
+}
+
+// Width and height from a PNG's IHDR chunk (bytes 16..23, big-endian),
+// read without any image library: the oracle for the decoder's size.
+std::pair<int, int> pngSize(const std::vector<uint8_t>& png) {
+  auto u32 = [&](size_t at) {
+    return int(uint32_t(png[at]) << 24 | uint32_t(png[at + 1]) << 16 | uint32_t(png[at + 2]) << 8 |
+               uint32_t(png[at + 3]));
+  };
+  return {u32(16), u32(20)};
+}
+
+TEST(MaterialTextures, TheFoxsEmbeddedBaseColourImageDecodesToAnOrangeFur) {
+  const auto fox = std::filesystem::path(VISTREAM_SHARED_DIR) / "data" / "Fox.glb";
+  const Scene scene = loadScene(fox);
+  size_t textured = 0;
+  std::vector<std::string> warnings;
+  const auto textures = loadMaterialTextures(scene, warnings);
+  EXPECT_TRUE(warnings.empty()) << warnings.front();
+  ASSERT_EQ(textures.size(), scene.materials.size());
+  for (size_t m = 0; m < scene.materials.size(); ++m) {
+    const Material& material = scene.materials[m];
+    if (!material.baseColorImage) continue;
+    ++textured;
+    // The glb holds a PNG (its signature), whose header gives the size.
+    const std::vector<uint8_t>& png = *material.baseColorImage;
+    ASSERT_GT(png.size(), 24u);
+    ASSERT_EQ(std::string(png.begin() + 1, png.begin() + 4), "PNG");
+    ASSERT_TRUE(textures[m]);
+    EXPECT_EQ(std::make_pair(textures[m]->width(), textures[m]->height()), pngSize(png));
+    // A red fox: its fur is more red than green, more green than blue.
+    const glm::vec3 mean = textures[m]->mean();
+    EXPECT_GT(mean.r, mean.g);
+    EXPECT_GT(mean.g, mean.b);
+  }
+  EXPECT_EQ(textured, 1u);
+}
+
+TEST(MaterialTextures, AMissingTextureFileIsAWarningNamingItAndTheMaterialKeepsNone) {
+  testing::TempDir dir;
+  Scene scene;
+  scene.sources = {dir.path() / "scene.obj"};
+  scene.materials = {Material::named("plain"), Material::named("brick")};
+  scene.materials[1].baseColorTexture = "brick.png";
+  std::vector<std::string> warnings;
+  const auto textures = loadMaterialTextures(scene, warnings);
+  ASSERT_EQ(textures.size(), 2u);
+  EXPECT_FALSE(textures[0]);
+  EXPECT_FALSE(textures[1]);
+  ASSERT_EQ(warnings.size(), 1u);
+  EXPECT_NE(warnings[0].find("brick.png"), std::string::npos) << warnings[0];
+  EXPECT_NE(warnings[0].find("brick"), std::string::npos) << warnings[0];
 }
 
 }  // namespace

@@ -480,6 +480,55 @@ TEST(GltfLoader, ReadsTexcoordsPerVertex) {
   testing::expectTexcoordsEqualFileXy(scene, scene.objects.at(0).mesh);
 }
 
+// ---- base-colour images --------------------------------------------------------------
+
+// A one-triangle document whose material's base-colour texture is `image`
+// (a glTF image object). The loader decodes no pixels, so the image bytes
+// need not be a real PNG.
+GltfDoc texturedTriangle(json image) {
+  GltfDoc g;
+  const int pos = g.addPositions(kUnitTriangle);
+  json prim = GltfDoc::primitive(pos);
+  prim["material"] = 0;
+  g.doc()["images"] = json::array({std::move(image)});
+  g.doc()["textures"] = json::array({{{"source", 0}}});
+  g.doc()["materials"] = json::array(
+      {{{"name", "skin"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}});
+  g.addOnlyRoot("tri", "tri", {prim});
+  return g;
+}
+
+const std::vector<uint8_t> kImageBytes{0x89, 'P', 'N', 'G', 1, 2, 3, 4, 5, 6, 7};
+
+TEST(GltfLoader, KeepsTheBytesOfAnImageInABufferView) {
+  const TempDir dir;
+  GltfDoc g = texturedTriangle(json::object());
+  const int view = g.addView(kImageBytes.data(), kImageBytes.size());
+  g.doc()["images"][0] = {{"bufferView", view}, {"mimeType", "image/png"}, {"name", "fur"}};
+  const Scene scene = loadGltf(dir.write("view.glb", g.glb()));
+  const Material& m = scene.materials.at(0);
+  EXPECT_EQ(m.baseColorTexture, "fur");
+  ASSERT_TRUE(m.baseColorImage);
+  EXPECT_EQ(*m.baseColorImage, kImageBytes);
+}
+
+TEST(GltfLoader, KeepsTheBytesOfAnImageGivenAsADataUri) {
+  const TempDir dir;
+  GltfDoc g = texturedTriangle({{"uri", "data:image/png;base64," + base64(kImageBytes)}});
+  const Scene scene = loadGltf(dir.write("uri.gltf", g.text()));
+  ASSERT_TRUE(scene.materials.at(0).baseColorImage);
+  EXPECT_EQ(*scene.materials.at(0).baseColorImage, kImageBytes);
+}
+
+TEST(GltfLoader, NamesAnExternalImageFileAndKeepsNoBytes) {
+  const TempDir dir;
+  dir.write("fur.png", std::string(kImageBytes.begin(), kImageBytes.end()));
+  GltfDoc g = texturedTriangle({{"uri", "fur.png"}});
+  const Scene scene = loadGltf(dir.write("external.gltf", g.text()));
+  EXPECT_EQ(scene.materials.at(0).baseColorTexture, "fur.png");
+  EXPECT_FALSE(scene.materials.at(0).baseColorImage);
+}
+
 TEST(GltfLoader, KeepsJointsPerVertexWhenOnlySomePrimitivesAreSkinned) {
   // LOADER BUG (reported, not fixed here): joints/weights are appended only for
   // primitives that have JOINTS_0/WEIGHTS_0, so with an unskinned primitive
