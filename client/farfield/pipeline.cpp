@@ -307,10 +307,12 @@ struct FrameRun {
   void classifyPixels() {
     const std::vector<uint8_t>& covered = r.covered_;
     const Camera::PixelRays pixelRays = camera.pixelRays();
-    // Polygon pixels: each looks its colour up in its triangle's grid (rows
-    // in parallel: the lookups are most of this stage's work).
+    // Colours first, rows in parallel: polygon pixels look theirs up in
+    // their triangle's grid, one span per triangle; every other pixel takes
+    // the background's (the far field overwrites its own in compose()).
+    Stopwatch clock;
+    std::vector<EyeTriangle>& seen = r.seen_;
     if (!glNear) {
-      std::vector<EyeTriangle>& seen = r.seen_;
       if (seen.size() < r.geometry_.size()) seen.resize(r.geometry_.size());
       tbb::parallel_for(tbb::blocked_range<size_t>(0, r.near_.size(), 1024),
                         [&](const tbb::blocked_range<size_t>& range) {
@@ -318,17 +320,30 @@ struct FrameRun {
                             seen[r.near_[i]] =
                                 EyeTriangle::of(r.geometry_.triangles, r.near_[i], camera.eye);
                         });
-      tbb::parallel_for(tbb::blocked_range<int>(0, H, 8), [&](const tbb::blocked_range<int>& rows) {
-        for (int y = rows.begin(); y != rows.end(); ++y)
-          for (int x = 0; x < W; ++x) {
-            const size_t p = size_t(y) * size_t(W) + size_t(x);
-            if (covered[p] == kCovered)
-              out.set(x, y,
-                      r.geometry_.colourAlong(r.ids_.ids[p], seen[r.ids_.ids[p]],
-                                              pixelRays.at(float(x) + 0.5f, float(y) + 0.5f)));
-          }
-      });
     }
+    tbb::parallel_for(tbb::blocked_range<int>(0, H, 8), [&](const tbb::blocked_range<int>& rows) {
+      for (int y = rows.begin(); y != rows.end(); ++y) {
+        const size_t row = size_t(y) * size_t(W);
+        // With OpenGL drawing the near field there are no triangle ids.
+        const uint32_t* ids = glNear ? nullptr : r.ids_.ids.data() + row;
+        const uint8_t* cov = covered.data() + row;
+        for (int x = 0; x < W;) {
+          const bool polygon = cov[x] == kCovered;
+          const uint32_t t = polygon && ids ? ids[x] : 0;
+          int end = x + 1;
+          while (end < W && (cov[end] == kCovered) == polygon && (!polygon || !ids || ids[end] == t))
+            ++end;
+          const glm::vec3 first = pixelRays.at(float(x) + 0.5f, float(y) + 0.5f);
+          uint8_t* o = out.pixels.data() + 3 * (row + size_t(x));
+          if (!polygon)
+            r.geometry_.shadeBackground(camera.eye, first, pixelRays.perX, end - x, o);
+          else if (!glNear)
+            r.geometry_.shadeSpan(t, seen[t], first, pixelRays.perX, end - x, o);
+          x = end;
+        }
+      }
+    });
+    rep.ms.shade = clock.ms();
     for (int y = 0; y < H; ++y)
       for (int x = 0; x < W; ++x) {
         const size_t p = size_t(y) * size_t(W) + size_t(x);
@@ -339,7 +354,6 @@ struct FrameRun {
         const glm::vec3 dir = pixelRays.at(float(x) + 0.5f, float(y) + 0.5f);
         if (!rep.farFieldRan) {
           ++rep.pixels.background;
-          out.set(x, y, r.geometry_.background(camera.eye, dir));
           continue;
         }
         // Only pixels no polygon reaches can be sky: the horizon bounds the far
@@ -347,7 +361,6 @@ struct FrameRun {
         if (rep.horizonRan && covered[p] == kUncovered &&
             HorizonMap::raySlope(dir) > slopes[size_t(x)]) {
           ++rep.pixels.horizon;
-          out.set(x, y, r.geometry_.background(camera.eye, dir));
           continue;
         }
         candidates.push_back(uint32_t(p));

@@ -104,12 +104,15 @@ static_assert(sizeof(PixelCounts) == 6 * sizeof(size_t),
               "PixelCounts changed: update PixelCounts::forEachField");
 
 struct StageTimes {
-  double nearSelect = 0, nearDraw = 0, opacity = 0, horizon = 0, cache = 0, raycast = 0,
+  // shade: the colours of polygon pixels (software near field) and of the
+  // background, looked up (RenderGeometry::shadeSpan, shadeBackground).
+  double nearSelect = 0, nearDraw = 0, shade = 0, opacity = 0, horizon = 0, cache = 0, raycast = 0,
          compose = 0, total = 0;
 
   StageTimes& operator+=(const StageTimes& o) {
     nearSelect += o.nearSelect;
     nearDraw += o.nearDraw;
+    shade += o.shade;
     opacity += o.opacity;
     horizon += o.horizon;
     cache += o.cache;
@@ -123,6 +126,7 @@ struct StageTimes {
   void forEachField(F&& f) const {
     f(StatField{"near_select", "near-field selection", "ms"}, nearSelect);
     f(StatField{"near_draw", "near-field drawing", "ms"}, nearDraw);
+    f(StatField{"shade", "colour lookups", "ms"}, shade);
     f(StatField{"opacity", "opacity buffer", "ms"}, opacity);
     f(StatField{"horizon", "horizon tracing", "ms"}, horizon);
     f(StatField{"cache", "cache planning", "ms"}, cache);
@@ -131,7 +135,7 @@ struct StageTimes {
     f(StatField{"total", "frame", "ms"}, total);
   }
 };
-static_assert(sizeof(StageTimes) == 8 * sizeof(double),
+static_assert(sizeof(StageTimes) == 9 * sizeof(double),
               "StageTimes changed: update StageTimes::forEachField");
 
 struct FrameReport {

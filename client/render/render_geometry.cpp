@@ -1,5 +1,6 @@
 #include "client/render/render_geometry.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "common/light/lighting_cache.h"
@@ -18,6 +19,24 @@ glm::u8vec3 RenderGeometry::background(const glm::vec3& eye, const glm::vec3& di
   if (!groundY || !(dir.y < 0.0f) || !(eye.y > *groundY)) return sky;
   const float distance = (eye.y - *groundY) / -dir.y * glm::length(dir);
   return toBytes(haze.apply(glm::vec3(ground), distance));
+}
+
+void RenderGeometry::shadeBackground(const glm::vec3& eye, const glm::vec3& first,
+                                     const glm::vec3& step, int count, uint8_t* out) const {
+  const bool hasGround = groundY && eye.y > *groundY;
+  const float height = hasGround ? eye.y - *groundY : 0.0f;
+  const float inverseScale = haze.scale > 0.0f ? 1.0f / haze.scale : 0.0f;
+  const glm::vec3 skyColour(sky), groundColour(ground), hazeColour = haze.colour;
+  for (int k = 0; k < count; ++k, out += 3) {
+    const glm::vec3 dir = first + float(k) * step;
+    const bool below = hasGround && dir.y < 0.0f;
+    const float distance = height / (below ? -dir.y : 1.0f) * std::sqrt(glm::dot(dir, dir));
+    const float fade = oneMinusExpNeg(std::max(0.0f, distance) * inverseScale);
+    for (int a = 0; a < 3; ++a) {
+      const float g = groundColour[a] + (hazeColour[a] - groundColour[a]) * fade;
+      out[a] = below ? toByte(g) : uint8_t(skyColour[a]);
+    }
+  }
 }
 
 EyeTriangle EyeTriangle::of(const FlatTriangles& triangles, size_t t, const glm::vec3& eye) {
@@ -41,6 +60,79 @@ glm::u8vec3 RenderGeometry::colourAlong(size_t t, const EyeTriangle& seen,
   const float inv = 1.0f / det;
   const float u = glm::dot(dir, seen.toU) * inv, v = glm::dot(dir, seen.toV) * inv;
   return colourAt(t, u, v, std::abs(seen.along * inv) * glm::length(dir));
+}
+
+void RenderGeometry::shadeSpan(size_t t, const EyeTriangle& seen, const glm::vec3& first,
+                               const glm::vec3& step, int count, uint8_t* out) const {
+  const glm::u8vec3* grid = lighting.colours.data() + lighting.first[t];
+  const uint32_t level = lighting.level[t];
+  const float inverseScale = haze.scale > 0.0f ? 1.0f / haze.scale : 0.0f;
+  // Chunks of pixels in passes the compiler vectorizes, but for the lookups
+  // in grids finer than one cell: the barycentrics (clamped as
+  // LightingGrid::interpolate clamps them) and the haze, the colours, then
+  // the hazed bytes. Each pass computes what colourAlong does.
+  // Everything a pixel reads, in locals (no loads under a condition).
+  const glm::vec3 normal = seen.normal, toU = seen.toU, toV = seen.toV;
+  const float along = seen.along, centre = seen.centreDistance;
+  constexpr int kChunk = 64;
+  float us[kChunk], vs[kChunk], fade[kChunk], rgb[3][kChunk], weight[3][kChunk];
+  int corner[3][kChunk];
+  for (int k0 = 0; k0 < count; k0 += kChunk) {
+    const int m = std::min(kChunk, count - k0);
+    for (int k = 0; k < m; ++k) {
+      const glm::vec3 dir = first + float(k0 + k) * step;
+      const float det = glm::dot(dir, normal);
+      const bool edgeOn = !(std::abs(det) > 0.0f);  // the centre, at its distance
+      const float inv = 1.0f / (edgeOn ? 1.0f : det);
+      const float u0 = glm::dot(dir, toU) * inv, v0 = glm::dot(dir, toV) * inv;
+      const float d0 = std::abs(along * inv) * std::sqrt(glm::dot(dir, dir));
+      float u = edgeOn ? 1.0f / 3.0f : u0, v = edgeOn ? 1.0f / 3.0f : v0;
+      LightingGrid::clampBarycentrics(u, v);
+      us[k] = u;
+      vs[k] = v;
+      fade[k] = oneMinusExpNeg(std::max(0.0f, edgeOn ? centre : d0) * inverseScale);
+    }
+    if (level == 1) {
+      for (int a = 0; a < 3; ++a) {
+        const float c0 = float(grid[0][a]), c1 = float(grid[1][a]), c2 = float(grid[2][a]);
+        for (int k = 0; k < m; ++k)
+          rgb[a][k] = c0 * (1.0f - us[k] - vs[k]) + c1 * us[k] + c2 * vs[k];
+      }
+    } else {
+      // LightingGrid::interpolate in two passes: each pixel's three grid
+      // points and weights (no branches), then the gathers.
+      const int n = int(level);
+      const float nf = float(level);
+      for (int k = 0; k < m; ++k) {
+        const float x = us[k] * nf, y = vs[k] * nf;
+        const int j = std::min(int(y), n - 1);
+        int i = std::min(int(x), n - 1);
+        i -= i + j > n - 1 ? 1 : 0;
+        const float fx = x - float(i), fy = y - float(j);
+        const bool upper = fx + fy > 1.0f && i + j + 2 <= n;
+        const int row0 = j * (n + 1) - j * (j - 1) / 2, row1 = row0 + n + 1 - j;  // rows j, j + 1
+        corner[0][k] = upper ? row1 + i + 1 : row0 + i;
+        corner[1][k] = upper ? row1 + i : row0 + i + 1;
+        corner[2][k] = upper ? row0 + i + 1 : row1 + i;
+        weight[0][k] = upper ? fx + fy - 1.0f : 1.0f - fx - fy;
+        weight[1][k] = upper ? 1.0f - fx : fx;
+        weight[2][k] = upper ? 1.0f - fy : fy;
+      }
+      for (int a = 0; a < 3; ++a)
+        for (int k = 0; k < m; ++k)
+          rgb[a][k] = float(grid[corner[0][k]][a]) * weight[0][k] +
+                      float(grid[corner[1][k]][a]) * weight[1][k] +
+                      float(grid[corner[2][k]][a]) * weight[2][k];
+    }
+    for (int a = 0; a < 3; ++a) {
+      const float h = haze.colour[a];
+      uint8_t* o = out + 3 * k0 + a;
+      for (int k = 0; k < m; ++k) {
+        const float c = rgb[a][k] + (h - rgb[a][k]) * fade[k];
+        o[3 * k] = toByte(c);
+      }
+    }
+  }
 }
 
 void setBackdrop(RenderGeometry& g, const Backdrop& backdrop) {

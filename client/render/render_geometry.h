@@ -52,6 +52,10 @@ struct RenderGeometry {
   // The background a ray from `eye` along `dir` meets when it hits no
   // triangle: the sky, or the assumed ground (hazed by its distance).
   glm::u8vec3 background(const glm::vec3& eye, const glm::vec3& dir) const;
+  // background() for `count` pixels along first + k * step, written as RGB
+  // bytes to out[3k..3k+2] (a loop that vectorizes).
+  void shadeBackground(const glm::vec3& eye, const glm::vec3& first, const glm::vec3& step,
+                       int count, uint8_t* out) const;
   // The colour of triangle t at barycentrics (u, v) seen from `distance` metres.
   glm::u8vec3 colourAt(size_t t, float u, float v, float distance) const {
     return toBytes(haze.apply(lighting.colourAt(t, u, v), distance));
@@ -63,6 +67,12 @@ struct RenderGeometry {
   }
   // The same with the triangle set up for the eye once (a frame's pixels).
   glm::u8vec3 colourAlong(size_t t, const EyeTriangle& seen, const glm::vec3& dir) const;
+  // colourAlong for `count` pixels in a row that all see triangle t, along
+  // directions first + k * step, written as RGB bytes to out[3k..3k+2]: the
+  // same colours, without a call and a returned colour per pixel (the
+  // software near field's inner loop).
+  void shadeSpan(size_t t, const EyeTriangle& seen, const glm::vec3& first, const glm::vec3& step,
+                 int count, uint8_t* out) const;
   Box3f bounds;
 
   size_t size() const { return triangles.size(); }

@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -180,12 +181,6 @@ glm::u8vec3 encodeColour(const glm::vec3& linear) {
   return out;
 }
 
-glm::u8vec3 toBytes(const glm::vec3& c) {
-  glm::u8vec3 out;  // round half up (the values are never negative once clamped)
-  for (int i = 0; i < 3; ++i) out[i] = uint8_t(std::clamp(c[i], 0.0f, 255.0f) + 0.5f);
-  return out;
-}
-
 void LightingGrid::append(uint32_t n, const glm::u8vec3* c, size_t count) {
   VS_CHECK(n >= 1 && n <= 255);
   VS_CHECK_EQ(count, size_t(pointsOf(n)));
@@ -202,29 +197,6 @@ void LightingGrid::appendFlat(glm::u8vec3 c) {
 void LightingGrid::appendFrom(const LightingGrid& from, size_t t) {
   const uint32_t n = from.level[t];
   append(n, from.colours.data() + from.first[t], pointsOf(n));
-}
-
-glm::vec3 LightingGrid::colourAt(size_t t, float u, float v) const {
-  return interpolate(colours.data() + first[t], level[t], u, v);
-}
-
-glm::vec3 LightingGrid::interpolate(const glm::u8vec3* g, uint32_t n, float u, float v) {
-  // Barycentrics clamped into the triangle (a hit on an edge may round out).
-  u = std::isfinite(u) ? std::clamp(u, 0.0f, 1.0f) : 0.0f;
-  v = std::isfinite(v) ? std::clamp(v, 0.0f, 1.0f - u) : 0.0f;
-  const float x = u * float(n), y = v * float(n);
-  // Cell (i, j): its lower triangle (i, j), (i + 1, j), (i, j + 1) always
-  // exists, its upper one (i + 1, j + 1), (i, j + 1), (i + 1, j) when i + j
-  // <= n - 2. A point on the grid's far edge (i + j = n) belongs to the cell
-  // before it.
-  uint32_t i = std::min(uint32_t(x), n - 1), j = std::min(uint32_t(y), n - 1);
-  if (i + j > n - 1) --i;  // i + j <= x + y <= n, and j <= n - 1 gives i >= 1 here
-  const float fx = x - float(i), fy = y - float(j);
-  auto at = [&](uint32_t a, uint32_t b) { return glm::vec3(g[pointIndex(n, a, b)]); };
-  if (fx + fy > 1.0f && i + j + 2 <= n)
-    return at(i + 1, j + 1) * (fx + fy - 1.0f) + at(i, j + 1) * (1.0f - fx) +
-           at(i + 1, j) * (1.0f - fy);
-  return at(i, j) * (1.0f - fx - fy) + at(i + 1, j) * fx + at(i, j + 1) * fy;
 }
 
 glm::u8vec3 LightingGrid::meanColour(size_t t) const {

@@ -40,6 +40,8 @@
 // the point, so a run gives the same bytes on any thread count).
 #pragma once
 
+#include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <glm/glm.hpp>
@@ -76,11 +78,36 @@ struct LightingGrid {
   // Appends a copy of triangle t's grid of `from`.
   void appendFrom(const LightingGrid& from, size_t t);
 
+  // Barycentrics clamped into the triangle (a hit on an edge may round out;
+  // NaN gives 0), written with min and max so that pixel loops vectorize.
+  static void clampBarycentrics(float& u, float& v) {
+    u = std::min(std::max(0.0f, u), 1.0f);
+    v = std::min(std::max(0.0f, v), 1.0f - u);
+  }
   // The colour at barycentrics (u, v) of triangle t (weights of its vertices 1
   // and 2), interpolated within the grid, in 0..255 per channel (unrounded).
-  glm::vec3 colourAt(size_t t, float u, float v) const;
-  // The same on one grid `g` of level n.
-  static glm::vec3 interpolate(const glm::u8vec3* g, uint32_t n, float u, float v);
+  glm::vec3 colourAt(size_t t, float u, float v) const {
+    return interpolate(colours.data() + first[t], level[t], u, v);
+  }
+  // The same on one grid `g` of level n (inline: renderers call it per pixel).
+  [[gnu::always_inline]] static glm::vec3 interpolate(const glm::u8vec3* g, uint32_t n, float u,
+                                                      float v) {
+    clampBarycentrics(u, v);
+    auto at = [&](uint32_t a, uint32_t b) { return glm::vec3(g[pointIndex(n, a, b)]); };
+    if (n == 1) return at(0, 0) * (1.0f - u - v) + at(1, 0) * u + at(0, 1) * v;
+    const float x = u * float(n), y = v * float(n);
+    // Cell (i, j): its lower triangle (i, j), (i + 1, j), (i, j + 1) always
+    // exists, its upper one (i + 1, j + 1), (i, j + 1), (i + 1, j) when i + j
+    // <= n - 2. A point on the grid's far edge (i + j = n) belongs to the
+    // cell before it.
+    uint32_t i = std::min(uint32_t(x), n - 1), j = std::min(uint32_t(y), n - 1);
+    if (i + j > n - 1) --i;  // i + j <= x + y <= n, and j <= n - 1 gives i >= 1 here
+    const float fx = x - float(i), fy = y - float(j);
+    if (fx + fy > 1.0f && i + j + 2 <= n)
+      return at(i + 1, j + 1) * (fx + fy - 1.0f) + at(i, j + 1) * (1.0f - fx) +
+             at(i + 1, j) * (1.0f - fy);
+    return at(i, j) * (1.0f - fx - fy) + at(i + 1, j) * fx + at(i, j + 1) * fy;
+  }
   // The mean of a triangle's grid colours (for a one-colour summary).
   glm::u8vec3 meanColour(size_t t) const;
 };
@@ -134,22 +161,44 @@ LightingGrid bakeLighting(const Scene& scene, const FlatTriangles& triangles, co
 double ambientOcclusion(const RayQuery& rays, const glm::vec3& p, const glm::vec3& n,
                         uint32_t count, float distance, uint64_t seed);
 
+// 1 - exp(-x) for x >= 0 (0 for x = 0) without a library call, so loops over pixels
+// vectorize: exp(-x) = 2^n 2^f with n the integer nearest -x log2(e) and
+// |f| <= 1/2, 2^f by its degree-7 Taylor polynomial. Off by less than 1e-6
+// (a ten-thousandth of an 8-bit level in a haze); 1 beyond x = 87.
+inline float oneMinusExpNeg(float x) {
+  const float y = -std::min(x, 87.0f) * 1.44269504f;  // in [-125.6, 0]
+  const int n = int(y - 0.5f);                        // nearest integer (y <= 0)
+  const float f = (y - float(n)) * 0.693147181f;      // e^f = 2^(y - n)
+  const float p =
+      1.0f + f * (1.0f + f * (0.5f + f * (1.0f / 6.0f +
+                                          f * (1.0f / 24.0f +
+                                               f * (1.0f / 120.0f +
+                                                    f * (1.0f / 720.0f + f * (1.0f / 5040.0f)))))));
+  return 1.0f - std::bit_cast<float>(uint32_t(n + 127) << 23) * p;
+}
+
 // Fades a colour (0..255 per channel) towards the horizon's colour with
 // distance: c + (haze - c) * (1 - exp(-distance / scale)). The same in every
-// renderer; scale 0 turns it off.
+// renderer (the CPU ones by oneMinusExpNeg, the OpenGL shader by exp);
+// scale 0 turns it off.
 struct Haze {
   glm::vec3 colour{0.0f};  // 0..255
   float scale = 0.0f;      // metres
 
   float amount(float distance) const {
-    return scale > 0.0f && distance > 0.0f ? 1.0f - std::exp(-distance / scale) : 0.0f;
+    return scale > 0.0f ? oneMinusExpNeg(std::max(0.0f, distance) * (1.0f / scale)) : 0.0f;
   }
   glm::vec3 apply(const glm::vec3& c, float distance) const {
     return c + (colour - c) * amount(distance);
   }
 };
-// Rounds a 0..255 colour to bytes.
-glm::u8vec3 toBytes(const glm::vec3& c);
+// Rounds a 0..255 colour to bytes (half up; clamped, so never negative).
+inline uint8_t toByte(float c) {
+  return uint8_t(std::min(std::max(0.0f, c), 255.0f) + 0.5f);
+}
+inline glm::u8vec3 toBytes(const glm::vec3& c) {
+  return glm::u8vec3(toByte(c.r), toByte(c.g), toByte(c.b));
+}
 
 // What a renderer shows where no triangle is: the sky's colour near the
 // horizon (horizonColour), an assumed ground plane's colour lit like an open,

@@ -18,7 +18,7 @@ namespace vistream {
 namespace {
 
 static_assert(sizeof(PixelCounts) == 6 * sizeof(size_t));
-static_assert(sizeof(StageTimes) == 8 * sizeof(double));
+static_assert(sizeof(StageTimes) == 9 * sizeof(double));
 
 // JSON key -> table label.
 const std::map<std::string, std::string> kPixelFields = {
@@ -29,6 +29,7 @@ const std::map<std::string, std::string> kPixelFields = {
 const std::map<std::string, std::string> kStageFields = {
     {"near_select", "near-field selection"},
     {"near_draw", "near-field drawing"},
+    {"shade", "colour lookups"},
     {"opacity", "opacity buffer"},
     {"horizon", "horizon tracing"},
     {"cache", "cache planning"},
@@ -38,7 +39,8 @@ const std::map<std::string, std::string> kStageFields = {
 };
 
 // A frame whose every counter differs from every other: pixels k * 100 +
-// 10 * i for the i-th class, stage times k + i / 8 ms.
+// 10 * i for the i-th class, stage times k plus a fraction of a ms that
+// differs between stages.
 FrameRecord frame(size_t k) {
   FrameRecord f;
   f.frame = k;
@@ -53,6 +55,7 @@ FrameRecord frame(size_t k) {
   const double base = double(k);
   t.nearSelect = base + 0.125;
   t.nearDraw = base + 0.25;
+  t.shade = base + 0.3125;
   t.opacity = base + 0.375;
   t.horizon = base + 0.5;
   t.cache = base + 0.625;
@@ -68,9 +71,9 @@ std::map<std::string, double> pixelValues(double k) {
           {"ray_hit", k * 100 + 40}, {"ray_miss", k * 100 + 50}, {"background", k * 100 + 60}};
 }
 std::map<std::string, double> stageValues(double k) {
-  return {{"near_select", k + 0.125}, {"near_draw", k + 0.25}, {"opacity", k + 0.375},
-          {"horizon", k + 0.5},       {"cache", k + 0.625},    {"raycast", k + 0.75},
-          {"compose", k + 0.875},     {"total", k + 1.0}};
+  return {{"near_select", k + 0.125}, {"near_draw", k + 0.25}, {"shade", k + 0.3125},
+          {"opacity", k + 0.375},     {"horizon", k + 0.5},    {"cache", k + 0.625},
+          {"raycast", k + 0.75},      {"compose", k + 0.875},  {"total", k + 1.0}};
 }
 
 TEST(FrameReport, JsonHasEveryPixelClassAndStageTimeUnderItsKey) {
