@@ -1,0 +1,184 @@
+#include "common/avatar/hemisphere_raster.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+namespace vistream {
+namespace {
+
+// The oracle: does the ray from the origin along s meet triangle (a, b, c)?
+// (Moeller and Trumbore, in double.)
+bool rayHitsTriangle(const glm::vec3& s, const glm::vec3& a, const glm::vec3& b,
+                     const glm::vec3& c) {
+  const glm::dvec3 d(s), A(a), e1 = glm::dvec3(b) - A, e2 = glm::dvec3(c) - A;
+  const glm::dvec3 p = glm::cross(d, e2);
+  const double det = glm::dot(e1, p);
+  if (det == 0.0) return false;
+  const glm::dvec3 t = -A;
+  const double u = glm::dot(t, p) / det;
+  const glm::dvec3 q = glm::cross(t, e1);
+  const double v = glm::dot(d, q) / det;
+  const double dist = glm::dot(e2, q) / det;
+  return u >= 0.0 && v >= 0.0 && u + v <= 1.0 && dist > 0.0;
+}
+
+// How close s is to the image's boundary: to one of the planes through the
+// origin and an edge (as |s . n| for unit n), or to the horizon (s.z).
+double boundaryDistance(const glm::vec3& s, const glm::vec3& a, const glm::vec3& b,
+                        const glm::vec3& c) {
+  double d = std::abs(double(s.z));
+  const glm::dvec3 S(s), P[3] = {glm::dvec3(a), glm::dvec3(b), glm::dvec3(c)};
+  for (int k = 0; k < 3; ++k) {
+    const glm::dvec3 n = glm::cross(P[k], P[(k + 1) % 3]);
+    const double len = glm::length(n);
+    if (len > 0.0) d = std::min(d, std::abs(glm::dot(S, n)) / len);
+  }
+  return d;
+}
+
+struct Comparison {
+  size_t covered = 0, mismatched = 0;
+  double worstDistance = 0.0;  // of a mismatched pixel from the boundary
+};
+
+// Rasterizes (a, b, c) alone and compares every disk pixel with the oracle.
+Comparison compare(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
+                   const PlaneMaskTable* table, int side) {
+  VisibilityMask mask(side);
+  rasterizeBlocker(a, b, c, table, mask);
+  Comparison r;
+  for (int y = 0; y < side; ++y)
+    for (int x = 0; x < side; ++x) {
+      if (!maskPixelInDisk(side, x, y)) {
+        EXPECT_FALSE(mask.test(x, y)) << "a pixel outside the disk is set";
+        continue;
+      }
+      const glm::vec3 s = maskDirection(side, x, y);
+      const bool want = rayHitsTriangle(s, a, b, c);
+      r.covered += want;
+      if (mask.test(x, y) != want) {
+        ++r.mismatched;
+        r.worstDistance = std::max(r.worstDistance, boundaryDistance(s, a, b, c));
+      }
+    }
+  return r;
+}
+
+// Random blockers around the vertex: small and near, crossing the tangent
+// plane, huge, far and thin.
+std::vector<std::array<glm::vec3, 3>> randomBlockers() {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> near(-2.0f, 2.0f), up(-0.5f, 2.0f);
+  std::vector<std::array<glm::vec3, 3>> out;
+  for (int i = 0; i < 300; ++i) {
+    const float scale = i % 10 == 0 ? 1e4f : (i % 10 == 1 ? 1e-3f : 1.0f);
+    const glm::vec3 centre = i % 10 == 1 ? glm::vec3(0, 0, 0.01f) : glm::vec3(0.0f);
+    std::array<glm::vec3, 3> t;
+    for (auto& p : t) p = centre + scale * glm::vec3(near(rng), near(rng), up(rng));
+    if (i % 10 == 2) t[2] = t[0] + 1e-3f * (t[1] - t[0]) + glm::vec3(0, 0, 1e-3f);  // a sliver
+    out.push_back(t);
+  }
+  return out;
+}
+
+TEST(HemisphereRaster, ExactPlanesMatchTheRayOracleExceptOnTheBoundary) {
+  size_t covered = 0;
+  for (const auto& t : randomBlockers()) {
+    const Comparison r = compare(t[0], t[1], t[2], nullptr, 32);
+    covered += r.covered;
+    EXPECT_LE(r.worstDistance, 1e-4) << r.mismatched << " pixels off";
+  }
+  EXPECT_GT(covered, 10000u);  // the blockers covered something
+}
+
+// A table's plane differs from the true one by at most |q - n| for unit
+// normals, so a pixel can only flip within that of an edge plane; on a
+// 128-cell cube face that is under sqrt(2) / 128 (half a cell's diagonal).
+TEST(HemisphereRaster, ThePlaneTableDiffersOnlyWithinItsQuantizationOfAnEdge) {
+  for (const int cube : {32, 128}) {
+    const PlaneMaskTable table(32, cube);
+    const double bound = std::sqrt(2.0) / cube * 1.02;
+    size_t covered = 0, mismatched = 0;
+    for (const auto& t : randomBlockers()) {
+      const Comparison r = compare(t[0], t[1], t[2], &table, 32);
+      covered += r.covered;
+      mismatched += r.mismatched;
+      EXPECT_LE(r.worstDistance, bound) << "cube " << cube;
+    }
+    EXPECT_LT(double(mismatched), 0.05 * double(covered)) << "cube " << cube;
+  }
+}
+
+TEST(HemisphereRaster, TheTablesQuantizedNormalIsWithinHalfACellDiagonal) {
+  const PlaneMaskTable table(32, 64);
+  std::mt19937 rng(3);
+  std::normal_distribution<float> g;
+  for (int i = 0; i < 10000; ++i) {
+    const glm::vec3 n = glm::normalize(glm::vec3(g(rng), g(rng), g(rng)));
+    ASSERT_LE(glm::distance(table.quantized(n), n), std::sqrt(2.0f) / 64.0f * 1.02f);
+  }
+}
+
+TEST(HemisphereRaster, ATriangleEdgeOnToTheVertexDrawsNothing) {
+  const PlaneMaskTable table(32, 64);
+  VisibilityMask mask(32);
+  // Its plane holds the vertex: c = -(a + b).
+  EXPECT_FALSE(rasterizeBlocker({1, 0, 1}, {0, 1, 1}, {-1, -1, -2}, &table, mask));
+  // The vertex lies on the edge from a to b.
+  EXPECT_FALSE(rasterizeBlocker({-1, -1, -1}, {1, 1, 1}, {0, 1, 3}, &table, mask));
+  // The vertex is one of its corners (a triangle of the vertex's own ring).
+  EXPECT_FALSE(rasterizeBlocker({0, 0, 0}, {1, 0, 0.5f}, {0, 1, 0.5f}, &table, mask));
+  // Collinear corners.
+  EXPECT_FALSE(rasterizeBlocker({1, 0, 1}, {2, 0, 2}, {3, 0, 3}, &table, mask));
+  EXPECT_EQ(mask.count(), 0u);
+}
+
+TEST(HemisphereRaster, ATriangleAtOrBelowTheTangentPlaneDrawsNothing) {
+  const PlaneMaskTable table(32, 64);
+  VisibilityMask mask(32);
+  EXPECT_FALSE(rasterizeBlocker({-1, -1, -1}, {1, -1, -1}, {0, 1, -0.5f}, &table, mask));
+  EXPECT_FALSE(rasterizeBlocker({-1, -1, 0}, {1, -1, -1}, {0, 1, 0}, &table, mask));
+  EXPECT_EQ(mask.count(), 0u);
+}
+
+// A ceiling over everything (two huge triangles at z = 1) covers the whole
+// hemisphere: every disk pixel but a few along the horizon and the seam.
+TEST(HemisphereRaster, TwoTrianglesOfAnEndlessCeilingCoverTheWholeDisk) {
+  const PlaneMaskTable table(32, 128);
+  VisibilityMask mask(32);
+  const float f = 1e5f;
+  EXPECT_TRUE(rasterizeBlocker({-f, -f, 1}, {f, -f, 1}, {f, f, 1}, &table, mask));
+  EXPECT_TRUE(rasterizeBlocker({-f, -f, 1}, {f, f, 1}, {-f, f, 1}, &table, mask));
+  size_t disk = 0;
+  for (int y = 0; y < 32; ++y)
+    for (int x = 0; x < 32; ++x) disk += maskPixelInDisk(32, x, y);
+  EXPECT_GE(double(mask.count()), 0.97 * double(disk));
+  EXPECT_LE(mask.count(), disk);
+}
+
+// A wall crossing the tangent plane: only its upper part is drawn, and the
+// result is the oracle's but for the boundary (the clipped edge included).
+TEST(HemisphereRaster, ABlockerCrossingTheTangentPlaneIsClippedToItsUpperPart) {
+  const glm::vec3 a{2, -3, -1}, b{2, 3, -1}, c{2, 0, 3};
+  const Comparison exact = compare(a, b, c, nullptr, 32);
+  EXPECT_GT(exact.covered, 20u);
+  EXPECT_LE(exact.worstDistance, 1e-4);
+}
+
+TEST(VisibilityMask, SetsTestsCountsAndClearsBits) {
+  VisibilityMask m(16);
+  EXPECT_EQ(m.words(), 4);
+  m.set(0, 0);
+  m.set(15, 15);
+  m.set(3, 7);
+  EXPECT_TRUE(m.test(3, 7));
+  EXPECT_FALSE(m.test(7, 3));
+  EXPECT_EQ(m.count(), 3u);
+  m.clear();
+  EXPECT_EQ(m.count(), 0u);
+}
+
+}  // namespace
+}  // namespace vistream
