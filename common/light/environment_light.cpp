@@ -6,6 +6,7 @@
 #include <memory>
 
 #include "common/core/error.h"
+#include "common/light/spherical_harmonics.h"
 
 namespace vistream {
 namespace {
@@ -25,16 +26,9 @@ glm::vec3 equirectDirection(double u, double v) {
 }  // namespace
 
 std::array<float, 9> shBasis(const glm::vec3& d) {
-  const float x = d.x, y = d.y, z = d.z;
-  return {0.282095f,
-          0.488603f * y,
-          0.488603f * z,
-          0.488603f * x,
-          1.092548f * x * y,
-          1.092548f * y * z,
-          0.315392f * (3.0f * z * z - 1.0f),
-          1.092548f * x * z,
-          0.546274f * (x * x - y * y)};
+  std::array<float, 9> y;
+  shEvaluate(d, 3, y.data());
+  return y;
 }
 
 EnvironmentLight EnvironmentLight::project(
