@@ -14,6 +14,7 @@
 
 #include "common/core/check.h"
 #include "common/core/progress.h"
+#include "common/core/tangent_frame.h"
 #include "common/light/texture.h"
 
 namespace vistream {
@@ -47,15 +48,6 @@ uint64_t pointSeed(const glm::vec3& p) {
 
 double unitFloat(uint64_t x) {
   return double(x >> 11) * (1.0 / 9007199254740992.0);
-}
-
-// An orthonormal frame (t, b) around unit n (Duff et al. 2017).
-void frameOf(const glm::vec3& n, glm::vec3& t, glm::vec3& b) {
-  const float s = n.z >= 0.0f ? 1.0f : -1.0f;
-  const float a = -1.0f / (s + n.z);
-  const float c = n.x * n.y * a;
-  t = glm::vec3(1.0f + s * n.x * n.x * a, s * c, -s * n.x);
-  b = glm::vec3(c, s + n.y * n.y * a, -n.y);
 }
 
 // Offset of a ray's origin off a surface at p: above float rounding of the
@@ -209,8 +201,8 @@ glm::u8vec3 LightingGrid::meanColour(size_t t) const {
 double ambientOcclusion(const RayQuery& rays, const glm::vec3& p, const glm::vec3& n,
                         uint32_t count, float distance, uint64_t seed) {
   if (count == 0) return 1.0;
-  glm::vec3 t, b;
-  frameOf(n, t, b);
+  const TangentFrame frame = TangentFrame::around(n);
+  const glm::vec3 &t = frame.t, &b = frame.b;
   const glm::vec3 org = p + n * surfaceOffset(p);
   // Stratified on a sqrt(count) x sqrt(count) grid of the unit square (the
   // remainder at random), rotated by the seed (Cranley-Patterson), then

@@ -10,6 +10,7 @@
 // sphere.
 #pragma once
 
+#include <array>
 #include <glm/glm.hpp>
 
 namespace vistream {
@@ -29,5 +30,29 @@ void shEvaluate(const glm::vec3& d, int orders, float* out);
 // convolution weights of Ramamoorthi and Hanrahan are these times
 // sqrt(4 pi / (2l + 1)).
 double clampedCosineZonal(int l);
+
+// The rotation of SH coefficient vectors that goes with a rotation r of
+// directions: for a function f with coefficients c, the function f(r^T w)
+// (f turned by r) has coefficients apply(c); equivalently Y(r s) = D Y(s)
+// for the basis vector Y. Band-diagonal; band 1 is r itself with its rows
+// and columns in (y, z, x) order, higher bands follow by the recurrences of
+// Ivanic and Ruedenberg (1996, with their 1998 corrections).
+class ShRotation {
+ public:
+  // r: a rotation matrix (orthonormal, determinant 1; glm's column-major),
+  // orders 1..5.
+  ShRotation(const glm::mat3& r, int orders);
+  int orders() const { return orders_; }
+  // out = D in, over shTerms(orders) coefficients (in and out distinct).
+  void apply(const float* in, float* out) const;
+  // Entry (m, n) of band l's (2l + 1)^2 block, m and n in -l..l.
+  float at(int l, int m, int n) const {
+    return bands_[size_t(l)][size_t((m + l) * (2 * l + 1) + (n + l))];
+  }
+
+ private:
+  int orders_;
+  std::array<std::array<float, 81>, kMaxShOrder + 1> bands_{};
+};
 
 }  // namespace vistream

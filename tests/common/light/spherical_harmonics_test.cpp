@@ -91,5 +91,48 @@ TEST(SphericalHarmonics, FewerOrdersAreThePrefixOfMore) {
   }
 }
 
+glm::mat3 randomRotation(std::mt19937& rng) {
+  std::normal_distribution<float> g;
+  const glm::vec3 a = glm::normalize(glm::vec3(g(rng), g(rng), g(rng)));
+  glm::vec3 b = glm::vec3(g(rng), g(rng), g(rng));
+  b = glm::normalize(b - a * glm::dot(a, b));
+  return glm::mat3(a, b, glm::cross(a, b));  // columns: a right-handed frame
+}
+
+// Y(r s) = D Y(s): the rotated basis, evaluated directly, is the rotation
+// matrix applied to the basis at s, for every band and random rotations.
+TEST(ShRotation, TurnsTheBasisAsTurningItsArgumentDoes) {
+  std::mt19937 rng(21);
+  const auto dirs = randomDirections(20);
+  for (int trial = 0; trial < 20; ++trial) {
+    const glm::mat3 r = randomRotation(rng);
+    const ShRotation d(r, 5);
+    for (const glm::vec3& s : dirs) {
+      float ys[25], yrs[25], turned[25];
+      shEvaluate(s, 5, ys);
+      shEvaluate(r * s, 5, yrs);
+      d.apply(ys, turned);
+      for (int i = 0; i < 25; ++i) ASSERT_NEAR(turned[i], yrs[i], 2e-4) << "term " << i;
+    }
+  }
+}
+
+TEST(ShRotation, TheIdentityLeavesCoefficientsAloneAndBandsAreOrthogonal) {
+  const ShRotation id(glm::mat3(1.0f), 5);
+  float c[25], out[25];
+  for (int i = 0; i < 25; ++i) c[i] = float(i) - 7.5f;
+  id.apply(c, out);
+  for (int i = 0; i < 25; ++i) EXPECT_NEAR(out[i], c[i], 1e-6f);
+  std::mt19937 rng(4);
+  const ShRotation d(randomRotation(rng), 5);
+  for (int l = 0; l <= 4; ++l)
+    for (int a = -l; a <= l; ++a)
+      for (int b = -l; b <= l; ++b) {
+        double dot = 0.0;
+        for (int k = -l; k <= l; ++k) dot += double(d.at(l, a, k)) * d.at(l, b, k);
+        EXPECT_NEAR(dot, a == b ? 1.0 : 0.0, 1e-5) << l << " " << a << " " << b;
+      }
+}
+
 }  // namespace
 }  // namespace vistream
