@@ -6,6 +6,7 @@
 #include <random>
 
 #include "common/light/spherical_harmonics.h"
+#include "tests/common/support/random_directions.h"
 
 namespace vistream {
 namespace {
@@ -34,19 +35,13 @@ double relativeL2(const float* got, const std::vector<double>& want, int terms) 
   return std::sqrt(num / den);
 }
 
-std::vector<glm::vec3> randomNormals(size_t n) {
-  std::mt19937 rng(9);
-  std::normal_distribution<float> g;
-  std::vector<glm::vec3> out;
-  while (out.size() < n) out.push_back(glm::normalize(glm::vec3(g(rng), g(rng), g(rng)) + 1e-6f));
-  return out;
-}
+using testing::randomDirections;
 
 TEST(Transfer, AnOpenHemisphereGivesTheRotatedClampedCosine) {
   for (const bool downsample : {false, true}) {
     const TransferIntegrator integrator(32, {5, downsample});
     const VisibilityMask open(32);
-    for (const glm::vec3& n : randomNormals(50)) {
+    for (const glm::vec3& n : randomDirections(50)) {
       float t[25];
       integrator.diffuse(open, TangentFrame::around(n), t);
       EXPECT_LT(relativeL2(t, openTransfer(n), 25), 0.02) << "downsample " << downsample;

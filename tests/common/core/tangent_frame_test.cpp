@@ -5,19 +5,15 @@
 #include <random>
 #include <vector>
 
+#include "tests/common/support/random_directions.h"
+
 namespace vistream {
 namespace {
 
-std::vector<glm::vec3> randomNormals(size_t n) {
-  std::mt19937 rng(9);
-  std::normal_distribution<float> g;
-  std::vector<glm::vec3> out;
-  while (out.size() < n) out.push_back(glm::normalize(glm::vec3(g(rng), g(rng), g(rng)) + 1e-6f));
-  return out;
-}
+using testing::randomDirections;
 
 TEST(TangentFrame, IsOrthonormalForEveryNormalIncludingThePoles) {
-  auto normals = randomNormals(100);
+  auto normals = randomDirections(100);
   normals.insert(normals.end(), {{0, 0, 1}, {0, 0, -1}, {1, 0, 0}, {0, -1, 0}});
   for (const glm::vec3& n : normals) {
     const TangentFrame f = TangentFrame::around(n);

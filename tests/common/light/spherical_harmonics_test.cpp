@@ -6,21 +6,14 @@
 #include <random>
 #include <vector>
 
+#include "tests/common/support/random_directions.h"
+
 namespace vistream {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-std::vector<glm::vec3> randomDirections(size_t n) {
-  std::mt19937 rng(5);
-  std::normal_distribution<float> g;
-  std::vector<glm::vec3> out;
-  while (out.size() < n) {
-    const glm::vec3 v(g(rng), g(rng), g(rng));
-    if (glm::length(v) > 1e-3f) out.push_back(glm::normalize(v));
-  }
-  return out;
-}
+using testing::randomDirections;
 
 // Closed forms from the literature (Sloan, "Stupid spherical harmonics tricks").
 TEST(SphericalHarmonics, MatchesTheClosedFormsOfOrdersZeroToFour) {
