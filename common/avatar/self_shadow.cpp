@@ -1,0 +1,171 @@
+#include "common/avatar/self_shadow.h"
+
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "common/core/check.h"
+#include "common/core/tangent_frame.h"
+#include "common/light/spherical_harmonics.h"
+#include "common/raycast/ray_query.h"
+
+namespace vistream {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+uint64_t mix64(uint64_t x) {  // splitmix64's finaliser
+  x += 0x9e3779b97f4a7c15ull;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
+  return x ^ (x >> 31);
+}
+
+float meshSize(const std::vector<glm::vec3>& positions) {
+  glm::vec3 lo(INFINITY), hi(-INFINITY);
+  for (const glm::vec3& p : positions) {
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
+  }
+  return positions.empty() ? 1.0f : glm::length(hi - lo);
+}
+
+double seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+}  // namespace
+
+SelfShadowing::SelfShadowing(const SelfShadowOptions& options)
+    : options_(options),
+      table_(options.planeTable > 0
+                 ? std::make_unique<PlaneMaskTable>(options.maskSide, options.planeTable)
+                 : nullptr),
+      integrator_(options.maskSide, options.transfer) {}
+
+void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
+                            const std::vector<glm::vec3>& normals,
+                            const std::vector<glm::uvec3>& triangles, std::vector<float>& out,
+                            SelfShadowStats* stats) const {
+  VS_CHECK_EQ(positions.size(), normals.size());
+  const int terms = integrator_.terms();
+  out.assign(positions.size() * size_t(terms), 0.0f);
+  struct Local {
+    VisibilityMask mask;
+    SelfShadowStats stats;
+  };
+  tbb::enumerable_thread_specific<Local> locals([&] {
+    return Local{VisibilityMask(options_.maskSide), {}};
+  });
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, positions.size(), 16), [&](const auto& range) {
+    Local& local = locals.local();
+    for (size_t v = range.begin(); v != range.end(); ++v) {
+      const auto start = std::chrono::steady_clock::now();
+      const glm::vec3 p = positions[v];
+      const TangentFrame frame = TangentFrame::around(normals[v]);
+      local.mask.clear();
+      for (const glm::uvec3& t : triangles) {
+        const glm::vec3 a = frame.toLocal(positions[t.x] - p),
+                        b = frame.toLocal(positions[t.y] - p),
+                        c = frame.toLocal(positions[t.z] - p);
+        ++local.stats.blockerTests;
+        if (!(std::max({a.z, b.z, c.z}) > 0.0f)) continue;
+        local.stats.rasterized += rasterizeBlocker(a, b, c, table_.get(), local.mask);
+      }
+      const auto integrated = std::chrono::steady_clock::now();
+      local.stats.rasterSeconds += std::chrono::duration<double>(integrated - start).count();
+      integrator_.diffuse(local.mask, frame, out.data() + v * size_t(terms));
+      local.stats.integrateSeconds += seconds(integrated);
+    }
+  });
+  if (stats) {
+    *stats = SelfShadowStats{};
+    stats->vertices = positions.size();
+    for (const Local& l : locals) {
+      stats->blockerTests += l.stats.blockerTests;
+      stats->rasterized += l.stats.rasterized;
+      stats->rasterSeconds += l.stats.rasterSeconds;
+      stats->integrateSeconds += l.stats.integrateSeconds;
+    }
+  }
+}
+
+void monteCarloTransfer(const std::vector<glm::vec3>& positions,
+                        const std::vector<glm::vec3>& normals,
+                        const std::vector<glm::uvec3>& triangles, uint32_t rays, int orders,
+                        std::vector<float>& out) {
+  VS_CHECK(rays >= 1 && orders >= 1 && orders <= kMaxShOrder + 1);
+  const int terms = shTerms(orders);
+  FlatTriangles flat;
+  for (size_t t = 0; t < triangles.size(); ++t) {
+    for (int k = 0; k < 3; ++k) flat.positions.push_back(positions[triangles[t][k]]);
+    flat.faceIds.push_back(uint32_t(t));
+    flat.objectIds.push_back(0);
+    flat.degenerate.push_back(0);
+  }
+  const auto query = makeEmbreeRayQuery(flat);
+  const float offset = 1e-4f * meshSize(positions);
+  out.assign(positions.size() * size_t(terms), 0.0f);
+  const uint32_t side = std::max<uint32_t>(1, uint32_t(std::sqrt(double(rays))));
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, positions.size(), 8), [&](const auto& range) {
+    std::vector<Ray> batch(rays);
+    std::vector<uint8_t> hit(rays);
+    float y[25];
+    for (size_t v = range.begin(); v != range.end(); ++v) {
+      const TangentFrame frame = TangentFrame::around(normals[v]);
+      const glm::vec3 org = positions[v] + normals[v] * offset;
+      const uint64_t seed = mix64(v);
+      const double r1 = double(seed >> 11) / 9007199254740992.0,
+                   r2 = double(mix64(seed) >> 11) / 9007199254740992.0;
+      for (uint32_t k = 0; k < rays; ++k) {
+        double s1, s2;
+        if (k < side * side) {
+          s1 = (k % side + 0.5) / side;
+          s2 = (double(k / side) + 0.5) / side;
+        } else {
+          s1 = double(mix64(seed + k) >> 11) / 9007199254740992.0;
+          s2 = double(mix64(seed + 31 * k) >> 11) / 9007199254740992.0;
+        }
+        s1 = std::fmod(s1 + r1, 1.0);
+        s2 = std::fmod(s2 + r2, 1.0);
+        // Malley: a uniform point on the disk lifted to the hemisphere.
+        const double radius = std::sqrt(s1), phi = 2.0 * kPi * s2;
+        const glm::vec3 local(float(radius * std::cos(phi)), float(radius * std::sin(phi)),
+                              float(std::sqrt(std::max(0.0, 1.0 - s1))));
+        batch[k] = Ray{org, frame.toWorld(local), 0.0f, INFINITY};
+      }
+      query->occludedMany(batch, hit);
+      float* t = out.data() + v * size_t(terms);
+      const float weight = float(kPi / rays);
+      for (uint32_t k = 0; k < rays; ++k) {
+        if (hit[k]) continue;
+        shEvaluate(batch[k].dir, orders, y);
+        for (int i = 0; i < terms; ++i) t[i] += weight * y[i];
+      }
+    }
+  });
+}
+
+double meanRelativeL2(const std::vector<float>& a, const std::vector<float>& b, int terms) {
+  VS_CHECK_EQ(a.size(), b.size());
+  double sum = 0.0;
+  size_t count = 0;
+  for (size_t v = 0; v + size_t(terms) <= a.size(); v += size_t(terms)) {
+    double num = 0.0, den = 0.0;
+    for (int i = 0; i < terms; ++i) {
+      const double d = double(a[v + size_t(i)]) - b[v + size_t(i)];
+      num += d * d;
+      den += double(b[v + size_t(i)]) * b[v + size_t(i)];
+    }
+    if (den > 0.0) {
+      sum += std::sqrt(num / den);
+      ++count;
+    }
+  }
+  return count ? sum / double(count) : 0.0;
+}
+
+}  // namespace vistream

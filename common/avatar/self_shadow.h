@@ -1,0 +1,69 @@
+// Self-shadowing transfer vectors of an animated mesh, per vertex and per
+// frame (Kautz, Lehtinen and Aila 2004, section 3): each vertex's blockers
+// are rasterized into its visibility mask (hemisphere_raster.h) and the mask
+// is integrated against the SH basis (transfer.h). Here every triangle of
+// the mesh is a blocker of every vertex; triangles wholly at or below a
+// vertex's tangent plane are rejected before rasterization.
+//
+// The reference: Monte Carlo transfer, `rays` cosine-weighted rays a vertex
+// traced with Embree against the same mesh (stratified, deterministic).
+//
+// Thread safety: const methods may run concurrently; vertices are shaded in
+// parallel (TBB) and the results do not depend on the thread count.
+#pragma once
+
+#include <cstdint>
+#include <glm/glm.hpp>
+#include <memory>
+#include <vector>
+
+#include "common/avatar/hemisphere_raster.h"
+#include "common/avatar/transfer.h"
+
+namespace vistream {
+
+struct SelfShadowOptions {
+  int maskSide = 32;     // 16, 32 or 64
+  int planeTable = 128;  // cube-map cells a side; 0: exact planes per pixel
+  TransferOptions transfer;
+};
+
+struct SelfShadowStats {
+  uint64_t vertices = 0;
+  uint64_t blockerTests = 0;   // (vertex, triangle) pairs looked at
+  uint64_t rasterized = 0;     // of those, drawn into a mask
+  double rasterSeconds = 0.0;  // summed over threads
+  double integrateSeconds = 0.0;
+};
+
+class SelfShadowing {
+ public:
+  explicit SelfShadowing(const SelfShadowOptions& options = {});
+  const SelfShadowOptions& options() const { return options_; }
+  int terms() const { return integrator_.terms(); }
+
+  // Diffuse transfer vectors, terms() floats per vertex, of the mesh
+  // (positions, unit normals per vertex) shadowing itself.
+  void diffuse(const std::vector<glm::vec3>& positions, const std::vector<glm::vec3>& normals,
+               const std::vector<glm::uvec3>& triangles, std::vector<float>& out,
+               SelfShadowStats* stats = nullptr) const;
+
+ private:
+  SelfShadowOptions options_;
+  std::unique_ptr<PlaneMaskTable> table_;
+  TransferIntegrator integrator_;
+};
+
+// Monte Carlo diffuse transfer of the same mesh: `rays` cosine-weighted rays
+// a vertex (a stratified grid, rotated per vertex by a hash of its index),
+// leaving the vertex a hair above its tangent plane.
+void monteCarloTransfer(const std::vector<glm::vec3>& positions,
+                        const std::vector<glm::vec3>& normals,
+                        const std::vector<glm::uvec3>& triangles, uint32_t rays, int orders,
+                        std::vector<float>& out);
+
+// Mean over vertices of |a - b| / |b| for transfer vectors of `terms`
+// coefficients (vertices where b is zero are left out).
+double meanRelativeL2(const std::vector<float>& a, const std::vector<float>& b, int terms);
+
+}  // namespace vistream
