@@ -3,8 +3,12 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstring>
 #include <glm/gtc/matrix_transform.hpp>
+#include <map>
+#include <tuple>
 
+#include "common/core/check.h"
 #include "common/core/error.h"
 
 namespace vistream {
@@ -161,6 +165,96 @@ SkinnedMesh SkinnedMesh::firstOf(const Scene& scene) {
   }
   throwInputError("{}: no skinned object (a mesh with JOINTS_0 and WEIGHTS_0 under a skin)",
                   scene.name);
+}
+
+namespace {
+
+struct SkinWeights {
+  glm::u16vec4 joints{0};
+  glm::vec4 weights{0.0f};
+};
+
+// Half of a's weights and half of b's, merged by joint, the four largest kept.
+SkinWeights blend(const SkinWeights& a, const SkinWeights& b) {
+  std::vector<std::pair<uint16_t, float>> w;
+  for (const SkinWeights* s : {&a, &b})
+    for (int k = 0; k < 4; ++k) {
+      if (!(s->weights[k] > 0.0f)) continue;
+      auto it =
+          std::find_if(w.begin(), w.end(), [&](const auto& e) { return e.first == s->joints[k]; });
+      if (it == w.end())
+        w.emplace_back(s->joints[k], 0.5f * s->weights[k]);
+      else
+        it->second += 0.5f * s->weights[k];
+    }
+  std::sort(w.begin(), w.end(), [](const auto& x, const auto& y) {
+    return x.second != y.second ? x.second > y.second : x.first < y.first;
+  });
+  SkinWeights out;
+  float sum = 0.0f;
+  for (size_t k = 0; k < std::min<size_t>(4, w.size()); ++k) {
+    out.joints[int(k)] = w[k].first;
+    out.weights[int(k)] = w[k].second;
+    sum += w[k].second;
+  }
+  out.weights = sum > 0.0f ? out.weights / sum : glm::vec4(1, 0, 0, 0);
+  return out;
+}
+
+}  // namespace
+
+SkinnedMesh SkinnedMesh::subdivided(int times) const {
+  VS_CHECK(times >= 0 && times <= 6);
+  SkinnedMesh out;
+  out.name = name;
+  out.skin = skin;
+  // Weld: one vertex per (position, skin).
+  std::map<std::tuple<float, float, float, uint64_t, uint64_t, uint64_t>, uint32_t> welded;
+  std::vector<uint32_t> remap(positions.size());
+  for (size_t v = 0; v < positions.size(); ++v) {
+    uint64_t j = 0, w0 = 0, w1 = 0;
+    std::memcpy(&j, &joints[v], sizeof(glm::u16vec4));
+    std::memcpy(&w0, &weights[v].x, 8);
+    std::memcpy(&w1, &weights[v].z, 8);
+    const auto key = std::make_tuple(positions[v].x, positions[v].y, positions[v].z, j, w0, w1);
+    const auto [it, added] = welded.emplace(key, uint32_t(out.positions.size()));
+    if (added) {
+      out.positions.push_back(positions[v]);
+      out.joints.push_back(joints[v]);
+      out.weights.push_back(weights[v]);
+    }
+    remap[v] = it->second;
+  }
+  for (size_t t = 0; t < triangles.size(); ++t) {
+    out.triangles.emplace_back(remap[triangles[t].x], remap[triangles[t].y], remap[triangles[t].z]);
+    out.materials.push_back(t < materials.size() ? materials[t] : 0u);
+  }
+  for (int pass = 0; pass < times; ++pass) {
+    std::map<std::pair<uint32_t, uint32_t>, uint32_t> midpoints;
+    auto midpoint = [&](uint32_t a, uint32_t b) {
+      const auto key = std::minmax(a, b);
+      const auto [it, added] = midpoints.emplace(key, uint32_t(out.positions.size()));
+      if (added) {
+        out.positions.push_back(0.5f * (out.positions[a] + out.positions[b]));
+        const SkinWeights s =
+            blend({out.joints[a], out.weights[a]}, {out.joints[b], out.weights[b]});
+        out.joints.push_back(s.joints);
+        out.weights.push_back(s.weights);
+      }
+      return it->second;
+    };
+    std::vector<glm::uvec3> finer;
+    std::vector<uint32_t> finerMaterials;
+    for (size_t t = 0; t < out.triangles.size(); ++t) {
+      const glm::uvec3 c = out.triangles[t];
+      const uint32_t ab = midpoint(c.x, c.y), bc = midpoint(c.y, c.z), ca = midpoint(c.z, c.x);
+      finer.insert(finer.end(), {{c.x, ab, ca}, {ab, c.y, bc}, {ca, bc, c.z}, {ab, bc, ca}});
+      finerMaterials.insert(finerMaterials.end(), 4, out.materials[t]);
+    }
+    out.triangles = std::move(finer);
+    out.materials = std::move(finerMaterials);
+  }
+  return out;
 }
 
 void vertexNormals(const std::vector<glm::vec3>& positions,

@@ -51,6 +51,14 @@ struct SkinnedMesh {
   // The first skinned object of `scene` (InputError if it has none, or a
   // joint index beyond its skin).
   static SkinnedMesh firstOf(const Scene& scene);
+
+  // The mesh with vertices at the same position (and the same skin) merged
+  // and each triangle split `times` times into four at its edge midpoints,
+  // a midpoint's skin the blend of its ends' (the four largest weights
+  // kept, renormalized). Texture coordinates and face IDs are dropped: the
+  // result is for shadow computations (a finer test model, the paper's
+  // "Hand" stand-in), not for display.
+  SkinnedMesh subdivided(int times) const;
 };
 
 // Positions and unit normals (area-weighted from the triangles) of `mesh`

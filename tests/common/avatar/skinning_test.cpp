@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <glm/gtc/matrix_transform.hpp>
+#include <set>
 
 #include "common/scene/scene_loader.h"
 
@@ -191,6 +192,36 @@ TEST(Fox, WalkingMovesItsVerticesAndKeepsRigidPartsRigid) {
   EXPECT_GT(pairs, 100u);
   EXPECT_GT(moved, 0.01f * size);  // the legs swing
   EXPECT_LT(moved, 0.5f * size);   // and the fox stays in one piece
+}
+
+// Subdividing the Fox: welding leaves fewer vertices than the file's, each
+// pass adds one vertex per edge and quadruples the triangles, and a
+// midpoint lies halfway between its edge's ends in every pose.
+TEST(SkinnedMesh, SubdivisionAddsAVertexPerEdgeAndMidpointsStayHalfway) {
+  const Scene fox = loadScene(std::filesystem::path(VISTREAM_SHARED_DIR) / "data" / "Fox.glb");
+  const SkinnedMesh mesh = SkinnedMesh::firstOf(fox);
+  const SkinnedMesh welded = mesh.subdivided(0);
+  EXPECT_LT(welded.positions.size(), mesh.positions.size());
+  EXPECT_EQ(welded.triangles.size(), mesh.triangles.size());
+  std::set<std::pair<uint32_t, uint32_t>> edges;
+  for (const glm::uvec3& t : welded.triangles)
+    for (int k = 0; k < 3; ++k) edges.insert(std::minmax(t[k], t[(k + 1) % 3]));
+  const SkinnedMesh finer = mesh.subdivided(1);
+  EXPECT_EQ(finer.positions.size(), welded.positions.size() + edges.size());
+  EXPECT_EQ(finer.triangles.size(), 4 * mesh.triangles.size());
+  for (const glm::vec4& w : finer.weights) EXPECT_NEAR(w.x + w.y + w.z + w.w, 1.0f, 1e-5f);
+  // The first fine triangle is (a, ab, ca) of the first coarse one.
+  const glm::uvec3 coarse = welded.triangles[0], fine = finer.triangles[0];
+  EXPECT_EQ(fine.x, coarse.x);
+  const Skin& skin = fox.skins.at(size_t(mesh.skin));
+  Pose p;
+  poseMesh(finer, jointMatrices(skin, globalNodeMatrices(fox, findAnimation(fox, "Run"), 0.2f)), p);
+  // Linear blend skinning of a blended skin at the midpoint is not the
+  // midpoint of the skinned ends in general, but stays close to it.
+  const glm::vec3 mid = 0.5f * (p.positions[coarse.x] + p.positions[coarse.y]);
+  Box3f bounds;
+  for (const glm::vec3& q : p.positions) bounds.extend(q);
+  EXPECT_LT(glm::distance(p.positions[fine.y], mid), 0.02f * glm::length(bounds.hi - bounds.lo));
 }
 
 }  // namespace
