@@ -9,6 +9,7 @@
 
 #include "common/core/check.h"
 #include "common/core/error.h"
+#include "common/core/median.h"
 
 namespace vistream {
 
@@ -199,10 +200,6 @@ nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const Pip
       spread.push_back(f.contrast->luminanceStd);
     }
   if (!colours.empty()) {
-    auto median = [](std::vector<double> v) {
-      std::nth_element(v.begin(), v.begin() + ptrdiff_t(v.size() / 2), v.end());
-      return v[v.size() / 2];
-    };
     out["contrast"] = {{"min_distinct_colours", *std::min_element(colours.begin(), colours.end())},
                        {"median_distinct_colours", median(colours)},
                        {"min_luminance_std", *std::min_element(spread.begin(), spread.end())},

@@ -25,10 +25,12 @@
 #include <vector>
 
 #include "client/app/walkthrough.h"
+#include "client/cmd/shadow_bench.h"
 #include "client/farfield/pipeline.h"
 #include "common/cmd/cli.h"
 #include "common/core/error.h"
 #include "common/core/log.h"
+#include "common/core/median.h"
 #include "common/core/progress.h"
 #include "common/core/stats_output.h"
 #include "common/core/timer.h"
@@ -46,14 +48,9 @@ struct BenchArgs {
   int repeats = 3;
   double speed = 1.0;
   bool json = false, quick = false;
+  bool shadows = false;
+  ShadowBenchArgs shadow;
 };
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty()      ? 0.0
-         : v.size() % 2 ? v[v.size() / 2]
-                        : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
-}
 
 struct Config {
   std::string knob, value;
@@ -380,8 +377,21 @@ int runClientBenchTool(int argc, char** argv) {
   app.add_flag("--quick", a.quick, "fewer values per knob (for tests)");
   app.add_flag("--json", a.json, "print JSON instead of tables");
   app.add_option("--log-level", a.logLevel, "trace, debug, info, warn, error, critical, off");
-  return runFlatToolApp("vistream-client-bench", app, argc, argv, a.logLevel,
-                        [&] { return runBench(a); });
+  app.add_flag("--shadows", a.shadows,
+               "benchmark avatar self-shadowing instead (Kautz et al. 2004, Tables 1 and 2): "
+               "transfer vectors of --model's first clip against Monte Carlo with Embree");
+  app.add_option("--model", a.shadow.model, "--shadows: a skinned glTF model (e.g. Fox.glb)");
+  app.add_option("--subdivide", a.shadow.subdivide,
+                 "--shadows: split every triangle into four this many times (0..4)")
+      ->check(CLI::Range(0, 4));
+  app.add_option("--shadow-frames", a.shadow.frames, "--shadows: frames of the clip to time")
+      ->check(atLeast(2));
+  return runFlatToolApp("vistream-client-bench", app, argc, argv, a.logLevel, [&] {
+    if (!a.shadows) return runBench(a);
+    a.shadow.json = a.json;
+    a.shadow.quick = a.quick;
+    return runShadowBench(a.shadow);
+  });
 }
 
 }  // namespace vistream

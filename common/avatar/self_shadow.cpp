@@ -96,7 +96,7 @@ void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
 void monteCarloTransfer(const std::vector<glm::vec3>& positions,
                         const std::vector<glm::vec3>& normals,
                         const std::vector<glm::uvec3>& triangles, uint32_t rays, int orders,
-                        std::vector<float>& out) {
+                        std::vector<float>& out, uint64_t seed) {
   VS_CHECK(rays >= 1 && orders >= 1 && orders <= kMaxShOrder + 1);
   const int terms = shTerms(orders);
   FlatTriangles flat;
@@ -117,17 +117,17 @@ void monteCarloTransfer(const std::vector<glm::vec3>& positions,
     for (size_t v = range.begin(); v != range.end(); ++v) {
       const TangentFrame frame = TangentFrame::around(normals[v]);
       const glm::vec3 org = positions[v] + normals[v] * offset;
-      const uint64_t seed = mix64(v);
-      const double r1 = double(seed >> 11) / 9007199254740992.0,
-                   r2 = double(mix64(seed) >> 11) / 9007199254740992.0;
+      const uint64_t vertexSeed = mix64(v ^ mix64(seed));
+      const double r1 = double(vertexSeed >> 11) / 9007199254740992.0,
+                   r2 = double(mix64(vertexSeed) >> 11) / 9007199254740992.0;
       for (uint32_t k = 0; k < rays; ++k) {
         double s1, s2;
         if (k < side * side) {
           s1 = (k % side + 0.5) / side;
           s2 = (double(k / side) + 0.5) / side;
         } else {
-          s1 = double(mix64(seed + k) >> 11) / 9007199254740992.0;
-          s2 = double(mix64(seed + 31 * k) >> 11) / 9007199254740992.0;
+          s1 = double(mix64(vertexSeed + k) >> 11) / 9007199254740992.0;
+          s2 = double(mix64(vertexSeed + 31 * k) >> 11) / 9007199254740992.0;
         }
         s1 = std::fmod(s1 + r1, 1.0);
         s2 = std::fmod(s2 + r2, 1.0);

@@ -57,10 +57,12 @@ class SelfShadowing {
 // Monte Carlo diffuse transfer of the same mesh: `rays` cosine-weighted rays
 // a vertex (a stratified grid, rotated per vertex by a hash of its index),
 // leaving the vertex a hair above its tangent plane.
+// `seed` varies the rotation (two runs with different seeds are
+// independent estimates).
 void monteCarloTransfer(const std::vector<glm::vec3>& positions,
                         const std::vector<glm::vec3>& normals,
                         const std::vector<glm::uvec3>& triangles, uint32_t rays, int orders,
-                        std::vector<float>& out);
+                        std::vector<float>& out, uint64_t seed = 0);
 
 // Mean over vertices of |a - b| / |b| for transfer vectors of `terms`
 // coefficients (vertices where b is zero are left out).

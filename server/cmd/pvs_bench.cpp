@@ -22,6 +22,7 @@
 #include <random>
 #include <system_error>
 
+#include "common/core/median.h"
 #include "common/core/progress.h"
 #include "common/core/timer.h"
 #include "common/generate/scene_spec.h"
@@ -38,12 +39,6 @@ namespace vistream {
 namespace {
 
 using nlohmann::json;
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
-}
 
 double mean(const std::vector<double>& v) {
   double s = 0.0;

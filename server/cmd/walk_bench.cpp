@@ -10,6 +10,7 @@
 #include <iostream>
 #include <nlohmann/json.hpp>
 
+#include "common/core/median.h"
 #include "common/core/progress.h"
 #include "common/generate/path.h"
 #include "common/generate/scene_spec.h"
@@ -26,11 +27,6 @@ using json = nlohmann::json;
 struct WalkMeans {
   double tests = 0, propagated = 0, skipped = 0, cullMs = 0, frameMs = 0, faces = 0;
 };
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
 
 // Runs one viewer over the path `repeats` times (same seed, so the same
 // classifications); counts are per frame, times are medians of the runs' means.

@@ -302,3 +302,43 @@ TEST(ClientTool, LitFramesOfRealAndGeneratedCitiesAreNeverNearlyUniform) {
 }
 
 }  // namespace
+
+// Avatar self-shadowing (issue 15): the benchmark's machine contract on the
+// Fox, and its errors for bad models.
+TEST(ClientTool, TheShadowBenchmarkPrintsItsContractKeysForTheFox) {
+  const std::string fox = std::string(VISTREAM_SHARED_DIR) + "/data/Fox.glb";
+  const auto r = runTool("vistream-client-bench",
+                         "--shadows --model " + fox + " --quick --shadow-frames 2 --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  for (const char* key : {"vertices", "triangles", "fps", "ms_per_frame", "l2_error",
+                          "mc_ms_equal_error", "breakdown"})
+    EXPECT_TRUE(j.contains(key)) << key;
+  EXPECT_EQ(j["triangles"].get<int>(), 576);  // the Fox's, from its README
+  EXPECT_GT(j["vertices"].get<int>(), 0);
+  EXPECT_NEAR(j["fps"].get<double>() * j["ms_per_frame"].get<double>(), 1000.0, 1e-6);
+  // Within the paper's 2.5-8% of the converged reference.
+  EXPECT_GT(j["l2_error"].get<double>(), 0.0);
+  EXPECT_LT(j["l2_error"].get<double>(), 0.08);
+  double shares = 0.0;
+  for (const char* part : {"rasterization", "integration", "transform", "other"})
+    shares += j["breakdown"][part].get<double>();
+  EXPECT_NEAR(shares, 1.0, 0.02);
+  EXPECT_GE(j["knobs"].size(), 4u);
+}
+
+TEST(ClientTool, TheShadowBenchmarkRefusesAModelItCannotAnimate) {
+  vistream::testing::TempDir dir;
+  const fs::path obj = dir.write("box.obj", streetObj());
+  const vistream::testing::RefusedCommand bench{.tool = "vistream-client-bench",
+                                                .common = "--shadows --quick",
+                                                .at = vistream::testing::MentionAt::Anywhere};
+  const vistream::testing::BadArguments cases[] = {
+      {"", "--shadows needs --model"},
+      {"--model " + obj.string(), obj.string() + ": has no animation"},
+      {"--model " + (dir.path() / "missing.glb").string(),
+       (dir.path() / "missing.glb").string() + ": no such file"},
+      {"--model " + obj.string() + " --subdivide 9", "--subdivide"},
+  };
+  vistream::testing::expectEachRefused(bench, cases);
+}

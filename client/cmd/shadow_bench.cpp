@@ -1,0 +1,268 @@
+#include "client/cmd/shadow_bench.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <nlohmann/json.hpp>
+#include <vector>
+
+#include "common/avatar/self_shadow.h"
+#include "common/avatar/skinning.h"
+#include "common/core/error.h"
+#include "common/core/median.h"
+#include "common/core/progress.h"
+#include "common/core/timer.h"
+#include "common/light/spherical_harmonics.h"
+#include "common/scene/scene_loader.h"
+
+namespace vistream {
+namespace {
+
+using json = nlohmann::json;
+
+struct Model {
+  Scene scene;
+  SkinnedMesh mesh;
+  const Animation* clip = nullptr;
+  std::vector<float> times;  // of the benchmark's frames
+};
+
+// One knob setting's run over every frame.
+struct Run {
+  std::string knob, value;
+  SelfShadowOptions options;
+  double msPerFrame = 0, transformMs = 0, rasterMs = 0, integrateMs = 0;
+  double l2 = 0;  // against the reference, over its frames
+  double blockersPerVertex = 0;
+};
+
+struct Reference {
+  std::vector<std::vector<float>> transfer;  // per reference frame
+  std::vector<size_t> frames;                // their indices into Model::times
+};
+
+Run runOnce(const Model& m, const SelfShadowOptions& options, const Reference& reference) {
+  Run r;
+  r.options = options;
+  const SelfShadowing shadows(options);
+  const Skin& skin = m.scene.skins.at(size_t(m.mesh.skin));
+  std::vector<double> total, transform, raster, integrate;
+  double l2 = 0, blockers = 0;
+  Pose pose;
+  std::vector<float> out;
+  for (size_t f = 0; f < m.times.size(); ++f) {
+    Stopwatch clock;
+    poseMesh(m.mesh, jointMatrices(skin, globalNodeMatrices(m.scene, m.clip, m.times[f])), pose);
+    const double transformMs = clock.ms();
+    SelfShadowStats stats;
+    shadows.diffuse(pose.positions, pose.normals, m.mesh.triangles, out, &stats);
+    const double frameMs = clock.ms();
+    total.push_back(frameMs);
+    transform.push_back(transformMs);
+    // Thread seconds split the shadow time between its two parts.
+    const double threadSeconds = std::max(1e-12, stats.rasterSeconds + stats.integrateSeconds);
+    raster.push_back((frameMs - transformMs) * stats.rasterSeconds / threadSeconds);
+    integrate.push_back((frameMs - transformMs) * stats.integrateSeconds / threadSeconds);
+    blockers += double(stats.rasterized) / double(std::max<uint64_t>(1, stats.vertices));
+    const auto at = std::find(reference.frames.begin(), reference.frames.end(), f);
+    if (at != reference.frames.end()) {
+      // Fewer SH terms than the reference's count as zeros for the rest.
+      const int full = shTerms(TransferOptions{}.orders), terms = shadows.terms();
+      std::vector<float> padded(pose.positions.size() * size_t(full), 0.0f);
+      for (size_t v = 0; v < pose.positions.size(); ++v)
+        std::copy_n(out.begin() + std::ptrdiff_t(v * size_t(terms)), terms,
+                    padded.begin() + std::ptrdiff_t(v * size_t(full)));
+      l2 += meanRelativeL2(padded, reference.transfer[size_t(at - reference.frames.begin())], full);
+    }
+  }
+  r.msPerFrame = median(total);
+  r.transformMs = median(transform);
+  r.rasterMs = median(raster);
+  r.integrateMs = median(integrate);
+  r.l2 = reference.frames.empty() ? 0.0 : l2 / double(reference.frames.size());
+  r.blockersPerVertex = blockers / double(m.times.size());
+  return r;
+}
+
+json runJson(const Run& r) {
+  return {{"knob", r.knob},
+          {"value", r.value},
+          {"ms_per_frame", r.msPerFrame},
+          {"fps", r.msPerFrame > 0 ? 1000.0 / r.msPerFrame : 0.0},
+          {"l2_error", r.l2},
+          {"blockers_per_vertex", r.blockersPerVertex}};
+}
+
+}  // namespace
+
+int runShadowBench(const ShadowBenchArgs& a) {
+  if (a.model.empty()) throwInputError("--shadows needs --model (a skinned glTF, e.g. Fox.glb)");
+  if (a.subdivide < 0 || a.subdivide > 4)
+    throwInputError("--subdivide {}: must be 0..4 (each pass quadruples the triangles)",
+                    a.subdivide);
+  Model m;
+  m.scene = loadScene(a.model);
+  if (m.scene.animations.empty())
+    throwInputError("{}: has no animation to play (the benchmark poses its first clip)", a.model);
+  m.clip = &m.scene.animations.front();
+  m.mesh = SkinnedMesh::firstOf(m.scene);
+  // Welded (shared corners get one smooth normal), then subdivided.
+  m.mesh = m.mesh.subdivided(a.subdivide);
+  const int frames = std::max(2, a.frames);
+  for (int f = 0; f < frames; ++f) m.times.push_back(m.clip->duration * float(f) / float(frames));
+
+  // The reference and the Monte Carlo sweep, on the first frames.
+  const uint32_t referenceRays = a.quick ? 4096 : 16384;
+  const std::vector<uint32_t> sweep =
+      a.quick ? std::vector<uint32_t>{64, 256} : std::vector<uint32_t>{64, 256, 1024, 4096};
+  Reference reference;
+  const int orders = TransferOptions{}.orders;
+  const Skin& skin = m.scene.skins.at(size_t(m.mesh.skin));
+  std::vector<std::pair<double, double>> mc;  // (ms per frame, error)
+  {
+    ProgressBar bar("monte carlo", uint64_t(a.referenceFrames) * (1 + sweep.size()));
+    std::vector<std::vector<double>> ms(sweep.size()), err(sweep.size());
+    for (int k = 0; k < std::min(a.referenceFrames, frames); ++k) {
+      const size_t f = size_t(k) * size_t(frames) / size_t(std::max(1, a.referenceFrames));
+      Pose pose;
+      poseMesh(m.mesh, jointMatrices(skin, globalNodeMatrices(m.scene, m.clip, m.times[f])), pose);
+      std::vector<float> ref;
+      monteCarloTransfer(pose.positions, pose.normals, m.mesh.triangles, referenceRays, orders, ref,
+                         1);
+      bar.advance();
+      for (size_t s = 0; s < sweep.size(); ++s) {
+        std::vector<float> estimate;
+        Stopwatch clock;
+        monteCarloTransfer(pose.positions, pose.normals, m.mesh.triangles, sweep[s], orders,
+                           estimate, 2);
+        ms[s].push_back(clock.ms());
+        err[s].push_back(meanRelativeL2(estimate, ref, shTerms(orders)));
+        bar.advance();
+      }
+      reference.frames.push_back(f);
+      reference.transfer.push_back(std::move(ref));
+    }
+    bar.finish();
+    for (size_t s = 0; s < sweep.size(); ++s) mc.emplace_back(median(ms[s]), median(err[s]));
+  }
+  // Monte Carlo's time at error e: log-log interpolation, or the last point
+  // extended with error ~ rays^-1/2 (time ~ e^-2).
+  auto mcMsAt = [&](double e) -> double {
+    if (e <= 0.0) return double(INFINITY);
+    for (size_t s = 0; s + 1 < mc.size(); ++s) {
+      const auto [t0, e0] = mc[s];
+      const auto [t1, e1] = mc[s + 1];
+      if (e <= e0 && e >= e1 && e0 > e1) {
+        const double x = std::log(e0 / e) / std::log(e0 / e1);
+        return std::exp(std::log(t0) + x * std::log(t1 / t0));
+      }
+    }
+    if (e > mc.front().second) return mc.front().first * std::pow(mc.front().second / e, 2.0);
+    return mc.back().first * std::pow(mc.back().second / e, 2.0);
+  };
+
+  // Defaults, then each knob alone.
+  std::vector<Run> runs;
+  auto add = [&](std::string knob, std::string value, SelfShadowOptions o) {
+    Run r = runOnce(m, o, reference);
+    r.knob = std::move(knob);
+    r.value = std::move(value);
+    runs.push_back(std::move(r));
+  };
+  ProgressBar bar("knobs", a.quick ? 5 : 11);
+  add("defaults", "mask 32, table 128, 25 terms, 4x4", {});
+  bar.advance();
+  for (const int side : a.quick ? std::vector<int>{16} : std::vector<int>{16, 64}) {
+    SelfShadowOptions o;
+    o.maskSide = side;
+    add("mask side", std::to_string(side), o);
+    bar.advance();
+  }
+  for (const int cube : a.quick ? std::vector<int>{64} : std::vector<int>{64, 256}) {
+    SelfShadowOptions o;
+    o.planeTable = cube;
+    add("plane table", std::to_string(cube), o);
+    bar.advance();
+  }
+  if (!a.quick) {
+    SelfShadowOptions o;
+    o.planeTable = 0;
+    add("plane table", "off (exact)", o);
+    bar.advance();
+  }
+  for (const int terms : a.quick ? std::vector<int>{9} : std::vector<int>{9, 16}) {
+    SelfShadowOptions o;
+    o.transfer.orders = int(std::lround(std::sqrt(double(terms))));
+    add("SH terms", std::to_string(terms), o);
+    bar.advance();
+  }
+  {
+    SelfShadowOptions o;
+    o.transfer.downsample = false;
+    add("downsampling", "off", o);
+    bar.advance();
+  }
+  bar.finish();
+
+  const Run& d = runs.front();
+  const double mcEqual = mcMsAt(d.l2);
+  const double other = std::max(0.0, d.msPerFrame - d.transformMs - d.rasterMs - d.integrateMs);
+  json out = {{"model", a.model},
+              {"subdivide", a.subdivide},
+              {"clip", m.clip->name},
+              {"frames", frames},
+              {"vertices", m.mesh.positions.size()},
+              {"triangles", m.mesh.triangles.size()},
+              {"ms_per_frame", d.msPerFrame},
+              {"fps", d.msPerFrame > 0 ? 1000.0 / d.msPerFrame : 0.0},
+              {"l2_error", d.l2},
+              {"blockers_per_vertex", d.blockersPerVertex},
+              {"mc_ms_equal_error", mcEqual},
+              {"speedup_vs_mc", mcEqual / d.msPerFrame},
+              {"reference_rays", referenceRays},
+              {"breakdown",
+               {{"rasterization", d.rasterMs / d.msPerFrame},
+                {"integration", d.integrateMs / d.msPerFrame},
+                {"transform", d.transformMs / d.msPerFrame},
+                {"other", other / d.msPerFrame}}}};
+  json mcRows = json::array();
+  for (size_t s = 0; s < sweep.size(); ++s)
+    mcRows.push_back(
+        {{"rays", sweep[s]}, {"ms_per_frame", mc[s].first}, {"l2_error", mc[s].second}});
+  out["monte_carlo"] = mcRows;
+  json knobRows = json::array();
+  for (const Run& r : runs) knobRows.push_back(runJson(r));
+  out["knobs"] = knobRows;
+
+  if (a.json) {
+    std::printf("%s\n", out.dump(2).c_str());
+    return 0;
+  }
+  std::printf("\nself-shadowing of %s (%s clip, %d frames): %zu vertices, %zu triangles\n\n",
+              a.model.c_str(), m.clip->name.c_str(), frames, m.mesh.positions.size(),
+              m.mesh.triangles.size());
+  std::printf(
+      "%-28s %10.2f\n%-28s %10.1f\n%-28s %10.4f\n%-28s %10.1f\n%-28s %10.2f\n%-28s %9.1fx\n",
+      "ms a frame (median)", d.msPerFrame, "frames a second", 1000.0 / d.msPerFrame,
+      "mean relative L2 error", d.l2, "blockers a vertex", d.blockersPerVertex,
+      "Monte Carlo ms, same error", mcEqual, "faster than Monte Carlo", mcEqual / d.msPerFrame);
+  std::printf(
+      "\nTable 2, share of a frame:\n%-28s %9.1f%%\n%-28s %9.1f%%\n%-28s %9.1f%%\n%-28s %9.1f%%\n",
+      "rasterization", 100 * d.rasterMs / d.msPerFrame, "integration",
+      100 * d.integrateMs / d.msPerFrame, "transform", 100 * d.transformMs / d.msPerFrame, "other",
+      100 * other / d.msPerFrame);
+  std::printf("\nMonte Carlo (Embree), against %u rays a vertex:\n%-10s %12s %12s\n", referenceRays,
+              "rays", "ms a frame", "L2 error");
+  for (size_t s = 0; s < sweep.size(); ++s)
+    std::printf("%-10u %12.1f %12.4f\n", sweep[s], mc[s].first, mc[s].second);
+  std::printf("\nAccuracy against time, one knob at a time:\n%-14s %-36s %10s %8s %10s %9s\n",
+              "knob", "value", "ms/frame", "fps", "L2 error", "blockers");
+  for (const Run& r : runs)
+    std::printf("%-14s %-36s %10.2f %8.1f %10.4f %9.1f\n", r.knob.c_str(), r.value.c_str(),
+                r.msPerFrame, 1000.0 / r.msPerFrame, r.l2, r.blockersPerVertex);
+  return 0;
+}
+
+}  // namespace vistream

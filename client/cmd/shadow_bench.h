@@ -1,0 +1,33 @@
+// `vistream-client-bench --shadows`: what self-shadowing's accuracy costs in
+// time (Kautz, Lehtinen and Aila 2004, Tables 1 and 2), on any skinned glTF
+// model animated by its first clip.
+//
+// For each frame of the clip (evenly spaced), the model is posed (linear
+// blend skinning and normals: "transform") and every vertex's transfer
+// vector computed (rasterization and integration); frame times are medians
+// over the frames. The reference is Monte Carlo transfer with 16,384 Embree
+// rays a vertex on a subset of the frames; the error is the mean relative L2
+// distance of the transfer vectors to it. Monte Carlo itself is swept (64 to
+// 4,096 rays, another seed) and its time at our error interpolated on a
+// log-log line (error falling as rays^-1/2 beyond the sweep). Each knob
+// (mask side, plane table, SH terms, downsampling) is then varied alone
+// around the defaults.
+#pragma once
+
+#include <string>
+
+namespace vistream {
+
+struct ShadowBenchArgs {
+  std::string model;
+  int subdivide = 0;
+  int frames = 8;
+  int referenceFrames = 2;
+  bool quick = false;  // fewer knob values and Monte Carlo rays (tests)
+  bool json = false;
+};
+
+// Returns 0 on success; throws InputError for a model it cannot use.
+int runShadowBench(const ShadowBenchArgs& args);
+
+}  // namespace vistream
