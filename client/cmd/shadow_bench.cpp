@@ -25,6 +25,8 @@ using json = nlohmann::json;
 struct Model {
   Scene scene;
   SkinnedMesh mesh;
+  std::vector<glm::uvec3> coarse;  // the welded model before subdivision
+  int levels = 0;
   const Animation* clip = nullptr;
   std::vector<float> times;  // of the benchmark's frames
 };
@@ -33,6 +35,7 @@ struct Model {
 struct Run {
   std::string knob, value;
   SelfShadowOptions options;
+  int ring = 0;  // mesh hierarchy: 0 off, else the fine ring
   double msPerFrame = 0, transformMs = 0, rasterMs = 0, integrateMs = 0;
   double l2 = 0;  // against the reference, over its frames
   double blockersPerVertex = 0;
@@ -43,10 +46,16 @@ struct Reference {
   std::vector<size_t> frames;                // their indices into Model::times
 };
 
-Run runOnce(const Model& m, const SelfShadowOptions& options, const Reference& reference) {
+Run runOnce(const Model& m, const SelfShadowOptions& options, int ring,
+            const Reference& reference) {
   Run r;
   r.options = options;
+  r.ring = ring;
   const SelfShadowing shadows(options);
+  const ShadowHierarchy hierarchy =
+      ring > 0 ? ShadowHierarchy::build(m.mesh.triangles, m.coarse, m.levels, ring,
+                                        m.mesh.positions.size())
+               : ShadowHierarchy{};
   const Skin& skin = m.scene.skins.at(size_t(m.mesh.skin));
   std::vector<double> total, transform, raster, integrate;
   double l2 = 0, blockers = 0;
@@ -57,7 +66,8 @@ Run runOnce(const Model& m, const SelfShadowOptions& options, const Reference& r
     poseMesh(m.mesh, jointMatrices(skin, globalNodeMatrices(m.scene, m.clip, m.times[f])), pose);
     const double transformMs = clock.ms();
     SelfShadowStats stats;
-    shadows.diffuse(pose.positions, pose.normals, m.mesh.triangles, out, &stats);
+    shadows.diffuse(pose.positions, pose.normals, m.mesh.triangles, out, &stats,
+                    ring > 0 ? &hierarchy : nullptr);
     const double frameMs = clock.ms();
     total.push_back(frameMs);
     transform.push_back(transformMs);
@@ -108,8 +118,11 @@ int runShadowBench(const ShadowBenchArgs& a) {
     throwInputError("{}: has no animation to play (the benchmark poses its first clip)", a.model);
   m.clip = &m.scene.animations.front();
   m.mesh = SkinnedMesh::firstOf(m.scene);
-  // Welded (shared corners get one smooth normal), then subdivided.
+  // Welded (shared corners get one smooth normal), then subdivided; the
+  // welded model is the hierarchy's coarse level.
+  m.coarse = m.mesh.subdivided(0).triangles;
   m.mesh = m.mesh.subdivided(a.subdivide);
+  m.levels = a.subdivide;
   const int frames = std::max(2, a.frames);
   for (int f = 0; f < frames; ++f) m.times.push_back(m.clip->duration * float(f) / float(frames));
 
@@ -165,44 +178,53 @@ int runShadowBench(const ShadowBenchArgs& a) {
 
   // Defaults, then each knob alone.
   std::vector<Run> runs;
-  auto add = [&](std::string knob, std::string value, SelfShadowOptions o) {
-    Run r = runOnce(m, o, reference);
+  // The hierarchy is on (two rings) wherever there is a finer level.
+  const int defaultRing = a.subdivide > 0 ? 2 : 0;
+  auto add = [&](std::string knob, std::string value, SelfShadowOptions o, int ring) {
+    Run r = runOnce(m, o, ring, reference);
     r.knob = std::move(knob);
     r.value = std::move(value);
     runs.push_back(std::move(r));
   };
   ProgressBar bar("knobs", a.quick ? 5 : 11);
-  add("defaults", "mask 32, table 128, 25 terms, 4x4", {});
+  add("defaults",
+      defaultRing ? "mask 32, table 128, 25 terms, 4x4, ring 2"
+                  : "mask 32, table 128, 25 terms, 4x4",
+      {}, defaultRing);
   bar.advance();
   for (const int side : a.quick ? std::vector<int>{16} : std::vector<int>{16, 64}) {
     SelfShadowOptions o;
     o.maskSide = side;
-    add("mask side", std::to_string(side), o);
+    add("mask side", std::to_string(side), o, defaultRing);
     bar.advance();
   }
   for (const int cube : a.quick ? std::vector<int>{64} : std::vector<int>{64, 256}) {
     SelfShadowOptions o;
     o.planeTable = cube;
-    add("plane table", std::to_string(cube), o);
+    add("plane table", std::to_string(cube), o, defaultRing);
     bar.advance();
   }
   if (!a.quick) {
     SelfShadowOptions o;
     o.planeTable = 0;
-    add("plane table", "off (exact)", o);
+    add("plane table", "off (exact)", o, defaultRing);
     bar.advance();
   }
   for (const int terms : a.quick ? std::vector<int>{9} : std::vector<int>{9, 16}) {
     SelfShadowOptions o;
     o.transfer.orders = int(std::lround(std::sqrt(double(terms))));
-    add("SH terms", std::to_string(terms), o);
+    add("SH terms", std::to_string(terms), o, defaultRing);
     bar.advance();
   }
   {
     SelfShadowOptions o;
     o.transfer.downsample = false;
-    add("downsampling", "off", o);
+    add("downsampling", "off", o, defaultRing);
     bar.advance();
+  }
+  if (defaultRing) {
+    add("mesh hierarchy", "ring 1", {}, 1);
+    add("mesh hierarchy", "off (every fine triangle)", {}, 0);
   }
   bar.finish();
 

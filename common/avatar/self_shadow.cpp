@@ -49,7 +49,7 @@ SelfShadowing::SelfShadowing(const SelfShadowOptions& options)
 void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
                             const std::vector<glm::vec3>& normals,
                             const std::vector<glm::uvec3>& triangles, std::vector<float>& out,
-                            SelfShadowStats* stats) const {
+                            SelfShadowStats* stats, const ShadowHierarchy* hierarchy) const {
   VS_CHECK_EQ(positions.size(), normals.size());
   const int terms = integrator_.terms();
   out.assign(positions.size() * size_t(terms), 0.0f);
@@ -67,13 +67,29 @@ void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
       const glm::vec3 p = positions[v];
       const TangentFrame frame = TangentFrame::around(normals[v]);
       local.mask.clear();
-      for (const glm::uvec3& t : triangles) {
+      auto block = [&](const glm::uvec3& t) {
         const glm::vec3 a = frame.toLocal(positions[t.x] - p),
                         b = frame.toLocal(positions[t.y] - p),
                         c = frame.toLocal(positions[t.z] - p);
         ++local.stats.blockerTests;
-        if (!(std::max({a.z, b.z, c.z}) > 0.0f)) continue;
+        if (!(std::max({a.z, b.z, c.z}) > 0.0f)) return;
         local.stats.rasterized += rasterizeBlocker(a, b, c, table_.get(), local.mask);
+      };
+      if (!hierarchy) {
+        for (const glm::uvec3& t : triangles) block(t);
+      } else {
+        const ShadowHierarchy& h = *hierarchy;
+        for (uint32_t k = h.ringStart[v]; k < h.ringStart[v + 1]; ++k)
+          block(triangles[h.ringTriangles[k]]);
+        const uint32_t* skip = h.skipTriangles.data() + h.skipStart[v];
+        const uint32_t* skipEnd = h.skipTriangles.data() + h.skipStart[v + 1];
+        for (uint32_t c = 0; c < h.coarse.size(); ++c) {
+          if (skip != skipEnd && *skip == c) {  // sorted: one pass
+            ++skip;
+            continue;
+          }
+          block(h.coarse[c]);
+        }
       }
       const auto integrated = std::chrono::steady_clock::now();
       local.stats.rasterSeconds += std::chrono::duration<double>(integrated - start).count();
@@ -91,6 +107,47 @@ void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
       stats->integrateSeconds += l.stats.integrateSeconds;
     }
   }
+}
+
+ShadowHierarchy ShadowHierarchy::build(const std::vector<glm::uvec3>& fine,
+                                       const std::vector<glm::uvec3>& coarse, int levels, int ring,
+                                       size_t vertices) {
+  VS_CHECK(ring >= 1 && ring <= 2 && levels >= 0 && levels <= 6);
+  VS_CHECK_EQ(fine.size(), coarse.size() << (2 * levels));
+  ShadowHierarchy h;
+  h.coarse = coarse;
+  // Fine triangles around each vertex.
+  std::vector<std::vector<uint32_t>> around(vertices);
+  for (uint32_t t = 0; t < fine.size(); ++t)
+    for (int k = 0; k < 3; ++k) around[fine[t][k]].push_back(t);
+  h.ringStart.push_back(0);
+  h.skipStart.push_back(0);
+  std::vector<uint32_t> ringOf, parents;
+  for (size_t v = 0; v < vertices; ++v) {
+    ringOf = around[v];
+    if (ring == 2)
+      for (const uint32_t t : around[v])
+        for (int k = 0; k < 3; ++k)
+          ringOf.insert(ringOf.end(), around[fine[t][k]].begin(), around[fine[t][k]].end());
+    std::sort(ringOf.begin(), ringOf.end());
+    ringOf.erase(std::unique(ringOf.begin(), ringOf.end()), ringOf.end());
+    parents.clear();
+    for (const uint32_t t : ringOf) parents.push_back(t >> (2 * levels));
+    std::sort(parents.begin(), parents.end());
+    parents.erase(std::unique(parents.begin(), parents.end()), parents.end());
+    h.ringTriangles.insert(h.ringTriangles.end(), ringOf.begin(), ringOf.end());
+    h.skipTriangles.insert(h.skipTriangles.end(), parents.begin(), parents.end());
+    h.ringStart.push_back(uint32_t(h.ringTriangles.size()));
+    h.skipStart.push_back(uint32_t(h.skipTriangles.size()));
+  }
+  return h;
+}
+
+double ShadowHierarchy::meanBlockers() const {
+  const size_t vertices = ringStart.size() - 1;
+  if (vertices == 0) return 0.0;
+  return double(ringTriangles.size() + vertices * coarse.size() - skipTriangles.size()) /
+         double(vertices);
 }
 
 void monteCarloTransfer(const std::vector<glm::vec3>& positions,

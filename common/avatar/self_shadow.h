@@ -36,6 +36,25 @@ struct SelfShadowStats {
   double integrateSeconds = 0.0;
 };
 
+// The paper's two-level mesh hierarchy (section 3.2): near a vertex its
+// blockers are the fine mesh's triangles within `ring` rings of it; the rest
+// of the model blocks through a coarse mesh, without the coarse triangles
+// whose area the fine ring covers (their parents). Both meshes index the
+// same vertices (SkinnedMesh::subdivided keeps the coarse vertices first).
+// Fine triangle t's coarse parent is parentOf[t].
+struct ShadowHierarchy {
+  std::vector<glm::uvec3> coarse;
+  std::vector<uint32_t> ringStart, ringTriangles;  // per vertex (CSR): fine triangles
+  std::vector<uint32_t> skipStart, skipTriangles;  // per vertex (CSR): coarse ones left out
+
+  // For a mesh subdivided `levels` times from `coarse` (fine triangle t
+  // descends from coarse triangle t >> 2 levels). ring: 1 or 2.
+  static ShadowHierarchy build(const std::vector<glm::uvec3>& fine,
+                               const std::vector<glm::uvec3>& coarse, int levels, int ring,
+                               size_t vertices);
+  double meanBlockers() const;  // ring plus coarse, a vertex
+};
+
 class SelfShadowing {
  public:
   explicit SelfShadowing(const SelfShadowOptions& options = {});
@@ -44,9 +63,11 @@ class SelfShadowing {
 
   // Diffuse transfer vectors, terms() floats per vertex, of the mesh
   // (positions, unit normals per vertex) shadowing itself.
+  // With a hierarchy, its blockers replace `triangles` (which must be the
+  // fine mesh it was built for).
   void diffuse(const std::vector<glm::vec3>& positions, const std::vector<glm::vec3>& normals,
                const std::vector<glm::uvec3>& triangles, std::vector<float>& out,
-               SelfShadowStats* stats = nullptr) const;
+               SelfShadowStats* stats = nullptr, const ShadowHierarchy* hierarchy = nullptr) const;
 
  private:
   SelfShadowOptions options_;

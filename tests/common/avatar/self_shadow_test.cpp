@@ -142,5 +142,43 @@ TEST(SelfShadow, TheWalkingFoxMatchesConvergedMonteCarlo) {
   EXPECT_LT(stats.rasterized, stats.blockerTests);
 }
 
+// Without a finer level the hierarchy's ring and the coarse mesh minus the
+// ring's parents are every triangle once: the same transfer, exactly.
+TEST(ShadowHierarchy, OnAnUnsubdividedMeshItIsEveryTriangleOnce) {
+  const Mesh m = ballOverFloor();
+  const SelfShadowing shadows;
+  for (const int ring : {1, 2}) {
+    const ShadowHierarchy h =
+        ShadowHierarchy::build(m.triangles, m.triangles, 0, ring, m.positions.size());
+    EXPECT_DOUBLE_EQ(h.meanBlockers(), double(m.triangles.size()));
+    std::vector<float> all, split;
+    shadows.diffuse(m.positions, m.normals, m.triangles, all);
+    shadows.diffuse(m.positions, m.normals, m.triangles, split, nullptr, &h);
+    EXPECT_EQ(all, split) << "ring " << ring;
+  }
+}
+
+// The Fox subdivided twice (the paper's "Hand" size): blocking through the
+// original mesh beyond two rings keeps the error against Monte Carlo over
+// the full fine mesh within the paper's bound, with far fewer blockers.
+TEST(ShadowHierarchy, TheSubdividedFoxStaysWithinThePapersErrorWithAFractionOfTheBlockers) {
+  const Scene fox = loadScene(std::filesystem::path(VISTREAM_SHARED_DIR) / "data" / "Fox.glb");
+  const SkinnedMesh base = SkinnedMesh::firstOf(fox);
+  const SkinnedMesh coarse = base.subdivided(0), fine = base.subdivided(2);
+  const ShadowHierarchy h =
+      ShadowHierarchy::build(fine.triangles, coarse.triangles, 2, 2, fine.positions.size());
+  EXPECT_LT(h.meanBlockers(), 0.1 * double(fine.triangles.size()));
+  Pose pose;
+  poseMesh(fine,
+           jointMatrices(fox.skins.at(size_t(fine.skin)),
+                         globalNodeMatrices(fox, findAnimation(fox, "Walk"), 0.5f)),
+           pose);
+  const SelfShadowing shadows;
+  std::vector<float> ours, reference;
+  shadows.diffuse(pose.positions, pose.normals, fine.triangles, ours, nullptr, &h);
+  monteCarloTransfer(pose.positions, pose.normals, fine.triangles, 4096, 5, reference);
+  EXPECT_LT(meanRelativeL2(ours, reference, shadows.terms()), 0.08);
+}
+
 }  // namespace
 }  // namespace vistream
