@@ -56,14 +56,13 @@ Run runOnce(const Model& m, const SelfShadowOptions& options, int ring,
       ring > 0 ? ShadowHierarchy::build(m.mesh.triangles, m.coarse, m.levels, ring,
                                         m.mesh.positions.size())
                : ShadowHierarchy{};
-  const Skin& skin = m.scene.skins.at(size_t(m.mesh.skin));
   std::vector<double> total, transform, raster, integrate;
   double l2 = 0, blockers = 0;
   Pose pose;
   std::vector<float> out;
   for (size_t f = 0; f < m.times.size(); ++f) {
     Stopwatch clock;
-    poseMesh(m.mesh, jointMatrices(skin, globalNodeMatrices(m.scene, m.clip, m.times[f])), pose);
+    poseAt(m.scene, m.mesh, m.clip, m.times[f], pose);
     const double transformMs = clock.ms();
     SelfShadowStats stats;
     shadows.diffuse(pose.positions, pose.normals, m.mesh.triangles, out, &stats,
@@ -132,7 +131,6 @@ int runShadowBench(const ShadowBenchArgs& a) {
       a.quick ? std::vector<uint32_t>{64, 256} : std::vector<uint32_t>{64, 256, 1024, 4096};
   Reference reference;
   const int orders = TransferOptions{}.orders;
-  const Skin& skin = m.scene.skins.at(size_t(m.mesh.skin));
   std::vector<std::pair<double, double>> mc;  // (ms per frame, error)
   {
     ProgressBar bar("monte carlo", uint64_t(a.referenceFrames) * (1 + sweep.size()));
@@ -140,7 +138,7 @@ int runShadowBench(const ShadowBenchArgs& a) {
     for (int k = 0; k < std::min(a.referenceFrames, frames); ++k) {
       const size_t f = size_t(k) * size_t(frames) / size_t(std::max(1, a.referenceFrames));
       Pose pose;
-      poseMesh(m.mesh, jointMatrices(skin, globalNodeMatrices(m.scene, m.clip, m.times[f])), pose);
+      poseAt(m.scene, m.mesh, m.clip, m.times[f], pose);
       std::vector<float> ref;
       monteCarloTransfer(pose.positions, pose.normals, m.mesh.triangles, referenceRays, orders, ref,
                          1);

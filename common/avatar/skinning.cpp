@@ -284,6 +284,14 @@ void poseMesh(const SkinnedMesh& mesh, const std::vector<glm::mat4>& joints, Pos
   vertexNormals(out.positions, mesh.triangles, out.normals);
 }
 
+void poseAt(const Scene& scene, const SkinnedMesh& mesh, const Animation* animation, float t,
+            Pose& out) {
+  VS_CHECK(mesh.skin >= 0 && size_t(mesh.skin) < scene.skins.size());
+  poseMesh(mesh,
+           jointMatrices(scene.skins[size_t(mesh.skin)], globalNodeMatrices(scene, animation, t)),
+           out);
+}
+
 const Animation* findAnimation(const Scene& scene, const std::string& name) {
   auto lower = [](std::string s) {
     std::transform(s.begin(), s.end(), s.begin(),

@@ -68,6 +68,10 @@ struct Pose {
   std::vector<glm::vec3> normals;
 };
 void poseMesh(const SkinnedMesh& mesh, const std::vector<glm::mat4>& joints, Pose& out);
+// poseMesh with `animation` (of `scene`, the mesh's source) at clip time t;
+// null: the rest pose.
+void poseAt(const Scene& scene, const SkinnedMesh& mesh, const Animation* animation, float t,
+            Pose& out);
 
 // Per-vertex normals of a triangle mesh: the area-weighted sum of its
 // triangles' normals, normalized (up for a vertex with no area around it).

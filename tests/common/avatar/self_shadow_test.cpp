@@ -125,10 +125,7 @@ TEST(SelfShadow, TheWalkingFoxMatchesConvergedMonteCarlo) {
   const Scene fox = loadScene(std::filesystem::path(VISTREAM_SHARED_DIR) / "data" / "Fox.glb");
   const SkinnedMesh mesh = SkinnedMesh::firstOf(fox);
   Pose pose;
-  poseMesh(mesh,
-           jointMatrices(fox.skins.at(size_t(mesh.skin)),
-                         globalNodeMatrices(fox, findAnimation(fox, "Walk"), 0.3f)),
-           pose);
+  poseAt(fox, mesh, findAnimation(fox, "Walk"), 0.3f, pose);
   const SelfShadowing shadows;
   std::vector<float> ours, reference;
   SelfShadowStats stats;
@@ -169,10 +166,7 @@ TEST(ShadowHierarchy, TheSubdividedFoxStaysWithinThePapersErrorWithAFractionOfTh
       ShadowHierarchy::build(fine.triangles, coarse.triangles, 2, 2, fine.positions.size());
   EXPECT_LT(h.meanBlockers(), 0.1 * double(fine.triangles.size()));
   Pose pose;
-  poseMesh(fine,
-           jointMatrices(fox.skins.at(size_t(fine.skin)),
-                         globalNodeMatrices(fox, findAnimation(fox, "Walk"), 0.5f)),
-           pose);
+  poseAt(fox, fine, findAnimation(fox, "Walk"), 0.5f, pose);
   const SelfShadowing shadows;
   std::vector<float> ours, reference;
   shadows.diffuse(pose.positions, pose.normals, fine.triangles, ours, nullptr, &h);

@@ -174,11 +174,11 @@ TEST(Fox, WalkingMovesItsVerticesAndKeepsRigidPartsRigid) {
   for (const glm::vec3& p : mesh.positions) bind.extend(p);
   const float size = glm::length(bind.hi - bind.lo);
   Pose first, pose;
-  poseMesh(mesh, jointMatrices(skin, globalNodeMatrices(fox, walk, 0.0f)), first);
+  poseAt(fox, mesh, walk, 0.0f, first);
   float moved = 0.0f;
   size_t pairs = 0;
   for (const float t : {0.1f, 0.35f, 0.6f}) {
-    poseMesh(mesh, jointMatrices(skin, globalNodeMatrices(fox, walk, t)), pose);
+    poseAt(fox, mesh, walk, t, pose);
     for (size_t v = 0; v < mesh.positions.size(); ++v)
       moved = std::max(moved, glm::distance(pose.positions[v], first.positions[v]));
     for (const auto& group : rigid)
@@ -213,9 +213,8 @@ TEST(SkinnedMesh, SubdivisionAddsAVertexPerEdgeAndMidpointsStayHalfway) {
   // The first fine triangle is (a, ab, ca) of the first coarse one.
   const glm::uvec3 coarse = welded.triangles[0], fine = finer.triangles[0];
   EXPECT_EQ(fine.x, coarse.x);
-  const Skin& skin = fox.skins.at(size_t(mesh.skin));
   Pose p;
-  poseMesh(finer, jointMatrices(skin, globalNodeMatrices(fox, findAnimation(fox, "Run"), 0.2f)), p);
+  poseAt(fox, finer, findAnimation(fox, "Run"), 0.2f, p);
   // Linear blend skinning of a blended skin at the midpoint is not the
   // midpoint of the skinned ends in general, but stays close to it.
   const glm::vec3 mid = 0.5f * (p.positions[coarse.x] + p.positions[coarse.y]);
