@@ -36,7 +36,7 @@ EnvironmentLight EnvironmentLight::project(
   EnvironmentLight e;
   e.source_ = std::move(source);
   const int height = std::max(1, width / 2);
-  std::array<glm::dvec3, 9> sum{};
+  std::array<glm::dvec3, 25> sum{};
   glm::dvec3 horizon(0.0);
   double horizonWeight = 0.0;
   for (int row = 0; row < height; ++row) {
@@ -48,8 +48,9 @@ EnvironmentLight EnvironmentLight::project(
     for (int col = 0; col < width; ++col) {
       const glm::vec3 d = equirectDirection((col + 0.5) / width, v);
       const glm::dvec3 l = glm::dvec3(radiance(d));
-      const auto y = shBasis(d);
-      for (size_t k = 0; k < 9; ++k) sum[k] += l * double(y[k]) * dOmega;
+      float y[25];
+      shEvaluate(d, 5, y);
+      for (size_t k = 0; k < 25; ++k) sum[k] += l * double(y[k]) * dOmega;
       if (nearHorizon) {
         horizon += l * dOmega;
         horizonWeight += dOmega;
@@ -58,6 +59,7 @@ EnvironmentLight EnvironmentLight::project(
   }
   const float a[9] = {kA0, kA1, kA1, kA1, kA2, kA2, kA2, kA2, kA2};
   for (size_t k = 0; k < 9; ++k) e.coeff_[k] = glm::vec3(sum[k]) * a[k];
+  for (size_t k = 0; k < 25; ++k) e.radiance_[k] = glm::vec3(sum[k]);
   e.horizon_ = horizonWeight > 0.0 ? glm::vec3(horizon / horizonWeight) : glm::vec3(0.0f);
   return e;
 }
@@ -106,6 +108,12 @@ glm::vec3 EnvironmentLight::irradiance(const glm::vec3& n) const {
   glm::vec3 e(0.0f);
   for (size_t k = 0; k < 9; ++k) e += coeff_[k] * y[k];
   return glm::max(e, glm::vec3(0.0f));
+}
+
+glm::vec3 EnvironmentLight::transferred(const float* transfer, int orders) const {
+  glm::vec3 c(0.0f);
+  for (int i = 0; i < shTerms(orders); ++i) c += radiance_[size_t(i)] * transfer[i];
+  return glm::max(c, glm::vec3(0.0f));
 }
 
 }  // namespace vistream

@@ -1,6 +1,7 @@
 // Light from the scene's environment: the diffuse irradiance a surface with a
 // given normal receives from the whole sky (and ground), as 9 spherical
-// harmonic coefficients per colour channel.
+// harmonic coefficients per colour channel, and the radiance itself as 25
+// (for radiance transfer).
 //
 // Method: Ramamoorthi and Hanrahan, "An Efficient Representation for
 // Irradiance Environment Maps" (SIGGRAPH 2001). The radiance is projected onto
@@ -56,12 +57,19 @@ class EnvironmentLight {
   // Mean radiance of the band within 10 degrees above the horizon: the colour
   // a distant view fades into (background and haze).
   const glm::vec3& horizonRadiance() const { return horizon_; }
-  const std::array<glm::vec3, 9>& coefficients() const { return coeff_; }
+  // The radiance's own projection onto the 25 real spherical harmonics of
+  // orders 0..4 (spherical_harmonics.h), linear RGB: what transfer vectors
+  // (common/avatar/transfer.h) are dotted with.
+  const std::array<glm::vec3, 25>& radiance() const { return radiance_; }
+  // Exitant radiance of a transfer vector (shTerms(orders) coefficients):
+  // sum of t_i L_i, per channel, clamped at 0.
+  glm::vec3 transferred(const float* transfer, int orders) const;
   // "hdr: FILE" or "analytic sky".
   const std::string& source() const { return source_; }
 
  private:
   std::array<glm::vec3, 9> coeff_{};  // radiance coefficients times A_l
+  std::array<glm::vec3, 25> radiance_{};
   glm::vec3 horizon_{0.0f};
   std::string source_;
 };

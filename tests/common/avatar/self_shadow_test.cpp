@@ -3,8 +3,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <glm/gtc/matrix_transform.hpp>
 
 #include "common/avatar/skinning.h"
+#include "common/light/environment_light.h"
 #include "common/scene/scene_loader.h"
 
 namespace vistream {
@@ -137,6 +139,39 @@ TEST(SelfShadow, TheWalkingFoxMatchesConvergedMonteCarlo) {
   EXPECT_EQ(stats.blockerTests, pose.positions.size() * mesh.triangles.size());
   EXPECT_GT(stats.rasterized, 0u);
   EXPECT_LT(stats.rasterized, stats.blockerTests);
+}
+
+// Turning the model and the environment together by the same rotation
+// leaves every vertex's radiance as it was (up to the masks' quantization,
+// which follows each vertex's own tangent frame).
+TEST(SelfShadow, TurningModelAndEnvironmentTogetherLeavesRadianceUnchanged) {
+  const Mesh m = ballOverFloor();
+  auto sky = [](const glm::vec3& d) {
+    return glm::vec3(std::exp(2.0f * d.y + d.x), std::exp(d.y), 1.0f + d.z * d.z);
+  };
+  const glm::mat3 r =
+      glm::mat3(glm::rotate(glm::mat4(1.0f), 0.7f, glm::normalize(glm::vec3(1, 2, -1))));
+  Mesh turned = m;
+  for (glm::vec3& p : turned.positions) p = r * p;
+  for (glm::vec3& n : turned.normals) n = glm::normalize(r * n);
+  const auto env = EnvironmentLight::project(sky, 256, "sky");
+  const auto turnedEnv = EnvironmentLight::project(
+      [&](const glm::vec3& d) { return sky(glm::transpose(r) * d); }, 256, "turned sky");
+  auto difference = [&](const SelfShadowOptions& o) {  // of all radiance
+    const SelfShadowing shadows(o);
+    std::vector<float> a, b;
+    shadows.diffuse(m.positions, m.normals, m.triangles, a);
+    shadows.diffuse(turned.positions, turned.normals, turned.triangles, b);
+    double differ = 0.0, total = 0.0;  // summed over vertices
+    for (size_t v = 0; v < m.positions.size(); ++v) {
+      const glm::vec3 ra = env.transferred(&a[v * 25], 5),
+                      rb = turnedEnv.transferred(&b[v * 25], 5);
+      differ += glm::length(ra - rb);
+      total += glm::length(ra);
+    }
+    return differ / total;
+  };
+  EXPECT_LT(difference({}), 0.01);
 }
 
 // Without a finer level the hierarchy's ring and the coarse mesh minus the
