@@ -386,6 +386,11 @@ int runClientBenchTool(int argc, char** argv) {
       ->check(CLI::Range(0, 4));
   app.add_option("--shadow-frames", a.shadow.frames, "--shadows: frames of the clip to time")
       ->check(atLeast(2));
+  app.add_option("--shadow-png", a.shadow.png,
+                 "--shadows: write a PNG of one pose unshadowed, shadowed by this method and by "
+                 "Monte Carlo, side by side");
+  app.add_option("--environment", a.shadow.environment,
+                 "--shadows: an equirectangular HDR to light the PNG (default: the model's sky)");
   return runFlatToolApp("vistream-client-bench", app, argc, argv, a.logLevel, [&] {
     if (!a.shadows) return runBench(a);
     a.shadow.json = a.json;

@@ -5,16 +5,22 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <nlohmann/json.hpp>
 #include <vector>
 
+#include "client/farfield/pipeline.h"
+#include "client/render/image.h"
+#include "client/render/render_geometry.h"
 #include "common/avatar/self_shadow.h"
 #include "common/avatar/skinning.h"
 #include "common/core/error.h"
 #include "common/core/median.h"
 #include "common/core/progress.h"
 #include "common/core/timer.h"
+#include "common/light/environment_light.h"
 #include "common/light/spherical_harmonics.h"
+#include "common/light/texture.h"
 #include "common/scene/scene_loader.h"
 
 namespace vistream {
@@ -104,6 +110,78 @@ json runJson(const Run& r) {
           {"blockers_per_vertex", r.blockersPerVertex}};
 }
 
+// One view of the posed model, each vertex coloured by albedo / pi times
+// the environment's light through its transfer vector, scaled by `exposure`.
+ImageRgb8 renderTransfer(const Pose& pose, const std::vector<glm::uvec3>& triangles,
+                         const std::vector<float>& transfer, int orders,
+                         const EnvironmentLight& light, const glm::vec3& albedo, float exposure) {
+  constexpr float kPi = 3.14159265358979f;
+  const int terms = shTerms(orders);
+  RenderGeometry g;
+  g.sky = {40, 40, 48};
+  g.haze = Haze{};
+  for (size_t t = 0; t < triangles.size(); ++t) {
+    glm::u8vec3 corners[3];
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t v = triangles[t][k];
+      g.triangles.positions.push_back(pose.positions[v]);
+      g.bounds.extend(pose.positions[v]);
+      const glm::vec3 radiance =
+          light.transferred(transfer.data() + size_t(v) * size_t(terms), orders);
+      corners[k] = encodeColour(albedo / kPi * radiance * exposure);
+    }
+    g.triangles.faceIds.push_back(uint32_t(t));
+    g.triangles.objectIds.push_back(0);
+    g.triangles.degenerate.push_back(0);
+    g.lighting.append(1, corners, 3);
+  }
+  Camera camera;
+  camera.width = camera.height = 320;
+  camera.vfovDeg = 40.0f;
+  camera.yawDeg = 55.0f;
+  camera.pitchDeg = -12.0f;
+  const glm::vec3 centre = g.bounds.center();
+  const float radius = 0.5f * glm::length(g.bounds.hi - g.bounds.lo);
+  const float distance = 1.05f * radius / std::tan(glm::radians(0.5f * camera.vfovDeg));
+  camera.eye = centre - camera.forward() * distance;
+  camera.zNear = 0.01f * radius;
+  PipelineOptions options;
+  options.mode = RenderMode::GeometryAll;
+  FrameRenderer renderer(g, options);
+  ImageRgb8 image(camera.width, camera.height);
+  renderer.render(camera, image);
+  return image;
+}
+
+// The three views of issue 15's figure for one pose: no shadows, ours,
+// Monte Carlo.
+void writeShadowPng(const std::string& file, const std::string& environment, const Model& m,
+                    size_t frame, const std::vector<float>& reference, int orders) {
+  Pose pose;
+  poseAt(m.scene, m.mesh, m.clip, m.times[frame], pose);
+  const EnvironmentLight light = environment.empty() ? EnvironmentLight::of(m.scene.environment)
+                                                     : EnvironmentLight::fromHdr(environment);
+  std::vector<std::string> warnings;
+  const auto textures = loadMaterialTextures(m.scene, warnings);
+  glm::vec3 albedo = m.scene.materials.empty() ? glm::vec3(0.8f) : m.scene.materials[0].diffuse;
+  if (!textures.empty() && textures[0]) albedo *= textures[0]->mean();
+  const SelfShadowing shadows;
+  std::vector<float> open, ours;
+  shadows.diffuse(pose.positions, pose.normals, {}, open);  // no blockers
+  shadows.diffuse(pose.positions, pose.normals, m.mesh.triangles, ours);
+  // One exposure for all three: the brightest unshadowed vertex at 0.75.
+  float brightest = 1e-6f;
+  for (size_t v = 0; v < pose.positions.size(); ++v)
+    brightest = std::max(brightest, glm::dot(albedo * light.transferred(&open[v * 25], orders),
+                                             glm::vec3(0.2126f, 0.7152f, 0.0722f)));
+  const float exposure = 0.75f * 3.14159265f / brightest;
+  const std::vector<ImageRgb8> tiles = {
+      renderTransfer(pose, m.mesh.triangles, open, orders, light, albedo, exposure),
+      renderTransfer(pose, m.mesh.triangles, ours, orders, light, albedo, exposure),
+      renderTransfer(pose, m.mesh.triangles, reference, orders, light, albedo, exposure)};
+  writePng(contactSheet(tiles, 3), file);
+}
+
 }  // namespace
 
 int runShadowBench(const ShadowBenchArgs& a) {
@@ -111,6 +189,8 @@ int runShadowBench(const ShadowBenchArgs& a) {
   if (a.subdivide < 0 || a.subdivide > 4)
     throwInputError("--subdivide {}: must be 0..4 (each pass quadruples the triangles)",
                     a.subdivide);
+  if (!a.environment.empty() && !std::filesystem::exists(a.environment))
+    throwInputError("{}: no such file (--environment)", a.environment);
   Model m;
   m.scene = loadScene(a.model);
   if (m.scene.animations.empty())
@@ -158,6 +238,9 @@ int runShadowBench(const ShadowBenchArgs& a) {
     bar.finish();
     for (size_t s = 0; s < sweep.size(); ++s) mc.emplace_back(median(ms[s]), median(err[s]));
   }
+  if (!a.png.empty() && !reference.frames.empty())
+    writeShadowPng(a.png, a.environment, m, reference.frames.front(), reference.transfer.front(),
+                   orders);
   // Monte Carlo's time at error e: log-log interpolation, or the last point
   // extended with error ~ rays^-1/2 (time ~ e^-2).
   auto mcMsAt = [&](double e) -> double {

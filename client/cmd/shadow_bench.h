@@ -24,6 +24,12 @@ struct ShadowBenchArgs {
   int frames = 8;
   int referenceFrames = 2;
   bool quick = false;  // fewer knob values and Monte Carlo rays (tests)
+  // A PNG of the first reference frame: the model unshadowed, shadowed by
+  // this method and by the Monte Carlo reference, side by side.
+  std::string png;
+  // An equirectangular HDR environment to light the PNG with; empty: the
+  // model's scene environment (the analytic sky for a bare glTF).
+  std::string environment;
   bool json = false;
 };
 

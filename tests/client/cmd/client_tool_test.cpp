@@ -327,6 +327,47 @@ TEST(ClientTool, TheShadowBenchmarkPrintsItsContractKeysForTheFox) {
   EXPECT_GE(j["knobs"].size(), 4u);
 }
 
+// The figure: the Fox unshadowed, by this method and by Monte Carlo. The
+// shadows change the picture, and ours is closer to Monte Carlo's than the
+// unshadowed one is.
+TEST(ClientTool, TheShadowFigureShowsOursCloserToMonteCarloThanNoShadows) {
+  vistream::testing::TempDir dir;
+  const std::string fox = std::string(VISTREAM_SHARED_DIR) + "/data/Fox.glb";
+  const fs::path png = dir.path() / "fox.png";
+  const auto r = runTool("vistream-client-bench", "--shadows --model " + fox +
+                                                      " --quick --shadow-frames 2 --shadow-png " +
+                                                      png.string() + " --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  const vistream::ImageRgb8 sheet = vistream::readPng(png);
+  // Three 320 x 320 tiles with 4-pixel gaps around them.
+  ASSERT_EQ(sheet.width, 3 * 320 + 4 * 4);
+  ASSERT_EQ(sheet.height, 320 + 2 * 4);
+  auto tile = [&](int k) {
+    vistream::ImageRgb8 t(320, 320);
+    for (int y = 0; y < 320; ++y)
+      for (int x = 0; x < 320; ++x) t.set(x, y, sheet.at(4 + k * (320 + 4) + x, 4 + y));
+    return t;
+  };
+  const auto open = tile(0), ours = tile(1), reference = tile(2);
+  // Over the fox's pixels: those not of the background (the corner's colour).
+  const glm::u8vec3 background = reference.at(0, 0);
+  size_t foxPixels = 0;
+  auto meanDifference = [&](const vistream::ImageRgb8& a, const vistream::ImageRgb8& b) {
+    double sum = 0.0;
+    foxPixels = 0;
+    for (int y = 0; y < 320; ++y)
+      for (int x = 0; x < 320; ++x) {
+        if (reference.at(x, y) == background) continue;
+        ++foxPixels;
+        for (int c = 0; c < 3; ++c) sum += std::abs(int(a.at(x, y)[c]) - int(b.at(x, y)[c]));
+      }
+    return sum / double(3 * std::max<size_t>(1, foxPixels));
+  };
+  EXPECT_GT(meanDifference(open, reference), 2.0);  // the shadows show
+  EXPECT_GT(foxPixels, 5000u);                      // and so does the fox
+  EXPECT_LT(meanDifference(ours, reference), 0.5 * meanDifference(open, reference));
+}
+
 TEST(ClientTool, TheShadowBenchmarkRefusesAModelItCannotAnimate) {
   vistream::testing::TempDir dir;
   const fs::path obj = dir.write("box.obj", streetObj());
