@@ -389,8 +389,9 @@ int runClientBenchTool(int argc, char** argv) {
   app.add_option("--shadow-png", a.shadow.png,
                  "--shadows: write a PNG of one pose unshadowed, shadowed by this method and by "
                  "Monte Carlo, side by side");
-  app.add_option("--environment", a.shadow.environment,
-                 "--shadows: an equirectangular HDR to light the PNG (default: the model's sky)");
+  app.add_option(
+      "--environment", a.shadow.environment,
+      "--shadows: an equirectangular HDR to light the PNG; without it, the model's own sky");
   return runFlatToolApp("vistream-client-bench", app, argc, argv, a.logLevel, [&] {
     if (!a.shadows) return runBench(a);
     a.shadow.json = a.json;
