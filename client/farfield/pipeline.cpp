@@ -331,7 +331,8 @@ struct FrameRun {
           const bool polygon = cov[x] == kCovered;
           const uint32_t t = polygon && ids ? ids[x] : 0;
           int end = x + 1;
-          while (end < W && (cov[end] == kCovered) == polygon && (!polygon || !ids || ids[end] == t))
+          while (end < W && (cov[end] == kCovered) == polygon &&
+                 (!polygon || !ids || ids[end] == t))
             ++end;
           const glm::vec3 first = pixelRays.at(float(x) + 0.5f, float(y) + 0.5f);
           uint8_t* o = out.pixels.data() + 3 * (row + size_t(x));
