@@ -124,8 +124,12 @@ size_t PlaneMaskTable::cellOf(const glm::vec3& n) const {
   }
   if (!(m > 0.0f)) return 0;
   const float s = float(cubeSide_);
-  const int i = std::clamp(int((u / m + 1.0f) * 0.5f * s), 0, cubeSide_ - 1);
-  const int j = std::clamp(int((v / m + 1.0f) * 0.5f * s), 0, cubeSide_ - 1);
+  // Clamped as floats (NaN, from an infinite normal, gives 0) before the
+  // conversion to int.
+  auto cell = [&](float c) {
+    return int(std::min(std::max(0.0f, (c / m + 1.0f) * 0.5f * s), s - 1.0f));
+  };
+  const int i = cell(u), j = cell(v);
   return (size_t(face) * size_t(cubeSide_) + size_t(j)) * size_t(cubeSide_) + size_t(i);
 }
 

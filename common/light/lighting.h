@@ -161,14 +161,16 @@ LightingGrid bakeLighting(const Scene& scene, const FlatTriangles& triangles, co
 double ambientOcclusion(const RayQuery& rays, const glm::vec3& p, const glm::vec3& n,
                         uint32_t count, float distance, uint64_t seed);
 
-// 1 - exp(-x) for x >= 0 (0 for x = 0) without a library call, so loops over pixels
+// 1 - exp(-x) for x >= 0 (0 for x <= 0 or NaN) without a library call, so loops over pixels
 // vectorize: exp(-x) = 2^n 2^f with n the integer nearest -x log2(e) and
 // |f| <= 1/2, 2^f by its degree-7 Taylor polynomial. Off by less than 1e-6
 // (a ten-thousandth of an 8-bit level in a haze); 1 beyond x = 87.
 inline float oneMinusExpNeg(float x) {
-  const float y = -std::min(x, 87.0f) * 1.44269504f;  // in [-125.6, 0]
-  const int n = int(y - 0.5f);                        // nearest integer (y <= 0)
-  const float f = (y - float(n)) * 0.693147181f;      // e^f = 2^(y - n)
+  // NaN gives 0 (std::max(0, NaN) is 0), so the conversion to int below
+  // always has a number in range.
+  const float y = -std::min(std::max(0.0f, x), 87.0f) * 1.44269504f;  // in [-125.6, 0]
+  const int n = int(y - 0.5f);                                        // nearest integer (y <= 0)
+  const float f = (y - float(n)) * 0.693147181f;                      // e^f = 2^(y - n)
   const float p =
       1.0f + f * (1.0f + f * (0.5f + f * (1.0f / 6.0f +
                                           f * (1.0f / 24.0f +

@@ -39,6 +39,8 @@ TEST(RenderGeometry, OneMinusExpNegIsWithinAMillionthOfTheLibrarysValue) {
   EXPECT_EQ(oneMinusExpNeg(0.0f), 0.0f);
   EXPECT_EQ(oneMinusExpNeg(1e30f), 1.0f);
   EXPECT_EQ(oneMinusExpNeg(INFINITY), 1.0f);
+  EXPECT_EQ(oneMinusExpNeg(NAN), 0.0f);
+  EXPECT_EQ(oneMinusExpNeg(-5.0f), 0.0f);
 }
 
 // Random triangles with random grids of levels 1..8 seen from random eyes:

@@ -111,6 +111,14 @@ TEST(HemisphereRaster, ThePlaneTableDiffersOnlyWithinItsQuantizationOfAnEdge) {
   }
 }
 
+TEST(HemisphereRaster, TheTableAnswersEveryNormalEvenInfiniteOrNaN) {
+  const PlaneMaskTable table(16, 8);
+  for (const glm::vec3& n :
+       {glm::vec3(INFINITY, 1, 0), glm::vec3(NAN, 0, 1), glm::vec3(0.0f),
+        glm::vec3(-INFINITY, -INFINITY, INFINITY), glm::vec3(1e38f, -1e38f, 3)})
+    EXPECT_NE(table.above(n), nullptr);
+}
+
 TEST(HemisphereRaster, TheTablesQuantizedNormalIsWithinHalfACellDiagonal) {
   const PlaneMaskTable table(32, 64);
   std::mt19937 rng(3);
