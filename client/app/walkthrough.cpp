@@ -137,7 +137,7 @@ nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const Pip
   const Means m = means(frames);
   nlohmann::json perFrame = nlohmann::json::array();
   std::map<std::string, std::map<std::string, size_t>> why;  // stage -> reason -> frames
-  size_t farRan = 0, horizonRan = 0, cacheRan = 0;
+  size_t farRan = 0, horizonRan = 0, cacheRan = 0, avatarsRan = 0;
   for (const FrameRecord& f : frames) {
     nlohmann::json j = f.report.toJson();
     j["frame"] = f.frame;
@@ -151,6 +151,15 @@ nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const Pip
     if (f.contrast) {
       j["distinct_colours"] = f.contrast->distinctColours;
       j["luminance_std"] = f.contrast->luminanceStd;
+    }
+    if (f.avatars) {
+      const AvatarFrame& a = *f.avatars;
+      j["avatars"] = {{"in_view", a.inView},           {"beyond_d", a.beyond},
+                      {"outside_view", a.outside},     {"poses_shaded", a.posesShaded},
+                      {"poses_reused", a.posesReused}, {"ms", a.ms},
+                      {"pixels", f.avatarPixels},      {"why", a.why}};
+      ++why["avatars"][a.why];
+      avatarsRan += a.inView > 0;
     }
     perFrame.push_back(std::move(j));
     ++why["far_field"][f.report.farFieldWhy];
@@ -166,6 +175,7 @@ nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const Pip
     for (const auto& [text, count] : reasons) r[text.empty() ? "-" : text] = count;
     stages[stage] = {{"frames_ran", stage == "far_field"         ? farRan
                                     : stage == "horizon_tracing" ? horizonRan
+                                    : stage == "avatars"         ? avatarsRan
                                                                  : cacheRan},
                      {"reasons", r}};
   }
@@ -229,6 +239,12 @@ std::string walkthroughTable(const std::vector<FrameRecord>& frames, const Pipel
   s += fmt::format("{:<28} {:>12.3f}\n", "geometry intake", m.intakeMs / m.frames);
   s += fmt::format("{:<28} {:>12.3f}\n", "wall clock (intake + frame)", m.wallMs / m.frames);
   s += fmt::format("geometry intake: {:.1f} ms in total\n", m.intakeMs);
+  std::vector<double> avatarMs;
+  for (const FrameRecord& f : frames)
+    if (f.avatars) avatarMs.push_back(f.avatars->ms);
+  if (!avatarMs.empty())
+    s += fmt::format("avatars (select, pose, shadow, build): median {:.2f} ms a frame\n",
+                     median(avatarMs));
   if (m.compared)
     s += fmt::format("\nagainst raycast-all: {:.3f}% of pixels differ, mean colour error {:.5f}\n",
                      100.0 * m.differing, m.colourError);
@@ -238,6 +254,7 @@ std::string walkthroughTable(const std::vector<FrameRecord>& frames, const Pipel
     ++why["far field"][(f.report.farFieldRan ? "ran: " : "off: ") + f.report.farFieldWhy];
     ++why["horizon tracing"][(f.report.horizonRan ? "ran: " : "off: ") + f.report.horizonWhy];
     ++why["image cache"][(f.report.cacheRan ? "ran: " : "off: ") + f.report.cacheWhy];
+    if (f.avatars) ++why["avatars"][(f.avatars->inView ? "ran: " : "off: ") + f.avatars->why];
   }
   s += "\n";
   for (const auto& [stage, reasons] : why)

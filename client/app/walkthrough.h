@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "client/avatar/avatar_view.h"
 #include "client/farfield/pipeline.h"
 #include "client/render/camera.h"
 #include "client/render/image.h"
@@ -52,13 +53,17 @@ struct FrameRecord {
   bool compared = false;
   ImageDifference difference;
   std::optional<ImageContrast> contrast;  // of the frame drawn, when measured
+  std::optional<AvatarFrame> avatars;     // when the walk shows other users
+  size_t avatarPixels = 0;                // pixels the avatars were drawn in (headless)
 };
 
 // The headless JSON contract: frames, mean_frame_ms, pixels (means of
 // polygon, horizon, cache, ray_hit, ray_miss), per_frame records, plus
 // extensions (mode, size, stage summaries, error against the reference,
 // geometry_intake_ms_total, geometry_intake_ms_per_frame, wall_ms_per_frame;
-// per frame geometry_intake_ms and wall_ms).
+// per frame geometry_intake_ms and wall_ms; with avatars, per frame
+// `avatars` {in_view, beyond_d, outside_view, poses_shaded, poses_reused,
+// ms, pixels, why} and stages.avatars as for the pipeline's stages).
 nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames,
                                const PipelineOptions& options, int width, int height);
 // The same for people: an aligned table of pixel classes and stage times.

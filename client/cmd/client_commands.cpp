@@ -17,6 +17,8 @@
 #include <string>
 
 #include "client/app/walkthrough.h"
+#include "client/avatar/avatar_view.h"
+#include "client/avatar/crowd.h"
 #include "client/farfield/pipeline.h"
 #include "client/gl/gl_renderer.h"
 #include "client/gl/gl_window.h"
@@ -55,6 +57,9 @@ struct Args {
   int horizonSubsample = 4;
   double pathSpeed = 1.0;
   double waitS = 20.0;
+  size_t avatars = 0;         // simulated users walking local paths
+  std::string avatarModel;    // skinned glTF; empty: the default
+  float avatarHeight = 1.2f;  // metres
 };
 
 RenderMode parseMode(const std::string& m) {
@@ -263,9 +268,49 @@ struct LiveGeometry {
   }
 };
 
+// Other users in the frames: simulated walkers (--avatars N) shown as the
+// avatar model, shaded with self-shadows under the scene's light.
+struct Avatars {
+  std::unique_ptr<LocalCrowd> crowd;
+  std::unique_ptr<AvatarView> view;
+  std::vector<double> times;  // per camera: the path's clock
+  RenderGeometry dynamic;     // this frame's avatars
+
+  explicit operator bool() const { return view != nullptr; }
+  // Builds this frame's avatars for camera i into `dynamic`.
+  AvatarFrame build(size_t i, const Camera& camera, float nearDistance) {
+    return view->build(camera, nearDistance, crowd->at(times[i]), dynamic);
+  }
+};
+
+// The avatar model: --avatar-model, else the Fox beside the clone
+// (VISTREAM_DEFAULT_AVATAR, set at build time).
+std::filesystem::path avatarModelPath(const Args& a) {
+  if (!a.avatarModel.empty()) return a.avatarModel;
+  return VISTREAM_DEFAULT_AVATAR;
+}
+
+Avatars makeAvatars(const Args& a, const Scene& scene, const std::vector<PathSample>& path,
+                    const RenderGeometry& geometry, const RayQuery& rays) {
+  Avatars out;
+  if (a.avatars == 0) return out;
+  const std::filesystem::path file = avatarModelPath(a);
+  auto model = std::make_shared<const AvatarModel>(AvatarModel::load(file, a.avatarHeight));
+  for (const std::string& w : model->warnings()) spdlog::warn("{}", w);
+  const AvatarLight light =
+      AvatarLight::of(EnvironmentLight::of(scene.environment), scene.environment);
+  out.view = std::make_unique<AvatarView>(model, light, geometry.haze, &rays);
+  out.crowd = std::make_unique<LocalCrowd>(path, scene.origin, a.avatars, &rays);
+  for (const PathSample& s : path) out.times.push_back(s.t);
+  spdlog::info("{} simulated users shown as {} ({} vertices, {} triangles)", a.avatars,
+               model->name(), model->vertexCount(), model->triangleCount());
+  return out;
+}
+
 // Headless: software near field, PNG frames, statistics.
 int runHeadless(const Args& a, LiveGeometry& live, const std::vector<Camera>& cameras,
-                glm::ivec2 size, StreamClient* net, ConnectionFigures& connection) {
+                glm::ivec2 size, StreamClient* net, ConnectionFigures& connection,
+                Avatars& avatars) {
   std::vector<FrameRecord> records;
   ImageRgb8 image, refImage;
   ContactSheetRow sheet(a.sheetFile, cameras.size());
@@ -292,9 +337,14 @@ int runHeadless(const Args& a, LiveGeometry& live, const std::vector<Camera>& ca
     if (net) live.refresh(*net, /*force=*/true);
     r.geometryIntakeMs = wall.ms();
     r.report = live.renderer->render(cameras[i], image);
+    if (avatars) {
+      r.avatars = avatars.build(i, cameras[i], live.renderer->polygonDistance());
+      r.avatarPixels = live.renderer->drawDynamic(cameras[i], avatars.dynamic, image);
+    }
     r.wallMs = wall.ms();
     if (live.reference) {
       live.reference->render(cameras[i], refImage);
+      if (avatars) live.reference->drawDynamic(cameras[i], avatars.dynamic, refImage);
       r.compared = true;
       r.difference = compareImages(image, refImage);
     }
@@ -313,7 +363,7 @@ int runHeadless(const Args& a, LiveGeometry& live, const std::vector<Camera>& ca
 
 // Windowed: OpenGL near field; along a path (frames written if --out) or interactive.
 int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, glm::ivec2 size,
-              Camera start, StreamClient* net) {
+              Camera start, StreamClient* net, Avatars& avatars) {
   const PipelineOptions& o = live.options;
   GlWindowOptions wo;
   wo.width = size.x;
@@ -343,6 +393,10 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
       FrameRecord r;
       r.frame = i;
       r.report = live.renderer->renderFarField(cameras[i], farImage, near);
+      if (avatars) {
+        r.avatars = avatars.build(i, cameras[i], live.renderer->polygonDistance());
+        gl.uploadDynamic(avatars.dynamic);
+      }
       gl.draw(cameras[i], farImage, near, live.renderer->polygonDistance());
       if (!a.outDir.empty() || !a.sheetFile.empty()) {
         const ImageRgb8 frame = gl.readBack(size.x, size.y);
@@ -410,6 +464,15 @@ int run(const Args& a) {
         "--scene");
   if (a.headless && a.pathFile.empty())
     throwInputError("--headless needs --path (a path file, or auto)");
+  if (a.avatars > 0 && !local)
+    throwInputError(InputErrorCode::BadArgument,
+                    "--avatars simulates users in a local scene: give --scene, not --host "
+                    "(a connected client shows the users the server reports)");
+  if (a.avatars > 0 && a.pathFile.empty())
+    throwInputError("--avatars needs --path: the simulated users walk beside it");
+  if (a.avatars > 0 && !std::filesystem::exists(avatarModelPath(a)))
+    throwInputError("--avatars: the avatar model {} does not exist (give --avatar-model)",
+                    avatarModelPath(a).string());
   const glm::ivec2 size = parseImageSize(a.size);
   const RenderMode mode = parseMode(a.mode);
   // Numbers are range-checked at parse time (see runClientTool).
@@ -481,7 +544,9 @@ int run(const Args& a) {
     live.local->groundY = ground.y;
     if (ground.y) spdlog::info("ground {}", ground.why);
   }
-  if (a.headless) return runHeadless(a, live, cameras, size, net.get(), connection);
+  Avatars avatars;
+  if (a.avatars > 0) avatars = makeAvatars(a, *scene, path, live.geometry(), live.renderer->rays());
+  if (a.headless) return runHeadless(a, live, cameras, size, net.get(), connection, avatars);
   Camera start;
   start.width = size.x;
   start.height = size.y;
@@ -490,7 +555,7 @@ int run(const Args& a) {
     start = cameras.front();
   else if (!live.geometry().bounds.empty())
     start.eye = live.geometry().bounds.center();
-  return runWindow(a, live, cameras, size, start, net.get());
+  return runWindow(a, live, cameras, size, start, net.get(), avatars);
 }
 
 }  // namespace
@@ -565,6 +630,15 @@ int runClientTool(int argc, char** argv) {
       ->check(nonNegative());
   app.add_flag("--compare", a.compare,
                "also render raycast-all and report the image error of every frame");
+  app.add_option("--avatars", a.avatars,
+                 "local: N simulated users walking beside the path, drawn as animated, "
+                 "self-shadowed avatars")
+      ->check(CLI::Range(size_t(0), size_t(1000)));
+  app.add_option("--avatar-model", a.avatarModel, "the avatars' skinned glTF model")
+      ->default_str(std::filesystem::path(VISTREAM_DEFAULT_AVATAR).filename().string() +
+                    " beside the clone (../shared/data)");
+  app.add_option("--avatar-height", a.avatarHeight, "the avatars' height, metres")
+      ->check(between(0.1, 10.0));
   app.add_option("--log-level", a.logLevel, "trace, debug, info, warn, error, critical, off");
   return runFlatToolApp("vistream-client", app, argc, argv, a.logLevel, [&] { return run(a); });
 }

@@ -232,6 +232,7 @@ struct FrameRun {
   void drawPolygons() {
     Stopwatch clock;
     const auto& triangles = r.geometry_.triangles;
+    r.idsDrawn_ = !glNear;
     if (glNear) {
       *glNear = r.near_;
       r.raster_.coverage(camera, triangles, r.near_, kGlInsetPx, r.covered_, r.polygonDistance());
@@ -461,6 +462,52 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out,
   f.compose();
   f.rep.ms.total = total.ms();
   return std::move(f.rep);
+}
+
+size_t FrameRenderer::drawDynamic(const Camera& camera, const RenderGeometry& dynamic,
+                                  ImageRgb8& out) {
+  const size_t n = dynamic.size();
+  if (n == 0) return 0;
+  VS_CHECK(idsDrawn_ && ids_.width == camera.width && ids_.height == camera.height);
+  VS_CHECK(out.width == camera.width && out.height == camera.height);
+  dynamicWhich_.resize(n);
+  for (size_t t = 0; t < n; ++t) dynamicWhich_[t] = uint32_t(t);
+  dynamicRaster_.draw(camera, dynamic.triangles, dynamicWhich_, dynamicIds_, polygonDistance());
+  const int W = camera.width, H = camera.height;
+  const Camera::PixelRays pixelRays = camera.pixelRays();
+  std::vector<EyeTriangle> seen(n);
+  for (size_t t = 0; t < n; ++t) seen[t] = EyeTriangle::of(dynamic.triangles, t, camera.eye);
+  // Fragments that pass the near field's depth test.
+  std::vector<uint32_t> pixels;
+  for (size_t p = 0; p < size_t(W) * size_t(H); ++p) {
+    const uint32_t id = dynamicIds_.ids[p];
+    if (id >= kBeyondDistance) continue;
+    const uint32_t near = ids_.ids[p];
+    if (near < kBeyondDistance && ids_.inverseDepth[p] >= dynamicIds_.inverseDepth[p]) continue;
+    pixels.push_back(uint32_t(p));
+  }
+  // Raycast-all frames have no near field: the static scene's rays decide.
+  std::vector<uint8_t> hidden(pixels.size(), 0);
+  if (options_.mode == RenderMode::RaycastAll && !pixels.empty()) {
+    std::vector<Ray> rays(pixels.size());
+    for (size_t k = 0; k < pixels.size(); ++k) {
+      const size_t p = pixels[k];
+      const glm::vec3 dir = pixelRays.at(float(p % size_t(W)) + 0.5f, float(p / size_t(W)) + 0.5f);
+      // The fragment's view depth is 1 / inverseDepth; dir has unit depth.
+      rays[k] = Ray{camera.eye, dir, 0.0f, 1.0f / dynamicIds_.inverseDepth[p]};
+    }
+    rays_->occludedMany(rays, hidden);
+  }
+  size_t drawn = 0;
+  for (size_t k = 0; k < pixels.size(); ++k) {
+    if (hidden[k]) continue;
+    const size_t p = pixels[k];
+    const int x = int(p % size_t(W)), y = int(p / size_t(W));
+    const uint32_t t = dynamicIds_.ids[p];
+    out.set(x, y, dynamic.colourAlong(t, seen[t], pixelRays.at(float(x) + 0.5f, float(y) + 0.5f)));
+    ++drawn;
+  }
+  return drawn;
 }
 
 }  // namespace vistream

@@ -163,6 +163,14 @@ class FrameRenderer {
   // far-field image (valid wherever the opacity buffer is uncovered).
   FrameReport renderFarField(const Camera& camera, ImageRgb8& farImage,
                              std::vector<uint32_t>& near);
+  // Dynamic objects (avatars, client/avatar/avatar_view.h) over the frame
+  // render() just drew into `out`, with a depth test against it: against the
+  // near field's depth where polygons cover a pixel; elsewhere in
+  // raycast-all mode by a shadow ray from the eye to the fragment; the far
+  // field lies beyond d, where dynamic fragments are dropped. Colours by
+  // barycentrics and haze as for static triangles. Returns the pixels drawn.
+  // Not for renderFarField frames: OpenGL draws the dynamic objects there.
+  size_t drawDynamic(const Camera& camera, const RenderGeometry& dynamic, ImageRgb8& out);
   // How far from the eye polygons are drawn: d in pipeline mode, unlimited
   // in geometry-all. An OpenGL near field discards fragments beyond it.
   float polygonDistance() const;
@@ -210,6 +218,10 @@ class FrameRenderer {
   std::unique_ptr<PanoramicCache> cache_;
   SoftwareRasterizer raster_;
   IdBuffer ids_;
+  bool idsDrawn_ = false;  // ids_ holds the last frame's near field (not an OpenGL frame)
+  SoftwareRasterizer dynamicRaster_;
+  IdBuffer dynamicIds_;
+  std::vector<uint32_t> dynamicWhich_;
   std::vector<EyeTriangle> seen_;  // per triangle, set up for the frame's eye (near field only)
   std::vector<uint8_t> covered_;
   std::vector<uint32_t> near_, stamp_;

@@ -298,12 +298,49 @@ struct GlRenderer::Impl {
   GLint hudViewport = hudProgram.uniform("viewport");
   GLint hudColour = hudProgram.uniform("colour");
 
-  VertexArray nearArray;
-  Buffer nearVertices;
-  Buffer nearIndices;
-  TextureBuffer gridBuffer, colourBuffer;
-  Haze haze;
-  size_t triangleCount = 0;
+  // Triangles with their colour grids: the static near field, and the
+  // dynamic objects (avatars), uploaded every frame they change.
+  struct TriangleSet {
+    VertexArray array;
+    Buffer vertices;
+    Buffer indices;
+    TextureBuffer grids, colours;
+    Haze haze;
+    size_t triangleCount = 0;
+
+    TriangleSet() {
+      glBindVertexArray(array.id);
+      glBindBuffer(GL_ARRAY_BUFFER, vertices.id);
+      glEnableVertexAttribArray(0);
+      glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(glm::vec3), nullptr);
+      glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, indices.id);  // recorded in the vertex array
+      glBindVertexArray(0);
+    }
+    void upload(const RenderGeometry& geometry, GLenum usage) {
+      const size_t n = geometry.size();
+      VS_CHECK_EQ(geometry.triangles.positions.size(), 3 * n);
+      const LightingGrid& lighting = geometry.lighting;
+      VS_CHECK_EQ(lighting.size(), n);
+      glBindBuffer(GL_ARRAY_BUFFER, vertices.id);
+      glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(std::max<size_t>(1, 3 * n) * sizeof(glm::vec3)),
+                   n ? geometry.triangles.positions.data() : nullptr, usage);
+      std::vector<glm::uvec2> g(n);
+      for (size_t t = 0; t < n; ++t) g[t] = glm::uvec2(lighting.first[t], lighting.level[t]);
+      std::vector<glm::u8vec4> c(lighting.colours.size());
+      for (size_t i = 0; i < c.size(); ++i) c[i] = glm::u8vec4(lighting.colours[i], 255);
+      GLint maxTexels = 0;
+      glGetIntegerv(GL_MAX_TEXTURE_BUFFER_SIZE, &maxTexels);
+      if (size_t(maxTexels) < std::max(g.size(), c.size()))
+        throw std::runtime_error(fmt::format(
+            "OpenGL: {} lighting colours exceed this driver's texture buffer limit of {} texels",
+            c.size(), maxTexels));
+      grids.upload(GL_RG32UI, g);
+      colours.upload(GL_RGBA8, c);
+      haze = geometry.haze;
+      triangleCount = n;
+    }
+  };
+  TriangleSet staticSet, dynamicSet;
   std::vector<GLuint> indices;  // scratch, reused every frame
 
   VertexArray emptyArray;  // core profile draws need a bound vertex array
@@ -315,12 +352,6 @@ struct GlRenderer::Impl {
   std::vector<glm::vec2> hudScratch;
 
   Impl() {
-    glBindVertexArray(nearArray.id);
-    glBindBuffer(GL_ARRAY_BUFFER, nearVertices.id);
-    glEnableVertexAttribArray(0);
-    glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(glm::vec3), nullptr);
-    glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, nearIndices.id);  // recorded in the vertex array
-
     glBindVertexArray(hudArray.id);
     glBindBuffer(GL_ARRAY_BUFFER, hudVertices.id);
     glEnableVertexAttribArray(0);
@@ -354,17 +385,20 @@ struct GlRenderer::Impl {
     glDrawArrays(GL_TRIANGLES, 0, 3);
   }
 
-  void drawNear(const Camera& camera, std::span<const uint32_t> near, float nearDistance) {
-    if (near.empty()) return;
-    indices.resize(3 * near.size());
-    for (size_t i = 0; i < near.size(); ++i) {
-      const uint32_t t = near[i];
-      VS_CHECK_LT(size_t(t), triangleCount);
+  // Triangles `which` of `set` (all of them if null) with a depth test.
+  void drawSet(const Camera& camera, TriangleSet& set, const std::span<const uint32_t>* which,
+               float nearDistance) {
+    const size_t count = which ? which->size() : set.triangleCount;
+    if (count == 0) return;
+    indices.resize(3 * count);
+    for (size_t i = 0; i < count; ++i) {
+      const uint32_t t = which ? (*which)[i] : uint32_t(i);
+      VS_CHECK_LT(size_t(t), set.triangleCount);
       indices[3 * i] = 3 * t;
       indices[3 * i + 1] = 3 * t + 1;
       indices[3 * i + 2] = 3 * t + 2;
     }
-    glBindVertexArray(nearArray.id);
+    glBindVertexArray(set.array.id);
     const GLsizeiptr bytes = GLsizeiptr(indices.size() * sizeof(GLuint));
     // Orphan last frame's list, so the driver need not wait for the GPU to finish with it.
     glBufferData(GL_ELEMENT_ARRAY_BUFFER, bytes, nullptr, GL_STREAM_DRAW);
@@ -376,10 +410,10 @@ struct GlRenderer::Impl {
     glUniform1f(maxDistance, std::isfinite(nearDistance) ? nearDistance : 3.0e38f);
     glUniform1i(grids, 1);
     glUniform1i(colours, 2);
-    glUniform3f(hazeColour, haze.colour.r, haze.colour.g, haze.colour.b);
-    glUniform1f(hazeScale, haze.scale);
-    gridBuffer.bind(GL_TEXTURE1);
-    colourBuffer.bind(GL_TEXTURE2);
+    glUniform3f(hazeColour, set.haze.colour.r, set.haze.colour.g, set.haze.colour.b);
+    glUniform1f(hazeScale, set.haze.scale);
+    set.grids.bind(GL_TEXTURE1);
+    set.colours.bind(GL_TEXTURE2);
     glActiveTexture(GL_TEXTURE0);
     glEnable(GL_DEPTH_TEST);
     glDepthFunc(GL_LESS);
@@ -455,27 +489,11 @@ GlRenderer::GlRenderer() : impl_(std::make_unique<Impl>()) {}
 GlRenderer::~GlRenderer() = default;
 
 void GlRenderer::upload(const RenderGeometry& geometry) {
-  const size_t n = geometry.size();
-  VS_CHECK_EQ(geometry.triangles.positions.size(), 3 * n);
-  const LightingGrid& lighting = geometry.lighting;
-  VS_CHECK_EQ(lighting.size(), n);
-  glBindBuffer(GL_ARRAY_BUFFER, impl_->nearVertices.id);
-  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(std::max<size_t>(1, 3 * n) * sizeof(glm::vec3)),
-               n ? geometry.triangles.positions.data() : nullptr, GL_STATIC_DRAW);
-  std::vector<glm::uvec2> grids(n);
-  for (size_t t = 0; t < n; ++t) grids[t] = glm::uvec2(lighting.first[t], lighting.level[t]);
-  std::vector<glm::u8vec4> colours(lighting.colours.size());
-  for (size_t i = 0; i < colours.size(); ++i) colours[i] = glm::u8vec4(lighting.colours[i], 255);
-  GLint maxTexels = 0;
-  glGetIntegerv(GL_MAX_TEXTURE_BUFFER_SIZE, &maxTexels);
-  if (size_t(maxTexels) < std::max(grids.size(), colours.size()))
-    throw std::runtime_error(fmt::format(
-        "OpenGL: {} lighting colours exceed this driver's texture buffer limit of {} texels",
-        colours.size(), maxTexels));
-  impl_->gridBuffer.upload(GL_RG32UI, grids);
-  impl_->colourBuffer.upload(GL_RGBA8, colours);
-  impl_->haze = geometry.haze;
-  impl_->triangleCount = n;
+  impl_->staticSet.upload(geometry, GL_STATIC_DRAW);
+}
+
+void GlRenderer::uploadDynamic(const RenderGeometry& geometry) {
+  impl_->dynamicSet.upload(geometry, GL_STREAM_DRAW);
 }
 
 void GlRenderer::draw(const Camera& camera, const ImageRgb8& farField,
@@ -506,7 +524,8 @@ void GlRenderer::draw(const Camera& camera, const ImageRgb8& farField,
     glClearDepth(1.0);
     glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
   }
-  impl_->drawNear(camera, near, nearDistance);
+  impl_->drawSet(camera, impl_->staticSet, &near, nearDistance);
+  impl_->drawSet(camera, impl_->dynamicSet, nullptr, nearDistance);
   impl_->drawHud(camera, hud);
   glBindVertexArray(0);
   glUseProgram(0);

@@ -7,7 +7,8 @@
 //  2. the near-field triangles are drawn over it with a depth test, each in
 //     its prelit colour (RenderGeometry::colours), flat, unlit; fragments
 //     farther than the near-field distance d from the eye are discarded
-//     (those pixels belong to the far field).
+//     (those pixels belong to the far field); then the dynamic objects
+//     (uploadDynamic) the same way.
 // A pixel the near field covers shows the near field; any other pixel shows
 // the far-field image. The opacity buffer is made on the CPU with an inset
 // (see SoftwareRasterizer::coverage), so every pixel it calls covered is
@@ -58,6 +59,9 @@ class GlRenderer {
   // 3 vertices a triangle, triangle t at vertices 3t..3t+2). Call again when
   // the geometry changed.
   void upload(const RenderGeometry& geometry);
+  // Uploads the dynamic objects (avatars) drawn whole after the near field,
+  // with the same depth test and maximum distance; an empty geometry draws none.
+  void uploadDynamic(const RenderGeometry& geometry);
   // Draws one frame into the current framebuffer (camera.width x camera.height):
   // the far-field image as background, then triangles `near` (indices into
   // the uploaded geometry) with a depth test, then the HUD lines (top left,

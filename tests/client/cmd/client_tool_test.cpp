@@ -178,6 +178,9 @@ TEST(ClientTool, BadArgumentsGetAClearErrorAndANonZeroExit) {
       {"--scene " + scene.string() + " --headless --path " + (dir.path() / "missing.csv").string(),
        "missing.csv"},
       {"--host 127.0.0.1 --port 1 --headless --path " + path.string(), "127.0.0.1:1"},
+      {common + " --avatars 2 --avatar-model " + (dir.path() / "nofox.glb").string(), "nofox.glb"},
+      {common + " --avatars 2 --avatar-model " + scene.string(), "street.obj"},  // no skin
+      {"--host 127.0.0.1 --port 1 --headless --avatars 2 --path " + path.string(), "--avatars"},
   };
   for (const auto& [args, mention] : cases) {
     const auto r = runTool("vistream-client", args);
@@ -188,6 +191,55 @@ TEST(ClientTool, BadArgumentsGetAClearErrorAndANonZeroExit) {
   EXPECT_EQ(help.status, 0);
   EXPECT_NE(help.out.find("--headless"), std::string::npos);
   EXPECT_EQ(runTool("vistream-client-bench", "--help").status, 0);
+}
+
+// Simulated users walk beside the path as Fox avatars: the JSON says per
+// frame how many were in view and why, frames show them (orange pixels the
+// walk without them lacks), and the summary counts the frames they ran in.
+TEST(ClientTool, AvatarsWalkBesideTheHeadlessPathAndSayWhyTheyRan) {
+  vistream::testing::TempDir dir;
+  const fs::path scene = dir.write("street.obj", streetObj());
+  std::string walk = "t,x,y,z,yaw_deg,pitch_deg\n";  // 30 m at 1.5 m/s
+  for (int i = 0; i < 100; ++i)
+    walk += std::to_string(i / 5.0) + ",0,1.7," + std::to_string(10.0 - 0.3 * i) + ",0,-5\n";
+  const fs::path path = dir.write("walk.csv", walk);
+  const std::string common = "--scene " + scene.string() + " --headless --json --size 160x120 " +
+                             "--path " + path.string();
+  const auto with =
+      runTool("vistream-client", common + " --avatars 4 --out " + (dir.path() / "with").string());
+  ASSERT_EQ(with.status, 0) << with.err;
+  const auto without =
+      runTool("vistream-client", common + " --out " + (dir.path() / "without").string());
+  ASSERT_EQ(without.status, 0) << without.err;
+  const nlohmann::json j = parseJson(with.out);
+  ASSERT_TRUE(j["stages"].contains("avatars"));
+  EXPECT_GE(j["stages"]["avatars"]["frames_ran"].get<size_t>(), 60u);
+  for (const auto& f : j["per_frame"]) {
+    const auto& a = f["avatars"];
+    // The walker 6 m ahead is in view until the path's end turns it back
+    // (from 24 m, frame 80).
+    if (f["frame"].get<size_t>() < 60) {
+      EXPECT_GE(a["in_view"].get<size_t>(), 1u);
+    }
+    EXPECT_EQ(
+        a["in_view"].get<size_t>() + a["beyond_d"].get<size_t>() + a["outside_view"].get<size_t>(),
+        4u);
+    EXPECT_NE(a["why"].get<std::string>().find("in view"), std::string::npos);
+  }
+  EXPECT_FALSE(parseJson(without.out)["per_frame"][0].contains("avatars"));
+  // Where the frames differ, the one with avatars shows the Fox's orange.
+  const auto a = vistream::readPng(dir.path() / "with" / "frame_00010.png");
+  const auto b = vistream::readPng(dir.path() / "without" / "frame_00010.png");
+  size_t differ = 0, orange = 0;
+  for (int y = 0; y < a.height; ++y)
+    for (int x = 0; x < a.width; ++x) {
+      const glm::u8vec3 c = a.at(x, y);
+      if (c == b.at(x, y)) continue;
+      ++differ;
+      orange += c.r > c.b + 40;
+    }
+  EXPECT_GT(differ, 100u);
+  EXPECT_GT(orange, differ / 2);
 }
 
 TEST(ClientTool, AServerThatSendsGarbageEndsTheClientWithAClearError) {

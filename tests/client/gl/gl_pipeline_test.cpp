@@ -2,9 +2,11 @@
 // through FrameRenderer::renderFarField + GlRenderer (OpenGL near field,
 // opacity buffer with an inset) and through FrameRenderer::render (software
 // near field) gives the same frame, up to pixels on triangle edges.
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <memory>
+#include <nlohmann/json.hpp>
 
 #include "client/app/walkthrough.h"
 #include "client/farfield/pipeline.h"
@@ -83,6 +85,36 @@ TEST(GlPipeline, TheWindowedClientRendersAPathLikeTheHeadlessOne) {
     EXPECT_LT(d.differingFraction, 0.005) << name;
     EXPECT_EQ(d.interiorDiffering, 0u) << name;
   }
+}
+
+// Avatars (simulated users beside the path) look the same in a window as
+// headless: OpenGL draws them from the same corner colours with the same
+// depth test, so only edge pixels may differ.
+TEST(GlPipeline, TheWindowedClientDrawsAvatarsLikeTheHeadlessOne) {
+  vistream::testing::TempDir dir;
+  const std::string common =
+      "--scene city1 --path auto --frames 40 --avatars 4 --size 200x150 --polygon-budget 0 "
+      "--near-distance 60";
+  const auto window = vistream::testing::runTool("vistream-client",
+                                                 common + " --out " + (dir.path() / "gl").string());
+  ASSERT_EQ(window.status, 0) << window.err;
+  const auto headless = vistream::testing::runTool(
+      "vistream-client", common + " --headless --json --out " + (dir.path() / "soft").string());
+  ASSERT_EQ(headless.status, 0) << headless.err;
+  const nlohmann::json j = nlohmann::json::parse(headless.out);
+  size_t withAvatars = 0;
+  for (const auto& f : j["per_frame"]) {
+    const size_t avatarPixels = f["avatars"]["pixels"].get<size_t>();
+    if (avatarPixels < 100) continue;
+    ++withAvatars;
+    const std::string name = fmt::format("frame_{:05d}.png", f["frame"].get<size_t>());
+    const ImageDifference d =
+        compareImages(readPng(dir.path() / "gl" / name), readPng(dir.path() / "soft" / name),
+                      /*tolerance=*/1);
+    EXPECT_LT(d.differingFraction, 0.005) << name << " with " << avatarPixels << " avatar pixels";
+    EXPECT_EQ(d.interiorDiffering, 0u) << name;
+  }
+  EXPECT_GT(withAvatars, 5u) << "frames that show avatars";
 }
 
 }  // namespace

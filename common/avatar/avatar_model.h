@@ -1,0 +1,162 @@
+// Avatars: a skinned glTF model made ready to stand for a user in a scene,
+// and its self-shadowed colours under the scene's light.
+//
+// An AvatarModel is a skinned model (skinning.h) in metres: scaled so its
+// rest pose is `height` tall, its feet on y = 0 and its footprint centred on
+// the origin, facing +Z (glTF's front). A user's avatar stands at its feet
+// position and turns with the user's yaw: the model's +Z becomes the view
+// direction (yaw 0 looks along -Z, so the model turns by yaw + 180 degrees).
+//
+// Gait follows speed: standing (below kStandingSpeed) plays the model's
+// idle clip ("Survey" on the Fox), walking its "Walk" clip, running (from
+// kRunningSpeed) its "Run" clip; a model without a clip of that name plays
+// its first clip, and a model without clips stands in its rest pose.
+//
+// Shading (AvatarShader) follows Kautz, Lehtinen and Aila (2004): per
+// vertex a diffuse SH transfer vector with self-shadowing (self_shadow.h),
+// dotted with the light. The light is the static scene's, in the same
+// units as its baked colours (common/light/lighting.h): the environment's
+// radiance times skyExposure plus the sun projected into the same 25
+// coefficients, so an avatar's open, up-facing white surface gets what a
+// static one gets, and parts it shadows itself get less. Corner colours are
+// the vertex's light times the albedo of its material and texture around the
+// corner's texture coordinate, encoded as the baked colours are (gamma 2.2).
+//
+// Coefficient reuse: a pose depends on (clip, clip time) only, so the shader
+// samples clip time at `poseRate` poses a second and keeps each sampled
+// pose's positions, normals and transfer vectors in model space; turning an
+// avatar rotates the light, not the transfer vectors (SH rotation). Many
+// avatars playing the same clip share the work.
+//
+// Thread safety: an AvatarModel is immutable. An AvatarShader's shade() may
+// not run concurrently with itself (its pose cache); the self-shadow loop
+// inside runs in parallel (TBB).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <glm/glm.hpp>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "common/avatar/self_shadow.h"
+#include "common/avatar/skinning.h"
+#include "common/light/environment_light.h"
+#include "common/light/lighting.h"
+#include "common/scene/scene.h"
+
+namespace vistream {
+
+enum class Gait : uint8_t { Stand, Walk, Run };
+const char* gaitName(Gait g);
+inline constexpr float kStandingSpeed = 0.2f;  // m/s: slower is standing
+inline constexpr float kRunningSpeed = 2.5f;   // m/s: faster is running
+Gait gaitForSpeed(float metresPerSecond);
+
+class AvatarModel {
+ public:
+  // The first skinned object of `scene` (InputError if none, naming
+  // `name`). heightM > 0.
+  static AvatarModel fromScene(Scene scene, const std::string& name, float heightM);
+  // Loads a skinned glTF file (loadScene; InputError naming the file).
+  static AvatarModel load(const std::filesystem::path& file, float heightM);
+
+  const std::string& name() const { return name_; }
+  float height() const { return height_; }
+  // Welded vertices (one per position and skin): what is posed and shaded.
+  size_t vertexCount() const { return welded_.positions.size(); }
+  size_t triangleCount() const { return welded_.triangles.size(); }
+  const std::vector<glm::uvec3>& triangles() const { return welded_.triangles; }
+  // Per triangle corner (3t + k): linear albedo.
+  const std::vector<glm::vec3>& cornerAlbedo() const { return cornerAlbedo_; }
+  // Face IDs of the model's source file, per triangle.
+  const std::vector<uint32_t>& faceIds() const { return source_.faceIds; }
+  // The clip played for a gait (null: the rest pose), and its length in
+  // seconds (0 without a clip).
+  const Animation* clip(Gait g) const { return clips_[size_t(g)]; }
+  float clipDuration(Gait g) const;
+  // Radius of a sphere around (0, height / 2, 0) holding every pose of
+  // every clip (sampled), metres: for culling against the view.
+  float boundingRadius() const { return boundingRadius_; }
+  // Warnings met while loading (missing textures).
+  const std::vector<std::string>& warnings() const { return warnings_; }
+
+  // Positions (metres, model frame as above) and unit normals of the welded
+  // vertices at clip time t of gait g's clip.
+  void pose(Gait g, float t, Pose& out) const;
+
+ private:
+  std::string name_;
+  float height_ = 1.0f;
+  std::shared_ptr<const Scene> scene_;
+  SkinnedMesh source_, welded_;
+  std::vector<glm::vec3> cornerAlbedo_;
+  std::array<const Animation*, 3> clips_{};
+  glm::mat4 toMetres_{1.0f};
+  float boundingRadius_ = 1.0f;
+  std::vector<std::string> warnings_;
+};
+
+// The light an avatar is shaded with: 25 RGB coefficients (orders 0..4) in
+// the units of the static scene's baked colours.
+struct AvatarLight {
+  std::array<glm::vec3, 25> sky{};  // the environment's radiance times skyExposure
+  std::array<float, 25> sun{};      // sunIntensity times the sun as a directional light (white)
+  glm::vec3 sunDirection{0.0f};     // towards the sun, world frame (turned() keeps it); 0: no sun
+  static AvatarLight of(const EnvironmentLight& environment, const Environment& scene,
+                        const LightingOptions& options = {});
+  // The same light seen from a model turned by `yawDeg` about +Y (as
+  // AvatarPlacement turns it): rotated the other way.
+  AvatarLight turned(float yawDeg) const;
+  // Sum of t_i (sky_i + sunVisible sun_i) per channel for a transfer vector
+  // of 25 terms, clamped at 0.
+  glm::vec3 apply(const float* transfer, float sunVisible = 1.0f) const;
+};
+
+struct AvatarShaderOptions {
+  SelfShadowOptions shadows;
+  float poseRate = 30.0f;  // sampled poses a second of clip time; 0: every pose exactly
+  size_t maxCachedPoses = 1024;
+};
+
+struct ShadedAvatar {
+  std::vector<glm::vec3> positions;  // per welded vertex, model frame (metres)
+  std::vector<glm::u8vec3> corners;  // per triangle corner: encoded colour
+};
+
+class AvatarShader {
+ public:
+  AvatarShader(std::shared_ptr<const AvatarModel> model, const AvatarShaderOptions& options = {});
+  const AvatarModel& model() const { return *model_; }
+  const AvatarShaderOptions& options() const { return options_; }
+
+  // The model in gait g at clip time t, lit by `light` (already turned to
+  // the model's frame), its sun dimmed by `sunVisible` in [0, 1] (the static
+  // scene's shadow).
+  void shade(Gait g, float t, const AvatarLight& light, float sunVisible, ShadedAvatar& out);
+
+  struct Stats {
+    uint64_t posesShaded = 0;  // self-shadow loops run
+    uint64_t posesReused = 0;  // served from the cache
+    double shadowMs = 0.0;     // in the self-shadow loops
+  };
+  const Stats& stats() const { return stats_; }
+
+ private:
+  struct Sampled {
+    Pose pose;
+    std::vector<float> transfer;
+  };
+  const Sampled& sampled(Gait g, float t);
+  std::shared_ptr<const AvatarModel> model_;
+  AvatarShaderOptions options_;
+  SelfShadowing shadowing_;
+  std::map<std::pair<int, int64_t>, Sampled> cache_;
+  Sampled exact_;
+  Stats stats_;
+};
+
+}  // namespace vistream

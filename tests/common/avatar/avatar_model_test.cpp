@@ -1,0 +1,148 @@
+#include "common/avatar/avatar_model.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <glm/gtc/matrix_transform.hpp>
+
+#include "common/core/error.h"
+#include "common/light/spherical_harmonics.h"
+
+namespace vistream {
+namespace {
+
+std::filesystem::path foxFile() {
+  return std::filesystem::path(VISTREAM_SHARED_DIR) / "data" / "Fox.glb";
+}
+
+Box3f boundsOf(const std::vector<glm::vec3>& points) {
+  Box3f b;
+  for (const glm::vec3& p : points) b.extend(p);
+  return b;
+}
+
+TEST(Gait, FollowsSpeed) {
+  EXPECT_EQ(gaitForSpeed(0.0f), Gait::Stand);
+  EXPECT_EQ(gaitForSpeed(NAN), Gait::Stand);
+  EXPECT_EQ(gaitForSpeed(1.4f), Gait::Walk);
+  EXPECT_EQ(gaitForSpeed(3.6f), Gait::Run);
+}
+
+// The Fox in metres: its rest pose is as tall as asked, stands on y = 0 and
+// is centred over the origin; every clip's poses stay inside the bounding
+// sphere; the gaits play the Fox's own clips.
+TEST(AvatarModel, TheFoxStandsOnTheOriginAsTallAsAsked) {
+  const AvatarModel fox = AvatarModel::load(foxFile(), 1.2f);
+  EXPECT_EQ(fox.triangleCount(), 576u);
+  ASSERT_NE(fox.clip(Gait::Walk), nullptr);
+  EXPECT_EQ(fox.clip(Gait::Walk)->name, "Walk");
+  EXPECT_EQ(fox.clip(Gait::Run)->name, "Run");
+  EXPECT_EQ(fox.clip(Gait::Stand)->name, "Survey");
+
+  Pose rest;
+  fox.pose(Gait::Stand, 0.0f, rest);
+  const Box3f b = boundsOf(rest.positions);
+  EXPECT_NEAR(b.lo.y, 0.0f, 0.05f);  // the first frame of Survey is close to the rest pose
+  EXPECT_NEAR(b.hi.y - b.lo.y, 1.2f, 0.1f);
+  EXPECT_NEAR(0.5f * (b.lo.x + b.hi.x), 0.0f, 0.2f);  // Survey starts looking aside
+  EXPECT_NEAR(0.5f * (b.lo.z + b.hi.z), 0.0f, 0.2f);
+  // A fox is longer (along +Z, glTF's front) than it is wide.
+  EXPECT_GT(b.hi.z - b.lo.z, 1.5f * (b.hi.x - b.lo.x));
+
+  const glm::vec3 centre(0.0f, 0.6f, 0.0f);
+  for (Gait g : {Gait::Stand, Gait::Walk, Gait::Run})
+    for (float t = 0.0f; t < fox.clipDuration(g); t += 0.05f) {
+      Pose p;
+      fox.pose(g, t, p);
+      for (const glm::vec3& x : p.positions)
+        ASSERT_LE(glm::length(x - centre), fox.boundingRadius()) << gaitName(g) << " t " << t;
+    }
+}
+
+// The Fox's texture is orange: most corners' albedo is red above blue.
+TEST(AvatarModel, CornerAlbedoComesFromTheTexture) {
+  const AvatarModel fox = AvatarModel::load(foxFile(), 1.0f);
+  ASSERT_EQ(fox.cornerAlbedo().size(), 3 * fox.triangleCount());
+  size_t orange = 0;
+  for (const glm::vec3& a : fox.cornerAlbedo()) orange += a.r > 1.5f * a.b;
+  EXPECT_GT(orange, fox.cornerAlbedo().size() / 2);
+  EXPECT_TRUE(fox.warnings().empty());
+}
+
+// The light of a white environment of radiance 1 with no sun: an open
+// transfer vector (the clamped cosine about n, no blockers) gives
+// skyExposure's ambient on an up-facing surface, whatever the yaw.
+TEST(AvatarLight, AnOpenUpFacingSurfaceGetsTheAmbientOfTheBake) {
+  const EnvironmentLight white =
+      EnvironmentLight::project([](const glm::vec3&) { return glm::vec3(1.0f); }, 64, "white");
+  Environment scene;
+  scene.sunIntensity = 0.0f;
+  LightingOptions options;
+  options.ambient = 0.7f;
+  const AvatarLight light = AvatarLight::of(white, scene, options);
+  // The clamped cosine about +Y in 25 SH terms: zonal about z, rotated to y.
+  float zonal[25] = {}, up[25];
+  for (int l = 0; l < 5; ++l) zonal[l * l + l] = float(clampedCosineZonal(l));
+  const glm::mat3 zToY = glm::mat3(glm::rotate(glm::mat4(1.0f), -1.5707963f, glm::vec3(1, 0, 0)));
+  ShRotation(zToY, 5).apply(zonal, up);
+  for (float yaw : {0.0f, 90.0f, 217.0f}) {
+    const glm::vec3 c = light.turned(yaw).apply(up);
+    EXPECT_NEAR(c.r, 0.7f, 0.02f) << "yaw " << yaw;
+    EXPECT_NEAR(c.g, 0.7f, 0.02f);
+  }
+}
+
+// A sun alone: an open surface facing it gets sunIntensity, one facing away
+// nothing (within the ringing of 25 terms), and sunVisible 0 puts it out.
+TEST(AvatarLight, TheSunLightsWhatFacesItAndTheSceneCanShadeIt) {
+  const EnvironmentLight black =
+      EnvironmentLight::project([](const glm::vec3&) { return glm::vec3(0.0f); }, 32, "black");
+  Environment scene;
+  scene.sunIntensity = 0.5f;
+  scene.sunDirection = glm::vec3(0.0f, 0.0f, 1.0f);
+  const AvatarLight light = AvatarLight::of(black, scene);
+  float towards[25] = {}, away[25];
+  for (int l = 0; l < 5; ++l) towards[l * l + l] = float(clampedCosineZonal(l));  // about +z
+  const glm::mat3 flip = glm::mat3(glm::rotate(glm::mat4(1.0f), 3.14159265f, glm::vec3(1, 0, 0)));
+  ShRotation(flip, 5).apply(towards, away);
+  EXPECT_NEAR(light.apply(towards).r, 0.5f, 0.05f);
+  EXPECT_LT(light.apply(away).r, 0.05f);
+  EXPECT_EQ(light.apply(towards, 0.0f).r, 0.0f);
+}
+
+// The shader reuses sampled poses: the same clip time twice shades once,
+// and its colours are the model's albedo times its light.
+TEST(AvatarShader, ReusesASampledPoseAndColoursByAlbedoTimesLight) {
+  auto fox = std::make_shared<const AvatarModel>(AvatarModel::load(foxFile(), 1.0f));
+  AvatarShaderOptions options;
+  options.poseRate = 10.0f;
+  AvatarShader shader(fox, options);
+  const EnvironmentLight sky = EnvironmentLight::sky(glm::vec3(0.55f, 0.7f, 0.9f));
+  const AvatarLight light = AvatarLight::of(sky, Environment{});
+  ShadedAvatar a, b;
+  shader.shade(Gait::Walk, 0.31f, light, 1.0f, a);
+  shader.shade(Gait::Walk, 0.33f, light, 1.0f, b);  // the same 0.1 s sample
+  EXPECT_EQ(shader.stats().posesShaded, 1u);
+  EXPECT_EQ(shader.stats().posesReused, 1u);
+  EXPECT_EQ(a.corners, b.corners);
+  ASSERT_EQ(a.corners.size(), 3 * fox->triangleCount());
+  // Orange fur stays orange under a bluish sky: red above blue at most corners.
+  size_t orange = 0;
+  for (const glm::u8vec3& c : a.corners) orange += c.r > c.b;
+  EXPECT_GT(orange, a.corners.size() / 2);
+  // Putting the sun out darkens every corner or leaves it.
+  ShadedAvatar shade;
+  shader.shade(Gait::Walk, 0.31f, light, 0.0f, shade);
+  for (size_t c = 0; c < a.corners.size(); ++c) ASSERT_LE(shade.corners[c].r, a.corners[c].r);
+}
+
+TEST(AvatarModel, ASceneWithoutASkinIsAnInputError) {
+  Scene s;
+  s.name = "boxes";
+  EXPECT_THROW(AvatarModel::fromScene(s, "boxes", 1.0f), InputError);
+  EXPECT_THROW(AvatarModel::load(foxFile(), 0.0f), InputError);
+}
+
+}  // namespace
+}  // namespace vistream
