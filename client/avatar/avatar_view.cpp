@@ -54,7 +54,14 @@ void appendAvatar(const AvatarModel& model, const ShadedAvatar& shaded, const gl
 
 AvatarView::AvatarView(std::shared_ptr<const AvatarModel> model, const AvatarLight& light,
                        Haze haze, const RayQuery* rays, const AvatarShaderOptions& options)
-    : model_(model), light_(light), haze_(haze), rays_(rays), shader_(model, options) {}
+    : light_(light), haze_(haze), rays_(rays), options_(options) {
+  if (model) setModel(0, std::move(model));
+}
+
+void AvatarView::setModel(uint16_t index, std::shared_ptr<const AvatarModel> model) {
+  if (shaders_.size() <= index) shaders_.resize(size_t(index) + 1);
+  shaders_[index] = model ? std::make_unique<AvatarShader>(std::move(model), options_) : nullptr;
+}
 
 glm::vec3 AvatarView::feetOf(const AvatarState& s) const {
   glm::vec3 feet = s.eye - glm::vec3(0.0f, kEyeHeight, 0.0f);
@@ -71,13 +78,18 @@ AvatarFrame AvatarView::build(const Camera& camera, float nearDistance,
   out = RenderGeometry{};
   out.haze = haze_;
   AvatarFrame f;
-  const AvatarShader::Stats before = shader_.stats();
-  const float radius = model_->boundingRadius();
   for (size_t i = 0; i < states.size(); ++i) {
     const AvatarState& s = states[i];
     if (!std::isfinite(s.eye.x) || !std::isfinite(s.eye.y) || !std::isfinite(s.eye.z)) continue;
+    if (!hasModel(s.model)) {
+      ++f.waiting;
+      continue;
+    }
+    AvatarShader& shader = *shaders_[s.model];
+    const AvatarModel& model = shader.model();
     const glm::vec3 feet = feetOf(s);
-    const glm::vec3 centre = feet + glm::vec3(0.0f, 0.5f * model_->height(), 0.0f);
+    const glm::vec3 centre = feet + glm::vec3(0.0f, 0.5f * model.height(), 0.0f);
+    const float radius = model.boundingRadius();
     if (!sphereInFrustum(camera, centre, radius)) {
       ++f.outside;
       continue;
@@ -93,18 +105,20 @@ AvatarFrame AvatarView::build(const Camera& camera, float nearDistance,
                                        std::numeric_limits<float>::infinity()})
                        ? 0.0f
                        : 1.0f;
-    const float turn = modelTurnDeg(s.yawDeg);
-    shader_.shade(gaitForSpeed(s.speed), s.phase, light_.turned(turn), sunVisible, scratch_);
-    appendAvatar(*model_, scratch_, feet, s.yawDeg, uint32_t(i), out);
+    const AvatarShader::Stats before = shader.stats();
+    shader.shade(gaitForSpeed(s.speed), s.phase, light_.turned(modelTurnDeg(s.yawDeg)), sunVisible,
+                 scratch_);
+    f.posesShaded += shader.stats().posesShaded - before.posesShaded;
+    f.posesReused += shader.stats().posesReused - before.posesReused;
+    appendAvatar(model, scratch_, feet, s.yawDeg, uint32_t(i), out);
   }
-  f.posesShaded = shader_.stats().posesShaded - before.posesShaded;
-  f.posesReused = shader_.stats().posesReused - before.posesReused;
   if (states.empty()) {
     f.why = "no dynamic objects";
   } else {
     f.why = fmt::format("{} avatar{} in view", f.inView, f.inView == 1 ? "" : "s");
     if (f.beyond) f.why += fmt::format(", {} beyond d", f.beyond);
     if (f.outside) f.why += fmt::format(", {} outside the view", f.outside);
+    if (f.waiting) f.why += fmt::format(", {} waiting for their model", f.waiting);
   }
   f.ms = clock.ms();
   return f;

@@ -15,7 +15,7 @@
 // AvatarFrame::why says what ran: "2 avatars in view, 1 beyond d, 3 outside
 // the view" or "no dynamic objects".
 //
-// Placement: an AvatarState's position is the user's eye (as in Pose and
+// Placement: an AvatarState's position is the user's eye (as in a Pose and
 // path files); the feet stand on the first floor a ray finds within 3 m
 // below it (when the view has the static scene's rays), else kEyeHeight
 // below it. The model turns with the user's yaw (avatar_model.h).
@@ -43,10 +43,12 @@ struct AvatarState {
   float yawDeg = 0.0f;
   float speed = 0.0f;  // m/s over the ground
   float phase = 0.0f;  // seconds into the gait's clip
+  uint16_t model = 0;  // which of the view's models draws the user
 };
 
 struct AvatarFrame {
   size_t inView = 0, beyond = 0, outside = 0;
+  size_t waiting = 0;                       // users whose model has not arrived (connected clients)
   size_t posesShaded = 0, posesReused = 0;  // this frame
   double ms = 0.0;                          // selecting, posing, shading and building
   std::string why;
@@ -58,6 +60,12 @@ class AvatarView {
   // tells whether the sun reaches an avatar; it must outlive the view.
   AvatarView(std::shared_ptr<const AvatarModel> model, const AvatarLight& light, Haze haze,
              const RayQuery* rays, const AvatarShaderOptions& options = {});
+  // Sets (or replaces) the model AvatarState::model `index` names; users of
+  // a model not set yet are counted as waiting and not drawn.
+  void setModel(uint16_t index, std::shared_ptr<const AvatarModel> model);
+  bool hasModel(uint16_t index) const { return index < shaders_.size() && shaders_[index]; }
+  // The static scene's rays, when the renderer holding them was rebuilt.
+  void setRays(const RayQuery* rays) { rays_ = rays; }
 
   // The avatars of `states` in view of `camera` within `nearDistance`, as
   // triangles in `out` (replaced; object ID = index into states, face ID =
@@ -65,16 +73,15 @@ class AvatarView {
   AvatarFrame build(const Camera& camera, float nearDistance,
                     const std::vector<AvatarState>& states, RenderGeometry& out);
 
-  const AvatarShader& shader() const { return shader_; }
+  const AvatarShader& shader(uint16_t index = 0) const { return *shaders_.at(index); }
 
  private:
   glm::vec3 feetOf(const AvatarState& s) const;
-  std::shared_ptr<const AvatarModel> model_;
   AvatarLight light_;
   Haze haze_;
   const RayQuery* rays_;
-  glm::vec3 sunDirection_{0.0f};
-  AvatarShader shader_;
+  AvatarShaderOptions options_;
+  std::vector<std::unique_ptr<AvatarShader>> shaders_;  // per model index (null: not yet set)
   ShadedAvatar scratch_;
 };
 

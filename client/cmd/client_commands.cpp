@@ -15,6 +15,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <thread>
 
 #include "client/app/walkthrough.h"
 #include "client/avatar/avatar_view.h"
@@ -32,6 +33,8 @@
 #include "common/core/timer.h"
 #include "common/generate/path.h"
 #include "common/generate/scene_spec.h"
+#include "common/light/environment_light.h"
+#include "common/scene/scene_loader.h"
 #include "common/world/static_world.h"
 
 namespace vistream {
@@ -58,6 +61,8 @@ struct Args {
   double pathSpeed = 1.0;
   double waitS = 20.0;
   size_t avatars = 0;         // simulated users walking local paths
+  bool noAvatars = false;     // connected: do not ask for or draw other users
+  bool realtime = false;      // headless: frames at the path's clock, not as fast as possible
   std::string avatarModel;    // skinned glTF; empty: the default
   float avatarHeight = 1.2f;  // metres
 };
@@ -268,18 +273,36 @@ struct LiveGeometry {
   }
 };
 
-// Other users in the frames: simulated walkers (--avatars N) shown as the
-// avatar model, shaded with self-shadows under the scene's light.
+// Other users in the frames, as animated, self-shadowed avatars: simulated
+// walkers beside the path (--avatars N, local), or the users the server
+// reports (connected; their models arrive over the connection).
 struct Avatars {
-  std::unique_ptr<LocalCrowd> crowd;
+  std::unique_ptr<LocalCrowd> crowd;  // local
+  StreamClient* net = nullptr;        // connected
   std::unique_ptr<AvatarView> view;
-  std::vector<double> times;  // per camera: the path's clock
-  RenderGeometry dynamic;     // this frame's avatars
+  std::vector<uint8_t> modelTried;  // connected: per offered model, loading was tried
+  RenderGeometry dynamic;           // this frame's avatars
 
   explicit operator bool() const { return view != nullptr; }
-  // Builds this frame's avatars for camera i into `dynamic`.
-  AvatarFrame build(size_t i, const Camera& camera, float nearDistance) {
-    return view->build(camera, nearDistance, crowd->at(times[i]), dynamic);
+  // This frame's avatars at time t (the path's clock) into `dynamic`.
+  AvatarFrame build(double t, const Camera& camera, float nearDistance, const RayQuery& rays) {
+    view->setRays(&rays);
+    if (!net) return view->build(camera, nearDistance, crowd->at(t), dynamic);
+    const std::vector<AvatarModelOffer> offers = net->avatarModels();
+    modelTried.resize(offers.size(), 0);
+    for (size_t k = 0; k < offers.size(); ++k) {
+      if (!offers[k].glb || modelTried[k]) continue;
+      modelTried[k] = 1;
+      try {
+        view->setModel(uint16_t(k), std::make_shared<const AvatarModel>(AvatarModel::fromScene(
+                                        loadGlbFromMemory(*offers[k].glb, offers[k].name),
+                                        offers[k].name, offers[k].heightM)));
+        spdlog::info("avatar model {} ({}) arrived", k, offers[k].name);
+      } catch (const InputError& e) {
+        spdlog::warn("avatar model {} from the server is unusable: {}", offers[k].name, e.what());
+      }
+    }
+    return view->build(camera, nearDistance, net->avatars(), dynamic);
   }
 };
 
@@ -290,34 +313,47 @@ std::filesystem::path avatarModelPath(const Args& a) {
   return VISTREAM_DEFAULT_AVATAR;
 }
 
-Avatars makeAvatars(const Args& a, const Scene& scene, const std::vector<PathSample>& path,
-                    const RenderGeometry& geometry, const RayQuery& rays) {
+Avatars localAvatars(const Args& a, const Scene& scene, const std::vector<PathSample>& path,
+                     const RenderGeometry& geometry) {
   Avatars out;
-  if (a.avatars == 0) return out;
-  const std::filesystem::path file = avatarModelPath(a);
-  auto model = std::make_shared<const AvatarModel>(AvatarModel::load(file, a.avatarHeight));
+  auto model =
+      std::make_shared<const AvatarModel>(AvatarModel::load(avatarModelPath(a), a.avatarHeight));
   for (const std::string& w : model->warnings()) spdlog::warn("{}", w);
   const AvatarLight light =
       AvatarLight::of(EnvironmentLight::of(scene.environment), scene.environment);
-  out.view = std::make_unique<AvatarView>(model, light, geometry.haze, &rays);
-  out.crowd = std::make_unique<LocalCrowd>(path, scene.origin, a.avatars, &rays);
-  for (const PathSample& s : path) out.times.push_back(s.t);
+  out.view = std::make_unique<AvatarView>(model, light, geometry.haze, nullptr);
+  out.crowd = std::make_unique<LocalCrowd>(path, scene.origin, a.avatars);
   spdlog::info("{} simulated users shown as {} ({} vertices, {} triangles)", a.avatars,
                model->name(), model->vertexCount(), model->triangleCount());
   return out;
 }
 
+Avatars remoteAvatars(StreamClient& net, const RenderGeometry& geometry) {
+  Avatars out;
+  out.net = &net;
+  // Without the server's light: the default sky's.
+  const AvatarLight light = net.avatarLight().value_or(
+      AvatarLight::of(EnvironmentLight::sky(Environment{}.skyColor), Environment{}));
+  out.view = std::make_unique<AvatarView>(nullptr, light, geometry.haze, nullptr);
+  return out;
+}
+
 // Headless: software near field, PNG frames, statistics.
 int runHeadless(const Args& a, LiveGeometry& live, const std::vector<Camera>& cameras,
-                glm::ivec2 size, StreamClient* net, ConnectionFigures& connection,
-                Avatars& avatars) {
+                const std::vector<double>& times, glm::ivec2 size, StreamClient* net,
+                ConnectionFigures& connection, Avatars& avatars) {
   std::vector<FrameRecord> records;
   ImageRgb8 image, refImage;
   ContactSheetRow sheet(a.sheetFile, cameras.size());
   ProgressBar bar(
       fmt::format("rendering {} frames ({})", cameras.size(), renderModeName(live.options.mode)),
       cameras.size());
+  Stopwatch clock;
   for (size_t i = 0; i < cameras.size(); ++i) {
+    if (a.realtime && !times.empty()) {  // frame i is due at its path time
+      const double due = 1000.0 * (times[i] - times.front()) - clock.ms();
+      if (due > 0.0) std::this_thread::sleep_for(std::chrono::duration<double, std::milli>(due));
+    }
     if (net) {
       // Each frame waits for the server to complete the view cell it stands in,
       // so a headless walk renders what a patient user would see.
@@ -338,7 +374,8 @@ int runHeadless(const Args& a, LiveGeometry& live, const std::vector<Camera>& ca
     r.geometryIntakeMs = wall.ms();
     r.report = live.renderer->render(cameras[i], image);
     if (avatars) {
-      r.avatars = avatars.build(i, cameras[i], live.renderer->polygonDistance());
+      r.avatars = avatars.build(times[i], cameras[i], live.renderer->polygonDistance(),
+                                live.renderer->rays());
       r.avatarPixels = live.renderer->drawDynamic(cameras[i], avatars.dynamic, image);
     }
     r.wallMs = wall.ms();
@@ -362,8 +399,9 @@ int runHeadless(const Args& a, LiveGeometry& live, const std::vector<Camera>& ca
 }
 
 // Windowed: OpenGL near field; along a path (frames written if --out) or interactive.
-int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, glm::ivec2 size,
-              Camera start, StreamClient* net, Avatars& avatars) {
+int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras,
+              const std::vector<double>& times, glm::ivec2 size, Camera start, StreamClient* net,
+              Avatars& avatars) {
   const PipelineOptions& o = live.options;
   GlWindowOptions wo;
   wo.width = size.x;
@@ -394,7 +432,8 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
       r.frame = i;
       r.report = live.renderer->renderFarField(cameras[i], farImage, near);
       if (avatars) {
-        r.avatars = avatars.build(i, cameras[i], live.renderer->polygonDistance());
+        r.avatars = avatars.build(times[i], cameras[i], live.renderer->polygonDistance(),
+                                  live.renderer->rays());
         gl.uploadDynamic(avatars.dynamic);
       }
       gl.draw(cameras[i], farImage, near, live.renderer->polygonDistance());
@@ -435,6 +474,12 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
       }
     }
     const FrameReport rep = live.renderer->renderFarField(cam, farImage, near);
+    std::string avatarWhy = "no dynamic objects";
+    if (avatars) {
+      avatarWhy =
+          avatars.build(now, cam, live.renderer->polygonDistance(), live.renderer->rays()).why;
+      gl.uploadDynamic(avatars.dynamic);
+    }
     const PixelCounts& p = rep.pixels;
     std::vector<HudLine> hud = {
         {fmt::format("frame {:.1f} ms (pipeline {:.1f} ms)  near {} triangles  d = {:.0f} m",
@@ -445,6 +490,7 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras, gl
                      live.faces(), net ? double(net->bytesReceived()) / 1e6 : 0.0,
                      rep.farFieldRan ? "on" : "off", rep.horizonRan ? "on" : "off",
                      rep.cacheRan ? "on" : "off")},
+        {"avatars: " + avatarWhy},
     };
     gl.draw(cam, farImage, near, live.renderer->polygonDistance(), hud);
     window.swapBuffers();
@@ -499,6 +545,7 @@ int run(const Args& a) {
     so.port = a.port;
     so.token = a.token;
     so.radius = a.streamRadius;
+    so.wantsAvatars = !a.noAvatars;
     net = std::make_unique<StreamClient>(so);
     origin = net->origin();
   }
@@ -545,8 +592,11 @@ int run(const Args& a) {
     if (ground.y) spdlog::info("ground {}", ground.why);
   }
   Avatars avatars;
-  if (a.avatars > 0) avatars = makeAvatars(a, *scene, path, live.geometry(), live.renderer->rays());
-  if (a.headless) return runHeadless(a, live, cameras, size, net.get(), connection, avatars);
+  if (a.avatars > 0) avatars = localAvatars(a, *scene, path, live.geometry());
+  if (net && !a.noAvatars) avatars = remoteAvatars(*net, live.geometry());
+  std::vector<double> times;
+  for (const PathSample& s : path) times.push_back(s.t);
+  if (a.headless) return runHeadless(a, live, cameras, times, size, net.get(), connection, avatars);
   Camera start;
   start.width = size.x;
   start.height = size.y;
@@ -555,7 +605,7 @@ int run(const Args& a) {
     start = cameras.front();
   else if (!live.geometry().bounds.empty())
     start.eye = live.geometry().bounds.center();
-  return runWindow(a, live, cameras, size, start, net.get(), avatars);
+  return runWindow(a, live, cameras, times, size, start, net.get(), avatars);
 }
 
 }  // namespace
@@ -634,6 +684,11 @@ int runClientTool(int argc, char** argv) {
                  "local: N simulated users walking beside the path, drawn as animated, "
                  "self-shadowed avatars")
       ->check(CLI::Range(size_t(0), size_t(1000)));
+  app.add_flag("--realtime", a.realtime,
+               "headless: render each frame at its path time (t), as a user walking would, "
+               "rather than as fast as possible");
+  app.add_flag("--no-avatars", a.noAvatars,
+               "connected: neither ask the server for other users nor draw them");
   app.add_option("--avatar-model", a.avatarModel, "the avatars' skinned glTF model")
       ->default_str(std::filesystem::path(VISTREAM_DEFAULT_AVATAR).filename().string() +
                     " beside the clone (../shared/data)");

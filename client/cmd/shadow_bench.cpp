@@ -64,7 +64,7 @@ Run runOnce(const Model& m, const SelfShadowOptions& options, int ring,
                : ShadowHierarchy{};
   std::vector<double> total, transform, raster, integrate;
   double l2 = 0, blockers = 0;
-  Pose pose;
+  PosedMesh pose;
   std::vector<float> out;
   for (size_t f = 0; f < m.times.size(); ++f) {
     Stopwatch clock;
@@ -112,7 +112,7 @@ json runJson(const Run& r) {
 
 // One view of the posed model, each vertex coloured by albedo / pi times
 // the environment's light through its transfer vector, scaled by `exposure`.
-ImageRgb8 renderTransfer(const Pose& pose, const std::vector<glm::uvec3>& triangles,
+ImageRgb8 renderTransfer(const PosedMesh& pose, const std::vector<glm::uvec3>& triangles,
                          const std::vector<float>& transfer, int orders,
                          const EnvironmentLight& light, const glm::vec3& albedo, float exposure) {
   constexpr float kPi = 3.14159265358979f;
@@ -157,7 +157,7 @@ ImageRgb8 renderTransfer(const Pose& pose, const std::vector<glm::uvec3>& triang
 // Monte Carlo.
 void writeShadowPng(const std::string& file, const std::string& environment, const Model& m,
                     size_t frame, const std::vector<float>& reference, int orders) {
-  Pose pose;
+  PosedMesh pose;
   poseAt(m.scene, m.mesh, m.clip, m.times[frame], pose);
   const EnvironmentLight light = environment.empty() ? EnvironmentLight::of(m.scene.environment)
                                                      : EnvironmentLight::fromHdr(environment);
@@ -217,7 +217,7 @@ int runShadowBench(const ShadowBenchArgs& a) {
     std::vector<std::vector<double>> ms(sweep.size()), err(sweep.size());
     for (int k = 0; k < std::min(a.referenceFrames, frames); ++k) {
       const size_t f = size_t(k) * size_t(frames) / size_t(std::max(1, a.referenceFrames));
-      Pose pose;
+      PosedMesh pose;
       poseAt(m.scene, m.mesh, m.clip, m.times[f], pose);
       std::vector<float> ref;
       monteCarloTransfer(pose.positions, pose.normals, m.mesh.triangles, referenceRays, orders, ref,

@@ -64,6 +64,19 @@ struct StreamClient::Impl : PeerHandler {
   std::unordered_set<uint32_t> changedFaces;
   bool replaceAll = true;  // the first delta carries everything
 
+  // Other users (Avatar updates), with when each was last reported.
+  using Clock = std::chrono::steady_clock;
+  struct Remote {
+    vistream::AvatarState state;
+    glm::vec3 velocity{0.0f};
+    Clock::time_point at;
+  };
+  std::map<uint32_t, Remote> remotes;
+  Clock::time_point lastPoseSent{};
+  std::vector<AvatarModelOffer> models;
+  std::vector<uint8_t> modelRequested;
+  std::optional<AvatarLight> avatarLight;
+
   // Called with `mutex` held.
   void noteChanged(uint32_t face) {
     if (replaceAll) return;
@@ -159,7 +172,9 @@ struct StreamClient::Impl : PeerHandler {
                                     err.text() ? err.text()->str() : ""));
                },
                [this](const Bye&) { finish("the server said bye"); },
-               [](Payload) {},  // Avatar, Stats, PvsReply: not used here
+               [this](const Avatar& a) { onAvatar(a); },
+               [this](const AvatarModelData& m) { onAvatarModel(m); },
+               [](Payload) {},  // Stats, PvsReply: not used here
            });
   }
   void onWelcome(const Welcome& w) {
@@ -184,6 +199,7 @@ struct StreamClient::Impl : PeerHandler {
           b.haze = Haze{glm::vec3(b.sky), w.haze_distance_m()};
           backdrop = b;
         }
+        readAvatarOffers(w);
         if (w.materials())
           for (const MaterialInfo* m : *w.materials())
             materials.push_back(m && isFinite(m->diffuse())
@@ -195,6 +211,87 @@ struct StreamClient::Impl : PeerHandler {
       }
     }
     finish("the server sent a second Welcome");
+  }
+  // Welcome's avatar models and light (`mutex` held). A light of the wrong
+  // length or with non-finite values is ignored (avatars then take the sky).
+  void readAvatarOffers(const Welcome& w) {
+    if (w.avatar_models())
+      for (const AvatarModelInfo* m : *w.avatar_models()) {
+        if (models.size() >= 1000) break;
+        AvatarModelOffer o;
+        if (m && m->name()) o.name = m->name()->str();
+        if (m) o.bytes = m->bytes();
+        if (m && std::isfinite(m->height_m()) && m->height_m() > 0.05f && m->height_m() < 20.0f)
+          o.heightM = m->height_m();
+        models.push_back(std::move(o));
+      }
+    modelRequested.assign(models.size(), 0);
+    if (const auto* l = w.avatar_light(); l && l->size() == 100) {
+      AvatarLight light;
+      bool finite = true;
+      for (size_t i = 0; i < 100; ++i) finite = finite && std::isfinite(l->Get(uint32_t(i)));
+      if (finite) {
+        for (uint32_t i = 0; i < 25; ++i)
+          light.sky[i] = glm::vec3(l->Get(3 * i), l->Get(3 * i + 1), l->Get(3 * i + 2));
+        for (uint32_t i = 0; i < 25; ++i) light.sun[i] = l->Get(75 + i);
+        if (isFinite(w.avatar_sun_direction()) &&
+            glm::length(fromWire(*w.avatar_sun_direction())) > 0.5f)
+          light.sunDirection = glm::normalize(fromWire(*w.avatar_sun_direction()));
+        avatarLight = light;
+      }
+    }
+  }
+  void onAvatar(const Avatar& a) {
+    std::vector<uint16_t> request;
+    {
+      std::lock_guard lock(mutex);
+      const Clock::time_point now = Clock::now();
+      if (a.departed())
+        for (uint32_t id : *a.departed()) remotes.erase(id);
+      if (a.avatars())
+        for (const wire::AvatarState* s : *a.avatars()) {
+          if (!s || !isFinite(s->position()) || !std::isfinite(s->yaw_deg()) ||
+              !std::isfinite(s->speed_mps()) || !std::isfinite(s->phase_s()))
+            continue;  // a user we cannot place
+          if (remotes.size() >= 10'000 && !remotes.count(s->session_id())) continue;
+          Remote& r = remotes[s->session_id()];
+          const glm::vec3 p(fromWire(*s->position()));
+          const double dt = std::chrono::duration<double>(now - r.at).count();
+          r.velocity = r.at != Clock::time_point{} && dt > 0.05 && dt < 2.0
+                           ? (p - r.state.eye) / float(dt)
+                           : glm::vec3(0.0f);
+          if (!(glm::length(r.velocity) < 50.0f)) r.velocity = glm::vec3(0.0f);
+          r.at = now;
+          r.state.id = s->session_id();
+          r.state.eye = p;
+          r.state.yawDeg = s->yaw_deg();
+          r.state.speed = s->speed_mps();
+          r.state.phase = s->phase_s();
+          r.state.model = s->model();
+          if (s->model() < models.size() && !modelRequested[s->model()]) {
+            modelRequested[s->model()] = 1;
+            request.push_back(s->model());
+          }
+        }
+    }
+    for (uint16_t m : request) {
+      AvatarModelRequestT r;
+      r.model = m;
+      send(encodeMessage(std::move(r)));
+    }
+  }
+  void onAvatarModel(const AvatarModelData& m) {
+    std::lock_guard lock(mutex);
+    if (m.model() >= models.size() || !modelRequested[m.model()] || models[m.model()].glb)
+      return;  // not asked for: ignored
+    const auto* glb = m.glb();
+    if (!glb || glb->size() != models[m.model()].bytes) {
+      spdlog::warn("avatar model {}: {} bytes arrived, {} announced; not drawn", m.model(),
+                   glb ? glb->size() : 0, models[m.model()].bytes);
+      return;
+    }
+    models[m.model()].glb = std::make_shared<const std::string>(
+        reinterpret_cast<const char*>(glb->data()), glb->size());
   }
   void onGeometry(const Geometry& geometry) {
     DecodedGeometry g;
@@ -295,7 +392,7 @@ StreamClient::StreamClient(const StreamClientOptions& o) : impl_(std::make_share
   hello.client_name = "vistream-client";
   hello.capabilities = std::make_unique<CapabilitiesT>();
   hello.capabilities->near_field_radius_m = o.radius;
-  hello.capabilities->wants_avatars = false;
+  hello.capabilities->wants_avatars = o.wantsAvatars;
   s.peer->start(impl_);
   s.send(encodeMessage(std::move(hello)));
   // The io thread never owns the Impl: the StreamClient joins it first.
@@ -341,8 +438,17 @@ float StreamClient::radius() const {
 void StreamClient::sendPose(const glm::vec3& eye, float yawDeg, float pitchDeg,
                             const glm::vec3& velocity) {
   {
+    // At most kMaxPosesPerSecond within one view cell: a headless walk
+    // renders hundreds of frames a second, and the server refuses a flood
+    // (a new cell always goes out, so waitForCell never waits on a dropped pose).
     std::lock_guard lock(impl_->mutex);
-    impl_->poseCell = impl_->grid.cellOf(eye);
+    const glm::ivec3 cell = impl_->grid.cellOf(eye);
+    const auto now = Impl::Clock::now();
+    if (cell == impl_->poseCell && impl_->lastPoseSent != Impl::Clock::time_point{} &&
+        now - impl_->lastPoseSent < std::chrono::duration<double>(1.0 / kMaxPosesPerSecond))
+      return;
+    impl_->poseCell = cell;
+    impl_->lastPoseSent = now;
   }
   PoseT pose;
   pose.position = std::make_unique<Vec3d>(toWire(glm::dvec3(eye)));
@@ -400,6 +506,30 @@ uint64_t StreamClient::bytesReceived() const {
 size_t StreamClient::facesHeld() const {
   std::lock_guard lock(impl_->mutex);
   return impl_->faces.size();
+}
+
+std::vector<vistream::AvatarState> StreamClient::avatars() const {
+  std::lock_guard lock(impl_->mutex);
+  const auto now = Impl::Clock::now();
+  std::vector<vistream::AvatarState> out;
+  for (const auto& [id, r] : impl_->remotes) {
+    const float age = float(std::chrono::duration<double>(now - r.at).count());
+    vistream::AvatarState s = r.state;
+    s.eye += r.velocity * std::min(age, 0.6f);
+    s.phase += age;
+    out.push_back(s);
+  }
+  return out;
+}
+
+std::vector<AvatarModelOffer> StreamClient::avatarModels() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->models;
+}
+
+std::optional<AvatarLight> StreamClient::avatarLight() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->avatarLight;
 }
 
 std::string StreamClient::error() const {

@@ -12,8 +12,11 @@
 #include <cstdint>
 #include <glm/glm.hpp>
 #include <memory>
+#include <optional>
 #include <string>
+#include <vector>
 
+#include "client/avatar/avatar_view.h"
 #include "client/render/render_geometry.h"
 #include "client/render/streamed_geometry.h"
 
@@ -26,7 +29,18 @@ struct StreamClientOptions {
   float radius = 0.0f;     // near-field radius to ask for (0: the server's)
   double timeoutS = 10.0;  // for connecting and for the Welcome
   size_t maxTriangles =
-      50'000'000;  // the session ends if the server sends more (no unbounded memory)
+      50'000'000;            // the session ends if the server sends more (no unbounded memory)
+  bool wantsAvatars = true;  // other users' Avatar updates, and their models when first seen
+};
+
+// An avatar model the server offers (Welcome.avatar_models) and, once it
+// arrived, its glb bytes (the client asks for a model when a user first
+// appears drawn as it).
+struct AvatarModelOffer {
+  std::string name;
+  uint32_t bytes = 0;
+  float heightM = 1.2f;
+  std::shared_ptr<const std::string> glb;  // null until it arrived
 };
 
 class StreamClient {
@@ -41,7 +55,9 @@ class StreamClient {
 
   glm::dvec3 origin() const;  // file coordinates of the local frame
   float radius() const;       // the near-field radius the server streams within
-  // Sends the viewer's pose (local frame).
+  // Sends the viewer's pose (local frame); within one view cell at most
+  // kMaxPosesPerSecond (poses in between are dropped).
+  static constexpr double kMaxPosesPerSecond = 60.0;
   void sendPose(const glm::vec3& eye, float yawDeg, float pitchDeg,
                 const glm::vec3& velocity = glm::vec3(0.0f));
   // Waits until the server reports the view cell of the last pose complete.
@@ -56,6 +72,14 @@ class StreamClient {
   uint64_t bytesReceived() const;
   size_t facesHeld() const;
   std::string error() const;  // why the session ended, empty while it runs
+
+  // Other users as the latest Avatar updates report them, positions carried
+  // forward at their last velocity (at most 0.6 s) and clip phases advanced
+  // to now, so 2 updates a second draw as smooth walking.
+  std::vector<AvatarState> avatars() const;
+  std::vector<AvatarModelOffer> avatarModels() const;
+  // The light avatars are shaded with (Welcome.avatar_light), if sent.
+  std::optional<AvatarLight> avatarLight() const;
 
  private:
   struct Impl;

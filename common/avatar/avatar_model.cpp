@@ -79,7 +79,7 @@ AvatarModel AvatarModel::fromScene(Scene scene, const std::string& name, float h
   }
 
   // Metres: the rest pose's bounds give the scale and the feet.
-  Pose rest;
+  PosedMesh rest;
   poseAt(scene, m.welded_, nullptr, 0.0f, rest);
   Box3f bounds;
   for (const glm::vec3& p : rest.positions) bounds.extend(p);
@@ -96,7 +96,7 @@ AvatarModel AvatarModel::fromScene(Scene scene, const std::string& name, float h
   // Bounding sphere over sampled poses of every clip.
   const glm::vec3 centre(0.0f, 0.5f * heightM, 0.0f);
   float radius = 0.0f;
-  Pose p;
+  PosedMesh p;
   for (Gait g : {Gait::Stand, Gait::Walk, Gait::Run}) {
     const float duration = m.clipDuration(g);
     for (int k = 0; k < 16; ++k) {
@@ -121,7 +121,7 @@ float AvatarModel::clipDuration(Gait g) const {
   return a ? a->duration : 0.0f;
 }
 
-void AvatarModel::pose(Gait g, float t, Pose& out) const {
+void AvatarModel::pose(Gait g, float t, PosedMesh& out) const {
   poseAt(*scene_, welded_, clip(g), t, out);
   for (glm::vec3& p : out.positions) p = glm::vec3(toMetres_ * glm::vec4(p, 1.0f));
   // A uniform scale and a translation leave normals as they are.

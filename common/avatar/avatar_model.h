@@ -86,7 +86,7 @@ class AvatarModel {
 
   // Positions (metres, model frame as above) and unit normals of the welded
   // vertices at clip time t of gait g's clip.
-  void pose(Gait g, float t, Pose& out) const;
+  void pose(Gait g, float t, PosedMesh& out) const;
 
  private:
   std::string name_;
@@ -147,7 +147,7 @@ class AvatarShader {
 
  private:
   struct Sampled {
-    Pose pose;
+    PosedMesh pose;
     std::vector<float> transfer;
   };
   const Sampled& sampled(Gait g, float t);

@@ -271,7 +271,7 @@ void vertexNormals(const std::vector<glm::vec3>& positions,
   }
 }
 
-void poseMesh(const SkinnedMesh& mesh, const std::vector<glm::mat4>& joints, Pose& out) {
+void poseMesh(const SkinnedMesh& mesh, const std::vector<glm::mat4>& joints, PosedMesh& out) {
   out.positions.resize(mesh.positions.size());
   for (size_t v = 0; v < mesh.positions.size(); ++v) {
     glm::mat4 m(0.0f);
@@ -285,7 +285,7 @@ void poseMesh(const SkinnedMesh& mesh, const std::vector<glm::mat4>& joints, Pos
 }
 
 void poseAt(const Scene& scene, const SkinnedMesh& mesh, const Animation* animation, float t,
-            Pose& out) {
+            PosedMesh& out) {
   VS_CHECK(mesh.skin >= 0 && size_t(mesh.skin) < scene.skins.size());
   poseMesh(mesh,
            jointMatrices(scene.skins[size_t(mesh.skin)], globalNodeMatrices(scene, animation, t)),

@@ -63,15 +63,15 @@ struct SkinnedMesh {
 
 // Positions and unit normals (area-weighted from the triangles) of `mesh`
 // posed by `joints` (jointMatrices of its skin).
-struct Pose {
+struct PosedMesh {
   std::vector<glm::vec3> positions;
   std::vector<glm::vec3> normals;
 };
-void poseMesh(const SkinnedMesh& mesh, const std::vector<glm::mat4>& joints, Pose& out);
+void poseMesh(const SkinnedMesh& mesh, const std::vector<glm::mat4>& joints, PosedMesh& out);
 // poseMesh with `animation` (of `scene`, the mesh's source) at clip time t;
 // null: the rest pose.
 void poseAt(const Scene& scene, const SkinnedMesh& mesh, const Animation* animation, float t,
-            Pose& out);
+            PosedMesh& out);
 
 // Per-vertex normals of a triangle mesh: the area-weighted sum of its
 // triangles' normals, normalized (up for a vertex with no area around it).

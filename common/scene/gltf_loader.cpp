@@ -327,18 +327,22 @@ struct PendingObject {
 };
 
 // Parses the file with tinygltf after the checks tinygltf does not make.
-tinygltf::Model parseGltf(const std::filesystem::path& path, const SceneLimits& limits) {
-  const std::string file = path.string();
-  const std::string bytes = readSceneFile(path, limits);
+// Refuses every file a glTF parsed from memory names (its images and
+// buffers must be in the bytes).
+bool refuseFile(std::vector<unsigned char>*, std::string* err, const std::string& path, void*) {
+  if (err) *err = "a glTF read from memory cannot read the file '" + path + "'";
+  return false;
+}
+
+// Parses glTF bytes: a .glb container when `binary`, else glTF JSON whose
+// external files are read from `baseDir` (empty: none may be read).
+tinygltf::Model parseGltfBytes(const std::string& bytes, const std::string& file, bool binary,
+                               const std::string& baseDir, const SceneLimits& limits) {
   if (bytes.empty()) throwInputError("{}: file is empty", file);
   if (bytes.size() > std::numeric_limits<uint32_t>::max())
     throwInputError(InputErrorCode::TooLarge,
                     "{}: {} bytes; glTF files of 4 GiB or more are not supported", file,
                     bytes.size());
-  std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return char(std::tolower(c)); });
-  const bool binary = ext == ".glb";
   if (binary)
     checkJsonNesting(glbJsonChunk(bytes, file), file + " (JSON chunk)");
   else
@@ -347,11 +351,11 @@ tinygltf::Model parseGltf(const std::filesystem::path& path, const SceneLimits& 
   tinygltf::TinyGLTF gltf;
   gltf.SetImageLoader(keepImageUndecoded, nullptr);
   SceneLimits fileLimits = limits;
-  gltf.SetFsCallbacks({&tinygltf::FileExists, &tinygltf::ExpandFilePath, &readLimitedFile,
-                       &tinygltf::WriteWholeFile, &fileLimits});
+  gltf.SetFsCallbacks({&tinygltf::FileExists, &tinygltf::ExpandFilePath,
+                       baseDir.empty() ? &refuseFile : &readLimitedFile, &tinygltf::WriteWholeFile,
+                       &fileLimits});
   tinygltf::Model model;
   std::string err, warn;
-  const std::string baseDir = path.parent_path().string();
   const bool ok =
       binary ? gltf.LoadBinaryFromMemory(&model, &err, &warn,
                                          reinterpret_cast<const unsigned char*>(bytes.data()),
@@ -362,6 +366,15 @@ tinygltf::Model parseGltf(const std::filesystem::path& path, const SceneLimits& 
   if (!ok)
     throwInputError("{}: {}", file, err.empty() ? std::string("not a valid glTF file") : err);
   return model;
+}
+
+tinygltf::Model parseGltf(const std::filesystem::path& path, const SceneLimits& limits) {
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return char(std::tolower(c)); });
+  std::string baseDir = path.parent_path().string();
+  if (baseDir.empty()) baseDir = ".";
+  return parseGltfBytes(readSceneFile(path, limits), path.string(), ext == ".glb", baseDir, limits);
 }
 
 // Builds a Scene from a parsed model, one named step per part of the file.
@@ -744,10 +757,8 @@ class GltfSceneBuilder {
   std::vector<PendingObject> pending_;
 };
 
-}  // namespace
-
-Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits) {
-  const tinygltf::Model model = parseGltf(path, limits);
+Scene buildGltfScene(const tinygltf::Model& model, const std::filesystem::path& path,
+                     const SceneLimits& limits) {
   const std::vector<int> roots = rootNodes(model);
   checkGeometryLimits(model, roots, path.string(), limits);
   GltfSceneBuilder builder(model, path);
@@ -757,6 +768,20 @@ Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits) {
   builder.readAnimations();
   builder.walkNodes(roots);
   return builder.finish();
+}
+
+}  // namespace
+
+Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits) {
+  return buildGltfScene(parseGltf(path, limits), path, limits);
+}
+
+Scene loadGlbFromMemory(std::string_view bytes, const std::string& name,
+                        const SceneLimits& limits) {
+  if (bytes.size() > limits.maxFileBytes)
+    throwInputError(InputErrorCode::TooLarge, "{}: {} bytes, more than the limit of {}", name,
+                    bytes.size(), limits.maxFileBytes);
+  return buildGltfScene(parseGltfBytes(std::string(bytes), name, true, "", limits), name, limits);
 }
 
 }  // namespace vistream

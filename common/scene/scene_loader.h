@@ -86,6 +86,13 @@ Scene loadObjFromMemory(std::string_view objText, const std::string& displayName
 // before tinygltf sees the bytes.
 Scene loadGltf(const std::filesystem::path& path, const SceneLimits& limits = {});
 
+// A glTF binary (.glb) from memory, e.g. received over the network: checked
+// as loadGltf checks a file; `name` stands for the file in errors and as the
+// scene's name. Every buffer and image must be inside the bytes: a URI
+// naming a file is an InputError (nothing is read from disk).
+Scene loadGlbFromMemory(std::string_view bytes, const std::string& name,
+                        const SceneLimits& limits = {});
+
 // ---- shared by the loaders ------------------------------------------------------
 
 // The whole file, after checking that it exists, is a regular file (not a

@@ -117,6 +117,10 @@ void dispatchPayload(const Envelope& envelope, Handler&& handler) {
       return detail::dispatchAs(envelope, envelope.payload_as_PvsReply(), handler);
     case Payload::Stats:
       return detail::dispatchAs(envelope, envelope.payload_as_Stats(), handler);
+    case Payload::AvatarModelRequest:
+      return detail::dispatchAs(envelope, envelope.payload_as_AvatarModelRequest(), handler);
+    case Payload::AvatarModelData:
+      return detail::dispatchAs(envelope, envelope.payload_as_AvatarModelData(), handler);
     default:
       return handler(envelope.payload_type());
   }

@@ -15,6 +15,7 @@
 #include "common/cmd/cli.h"
 #include "common/core/error.h"
 #include "common/generate/scene_spec.h"
+#include "server/stream/avatar_catalogue.h"
 #include "server/stream/stream_server.h"
 
 namespace vistream {
@@ -102,6 +103,15 @@ int runServerTool(int argc, char** argv) {
       ->check(nonNegative());
   app.add_option("--max-avatars", cfg.maxAvatars, "nearest visible avatars per update")
       ->check(atLeast<size_t>(0));
+  std::vector<std::string> avatarModels;
+  float avatarHeight = 1.2f;
+  app.add_option("--avatar-model", avatarModels,
+                 "skinned glTF binaries (.glb) users are drawn as, taken in turn by session; "
+                 "'none' offers none")
+      ->default_str(std::filesystem::path(VISTREAM_DEFAULT_AVATAR).filename().string() +
+                    " beside the clone (../shared/data), if it is there");
+  app.add_option("--avatar-height", avatarHeight, "avatars are drawn this tall, metres")
+      ->check(between(0.1, 10.0));
   app.add_option("--stats-interval", cfg.statsIntervalS, "seconds between stats lines")
       ->check(positive());
   app.add_option("--max-frame-bytes", cfg.maxInboundFrameBytes, "largest inbound frame accepted")
@@ -152,10 +162,25 @@ int runServerTool(int argc, char** argv) {
           "`vistream-pvs bake --scene {} --cell-size {:g} --out scene.db` and serve it with "
           "--pvs-db scene.db",
           scene, worldOptions.cellSize);
+    std::vector<std::filesystem::path> avatarFiles;
+    if (avatarModels.empty()) {
+      if (std::filesystem::exists(VISTREAM_DEFAULT_AVATAR))
+        avatarFiles.push_back(VISTREAM_DEFAULT_AVATAR);
+      else
+        spdlog::info("no avatar model: {} is not there (give --avatar-model)",
+                     VISTREAM_DEFAULT_AVATAR);
+    } else if (avatarModels != std::vector<std::string>{"none"}) {
+      for (const std::string& m : avatarModels) {
+        if (!std::filesystem::exists(m)) throwInputError("--avatar-model {}: no such file", m);
+        avatarFiles.push_back(m);
+      }
+    }
     worldOptions.pvsDatabase = pvsDb;
     worldOptions.fusion = *parseFusionChoice(fusion);
     worldOptions.lighting = !noLighting;
     StreamWorld world(openScene(scene, sceneLimits), worldOptions);
+    cfg.avatarModels = std::make_shared<const AvatarCatalogue>(
+        AvatarCatalogue::load(avatarFiles, avatarHeight, world.scene()));
     StreamServer server(world, cfg);
     server.start();
     if (!portFile.empty()) {

@@ -143,6 +143,11 @@ void Session::onFrame(const Envelope& envelope) {
                           return fail(ErrorCode::OutOfOrder, "PvsRequest before Hello");
                         onPvsRequest(request);
                       },
+                      [this](const AvatarModelRequest& request) {
+                        if (state_ != State::Active)
+                          return fail(ErrorCode::OutOfOrder, "AvatarModelRequest before Hello");
+                        onAvatarModelRequest(request);
+                      },
                       [this](const Bye&) {
                         spdlog::debug("session {}: client said bye", id_);
                         close("bye");
@@ -247,6 +252,22 @@ void Session::onHello(const Hello& hello) {
   const QuantizationGrid quantization = QuantizationGrid::forBounds(b);  // as every Geometry's
   w.quant_origin = std::make_unique<Vec3d>(toWire(quantization.origin));
   w.quant_step = quantization.step;
+  if (const auto& avatars = cfg.avatarModels; avatars && !avatars->models.empty()) {
+    for (const ServedAvatarModel& m : avatars->models) {
+      auto info = std::make_unique<AvatarModelInfoT>();
+      info->name = m.name;
+      info->bytes = m.bytes;
+      info->height_m = m.heightM;
+      w.avatar_models.push_back(std::move(info));
+    }
+    for (const glm::vec3& c : avatars->light.sky)
+      w.avatar_light.insert(w.avatar_light.end(), {c.r, c.g, c.b});
+    w.avatar_light.insert(w.avatar_light.end(), avatars->light.sun.begin(),
+                          avatars->light.sun.end());
+    if (glm::length(avatars->light.sunDirection) > 0.0f)
+      w.avatar_sun_direction = std::make_unique<Vec3f>(toWire(avatars->light.sunDirection));
+    modelsSent_.assign(avatars->models.size(), 0);
+  }
   send(std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(w))));
   spdlog::debug("session {}: welcome (radius {:.0f} m, budget {} bytes)", id_, radius_, budget_);
 }
@@ -274,6 +295,18 @@ void Session::onPose(const Pose& pose) {
                 fmt::format("Pose.velocity: a speed of {:.6g} m/s exceeds the server's limit of "
                             "{:.6g} m/s",
                             speed, cfg.maxSpeedMps));
+  // Speed over the ground: the client's velocity, else the step since the
+  // last pose; the gait follows it, and its phase counts from when it changed.
+  const Clock::time_point now = Clock::now();
+  float groundSpeed = std::hypot(v.x, v.z);
+  if (!pose.velocity() && hasPose_) {
+    const double dt = std::chrono::duration<double>(now - lastPoseAt_).count();
+    groundSpeed = dt > 0.02 ? float(std::hypot(p.x - position_.x, p.z - position_.z) / dt) : 0.0f;
+  }
+  const uint8_t gait = uint8_t(gaitForSpeed(groundSpeed));
+  if (gait != gait_ || lastPoseAt_ == Clock::time_point{}) gaitSince_ = now;
+  gait_ = gait;
+  lastPoseAt_ = now;
   position_ = p;
   const auto cell = world_.cellOf(glm::vec3(position_));
   hasPose_ = cell.has_value();
@@ -286,6 +319,9 @@ void Session::onPose(const Pose& pose) {
     snapshot_.yawDeg = pose.yaw_deg();
     snapshot_.pitchDeg = pose.pitch_deg();
     snapshot_.cell = cell_;
+    snapshot_.speedMps = groundSpeed;
+    snapshot_.gait = gait_;
+    snapshot_.gaitSince = gaitSince_;
   }
   pump();
 }
@@ -318,6 +354,20 @@ void Session::onPvsRequest(const PvsRequest& request) {
                             cfg.maxPvsRequestsWaiting));
   pvsWaiting_.push_back({requestId, *cell});
   dispatchPvsRequests();
+}
+
+void Session::onAvatarModelRequest(const AvatarModelRequest& request) {
+  const auto& avatars = server_.config().avatarModels;
+  const size_t count = avatars ? avatars->models.size() : 0;
+  if (request.model() >= count)
+    return fail(ErrorCode::BadRequest,
+                fmt::format("AvatarModelRequest.model {}: the server offers {} avatar model{}",
+                            request.model(), count, count == 1 ? "" : "s"));
+  // Once per model a session (a model is up to 8 MiB: no refetch loops).
+  if (modelsSent_[request.model()]++)
+    return fail(ErrorCode::RateLimited,
+                fmt::format("avatar model {} was already sent to this session", request.model()));
+  send(avatars->models[request.model()].frame);
 }
 
 void Session::dispatchPvsRequests() {

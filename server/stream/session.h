@@ -68,6 +68,9 @@ class Session : public std::enable_shared_from_this<Session> {
   struct Snapshot {
     uint32_t id = 0;
     bool active = false, hasPose = false, wantsAvatars = false;
+    float speedMps = 0.0f;                              // over the ground
+    uint8_t gait = 0;                                   // Gait (common/avatar/avatar_model.h)
+    std::chrono::steady_clock::time_point gaitSince{};  // when the user took up this gait
     glm::dvec3 position{0.0};
     float yawDeg = 0.0f, pitchDeg = 0.0f, radius = 0.0f;
     glm::ivec3 cell{0};
@@ -85,6 +88,7 @@ class Session : public std::enable_shared_from_this<Session> {
   void onHello(const wire::Hello& hello);
   void onPose(const wire::Pose& pose);
   void onPvsRequest(const wire::PvsRequest& request);
+  void onAvatarModelRequest(const wire::AvatarModelRequest& request);
   void dispatchPvsRequests();
   void onBytes(std::span<const uint8_t> bytes);
   // Drops every interest in visibility work: queued computations nobody
@@ -131,6 +135,10 @@ class Session : public std::enable_shared_from_this<Session> {
 
   // Pose (as last received; the scheduler has its own copy).
   bool hasPose_ = false;
+  Clock::time_point lastPoseAt_{};
+  uint8_t gait_ = 0;
+  Clock::time_point gaitSince_{};
+  std::vector<uint8_t> modelsSent_;  // per avatar model: AvatarModelData frames sent
   glm::dvec3 position_{0.0};
   glm::ivec3 cell_{0};
   mutable std::mutex snapshotMutex_;  // guards snapshot_

@@ -219,6 +219,7 @@ void StreamServer::avatarTick() {
     snaps.reserve(live.size());
     for (const auto& s : live) snaps.push_back(s->snapshot());
     std::vector<std::pair<double, size_t>> near;
+    const auto now = std::chrono::steady_clock::now();
     for (size_t i = 0; i < live.size(); ++i) {
       const Session::Snapshot& x = snaps[i];
       if (!x.active || !x.hasPose || !x.wantsAvatars) continue;
@@ -241,6 +242,10 @@ void StreamServer::avatarTick() {
         a->position = std::make_unique<wire::Vec3d>(wire::toWire(y.position));
         a->yaw_deg = y.yawDeg;
         a->pitch_deg = y.pitchDeg;
+        a->speed_mps = y.speedMps;
+        a->gait = wire::AvatarGait(y.gait);
+        a->phase_s = float(std::chrono::duration<double>(now - y.gaitSince).count());
+        if (config_.avatarModels) a->model = config_.avatarModels->modelOf(y.id);
         message.avatars.push_back(std::move(a));
       }
       live[i]->deliverAvatars(

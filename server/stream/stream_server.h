@@ -29,6 +29,7 @@
 #include <vector>
 
 #include "common/core/log.h"
+#include "server/stream/avatar_catalogue.h"
 #include "server/stream/stream_scheduler.h"
 #include "server/stream/stream_world.h"
 
@@ -49,7 +50,10 @@ struct StreamServerConfig {
   double prefetchSeconds = 3.0;  // look-ahead along the client's velocity, and the
                                  // neighbour margin (this long at walking speed, at least 2 m)
   double avatarHz = 2.0;
-  size_t maxAvatars = 16;             // nearest visible avatars per update
+  size_t maxAvatars = 16;  // nearest visible avatars per update
+  // The models users are drawn as, offered in Welcome (null or empty: none;
+  // Avatar updates still say where users are).
+  std::shared_ptr<const AvatarCatalogue> avatarModels;
   double statsIntervalS = 5.0;        // the server's log line
   double clientStatsIntervalS = 2.0;  // Stats frames to each client
   uint32_t maxInboundFrameBytes = 64u << 10;

@@ -55,6 +55,20 @@ int withServer(const vistream::testing::TempDir& dir, const fs::path& scene,
   return std::system(("bash -c '" + script + "'").c_str());
 }
 
+// The JSON a connected client run under withServer printed to DIR/net.json,
+// once the exit status it left in DIR/status is 0 (null otherwise, with a
+// failure showing its stderr from DIR/client.err).
+nlohmann::json connectedResult(const vistream::testing::TempDir& dir) {
+  std::ifstream st(dir.path() / "status");
+  int status = -1;
+  st >> status;
+  std::ifstream err(dir.path() / "client.err");
+  EXPECT_EQ(status, 0) << std::string((std::istreambuf_iterator<char>(err)), {});
+  if (status != 0) return nullptr;
+  std::ifstream netJson(dir.path() / "net.json");
+  return nlohmann::json::parse(std::string((std::istreambuf_iterator<char>(netJson)), {}));
+}
+
 // A vistream-client command line connected to withServer's server.
 std::string connectedClient(const std::string& args) {
   return std::string(VISTREAM_BIN_DIR) + "/vistream-client --host 127.0.0.1 --port $port " + args;
@@ -137,13 +151,8 @@ TEST(ClientTool, ConnectedHeadlessRendersWhatTheServerStreams) {
                                        "/net --json > " + d + "/net.json 2> " + d +
                                        "/client.err; echo $? > " + d + "/status")),
             0);
-  std::ifstream st(dir.path() / "status");
-  int status = -1;
-  st >> status;
-  std::ifstream err(dir.path() / "client.err");
-  ASSERT_EQ(status, 0) << std::string((std::istreambuf_iterator<char>(err)), {});
-  std::ifstream netJson(dir.path() / "net.json");
-  const auto j = parseJson(std::string((std::istreambuf_iterator<char>(netJson)), {}));
+  const auto j = connectedResult(dir);
+  ASSERT_FALSE(j.is_null());
   // Taking up geometry is part of each frame's wall-clock time.
   EXPECT_GE(j["geometry_intake_ms_total"].get<double>(), 0.0);
   EXPECT_GE(
@@ -160,6 +169,38 @@ TEST(ClientTool, ConnectedHeadlessRendersWhatTheServerStreams) {
     // Streamed corners are quantized to 16 bits, which may move an edge by a pixel.
     EXPECT_LT(diff.differingFraction, 0.02) << "frame " << i;
   }
+}
+
+// Two connected clients: one stands 6 m down the street, the other walks
+// towards it and draws it: the server reports the user, the client fetches
+// the Fox over the connection and shows it, and says so per frame.
+TEST(ClientTool, AConnectedClientDrawsAnotherUserAsTheServersAvatarModel) {
+  vistream::testing::TempDir dir;
+  const fs::path scene = dir.write("street.obj", streetObj());
+  std::string stand = "t,x,y,z,yaw_deg,pitch_deg\n", walk = stand;
+  // Both render in real time (the server reports users twice a second): the
+  // standing one for 4 s, the walker for 3 s from 0.3 s later.
+  for (int i = 0; i < 120; ++i) stand += std::to_string(i / 30.0) + ",0,1.7,4,180,0\n";
+  for (int i = 0; i < 90; ++i) walk += std::to_string(i / 30.0) + ",0,1.7,10,0,-5\n";
+  const fs::path standPath = dir.write("stand.csv", stand), walkPath = dir.write("walk.csv", walk);
+  const std::string d = dir.path().string();
+  ASSERT_EQ(
+      withServer(dir, scene,
+                 connectedClient("--headless --path " + standPath.string() +
+                                 " --size 64x48 --realtime > /dev/null 2>&1 & standing=$!;") +
+                     " sleep 0.3; " +
+                     connectedClient("--headless --path " + walkPath.string() +
+                                     " --size 160x120 --near-distance 40 --realtime --json > " + d +
+                                     "/net.json 2> " + d + "/client.err; echo $? > " + d +
+                                     "/status; wait $standing")),
+      0);
+  const auto j = connectedResult(dir);
+  ASSERT_FALSE(j.is_null());
+  size_t shown = 0;
+  for (const auto& f : j["per_frame"])
+    if (f["avatars"]["in_view"].get<size_t>() == 1 && f["avatars"]["pixels"].get<size_t>() > 20)
+      ++shown;
+  EXPECT_GT(shown, 30u) << j["stages"].dump();  // of 90 frames, after the first second
 }
 
 TEST(ClientTool, BadArgumentsGetAClearErrorAndANonZeroExit) {

@@ -40,7 +40,7 @@ TEST(AvatarModel, TheFoxStandsOnTheOriginAsTallAsAsked) {
   EXPECT_EQ(fox.clip(Gait::Run)->name, "Run");
   EXPECT_EQ(fox.clip(Gait::Stand)->name, "Survey");
 
-  Pose rest;
+  PosedMesh rest;
   fox.pose(Gait::Stand, 0.0f, rest);
   const Box3f b = boundsOf(rest.positions);
   EXPECT_NEAR(b.lo.y, 0.0f, 0.05f);  // the first frame of Survey is close to the rest pose
@@ -53,7 +53,7 @@ TEST(AvatarModel, TheFoxStandsOnTheOriginAsTallAsAsked) {
   const glm::vec3 centre(0.0f, 0.6f, 0.0f);
   for (Gait g : {Gait::Stand, Gait::Walk, Gait::Run})
     for (float t = 0.0f; t < fox.clipDuration(g); t += 0.05f) {
-      Pose p;
+      PosedMesh p;
       fox.pose(g, t, p);
       for (const glm::vec3& x : p.positions)
         ASSERT_LE(glm::length(x - centre), fox.boundingRadius()) << gaitName(g) << " t " << t;

@@ -126,7 +126,7 @@ TEST(SelfShadow, ExactPlanesAndThePlaneTableAgreeWithinTheTablesQuantization) {
 TEST(SelfShadow, TheWalkingFoxMatchesConvergedMonteCarlo) {
   const Scene fox = loadScene(std::filesystem::path(VISTREAM_SHARED_DIR) / "data" / "Fox.glb");
   const SkinnedMesh mesh = SkinnedMesh::firstOf(fox);
-  Pose pose;
+  PosedMesh pose;
   poseAt(fox, mesh, findAnimation(fox, "Walk"), 0.3f, pose);
   const SelfShadowing shadows;
   std::vector<float> ours, reference;
@@ -200,7 +200,7 @@ TEST(ShadowHierarchy, TheSubdividedFoxStaysWithinThePapersErrorWithAFractionOfTh
   const ShadowHierarchy h =
       ShadowHierarchy::build(fine.triangles, coarse.triangles, 2, 2, fine.positions.size());
   EXPECT_LT(h.meanBlockers(), 0.1 * double(fine.triangles.size()));
-  Pose pose;
+  PosedMesh pose;
   poseAt(fox, fine, findAnimation(fox, "Walk"), 0.5f, pose);
   const SelfShadowing shadows;
   std::vector<float> ours, reference;

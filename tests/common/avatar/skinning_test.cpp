@@ -131,7 +131,7 @@ TEST(PoseMesh, BlendsJointMatricesByNormalizedWeights) {
   EXPECT_EQ(mesh.weights[2], glm::vec4(1, 0, 0, 0));
   const std::vector<glm::mat4> joints = {glm::mat4(1.0f),
                                          glm::translate(glm::mat4(1.0f), glm::vec3(2, 0, 0))};
-  Pose pose;
+  PosedMesh pose;
   poseMesh(mesh, joints, pose);
   EXPECT_EQ(pose.positions[0], glm::vec3(1, 0, 0));
   EXPECT_EQ(pose.positions[1], glm::vec3(1, 0, 0));
@@ -173,7 +173,7 @@ TEST(Fox, WalkingMovesItsVerticesAndKeepsRigidPartsRigid) {
   Box3f bind;
   for (const glm::vec3& p : mesh.positions) bind.extend(p);
   const float size = glm::length(bind.hi - bind.lo);
-  Pose first, pose;
+  PosedMesh first, pose;
   poseAt(fox, mesh, walk, 0.0f, first);
   float moved = 0.0f;
   size_t pairs = 0;
@@ -213,7 +213,7 @@ TEST(SkinnedMesh, SubdivisionAddsAVertexPerEdgeAndMidpointsStayHalfway) {
   // The first fine triangle is (a, ab, ca) of the first coarse one.
   const glm::uvec3 coarse = welded.triangles[0], fine = finer.triangles[0];
   EXPECT_EQ(fine.x, coarse.x);
-  Pose p;
+  PosedMesh p;
   poseAt(fox, finer, findAnimation(fox, "Run"), 0.2f, p);
   // Linear blend skinning of a blended skin at the midpoint is not the
   // midpoint of the skinned ends in general, but stays close to it.

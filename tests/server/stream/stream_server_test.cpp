@@ -5,10 +5,13 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
+#include <fstream>
 #include <set>
 
 #include "common/generate/path.h"
 #include "common/raycast/ray_query.h"
+#include "common/scene/scene_loader.h"
 #include "common/world/static_world.h"
 #include "server/visibility/epsilon_pvs.h"
 #include "server/visibility/pvs_bake.h"
@@ -449,6 +452,73 @@ TEST(StreamServer, AvatarsGoOnlyToClientsThatCanSeeThemAndWantThem) {
   EXPECT_TRUE(aSeesB);
   EXPECT_FALSE(aSeesHidden) << "an avatar behind the wall was sent";
   EXPECT_FALSE(blind.nextOf(Payload::Avatar, 0.5)) << "a client that wants no avatars got some";
+}
+
+// The server offers the Fox: Welcome names it with its size and the light
+// avatars are shaded with; asking for it returns the file's bytes (which
+// load as the same model); asking again, or for a model not offered, ends
+// only that session. A user walking at 1.4 m/s is reported walking, its
+// phase growing with time.
+TEST(StreamServer, OffersAvatarModelsSendsEachOnceAndReportsGaitAndPhase) {
+  const std::filesystem::path fox = std::filesystem::path(VISTREAM_SHARED_DIR) / "data" / "Fox.glb";
+  ServerFixture fx(configWith([&](StreamServerConfig& c) {
+    c.avatarHz = 20.0;
+    c.avatarModels = std::make_shared<const AvatarCatalogue>(
+        AvatarCatalogue::load({fox}, 1.1f, testing::streetScene()));
+  }));
+  TestClient a(fx.port()), b(fx.port());
+  a.hello();
+  b.hello();
+  const auto w = a.nextOf(Payload::Welcome);
+  ASSERT_TRUE(w);
+  const wire::Welcome* welcome = wire::envelopeOf(*w)->payload_as_Welcome();
+  ASSERT_TRUE(welcome->avatar_models());
+  ASSERT_EQ(welcome->avatar_models()->size(), 1u);
+  EXPECT_EQ(welcome->avatar_models()->Get(0)->name()->str(), "Fox.glb");
+  EXPECT_EQ(welcome->avatar_models()->Get(0)->bytes(), std::filesystem::file_size(fox));
+  EXPECT_FLOAT_EQ(welcome->avatar_models()->Get(0)->height_m(), 1.1f);
+  ASSERT_TRUE(welcome->avatar_light());
+  EXPECT_EQ(welcome->avatar_light()->size(), 100u);
+  ASSERT_TRUE(b.nextOf(Payload::Welcome));
+
+  wire::AvatarModelRequestT request;
+  request.model = 0;
+  a.sendRaw(wire::encodeMessage(wire::AvatarModelRequestT(request)));
+  const auto data = a.nextOf(Payload::AvatarModelData);
+  ASSERT_TRUE(data);
+  const auto* glb = wire::envelopeOf(*data)->payload_as_AvatarModelData()->glb();
+  ASSERT_TRUE(glb);
+  const std::string bytes(reinterpret_cast<const char*>(glb->data()), glb->size());
+  std::ifstream in(fox, std::ios::binary);
+  const std::string file((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(bytes, file);
+  EXPECT_EQ(
+      AvatarModel::fromScene(loadGlbFromMemory(bytes, "Fox.glb"), "Fox.glb", 1.0f).triangleCount(),
+      576u);
+
+  // b walks east at 1.4 m/s; a watches from the same street.
+  a.pose({-10.0, 1.7, 8.0}, 90.0f);
+  std::vector<float> phases;
+  for (int i = 0; i < 40 && phases.size() < 6; ++i) {
+    b.pose({0.0 + 0.07 * i, 1.7, 8.0}, -90.0f, glm::vec3(1.4f, 0.0f, 0.0f));
+    auto f = a.nextOf(Payload::Avatar, 0.1);
+    if (!f) continue;
+    for (const auto* s : *wire::envelopeOf(*f)->payload_as_Avatar()->avatars()) {
+      EXPECT_EQ(s->gait(), wire::AvatarGait::Walk);
+      EXPECT_NEAR(s->speed_mps(), 1.4f, 1e-4f);
+      EXPECT_EQ(s->model(), 0u);
+      phases.push_back(s->phase_s());
+    }
+  }
+  ASSERT_GE(phases.size(), 3u);
+  EXPECT_GT(phases.back(), phases.front());
+
+  a.sendRaw(wire::encodeMessage(wire::AvatarModelRequestT(request)));  // again
+  EXPECT_EQ(nextErrorCode(a), ErrorCode::RateLimited);
+  request.model = 1;  // not offered
+  b.sendRaw(wire::encodeMessage(wire::AvatarModelRequestT(request)));
+  EXPECT_EQ(nextErrorCode(b), ErrorCode::BadRequest);
+  expectOthersStillServed(fx);
 }
 
 // ---- bad input: each ends only its own session ---------------------------------
