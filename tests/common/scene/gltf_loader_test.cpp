@@ -774,6 +774,44 @@ TEST(GltfLoader, LoadsAGlbWithItsBufferInTheBinChunk) {
   expectNear(fileTriangle(scene, scene.objects[0], 0)[1], {1, 0, 0}, 1e-6);
 }
 
+// The Fox from memory (as a client receives an avatar model) is the Fox
+// from its file: the same triangles, skin, clips and embedded texture.
+TEST(GlbFromMemory, LoadsTheFoxAsItsFileDoes) {
+  std::ifstream in(kFox, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), {});
+  const Scene fromFile = loadGltf(kFox), fromMemory = loadGlbFromMemory(bytes, "Fox.glb");
+  EXPECT_EQ(fromMemory.name, "Fox");
+  ASSERT_EQ(fromMemory.triangleCount(), fromFile.triangleCount());
+  ASSERT_EQ(fromMemory.objects.size(), fromFile.objects.size());
+  EXPECT_EQ(fromMemory.objects[0].mesh.positions, fromFile.objects[0].mesh.positions);
+  EXPECT_EQ(fromMemory.objects[0].mesh.weights, fromFile.objects[0].mesh.weights);
+  EXPECT_EQ(fromMemory.animations.size(), fromFile.animations.size());
+  ASSERT_TRUE(fromMemory.materials[0].baseColorImage);
+  EXPECT_EQ(*fromMemory.materials[0].baseColorImage, *fromFile.materials[0].baseColorImage);
+}
+
+// Bytes from the network never reach the disk: a glb whose buffer names a
+// file is refused, and so are cut or oversized bytes, each naming the model.
+TEST(GlbFromMemory, RefusesFileReferencesCutBytesAndTooManyBytes) {
+  GltfDoc g;
+  const int pos = g.addPositions(kUnitTriangle);
+  g.addOnlyRoot("n", "m", {GltfDoc::primitive(pos)});
+  json d = g.doc();
+  d["buffers"] = json::array({{{"byteLength", 36}, {"uri", "/etc/passwd"}}});
+  const std::string refused =
+      inputErrorOf([&] { loadGlbFromMemory(GltfDoc::glbOf(d.dump(), ""), "net.glb"); });
+  EXPECT_THAT(refused, HasSubstr("net.glb"));
+  EXPECT_THAT(refused, HasSubstr("cannot read the file"));
+  const std::string good = g.glb();
+  EXPECT_EQ(loadGlbFromMemory(good, "good.glb").triangleCount(), 1u);
+  EXPECT_THAT(inputErrorOf([&] { loadGlbFromMemory(good.substr(0, good.size() / 2), "cut.glb"); }),
+              HasSubstr("cut.glb"));
+  SceneLimits small;
+  small.maxFileBytes = good.size() - 1;
+  EXPECT_THAT(inputErrorOf([&] { loadGlbFromMemory(good, "big.glb", small); }),
+              HasSubstr("big.glb"));
+}
+
 TEST(GltfLoader, RejectsABinChunkLongerThanTheFileSayingSo) {
   // tinygltf said "At least Chunk1 Must have 4 bytes or more bytes, but got 4".
   GltfDoc g;
