@@ -31,6 +31,7 @@
 #include "common/core/log.h"
 #include "common/core/progress.h"
 #include "common/core/timer.h"
+#include "common/generate/generate.h"
 #include "common/generate/path.h"
 #include "common/generate/scene_spec.h"
 #include "common/light/environment_light.h"
@@ -516,7 +517,8 @@ int run(const Args& a) {
                     "(a connected client shows the users the server reports)");
   if (a.avatars > 0 && a.pathFile.empty())
     throwInputError("--avatars needs --path: the simulated users walk beside it");
-  if (a.avatars > 0 && !std::filesystem::exists(avatarModelPath(a)))
+  if (a.avatars > 0 && avatarModelPath(a) != "walker" &&
+      !std::filesystem::exists(avatarModelPath(a)))
     throwInputError("--avatars: the avatar model {} does not exist (give --avatar-model)",
                     avatarModelPath(a).string());
   const glm::ivec2 size = parseImageSize(a.size);
@@ -689,7 +691,8 @@ int runClientTool(int argc, char** argv) {
                "rather than as fast as possible");
   app.add_flag("--no-avatars", a.noAvatars,
                "connected: neither ask the server for other users nor draw them");
-  app.add_option("--avatar-model", a.avatarModel, "the avatars' skinned glTF model")
+  app.add_option("--avatar-model", a.avatarModel,
+                 "the avatars' skinned glTF model, or 'walker' (a built-in figure)")
       ->default_str(std::filesystem::path(VISTREAM_DEFAULT_AVATAR).filename().string() +
                     " beside the clone (../shared/data)");
   app.add_option("--avatar-height", a.avatarHeight, "the avatars' height, metres")

@@ -18,6 +18,7 @@
 #include "common/core/median.h"
 #include "common/core/progress.h"
 #include "common/core/timer.h"
+#include "common/generate/generate.h"
 #include "common/light/environment_light.h"
 #include "common/light/spherical_harmonics.h"
 #include "common/light/texture.h"
@@ -52,16 +53,16 @@ struct Reference {
   std::vector<size_t> frames;                // their indices into Model::times
 };
 
-Run runOnce(const Model& m, const SelfShadowOptions& options, int ring,
-            const Reference& reference) {
+Run runOnce(const Model& m, const SelfShadowOptions& options, int ring, const Reference& reference,
+            const VertexBlockers* pvs = nullptr) {
   Run r;
   r.options = options;
   r.ring = ring;
   const SelfShadowing shadows(options);
   const ShadowHierarchy hierarchy =
-      ring > 0 ? ShadowHierarchy::build(m.mesh.triangles, m.coarse, m.levels, ring,
-                                        m.mesh.positions.size())
-               : ShadowHierarchy{};
+      ring > 0 && !pvs ? ShadowHierarchy::build(m.mesh.triangles, m.coarse, m.levels, ring,
+                                                m.mesh.positions.size())
+                       : ShadowHierarchy{};
   std::vector<double> total, transform, raster, integrate;
   double l2 = 0, blockers = 0;
   PosedMesh pose;
@@ -71,8 +72,11 @@ Run runOnce(const Model& m, const SelfShadowOptions& options, int ring,
     poseAt(m.scene, m.mesh, m.clip, m.times[f], pose);
     const double transformMs = clock.ms();
     SelfShadowStats stats;
-    shadows.diffuse(pose.positions, pose.normals, m.mesh.triangles, out, &stats,
-                    ring > 0 ? &hierarchy : nullptr);
+    if (pvs)
+      shadows.diffuse(pose.positions, pose.normals, *pvs, out, &stats);
+    else
+      shadows.diffuse(pose.positions, pose.normals, m.mesh.triangles, out, &stats,
+                      ring > 0 ? &hierarchy : nullptr);
     const double frameMs = clock.ms();
     total.push_back(frameMs);
     transform.push_back(transformMs);
@@ -167,7 +171,7 @@ void writeShadowPng(const std::string& file, const std::string& environment, con
   if (!textures.empty() && textures[0]) albedo *= textures[0]->mean();
   const SelfShadowing shadows;
   std::vector<float> open, ours;
-  shadows.diffuse(pose.positions, pose.normals, {}, open);  // no blockers
+  shadows.diffuse(pose.positions, pose.normals, std::vector<glm::uvec3>{}, open);  // no blockers
   shadows.diffuse(pose.positions, pose.normals, m.mesh.triangles, ours);
   // One exposure for all three: the brightest unshadowed vertex at 0.75.
   float brightest = 1e-6f;
@@ -192,7 +196,8 @@ int runShadowBench(const ShadowBenchArgs& a) {
   if (!a.environment.empty() && !std::filesystem::exists(a.environment))
     throwInputError("{}: no such file (--environment)", a.environment);
   Model m;
-  m.scene = loadScene(a.model);
+  m.scene = a.model == "walker" && !std::filesystem::exists(a.model) ? generateWalker()
+                                                                     : loadScene(a.model);
   if (m.scene.animations.empty())
     throwInputError("{}: has no animation to play (the benchmark poses its first clip)", a.model);
   m.clip = &m.scene.animations.front();
@@ -205,10 +210,15 @@ int runShadowBench(const ShadowBenchArgs& a) {
   const int frames = std::max(2, a.frames);
   for (int f = 0; f < frames; ++f) m.times.push_back(m.clip->duration * float(f) / float(frames));
 
-  // The reference and the Monte Carlo sweep, on the first frames.
-  const uint32_t referenceRays = a.quick ? 4096 : 16384;
-  const std::vector<uint32_t> sweep =
-      a.quick ? std::vector<uint32_t>{64, 256} : std::vector<uint32_t>{64, 256, 1024, 4096};
+  // The reference and the Monte Carlo sweep, on the first frames. The
+  // reference traces 4 times the sweep's largest count (half its error):
+  // 65,536 rays a vertex up to 2,000 vertices, else 16,384 (the sweep then
+  // stops at 4,096).
+  const bool small = m.mesh.positions.size() <= 2000;
+  const std::vector<uint32_t> sweep = a.quick ? std::vector<uint32_t>{64, 256}
+                                      : small ? std::vector<uint32_t>{64, 256, 1024, 4096, 16384}
+                                              : std::vector<uint32_t>{64, 256, 1024, 4096};
+  const uint32_t referenceRays = 4 * sweep.back();
   Reference reference;
   const int orders = TransferOptions{}.orders;
   std::vector<std::pair<double, double>> mc;  // (ms per frame, error)
@@ -267,11 +277,34 @@ int runShadowBench(const ShadowBenchArgs& a) {
     r.value = std::move(value);
     runs.push_back(std::move(r));
   };
-  ProgressBar bar("knobs", a.quick ? 5 : 11);
+  ProgressBar bar("knobs", a.quick ? 6 : 12);
   add("defaults",
       defaultRing ? "mask 32, table 128, 25 terms, 4x4, ring 2"
                   : "mask 32, table 128, 25 terms, 4x4",
       {}, defaultRing);
+  bar.advance();
+  // The per-vertex PVS (section 3.2), from poses of the clip between the
+  // benchmark's frames (twice as many, a quarter step off), so the error it
+  // costs between its poses shows.
+  Stopwatch pvsClock;
+  std::vector<PosedMesh> pvsPoses(size_t(2 * frames));
+  for (size_t k = 0; k < pvsPoses.size(); ++k)
+    poseAt(m.scene, m.mesh, m.clip, m.clip->duration * (float(k) + 0.25f) / float(pvsPoses.size()),
+           pvsPoses[k]);
+  const VertexBlockers candidates =
+      defaultRing ? VertexBlockers::of(ShadowHierarchy::build(m.mesh.triangles, m.coarse, m.levels,
+                                                              defaultRing, m.mesh.positions.size()),
+                                       m.mesh.triangles)
+                  : VertexBlockers::everyTriangle(m.mesh.triangles, m.mesh.positions.size());
+  const VertexBlockers pvs = potentiallyVisibleBlockers(candidates, pvsPoses);
+  const double pvsBuildS = pvsClock.ms() / 1000.0;
+  {
+    Run r = runOnce(m, {}, defaultRing, reference, &pvs);
+    r.knob = "per-vertex PVS";
+    r.value = fmt::format("on ({} poses, {:.0f} of {:.0f} blockers kept)", pvsPoses.size(),
+                          pvs.meanPerVertex(), candidates.meanPerVertex());
+    runs.push_back(std::move(r));
+  }
   bar.advance();
   for (const int side : a.quick ? std::vector<int>{16} : std::vector<int>{16, 64}) {
     SelfShadowOptions o;
@@ -310,7 +343,8 @@ int runShadowBench(const ShadowBenchArgs& a) {
   bar.finish();
 
   const Run& d = runs.front();
-  const double mcEqual = mcMsAt(d.l2);
+  const Run& withPvs = runs[1];
+  const double mcEqual = mcMsAt(d.l2), mcEqualPvs = mcMsAt(withPvs.l2);
   const double other = std::max(0.0, d.msPerFrame - d.transformMs - d.rasterMs - d.integrateMs);
   json out = {{"model", a.model},
               {"subdivide", a.subdivide},
@@ -318,6 +352,7 @@ int runShadowBench(const ShadowBenchArgs& a) {
               {"frames", frames},
               {"vertices", m.mesh.positions.size()},
               {"triangles", m.mesh.triangles.size()},
+              {"lowres_triangles", a.subdivide > 0 ? m.coarse.size() : 0},
               {"ms_per_frame", d.msPerFrame},
               {"fps", d.msPerFrame > 0 ? 1000.0 / d.msPerFrame : 0.0},
               {"l2_error", d.l2},
@@ -335,6 +370,15 @@ int runShadowBench(const ShadowBenchArgs& a) {
     mcRows.push_back(
         {{"rays", sweep[s]}, {"ms_per_frame", mc[s].first}, {"l2_error", mc[s].second}});
   out["monte_carlo"] = mcRows;
+  out["with_pvs"] = {{"blockers_per_vertex", withPvs.blockersPerVertex},
+                     {"candidates_per_vertex", candidates.meanPerVertex()},
+                     {"ms_per_frame", withPvs.msPerFrame},
+                     {"fps", 1000.0 / withPvs.msPerFrame},
+                     {"l2_error", withPvs.l2},
+                     {"mc_ms_equal_error", mcEqualPvs},
+                     {"speedup_vs_mc", mcEqualPvs / withPvs.msPerFrame},
+                     {"poses", pvsPoses.size()},
+                     {"build_s", pvsBuildS}};
   json knobRows = json::array();
   for (const Run& r : runs) knobRows.push_back(runJson(r));
   out["knobs"] = knobRows;
@@ -346,6 +390,16 @@ int runShadowBench(const ShadowBenchArgs& a) {
   std::printf("\nself-shadowing of %s (%s clip, %d frames): %zu vertices, %zu triangles\n\n",
               a.model.c_str(), m.clip->name.c_str(), frames, m.mesh.positions.size(),
               m.mesh.triangles.size());
+  std::printf("Table 1 (the paper's rows):\n%-28s %10zu\n%-28s %10zu\n%-28s %10s\n", "vertices",
+              m.mesh.positions.size(), "triangles", m.mesh.triangles.size(), "low-res triangles",
+              a.subdivide > 0 ? std::to_string(m.coarse.size()).c_str() : "-");
+  std::printf("%-28s %10.1f\n%-28s %10.1f\n%-28s %10.1f\n%-28s %10.1f\n%-28s %9.2f%%\n",
+              "blockers a vertex", d.blockersPerVertex, "blockers a vertex (PVS)",
+              withPvs.blockersPerVertex, "fps", 1000.0 / d.msPerFrame, "fps with PVS",
+              1000.0 / withPvs.msPerFrame, "L2 error", 100.0 * d.l2);
+  std::printf("%-28s %9.2f%%\n%-28s %10.1f\n%-28s %9.1fx\n\n", "L2 error with PVS",
+              100.0 * withPvs.l2, "PVS build, s", pvsBuildS, "with PVS, faster than MC",
+              mcEqualPvs / withPvs.msPerFrame);
   std::printf(
       "%-28s %10.2f\n%-28s %10.1f\n%-28s %10.4f\n%-28s %10.1f\n%-28s %10.2f\n%-28s %9.1fx\n",
       "ms a frame (median)", d.msPerFrame, "frames a second", 1000.0 / d.msPerFrame,

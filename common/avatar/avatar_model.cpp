@@ -1,12 +1,12 @@
 #include "common/avatar/avatar_model.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <glm/gtc/matrix_transform.hpp>
 
 #include "common/core/check.h"
 #include "common/core/error.h"
+#include "common/core/timer.h"
 #include "common/light/spherical_harmonics.h"
 #include "common/light/texture.h"
 #include "common/scene/scene_loader.h"
@@ -176,6 +176,24 @@ AvatarShader::AvatarShader(std::shared_ptr<const AvatarModel> model,
     : model_(std::move(model)), options_(options), shadowing_(options.shadows) {
   VS_CHECK(model_ != nullptr);
   VS_CHECK_EQ(shadowing_.terms(), kTerms);
+}
+
+const VertexBlockers* AvatarShader::blockers(Gait g) {
+  const size_t i = size_t(g);
+  if (pvsTried_[i]) return pvs_[i].get();
+  pvsTried_[i] = true;
+  const size_t entries = model_->vertexCount() * model_->triangleCount();
+  if (options_.pvsPoses <= 0 || entries > AvatarShaderOptions::kMaxPvsEntries) return nullptr;
+  Stopwatch clock;
+  const float duration = model_->clipDuration(g);
+  std::vector<PosedMesh> poses(duration > 0.0f ? size_t(options_.pvsPoses) : 1);
+  for (size_t k = 0; k < poses.size(); ++k)
+    model_->pose(g, duration * float(k) / float(poses.size()), poses[k]);
+  pvs_[i] = std::make_unique<VertexBlockers>(potentiallyVisibleBlockers(
+      VertexBlockers::everyTriangle(model_->triangles(), model_->vertexCount()), poses,
+      options_.shadows));
+  stats_.pvsMs += clock.ms();
+  return pvs_[i].get();
 }
 
 const AvatarShader::Sampled& AvatarShader::sampled(Gait g, float t) {

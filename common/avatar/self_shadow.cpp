@@ -46,10 +46,10 @@ SelfShadowing::SelfShadowing(const SelfShadowOptions& options)
                  : nullptr),
       integrator_(options.maskSide, options.transfer) {}
 
-void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
-                            const std::vector<glm::vec3>& normals,
-                            const std::vector<glm::uvec3>& triangles, std::vector<float>& out,
-                            SelfShadowStats* stats, const ShadowHierarchy* hierarchy) const {
+template <class ForEachBlocker>
+void SelfShadowing::run(const std::vector<glm::vec3>& positions,
+                        const std::vector<glm::vec3>& normals, std::vector<float>& out,
+                        SelfShadowStats* stats, ForEachBlocker&& forEachBlocker) const {
   VS_CHECK_EQ(positions.size(), normals.size());
   const int terms = integrator_.terms();
   out.assign(positions.size() * size_t(terms), 0.0f);
@@ -67,30 +67,14 @@ void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
       const glm::vec3 p = positions[v];
       const TangentFrame frame = TangentFrame::around(normals[v]);
       local.mask.clear();
-      auto block = [&](const glm::uvec3& t) {
+      forEachBlocker(v, [&](const glm::uvec3& t) {
         const glm::vec3 a = frame.toLocal(positions[t.x] - p),
                         b = frame.toLocal(positions[t.y] - p),
                         c = frame.toLocal(positions[t.z] - p);
         ++local.stats.blockerTests;
         if (!(std::max({a.z, b.z, c.z}) > 0.0f)) return;
         local.stats.rasterized += rasterizeBlocker(a, b, c, table_.get(), local.mask);
-      };
-      if (!hierarchy) {
-        for (const glm::uvec3& t : triangles) block(t);
-      } else {
-        const ShadowHierarchy& h = *hierarchy;
-        for (uint32_t k = h.ringStart[v]; k < h.ringStart[v + 1]; ++k)
-          block(triangles[h.ringTriangles[k]]);
-        const uint32_t* skip = h.skipTriangles.data() + h.skipStart[v];
-        const uint32_t* skipEnd = h.skipTriangles.data() + h.skipStart[v + 1];
-        for (uint32_t c = 0; c < h.coarse.size(); ++c) {
-          if (skip != skipEnd && *skip == c) {  // sorted: one pass
-            ++skip;
-            continue;
-          }
-          block(h.coarse[c]);
-        }
-      }
+      });
       const auto integrated = std::chrono::steady_clock::now();
       local.stats.rasterSeconds += std::chrono::duration<double>(integrated - start).count();
       integrator_.diffuse(local.mask, frame, out.data() + v * size_t(terms));
@@ -107,6 +91,137 @@ void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
       stats->integrateSeconds += l.stats.integrateSeconds;
     }
   }
+}
+
+void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
+                            const std::vector<glm::vec3>& normals,
+                            const std::vector<glm::uvec3>& triangles, std::vector<float>& out,
+                            SelfShadowStats* stats, const ShadowHierarchy* hierarchy) const {
+  run(positions, normals, out, stats, [&](size_t v, auto&& block) {
+    if (!hierarchy) {
+      for (const glm::uvec3& t : triangles) block(t);
+      return;
+    }
+    const ShadowHierarchy& h = *hierarchy;
+    for (uint32_t k = h.ringStart[v]; k < h.ringStart[v + 1]; ++k)
+      block(triangles[h.ringTriangles[k]]);
+    const uint32_t* skip = h.skipTriangles.data() + h.skipStart[v];
+    const uint32_t* skipEnd = h.skipTriangles.data() + h.skipStart[v + 1];
+    for (uint32_t c = 0; c < h.coarse.size(); ++c) {
+      if (skip != skipEnd && *skip == c) {  // sorted: one pass
+        ++skip;
+        continue;
+      }
+      block(h.coarse[c]);
+    }
+  });
+}
+
+void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
+                            const std::vector<glm::vec3>& normals, const VertexBlockers& blockers,
+                            std::vector<float>& out, SelfShadowStats* stats) const {
+  VS_CHECK_EQ(blockers.vertices(), positions.size());
+  run(positions, normals, out, stats, [&](size_t v, auto&& block) {
+    for (uint32_t k = blockers.start[v]; k < blockers.start[v + 1]; ++k)
+      block(blockers.triangles[blockers.list[k]]);
+  });
+}
+
+double VertexBlockers::meanPerVertex() const {
+  return vertices() ? double(list.size()) / double(vertices()) : 0.0;
+}
+
+VertexBlockers VertexBlockers::everyTriangle(const std::vector<glm::uvec3>& triangles,
+                                             size_t vertices) {
+  VertexBlockers b;
+  b.triangles = triangles;
+  b.list.reserve(vertices * triangles.size());
+  for (size_t v = 0; v < vertices; ++v) {
+    for (uint32_t t = 0; t < triangles.size(); ++t) b.list.push_back(t);
+    b.start.push_back(uint32_t(b.list.size()));
+  }
+  return b;
+}
+
+VertexBlockers VertexBlockers::of(const ShadowHierarchy& h, const std::vector<glm::uvec3>& fine) {
+  VertexBlockers b;
+  b.triangles = fine;
+  b.triangles.insert(b.triangles.end(), h.coarse.begin(), h.coarse.end());
+  const uint32_t coarseFirst = uint32_t(fine.size());
+  for (size_t v = 0; v + 1 < h.ringStart.size(); ++v) {
+    b.list.insert(b.list.end(), h.ringTriangles.begin() + h.ringStart[v],
+                  h.ringTriangles.begin() + h.ringStart[v + 1]);
+    const uint32_t* skip = h.skipTriangles.data() + h.skipStart[v];
+    const uint32_t* skipEnd = h.skipTriangles.data() + h.skipStart[v + 1];
+    for (uint32_t c = 0; c < h.coarse.size(); ++c) {
+      if (skip != skipEnd && *skip == c) {
+        ++skip;
+        continue;
+      }
+      b.list.push_back(coarseFirst + c);
+    }
+    b.start.push_back(uint32_t(b.list.size()));
+  }
+  return b;
+}
+
+VertexBlockers potentiallyVisibleBlockers(const VertexBlockers& candidates,
+                                          const std::vector<PosedMesh>& poses,
+                                          const SelfShadowOptions& options) {
+  const size_t vertices = candidates.vertices();
+  for (const PosedMesh& p : poses) {
+    VS_CHECK_EQ(p.positions.size(), vertices);
+    VS_CHECK_EQ(p.normals.size(), vertices);
+  }
+  const std::unique_ptr<PlaneMaskTable> table =
+      options.planeTable > 0
+          ? std::make_unique<PlaneMaskTable>(options.maskSide, options.planeTable)
+          : nullptr;
+  std::vector<std::vector<uint32_t>> kept(vertices);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, vertices, 8), [&](const auto& range) {
+    VisibilityMask mask(options.maskSide);
+    std::vector<uint64_t> before(size_t(mask.words()));
+    std::vector<std::pair<float, uint32_t>> order;  // (distance^2, slot)
+    std::vector<glm::vec3> local;                   // 3 per slot
+    std::vector<uint8_t> keep;
+    for (size_t v = range.begin(); v != range.end(); ++v) {
+      const uint32_t first = candidates.start[v], count = candidates.start[v + 1] - first;
+      keep.assign(count, 0);
+      local.resize(3 * size_t(count));
+      for (const PosedMesh& pose : poses) {
+        const glm::vec3 p = pose.positions[v];
+        const TangentFrame frame = TangentFrame::around(pose.normals[v]);
+        order.clear();
+        for (uint32_t s = 0; s < count; ++s) {
+          const glm::uvec3 t = candidates.triangles[candidates.list[first + s]];
+          glm::vec3* q = local.data() + 3 * size_t(s);
+          q[0] = frame.toLocal(pose.positions[t.x] - p);
+          q[1] = frame.toLocal(pose.positions[t.y] - p);
+          q[2] = frame.toLocal(pose.positions[t.z] - p);
+          if (!(std::max({q[0].z, q[1].z, q[2].z}) > 0.0f)) continue;
+          const glm::vec3 centroid = (q[0] + q[1] + q[2]) / 3.0f;
+          order.emplace_back(glm::dot(centroid, centroid), s);
+        }
+        std::sort(order.begin(), order.end());
+        mask.clear();
+        for (const auto& [distance, s] : order) {
+          std::copy_n(mask.data(), before.size(), before.data());
+          const glm::vec3* q = local.data() + 3 * size_t(s);
+          rasterizeBlocker(q[0], q[1], q[2], table.get(), mask);
+          if (!std::equal(before.begin(), before.end(), mask.data())) keep[s] = 1;
+        }
+      }
+      for (uint32_t s = 0; s < count; ++s)
+        if (keep[s]) kept[v].push_back(candidates.list[first + s]);
+    }
+  });
+  VertexBlockers out;
+  out.triangles = candidates.triangles;
+  for (const auto& k : kept) {
+    out.list.insert(out.list.end(), k.begin(), k.end());
+    out.start.push_back(uint32_t(out.list.size()));
+  }
+  return out;
 }
 
 ShadowHierarchy ShadowHierarchy::build(const std::vector<glm::uvec3>& fine,

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "common/avatar/hemisphere_raster.h"
+#include "common/avatar/skinning.h"
 #include "common/avatar/transfer.h"
 
 namespace vistream {
@@ -55,6 +56,36 @@ struct ShadowHierarchy {
   double meanBlockers() const;  // ring plus coarse, a vertex
 };
 
+// Per vertex, the triangles that may block it, as lists: vertex v's are
+// triangles[list[k]] for k in [start[v], start[v + 1]) (vertex indices of the
+// posed mesh). The general form of the blocker sets above: every triangle,
+// the mesh hierarchy, or a PVS cut from either.
+struct VertexBlockers {
+  std::vector<glm::uvec3> triangles;
+  std::vector<uint32_t> start{0}, list;
+
+  size_t vertices() const { return start.size() - 1; }
+  double meanPerVertex() const;
+  // Every triangle for every vertex (vertices x triangles entries: small meshes).
+  static VertexBlockers everyTriangle(const std::vector<glm::uvec3>& triangles, size_t vertices);
+  // The hierarchy's blockers: each vertex's fine ring, then the coarse
+  // triangles the ring does not cover.
+  static VertexBlockers of(const ShadowHierarchy& hierarchy, const std::vector<glm::uvec3>& fine);
+};
+
+// The paper's static per-vertex PVS (section 3.2, "PVS"): the blockers of
+// `candidates` that add to the vertex's visibility mask in at least one of
+// the sampled `poses` of the animation (positions and normals of the mesh
+// the candidates index). Per pose, a vertex's candidates above its tangent
+// plane are rasterized nearest first (by centroid distance) and each that
+// sets a bit the ones before it left clear is kept. The mask is the OR of
+// its blockers, so at every sampled pose the kept ones give exactly the
+// mask of all of them; between sampled poses a blocker left out may be
+// missed (the error this costs is measured, not bounded). Parallel (TBB).
+VertexBlockers potentiallyVisibleBlockers(const VertexBlockers& candidates,
+                                          const std::vector<PosedMesh>& poses,
+                                          const SelfShadowOptions& options = {});
+
 class SelfShadowing {
  public:
   explicit SelfShadowing(const SelfShadowOptions& options = {});
@@ -68,8 +99,17 @@ class SelfShadowing {
   void diffuse(const std::vector<glm::vec3>& positions, const std::vector<glm::vec3>& normals,
                const std::vector<glm::uvec3>& triangles, std::vector<float>& out,
                SelfShadowStats* stats = nullptr, const ShadowHierarchy* hierarchy = nullptr) const;
+  // The same with each vertex's blockers from lists (a PVS).
+  void diffuse(const std::vector<glm::vec3>& positions, const std::vector<glm::vec3>& normals,
+               const VertexBlockers& blockers, std::vector<float>& out,
+               SelfShadowStats* stats = nullptr) const;
 
  private:
+  // The shadow loop: forEachBlocker(v, block) calls block(triangle) for
+  // vertex v's blockers.
+  template <class ForEachBlocker>
+  void run(const std::vector<glm::vec3>& positions, const std::vector<glm::vec3>& normals,
+           std::vector<float>& out, SelfShadowStats* stats, ForEachBlocker&& forEachBlocker) const;
   SelfShadowOptions options_;
   std::unique_ptr<PlaneMaskTable> table_;
   TransferIntegrator integrator_;

@@ -61,6 +61,12 @@ PolygonScene generateBigCity(uint64_t seed);
 PolygonScene generateInterior(uint64_t seed, double wallPatch = 0.0);
 PolygonScene generateTerrain(uint64_t seed);
 
+// The built-in avatar "walker": a skinned figure of boxes (torso, head, two
+// legs bending at the knee, two arms; 1.75 m tall, facing +Z) on nine
+// joints, with the clips Survey (3 s, head and torso turn), Walk (1 s) and
+// Run (0.6 s). A skinned test model besides the Fox (openScene("walker")).
+Scene generateWalker();
+
 // Triangulated scene with face IDs in object-then-face order (the OBJ order).
 Scene toScene(const PolygonScene& polygons);
 

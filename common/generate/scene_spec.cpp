@@ -16,7 +16,7 @@ namespace vistream {
 std::string sceneSpecHelp() {
   return fmt::format(
       "A SCENE is a file (.obj, .gltf, .glb, .json manifest) or a built-in name ({}; "
-      "'city1@SEED' picks a seed).",
+      "'city1@SEED' picks a seed; 'walker' is a skinned figure for avatars).",
       fmt::join(sceneTypes(), ", "));
 }
 
@@ -38,6 +38,7 @@ Scene openScene(const std::string& spec, const SceneLimits& limits) {
     if (err != std::errc() || ptr != s.data() + s.size())
       throwInputError("scene '{}': seed '{}' is not a non-negative integer", spec, s);
   }
+  if (spec == "walker") return generateWalker();
   const auto& types = sceneTypes();
   if (std::find(types.begin(), types.end(), type) == types.end())
     throwInputError("scene '{}': no such file, and not a built-in scene ({})", spec,

@@ -7,6 +7,7 @@
 #include <glm/gtc/matrix_transform.hpp>
 
 #include "common/core/error.h"
+#include "common/generate/generate.h"
 #include "common/light/spherical_harmonics.h"
 
 namespace vistream {
@@ -135,6 +136,50 @@ TEST(AvatarShader, ReusesASampledPoseAndColoursByAlbedoTimesLight) {
   ShadedAvatar shade;
   shader.shade(Gait::Walk, 0.31f, light, 0.0f, shade);
   for (size_t c = 0; c < a.corners.size(); ++c) ASSERT_LE(shade.corners[c].r, a.corners[c].r);
+}
+
+// The built-in walker: a closed, outward-wound figure 1.75 m tall whose
+// legs swing when it walks: the top of its head sees the whole sky (its
+// transfer vector is the open cosine's), and a foot moves between two
+// moments of the Walk clip while the head stays level.
+TEST(Walker, IsAClosedFigureWhoseLegsSwingWhenItWalks) {
+  const AvatarModel walker = AvatarModel::fromScene(generateWalker(), "walker", 1.75f);
+  EXPECT_EQ(walker.clip(Gait::Walk)->name, "Walk");
+  EXPECT_EQ(walker.clip(Gait::Run)->name, "Run");
+  EXPECT_EQ(walker.clip(Gait::Stand)->name, "Survey");
+  PosedMesh a, b;
+  walker.pose(Gait::Walk, 0.0f, a);
+  walker.pose(Gait::Walk, 0.25f, b);
+  const Box3f rest = boundsOf(a.positions);
+  EXPECT_NEAR(rest.hi.y - rest.lo.y, 1.75f, 0.05f);
+  size_t top = 0, foot = 0;
+  for (size_t v = 0; v < a.positions.size(); ++v) {
+    if (a.positions[v].y > a.positions[top].y) top = v;
+    if (a.positions[v].y < a.positions[foot].y) foot = v;
+  }
+  EXPECT_GT(glm::length(a.positions[foot] - b.positions[foot]), 0.1f);  // the swing
+  EXPECT_GT(a.normals[top].y, 0.5f);  // outward: the head's top faces up
+  const SelfShadowing shadows;
+  std::vector<float> t;
+  shadows.diffuse(a.positions, a.normals, walker.triangles(), t);
+  std::vector<float> open;
+  shadows.diffuse(a.positions, a.normals, std::vector<glm::uvec3>{}, open);
+  EXPECT_LT(
+      meanRelativeL2(
+          {t.begin() + std::ptrdiff_t(25 * top), t.begin() + std::ptrdiff_t(25 * top + 25)},
+          {open.begin() + std::ptrdiff_t(25 * top), open.begin() + std::ptrdiff_t(25 * top + 25)},
+          25),
+      0.02);
+  // A vertex in the armpit is shadowed: its transfer is far from open.
+  double shadowed = 0.0;
+  for (size_t v = 0; v < a.positions.size(); ++v)
+    shadowed = std::max(
+        shadowed,
+        meanRelativeL2(
+            {t.begin() + std::ptrdiff_t(25 * v), t.begin() + std::ptrdiff_t(25 * v + 25)},
+            {open.begin() + std::ptrdiff_t(25 * v), open.begin() + std::ptrdiff_t(25 * v + 25)},
+            25));
+  EXPECT_GT(shadowed, 0.3);
 }
 
 TEST(AvatarModel, ASceneWithoutASkinIsAnInputError) {
