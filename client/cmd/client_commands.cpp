@@ -317,8 +317,11 @@ std::filesystem::path avatarModelPath(const Args& a) {
 Avatars localAvatars(const Args& a, const Scene& scene, const std::vector<PathSample>& path,
                      const RenderGeometry& geometry) {
   Avatars out;
-  auto model =
-      std::make_shared<const AvatarModel>(AvatarModel::load(avatarModelPath(a), a.avatarHeight));
+  const std::filesystem::path file = avatarModelPath(a);
+  auto model = std::make_shared<const AvatarModel>(
+      file == "walker" && !std::filesystem::exists(file)
+          ? AvatarModel::fromScene(generateWalker(), "walker", a.avatarHeight)
+          : AvatarModel::load(file, a.avatarHeight));
   for (const std::string& w : model->warnings()) spdlog::warn("{}", w);
   const AvatarLight light =
       AvatarLight::of(EnvironmentLight::of(scene.environment), scene.environment);
