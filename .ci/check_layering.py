@@ -3,7 +3,7 @@
 
 Across code folders:  common < protocol < server, client
   (server and client never include each other).
-Inside common/:       core < scene < spatial < raycast < world < light < avatar < generate < cmd
+Inside common/:       core < scene < spatial < raycast < world < light < avatar < impostor < generate < cmd
 
 A file may include files of its own layer or of a lower one, never of a higher
 one. Every include of a file under common/, protocol/, server/ and client/ is
@@ -33,7 +33,7 @@ FOLDER_MAY_INCLUDE = {
 }
 FOLDER_ORDER_TEXT = "common < protocol < server, client (server and client never include each other)"
 
-COMMON_ORDER = ["core", "scene", "spatial", "raycast", "world", "light", "avatar", "generate", "cmd"]
+COMMON_ORDER = ["core", "scene", "spatial", "raycast", "world", "light", "avatar", "impostor", "generate", "cmd"]
 COMMON_ORDER_TEXT = " < ".join(COMMON_ORDER)
 
 SOURCE_SUFFIXES = (".h", ".hpp", ".cpp", ".cc", ".inl")

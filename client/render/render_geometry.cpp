@@ -16,9 +16,7 @@ glm::u8vec3 shadeTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec
 }
 
 glm::u8vec3 RenderGeometry::background(const glm::vec3& eye, const glm::vec3& dir) const {
-  if (!groundY || !(dir.y < 0.0f) || !(eye.y > *groundY)) return sky;
-  const float distance = (eye.y - *groundY) / -dir.y * glm::length(dir);
-  return toBytes(haze.apply(glm::vec3(ground), distance));
+  return Backdrop{sky, ground, haze}.along(eye, dir, groundY);
 }
 
 void RenderGeometry::shadeBackground(const glm::vec3& eye, const glm::vec3& first,

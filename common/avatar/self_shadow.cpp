@@ -8,6 +8,7 @@
 #include <cmath>
 
 #include "common/core/check.h"
+#include "common/core/random.h"
 #include "common/core/tangent_frame.h"
 #include "common/light/spherical_harmonics.h"
 #include "common/raycast/ray_query.h"
@@ -16,13 +17,6 @@ namespace vistream {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-
-uint64_t mix64(uint64_t x) {  // splitmix64's finaliser
-  x += 0x9e3779b97f4a7c15ull;
-  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
-  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
-  return x ^ (x >> 31);
-}
 
 float meshSize(const std::vector<glm::vec3>& positions) {
   glm::vec3 lo(INFINITY), hi(-INFINITY);
@@ -289,17 +283,16 @@ void monteCarloTransfer(const std::vector<glm::vec3>& positions,
     for (size_t v = range.begin(); v != range.end(); ++v) {
       const TangentFrame frame = TangentFrame::around(normals[v]);
       const glm::vec3 org = positions[v] + normals[v] * offset;
-      const uint64_t vertexSeed = mix64(v ^ mix64(seed));
-      const double r1 = double(vertexSeed >> 11) / 9007199254740992.0,
-                   r2 = double(mix64(vertexSeed) >> 11) / 9007199254740992.0;
+      const uint64_t vertexSeed = mixBits(v ^ mixBits(seed));
+      const double r1 = unitInterval(vertexSeed), r2 = unitInterval(mixBits(vertexSeed));
       for (uint32_t k = 0; k < rays; ++k) {
         double s1, s2;
         if (k < side * side) {
           s1 = (k % side + 0.5) / side;
           s2 = (double(k / side) + 0.5) / side;
         } else {
-          s1 = double(mix64(vertexSeed + k) >> 11) / 9007199254740992.0;
-          s2 = double(mix64(vertexSeed + 31 * k) >> 11) / 9007199254740992.0;
+          s1 = unitInterval(mixBits(vertexSeed + k));
+          s2 = unitInterval(mixBits(vertexSeed + 31 * k));
         }
         s1 = std::fmod(s1 + r1, 1.0);
         s2 = std::fmod(s2 + r2, 1.0);

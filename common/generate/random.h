@@ -13,6 +13,8 @@
 #include <utility>
 #include <vector>
 
+#include "common/core/random.h"
+
 namespace vistream::generate_detail {
 
 class SceneRandom {
@@ -20,7 +22,7 @@ class SceneRandom {
   explicit SceneRandom(uint64_t seed) : engine_(seed) {}
 
   // Uniform in [0, 1) from the top 53 bits of one engine draw.
-  double uniform() { return double(engine_() >> 11) * 0x1.0p-53; }
+  double uniform() { return unitInterval(engine_()); }
 
   // Uniform in [lo, hi).
   double uniform(double lo, double hi) { return lo + (hi - lo) * uniform(); }
@@ -48,13 +50,7 @@ class SceneRandom {
   std::mt19937_64 engine_;
 };
 
-// SplitMix64 finaliser (Steele, Lea and Flood 2014): a stateless hash from
-// integers to well-mixed bits, for noise lattices indexed by position.
-inline uint64_t mixBits(uint64_t x) {
-  x += 0x9e3779b97f4a7c15ull;
-  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
-  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
-  return x ^ (x >> 31);
-}
+// The stateless hash for noise lattices indexed by position (core/random.h).
+using vistream::mixBits;
 
 }  // namespace vistream::generate_detail

@@ -14,6 +14,7 @@
 
 #include "common/core/check.h"
 #include "common/core/progress.h"
+#include "common/core/random.h"
 #include "common/core/tangent_frame.h"
 #include "common/light/texture.h"
 
@@ -26,13 +27,6 @@ float luminance(const glm::vec3& c) {
   return glm::dot(c, glm::vec3(0.2126f, 0.7152f, 0.0722f));
 }
 
-uint64_t mix64(uint64_t x) {  // splitmix64's finaliser
-  x += 0x9e3779b97f4a7c15ull;
-  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
-  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
-  return x ^ (x >> 31);
-}
-
 // A seed from a point's position, so points shared by neighbouring triangles
 // (same position, same normal) get the same rays.
 uint64_t pointSeed(const glm::vec3& p) {
@@ -41,13 +35,9 @@ uint64_t pointSeed(const glm::vec3& p) {
     uint32_t bits;
     const float v = p[a] == 0.0f ? 0.0f : p[a];  // -0 and +0 alike
     std::memcpy(&bits, &v, 4);
-    h = mix64(h ^ bits);
+    h = mixBits(h ^ bits);
   }
   return h;
-}
-
-double unitFloat(uint64_t x) {
-  return double(x >> 11) * (1.0 / 9007199254740992.0);
 }
 
 // Offset of a ray's origin off a surface at p: above float rounding of the
@@ -207,7 +197,8 @@ double ambientOcclusion(const RayQuery& rays, const glm::vec3& p, const glm::vec
   // Stratified on a sqrt(count) x sqrt(count) grid of the unit square (the
   // remainder at random), rotated by the seed (Cranley-Patterson), then
   // mapped to the cosine-weighted hemisphere (Malley's method).
-  const double r1 = unitFloat(mix64(seed)), r2 = unitFloat(mix64(seed ^ 0x5851f42d4c957f2dull));
+  const double r1 = unitInterval(mixBits(seed)),
+               r2 = unitInterval(mixBits(seed ^ 0x5851f42d4c957f2dull));
   const uint32_t side = std::max<uint32_t>(1, uint32_t(std::sqrt(double(count))));
   std::vector<Ray> batch(count);
   for (uint32_t k = 0; k < count; ++k) {
@@ -216,8 +207,8 @@ double ambientOcclusion(const RayQuery& rays, const glm::vec3& p, const glm::vec
       s1 = (double(k % side) + 0.5) / side;
       s2 = (double(k / side) + 0.5) / side;
     } else {
-      s1 = unitFloat(mix64(seed + 2 * k + 1));
-      s2 = unitFloat(mix64(seed + 2 * k + 2));
+      s1 = unitInterval(mixBits(seed + 2 * k + 1));
+      s2 = unitInterval(mixBits(seed + 2 * k + 2));
     }
     s1 = std::fmod(s1 + r1, 1.0);
     s2 = std::fmod(s2 + r2, 1.0);
@@ -340,7 +331,7 @@ LightingGrid bakeLighting(const Scene& scene, const FlatTriangles& triangles, co
           const float inLength = glm::length(in), step = surfaceOffset(p);
           const glm::vec3 q = inLength > 2.0f * step ? p + in * (step / inLength) : p;
           const double ao = ambientOcclusion(rays, q, n, options.aoRays, options.aoDistance,
-                                             pointSeed(p) ^ mix64(pointSeed(n)));
+                                             pointSeed(p) ^ mixBits(pointSeed(n)));
           aoSum[t] += ao;
           buried[LightingGrid::pointIndex(level, i, j)] = options.aoRays > 0 && ao == 0.0;
           float lit = 0.0f;

@@ -209,6 +209,16 @@ struct Backdrop {
   glm::u8vec3 sky{140, 180, 230};
   glm::u8vec3 ground{118, 112, 100};
   Haze haze;
+
+  // What a ray from `eye` along `dir` meets when it hits no triangle: the
+  // sky, or, looking down from above an assumed ground plane at local height
+  // `groundY`, the ground, hazed by its distance.
+  glm::u8vec3 along(const glm::vec3& eye, const glm::vec3& dir,
+                    std::optional<float> groundY) const {
+    if (!groundY || !(dir.y < 0.0f) || !(eye.y > *groundY)) return sky;
+    const float distance = (eye.y - *groundY) / -dir.y * glm::length(dir);
+    return toBytes(haze.apply(glm::vec3(ground), distance));
+  }
 };
 Backdrop backdropOf(const Scene& scene, const EnvironmentLight& environment,
                     const LightingOptions& options = {});

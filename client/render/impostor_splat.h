@@ -1,0 +1,44 @@
+// The software renderer of point-based impostors (common/impostor/impostor.h):
+// what the OpenGL renderer's point shader does, on the CPU, for headless
+// frames and tests.
+//
+// Each point is projected with the camera (the same rotation-projection as
+// every renderer, camera.h) and covers the 2x2 pixels whose centres surround
+// its projection; a pixel keeps the nearest point (depth: distance along the
+// view axis) and takes that point's colour seen from the eye
+// (Impostor::colourSeenFrom: its texture at the eye's sampling-plane
+// coordinates, bilinear). Points behind the near plane are skipped.
+//
+// Thread safety: one ImpostorSplatter per viewer.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "client/render/camera.h"
+#include "client/render/image.h"
+#include "common/impostor/impostor.h"
+
+namespace vistream {
+
+class ImpostorSplatter {
+ public:
+  // Starts a frame of the camera's size: every depth at infinity.
+  void begin(const Camera& camera);
+  // Draws an impostor's points into the frame's depth and `out` (which has
+  // the camera's size). Returns the points that landed on the screen.
+  size_t draw(const Impostor& impostor, ImageRgb8& out);
+  // Per pixel, the nearest point's depth (infinity: no point).
+  const std::vector<float>& depth() const { return depth_; }
+  bool covered(int x, int y) const {
+    return depth_[size_t(y) * size_t(camera_.width) + size_t(x)] < kEmpty;
+  }
+
+  static constexpr float kEmpty = 3.0e38f;
+
+ private:
+  Camera camera_;
+  std::vector<float> depth_;
+};
+
+}  // namespace vistream

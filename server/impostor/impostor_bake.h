@@ -1,0 +1,127 @@
+// Baking a point-based impostor (Wimmer 2001, sections 5.3 and 5.4): its
+// points by three perspective layered depth images, their removal where
+// another camera samples better and sufficiently, and each point's texture
+// by Monte Carlo integration of the plenoptic image function.
+//
+// Geometric sampling. Each LDI camera (impostor_placement.h: the corners of
+// the triangle round the shaft) looks along the sampling plane's normal
+// through a window that holds the impostor's box, with square pixels of
+// resolutionFactor-th the heuristic's size (ldiPixelAngle). A pixel's ray
+// keeps every hit on the impostor's triangles inside the box (the layers,
+// at most maxLayers), each a candidate point. Thin geometry (a pole
+// narrower than an LDI pixel) can fall between the rays: where a triangle's
+// projection comes within half a pixel diagonal of the centre of an LDI
+// pixel whose ray met nothing, the point of its edges nearest that centre
+// is added, one a pixel. Together these keep every viewer's pixel that sees
+// the geometry within a pixel of a point: the 2x2 footprint covers it.
+//
+// Point removal (optional). Camera j's sample spacing on a surface at p is
+// bounded by s_j = a z_j / |n . w_j| (a its pixel size, z_j the depth of p
+// along its axis, w_j the unit direction from it, n the surface normal): the
+// side of a pixel's footprint perpendicular to the ray, stretched by the
+// surface's slant. Camera j samples p sufficiently when s_j <= the screen's
+// sample angle (ScreenSpec::sampleAngle) times p's distance from the
+// nearest point of the view cell: no viewer in the cell sees two of its
+// neighbouring samples more than a pixel apart. A point from camera k is
+// dropped when another camera samples its surface sufficiently and better
+// (smaller s, ties to the lower camera); the better camera's own samples of
+// that surface remain, so no region loses all its points.
+//
+// Appearance (the plenoptic image function). For texel i of point p, c_i is
+// the integral of PIF(s, theta, x) against the texel's filter over viewer
+// positions s on the sampling rectangle (a Gaussian of half a texel about
+// the texel's centre) and the monitor's filter over pixels x (a Gaussian of
+// half a pixel about the pixel p projects to, after a uniformly random
+// camera orientation, which places p anywhere in its pixel), counting only
+// views where p is visible (an occlusion ray from s to p against the
+// impostor's triangles: the points' z-buffer). PIF is what a ray from s
+// sees beyond the box's entry: the first scene triangle's baked colour with
+// the haze of its distance, or the backdrop. Rays go in until the standard
+// error of the texel's mean falls below varianceThreshold (8-bit levels,
+// per channel) after minRays, or maxRays were tried. A texel that never saw
+// its point takes the mean of the point's other texels, and a point never
+// seen from the rectangle the colour of its surface.
+//
+// Compression: a point whose texels all lie within singleColourTolerance of
+// their mean (per channel) keeps one colour.
+//
+// Determinism: every point's rays are seeded by the point, so a bake gives
+// the same bytes on any thread count.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include "common/impostor/impostor.h"
+#include "common/light/lighting.h"
+#include "common/raycast/ray_query.h"
+#include "common/scene/scene.h"
+#include "server/impostor/impostor_placement.h"
+
+namespace vistream {
+
+// The scene as the impostor bake sees it: its static triangles with their
+// baked colours and backdrop, and an Embree query over all of them (what the
+// plenoptic image function samples).
+struct ImpostorScene {
+  const FlatTriangles& triangles;
+  const RayQuery& rays;
+  const LightingGrid& lighting;
+  Backdrop backdrop;
+  std::optional<float> groundY;  // local height of an assumed ground plane
+};
+
+struct ImpostorOptions {
+  ScreenSpec screen;
+  float resolutionFactor = 1.0f;  // LDI pixels per heuristic pixel, per axis
+  bool removePoints = true;
+  uint32_t maxLayers = 8;
+  uint32_t textureWidth = 8, textureHeight = 2;
+  float varianceThreshold = 4.0f;      // standard error of a texel's mean, 8-bit levels
+  uint32_t minRays = 8, maxRays = 64;  // per texel
+  float singleColourTolerance = 3.0f;  // 8-bit levels
+  uint64_t seed = 1;
+  // Bounded work: an impostor whose LDIs would need more pixels is refused
+  // (InputError naming the figure), before any ray is cast.
+  uint64_t maxLdiPixels = 12'000'000;
+};
+
+struct ImpostorStats {
+  std::array<uint64_t, 3> ldiWidth{}, ldiHeight{};
+  float ldiPixelAngle = 0.0f;  // radians (tangent) at the cameras' centres
+  uint64_t samples = 0;        // LDI hits in the box (candidate points), thin ones included
+  uint64_t thinSamples = 0;    // added for thin geometry between LDI rays
+  uint64_t removed = 0;        // dropped by point removal
+  uint64_t points = 0;
+  uint64_t singleColour = 0;    // points keeping one colour
+  uint64_t appearanceRays = 0;  // PIF rays
+  uint64_t visibilityRays = 0;  // occlusion rays from the rectangle to points
+  uint64_t unseenPoints = 0;    // never visible from the rectangle
+  // For the view from the cell's centre towards the box's centre on the
+  // screen: the points' screen bounding box (Table 5.1's "approx. #screen
+  // pixels"), and the pixels holding at least one point.
+  uint64_t screenPixels = 0, coveredPixels = 0;
+  double pointsPerPixel = 0.0;         // points / screenPixels (Table 5.1)
+  double pointsPerCoveredPixel = 0.0;  // points / coveredPixels
+  uint64_t bytes = 0, bytesUncompressed = 0;
+  double sampleSeconds = 0.0, removeSeconds = 0.0, appearanceSeconds = 0.0, seconds = 0.0;
+};
+
+// Bakes the impostor of `triangles` (indices into scene.triangles, the
+// geometry it replaces) inside `box` for `cell`. Throws InputError for a
+// box that reaches the cell (frameImpostor) or needs more than maxLdiPixels.
+Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f& box,
+                      const std::vector<uint32_t>& triangles, const ImpostorOptions& options,
+                      ImpostorStats* stats = nullptr);
+
+// The screen pixels that impostor's points fall on for a viewer at `eye`
+// looking at `target` (a planar projection of the screen's pixel angle,
+// unbounded, so a wide impostor is counted whole), and their bounding box.
+struct ScreenCoverage {
+  uint64_t pixels = 0, boxPixels = 0;
+};
+ScreenCoverage screenCoverage(const std::vector<glm::vec3>& points, const glm::vec3& eye,
+                              const glm::vec3& target, const ScreenSpec& screen);
+
+}  // namespace vistream

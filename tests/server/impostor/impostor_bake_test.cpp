@@ -1,0 +1,443 @@
+// Point-based impostors (Wimmer 2001, chapter 5): the framing of the shaft,
+// the thesis's resolution factors, and the hard cases of the issue: no holes
+// from anywhere in the cell, a surface in the plane of two cameras,
+// microgeometry that changes colour across the cell, a cell touching its
+// box, coordinates far from the origin. Oracles: random rays from the cell to
+// the box, a 1D search over the symmetric triangle, and per-pixel ray casts
+// of the impostor's own geometry.
+#include "server/impostor/impostor_bake.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <tbb/task_arena.h>
+
+#include <cmath>
+#include <glm/gtc/constants.hpp>
+#include <random>
+
+#include "client/render/camera.h"
+#include "client/render/impostor_splat.h"
+#include "common/core/error.h"
+#include "common/scene/scene.h"
+#include "tests/common/support/box_scenes.h"
+
+namespace vistream {
+namespace {
+
+using testing::addBox;
+
+// A scene's static triangles with one flat colour per triangle, and the
+// Embree query the bake samples.
+struct ColouredScene {
+  Scene scene;
+  FlatTriangles triangles;
+  LightingGrid lighting;
+  std::unique_ptr<RayQuery> rays;
+  std::vector<uint32_t> all;
+
+  void finish(const std::function<glm::u8vec3(size_t, const glm::vec3&)>& colourOf) {
+    finalizeScene(scene);
+    triangles = flattenScene(scene, true);
+    for (size_t t = 0; t < triangles.size(); ++t) {
+      const glm::vec3 a = triangles.vertex(t, 0);
+      const glm::vec3 n = glm::cross(triangles.vertex(t, 1) - a, triangles.vertex(t, 2) - a);
+      lighting.appendFlat(colourOf(t, n));
+      all.push_back(uint32_t(t));
+    }
+    rays = makeEmbreeRayQuery(triangles);
+  }
+  // The triangles a cell's PVS would hold: all but faces of these closed
+  // boxes whose plane has the whole cell behind it (vistream-pvs culls those).
+  std::vector<uint32_t> facingCell(const Box3f& cell) const {
+    std::vector<uint32_t> out;
+    for (uint32_t t : all) {
+      const glm::vec3 a = triangles.vertex(t, 0);
+      const glm::vec3 n = glm::cross(triangles.vertex(t, 1) - a, triangles.vertex(t, 2) - a);
+      bool front = false;
+      for (int k = 0; k < 8; ++k) {
+        const glm::vec3 c{k & 1 ? cell.hi.x : cell.lo.x, k & 2 ? cell.hi.y : cell.lo.y,
+                          k & 4 ? cell.hi.z : cell.lo.z};
+        front = front || glm::dot(n, c - a) > 0.0f;
+      }
+      if (front) out.push_back(t);
+    }
+    return out;
+  }
+  ImpostorScene view() const {
+    Backdrop b;
+    b.haze.scale = 0.0f;
+    return ImpostorScene{triangles, *rays, lighting, b, std::nullopt};
+  }
+};
+
+// A block of buildings at `offset` + (-40..40, 0..30, -300..-220) in front of
+// a cell round `offset`: boxes of several sizes, thin poles, a low wall.
+ColouredScene buildingBlock(const glm::vec3& offset = glm::vec3(0.0f)) {
+  ColouredScene s;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> x(-38.0f, 30.0f), z(-295.0f, -235.0f), w(3.0f, 12.0f),
+      h(5.0f, 28.0f);
+  for (int k = 0; k < 14; ++k) {
+    const glm::vec3 lo(x(rng), 0.0f, z(rng));
+    addBox(s.scene, "b" + std::to_string(k), offset + lo,
+           offset + lo + glm::vec3(w(rng), h(rng), w(rng)));
+  }
+  for (int k = 0; k < 6; ++k) {  // poles 0.3 m thick: a little over half a pixel at 320x240
+    const glm::vec3 lo(-30.0f + 10.0f * float(k), 0.0f, -225.0f);
+    addBox(s.scene, "pole" + std::to_string(k), offset + lo,
+           offset + lo + glm::vec3(0.3f, 12.0f, 0.3f));
+  }
+  addBox(s.scene, "wall", offset + glm::vec3(-40.0f, 0.0f, -230.0f),
+         offset + glm::vec3(40.0f, 2.5f, -229.5f));
+  s.finish([](size_t t, const glm::vec3& n) {
+    const glm::vec3 u = glm::normalize(n);
+    return glm::u8vec3(uint8_t(128 + 100 * u.x), uint8_t(128 + 100 * u.y),
+                       uint8_t(100 + (t * 37) % 120));
+  });
+  return s;
+}
+
+Box3f boundsOf(const FlatTriangles& t) {
+  Box3f b;
+  for (const glm::vec3& p : t.positions) b.extend(p);
+  return b;
+}
+
+// Cameras at random points of the cell looking at random points of the box.
+std::vector<Camera> viewsFromCell(const Box3f& cell, const Box3f& box, int count, int width,
+                                  int height, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  std::vector<Camera> out;
+  for (int k = 0; k < count; ++k) {
+    Camera c;
+    c.width = width;
+    c.height = height;
+    c.eye = cell.lo + glm::vec3(unit(rng), unit(rng), unit(rng)) * cell.extent();
+    const glm::vec3 target = box.lo + glm::vec3(unit(rng), unit(rng), unit(rng)) * box.extent();
+    const glm::vec3 d = glm::normalize(target - c.eye);
+    c.yawDeg = glm::degrees(std::atan2(-d.x, -d.z));
+    c.pitchDeg = glm::degrees(std::asin(d.y));
+    out.push_back(c);
+  }
+  return out;
+}
+
+// Pixels whose centre ray meets the impostor's geometry inside its box but
+// that no point covers.
+struct HoleCount {
+  size_t geometryPixels = 0, uncovered = 0;
+};
+HoleCount holes(const ColouredScene& s, const Impostor& imp, const Camera& camera) {
+  ImpostorSplatter splatter;
+  splatter.begin(camera);
+  ImageRgb8 image(camera.width, camera.height);
+  splatter.draw(imp, image);
+  HoleCount h;
+  for (int y = 0; y < camera.height; ++y)
+    for (int x = 0; x < camera.width; ++x) {
+      const glm::vec3 dir = camera.rayDirection(float(x) + 0.5f, float(y) + 0.5f);
+      // The part of the ray inside the box.
+      float t0 = 0.0f, t1 = 1e30f;
+      for (int a = 0; a < 3; ++a) {
+        if (dir[a] == 0.0f) continue;
+        float n = (imp.box.lo[a] - camera.eye[a]) / dir[a],
+              f = (imp.box.hi[a] - camera.eye[a]) / dir[a];
+        if (n > f) std::swap(n, f);
+        t0 = std::max(t0, n);
+        t1 = std::min(t1, f);
+      }
+      if (t0 > t1 || !s.rays->firstHit(Ray{camera.eye, dir, t0, t1}).valid()) continue;
+      ++h.geometryPixels;
+      if (!splatter.covered(x, y)) ++h.uncovered;
+    }
+  return h;
+}
+
+// holes() summed over `count` views from random points of the cell.
+HoleCount holesFromCell(const ColouredScene& s, const Impostor& imp, int count, uint32_t seed) {
+  HoleCount sum;
+  for (const Camera& c : viewsFromCell(imp.cell, imp.box, count, 320, 240, seed)) {
+    const HoleCount h = holes(s, imp, c);
+    sum.geometryPixels += h.geometryPixels;
+    sum.uncovered += h.uncovered;
+  }
+  return sum;
+}
+
+ImpostorOptions quickOptions(int width, int height) {
+  ImpostorOptions o;
+  o.screen.width = width;
+  o.screen.height = height;
+  o.minRays = 2;
+  o.maxRays = 4;
+  return o;
+}
+
+TEST(ImpostorFrame, EveryRayFromTheCellToTheBoxCrossesTheSamplingRectangle) {
+  const Box3f cell({-4.0f, 0.0f, -3.0f}, {4.0f, 3.0f, 3.0f});
+  const Box3f box({60.0f, 0.0f, -320.0f}, {180.0f, 45.0f, -200.0f});
+  const ImpostorFrame f = frameImpostor(cell, box);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  for (int k = 0; k < 20000; ++k) {
+    const glm::vec3 s = cell.lo + glm::vec3(unit(rng), unit(rng), unit(rng)) * cell.extent();
+    const glm::vec3 p = box.lo + glm::vec3(unit(rng), unit(rng), unit(rng)) * box.extent();
+    const glm::vec2 st = f.plane.textureCoordinates(s, p);
+    ASSERT_GE(st.x, -1e-4f);
+    ASSERT_LE(st.x, 1.0f + 1e-4f);
+    ASSERT_GE(st.y, -1e-4f);
+    ASSERT_LE(st.y, 1.0f + 1e-4f);
+  }
+  // The plane faces the box, with the whole cell behind it.
+  for (int k = 0; k < 8; ++k) {
+    const glm::vec3 c{k & 1 ? cell.hi.x : cell.lo.x, k & 2 ? cell.hi.y : cell.lo.y,
+                      k & 4 ? cell.hi.z : cell.lo.z};
+    EXPECT_LE(glm::dot(f.plane.normal, c - f.plane.origin), 1e-3f);
+  }
+  EXPECT_GT(f.nearestDepth, 150.0f);
+}
+
+TEST(ImpostorFrame, TheCameraTriangleHasAHorizontalTopEdgeAndHoldsTheSection) {
+  const Box3f cell({-4.0f, 0.0f, -3.0f}, {4.0f, 3.0f, 3.0f});
+  const Box3f box({-50.0f, 0.0f, -320.0f}, {70.0f, 45.0f, -200.0f});
+  const ImpostorFrame f = frameImpostor(cell, box);
+  EXPECT_NEAR(f.cameras[0].y, f.cameras[1].y, 1e-3f);
+  EXPECT_LT(f.cameras[2].y, f.cameras[0].y);
+  const glm::vec3 u = glm::normalize(f.plane.uAxis), v = glm::normalize(f.plane.vAxis);
+  std::array<glm::vec2, 3> t;
+  for (size_t k = 0; k < 3; ++k)
+    t[k] = {glm::dot(f.cameras[k] - f.centre, u), glm::dot(f.cameras[k] - f.centre, v)};
+  auto side = [](glm::vec2 a, glm::vec2 b, glm::vec2 p) {
+    return (b.x - a.x) * (p.y - a.y) - (b.y - a.y) * (p.x - a.x);
+  };
+  for (const glm::vec2& p : f.section) {
+    const float s0 = side(t[0], t[1], p), s1 = side(t[1], t[2], p), s2 = side(t[2], t[0], p);
+    const bool inside = (s0 <= 1e-3f && s1 <= 1e-3f && s2 <= 1e-3f) ||
+                        (s0 >= -1e-3f && s1 >= -1e-3f && s2 >= -1e-3f);
+    EXPECT_TRUE(inside) << p.x << "," << p.y;
+  }
+}
+
+TEST(ImpostorFrame, ARectangularSectionGetsTheIsoscelesTriangleOfLeastCircumference) {
+  // A cell and box symmetric about the x = 0 plane, level with each other:
+  // the section is symmetric, and the best triangle round a w x h rectangle
+  // (top edge on its top) has perimeter min over a of
+  // w + 2h tan a + (w + 2h tan a) / sin a.
+  const Box3f cell({-5.0f, 0.0f, -2.0f}, {5.0f, 4.0f, 2.0f});
+  const Box3f box({-5.0f, 0.0f, -402.0f}, {5.0f, 4.0f, -400.0f});
+  const ImpostorFrame f = frameImpostor(cell, box);
+  glm::vec2 lo(1e9f), hi(-1e9f);
+  for (const glm::vec2& p : f.section) {
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
+  }
+  const double w = hi.x - lo.x, h = hi.y - lo.y;
+  EXPECT_NEAR(w, 10.0, 1e-3);  // the shaft between equal faces is a prism
+  EXPECT_NEAR(h, 4.0, 1e-3);
+  double best = 1e30;
+  for (double a = 0.001; a < glm::half_pi<double>(); a += 1e-5)
+    best = std::min(best, w + 2 * h * std::tan(a) + (w + 2 * h * std::tan(a)) / std::sin(a));
+  EXPECT_NEAR(f.trianglePerimeter, best, 1e-3 * best);
+}
+
+TEST(ImpostorFrame, ACellTouchingOrInsideItsBoxIsRefused) {
+  const Box3f cell({-4.0f, 0.0f, -4.0f}, {4.0f, 3.0f, 4.0f});
+  EXPECT_THROW(frameImpostor(cell, Box3f({-10.0f, 0.0f, -40.0f}, {10.0f, 9.0f, -4.0f})),
+               InputError);  // touching
+  EXPECT_THROW(frameImpostor(cell, Box3f({-10.0f, 0.0f, -40.0f}, {10.0f, 9.0f, -2.0f})),
+               InputError);  // overlapping
+  EXPECT_THROW(frameImpostor(cell, Box3f({-100.0f, -1.0f, -100.0f}, {100.0f, 9.0f, 100.0f})),
+               InputError);                                // surrounding
+  EXPECT_THROW(frameImpostor(cell, Box3f()), InputError);  // empty
+  EXPECT_NO_THROW(frameImpostor(cell, Box3f({-10.0f, 0.0f, -40.0f}, {10.0f, 9.0f, -4.5f})));
+}
+
+TEST(ImpostorResolution, ThePerspectiveAndDiagonalFactorsAreTheThesisFigures) {
+  // Section 5.4.1: a factor of about 1.17 for a 45-degree field of view, and
+  // sqrt 2 for the pixel diagonal.
+  ScreenSpec s;
+  s.vfovDeg = 45.0f;
+  EXPECT_NEAR(s.pixelAngle() / s.sampleAngle(), 1.17 * std::sqrt(2.0), 0.01);
+  EXPECT_NEAR(s.pixelAngle(), 2.0 * std::tan(glm::radians(22.5)) / 480.0, 1e-7);
+}
+
+TEST(ImpostorBake, LeavesNoHoleFromAnywhereInTheCell) {
+  const ColouredScene s = buildingBlock();
+  const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
+  const Box3f box = boundsOf(s.triangles);
+  ImpostorStats stats;
+  const Impostor imp =
+      bakeImpostor(s.view(), cell, box, s.facingCell(cell), quickOptions(320, 240), &stats);
+  ASSERT_GT(imp.size(), 1000u);
+  EXPECT_GT(stats.thinSamples, 0u);  // the poles are thinner than an LDI pixel
+  const HoleCount h = holesFromCell(s, imp, 24, 11);
+  EXPECT_GT(h.geometryPixels, 15000u);
+  EXPECT_EQ(h.uncovered, 0u) << "of " << h.geometryPixels
+                             << " pixels that see the impostor's geometry";
+}
+
+TEST(ImpostorBake, PointRemovalDropsPointsAndKeepsTheCoverage) {
+  const ColouredScene s = buildingBlock();
+  const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
+  const Box3f box = boundsOf(s.triangles);
+  ImpostorOptions all = quickOptions(320, 240);
+  all.removePoints = false;
+  ImpostorStats withRemoval, without;
+  const Impostor removed =
+      bakeImpostor(s.view(), cell, box, s.all, quickOptions(320, 240), &withRemoval);
+  bakeImpostor(s.view(), cell, box, s.all, all, &without);
+  EXPECT_EQ(without.removed, 0u);
+  EXPECT_EQ(withRemoval.samples, without.samples);
+  EXPECT_GT(withRemoval.removed, without.samples / 4);  // the thesis: 40-60%
+  EXPECT_EQ(withRemoval.points + withRemoval.removed, withRemoval.samples);
+  EXPECT_EQ(holesFromCell(s, removed, 8, 5).uncovered, 0u);
+}
+
+TEST(ImpostorBake, SamplesASurfaceInThePlaneOfTwoCamerasWithTheThird) {
+  // A horizontal slab at the height of the top edge (the two upper cameras):
+  // they see it edge on, only the lower camera samples it.
+  const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
+  const Box3f box({-40.0f, 0.0f, -300.0f}, {40.0f, 30.0f, -220.0f});
+  const ImpostorFrame f = frameImpostor(cell, box);
+  const float y = f.cameras[0].y;
+  ASSERT_GT(y, box.lo.y);
+  ASSERT_LT(y, box.hi.y);
+  ColouredScene s;
+  Object o;
+  o.name = "slab";
+  o.mesh.positions = {
+      {-30.0f, y, -290.0f}, {30.0f, y, -290.0f}, {30.0f, y, -230.0f}, {-30.0f, y, -230.0f}};
+  o.mesh.triangles = {{0, 2, 1}, {0, 3, 2}};
+  o.mesh.faceIds = {0, 0};
+  s.scene.objects.push_back(o);
+  s.scene.faceCount = 1;
+  s.finish([](size_t, const glm::vec3&) { return glm::u8vec3(200, 60, 60); });
+  ImpostorStats stats;
+  const Impostor imp = bakeImpostor(s.view(), cell, box, s.all, quickOptions(320, 240), &stats);
+  ASSERT_GT(imp.size(), 100u);
+  for (const glm::vec3& p : imp.points) ASSERT_NEAR(p.y, y, 1e-3f);
+  const HoleCount h = holesFromCell(s, imp, 8, 3);
+  EXPECT_GT(h.geometryPixels, 0u);
+  EXPECT_EQ(h.uncovered, 0u);
+}
+
+// V-shaped fins 0.1 m apart, 100 m ahead, walls 10 degrees off the view
+// axis, far enough to be sub-pixel. The right wall of each V faces left
+// (red), the left wall faces right (green): seen from the cell's left side
+// the red walls show, from its right the green ones.
+ColouredScene fins() {
+  ColouredScene s;
+  Object o;
+  o.name = "fins";
+  const float period = 0.1f, depth = 0.05f / std::tan(glm::radians(10.0f));
+  for (int k = 0; k < 200; ++k) {
+    const float x0 = -10.0f + period * float(k);
+    const uint32_t b = uint32_t(o.mesh.positions.size());
+    // Tooth: (x0, z=-100) -> (x0 + period/2, -100 - depth) -> (x0 + period, -100).
+    const glm::vec3 a0(x0, 0.0f, -100.0f), a1(x0 + 0.5f * period, 0.0f, -100.0f - depth),
+        a2(x0 + period, 0.0f, -100.0f);
+    for (const glm::vec3& p : {a0, a1, a2}) {
+      o.mesh.positions.push_back(p);
+      o.mesh.positions.push_back(p + glm::vec3(0.0f, 10.0f, 0.0f));
+    }
+    // Wall a0-a1 (triangles 4k, 4k + 1) faces right, wall a1-a2 faces left.
+    o.mesh.triangles.emplace_back(b + 0, b + 2, b + 3);
+    o.mesh.triangles.emplace_back(b + 0, b + 3, b + 1);
+    o.mesh.triangles.emplace_back(b + 2, b + 4, b + 5);
+    o.mesh.triangles.emplace_back(b + 2, b + 5, b + 3);
+    for (int f = 0; f < 4; ++f) o.mesh.faceIds.push_back(s.scene.faceCount + uint32_t(f / 2));
+    s.scene.faceCount += 2;
+  }
+  s.scene.objects.push_back(o);
+  s.finish([](size_t t, const glm::vec3&) {
+    return t % 4 < 2 ? glm::u8vec3(20, 220, 20) : glm::u8vec3(220, 20, 20);
+  });
+  return s;
+}
+
+glm::dvec3 meanImpostorColour(const Impostor& imp, const Camera& c) {
+  ImpostorSplatter splatter;
+  splatter.begin(c);
+  ImageRgb8 image(c.width, c.height);
+  splatter.draw(imp, image);
+  glm::dvec3 sum(0.0);
+  size_t n = 0;
+  for (int y = 0; y < c.height; ++y)
+    for (int x = 0; x < c.width; ++x)
+      if (splatter.covered(x, y)) {
+        sum += glm::dvec3(image.at(x, y));
+        ++n;
+      }
+  return n ? sum / double(n) : sum;
+}
+
+TEST(ImpostorBake, MicrogeometryShowsItsColourFromEachSideOfTheCell) {
+  const ColouredScene s = fins();
+  const Box3f cell({-18.0f, 4.0f, -2.0f}, {18.0f, 6.0f, 2.0f});
+  const Box3f box = boundsOf(s.triangles);
+  ImpostorOptions o = quickOptions(320, 240);
+  o.minRays = 16;
+  o.maxRays = 32;
+  const Impostor imp = bakeImpostor(s.view(), cell, box, s.all, o);
+  auto from = [&](float x) {
+    Camera c;
+    c.width = 320;
+    c.height = 240;
+    c.eye = {x, 5.0f, 0.0f};
+    c.yawDeg = glm::degrees(std::atan2(x, 100.0f));  // towards the fins' centre
+    return c;
+  };
+  // From x = -17 the viewer looks 9.6 degrees to the right, nearly along the
+  // right-facing (green) walls, which the red walls hide.
+  const glm::dvec3 left = meanImpostorColour(imp, from(-17.0f));
+  const glm::dvec3 right = meanImpostorColour(imp, from(17.0f));
+  EXPECT_GT(left.r, left.g + 60.0) << left.r << " " << left.g;
+  EXPECT_GT(right.g, right.r + 60.0) << right.r << " " << right.g;
+  // One colour a point (a 1x1 texture) cannot tell the sides apart.
+  o.textureWidth = o.textureHeight = 1;
+  const Impostor flat = bakeImpostor(s.view(), cell, box, s.all, o);
+  const glm::dvec3 l1 = meanImpostorColour(flat, from(-17.0f)),
+                   r1 = meanImpostorColour(flat, from(17.0f));
+  EXPECT_LT(std::abs((l1.r - l1.g) - (r1.r - r1.g)),
+            0.5 * std::abs((left.r - left.g) - (right.r - right.g)));
+}
+
+TEST(ImpostorBake, FarFromTheOriginStillLeavesNoHole) {
+  const glm::vec3 offset(20000.0f, 0.0f, -20000.0f);
+  const ColouredScene s = buildingBlock(offset);
+  const Box3f cell(offset + glm::vec3(-6.0f, 1.0f, -6.0f), offset + glm::vec3(6.0f, 3.0f, 6.0f));
+  const Box3f box = boundsOf(s.triangles);
+  const Impostor imp =
+      bakeImpostor(s.view(), cell, box, s.facingCell(cell), quickOptions(320, 240));
+  const HoleCount h = holesFromCell(s, imp, 8, 13);
+  EXPECT_GT(h.geometryPixels, 5000u);
+  EXPECT_EQ(h.uncovered, 0u);
+}
+
+TEST(ImpostorBake, GivesTheSameBytesOnAnyThreadCount) {
+  const ColouredScene s = buildingBlock();
+  const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
+  const Box3f box = boundsOf(s.triangles);
+  const ImpostorOptions o = quickOptions(160, 120);
+  const Impostor many = bakeImpostor(s.view(), cell, box, s.all, o);
+  Impostor one;
+  tbb::task_arena(1).execute([&] { one = bakeImpostor(s.view(), cell, box, s.all, o); });
+  ASSERT_EQ(one.size(), many.size());
+  EXPECT_EQ(one.points, many.points);
+  EXPECT_EQ(one.texels, many.texels);
+}
+
+TEST(ImpostorBake, RefusesAnImpostorTooLargeToSample) {
+  const ColouredScene s = buildingBlock();
+  const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
+  ImpostorOptions o = quickOptions(320, 240);
+  o.maxLdiPixels = 1000;
+  EXPECT_THROW(bakeImpostor(s.view(), cell, boundsOf(s.triangles), s.all, o), InputError);
+  o = quickOptions(320, 240);
+  o.resolutionFactor = 0.0f;
+  EXPECT_THROW(bakeImpostor(s.view(), cell, boundsOf(s.triangles), s.all, o), InputError);
+}
+
+}  // namespace
+}  // namespace vistream
