@@ -10,6 +10,7 @@
 #include "common/core/check.h"
 #include "common/core/error.h"
 #include "common/core/median.h"
+#include "common/core/parse.h"
 
 namespace vistream {
 
@@ -31,26 +32,8 @@ std::vector<Camera> camerasFromPath(const std::vector<PathSample>& path, const g
 }
 
 glm::ivec2 parseImageSize(const std::string& text, const char* option) {
-  const size_t x = text.find('x');
-  int w = 0, h = 0;
-  bool whole = x != std::string::npos;  // both sides are whole numbers
-  try {
-    size_t used = 0;
-    if (whole) {
-      w = std::stoi(text.substr(0, x), &used);
-      whole = used == x;
-    }
-    if (whole) {
-      h = std::stoi(text.substr(x + 1), &used);
-      whole = used == text.size() - x - 1;
-    }
-  } catch (const std::exception&) {  // std::stoi: not a number, or beyond int
-    whole = false;
-  }
-  if (!whole) throwInputError("{} {}: expected WIDTHxHEIGHT, e.g. 640x480", option, text);
-  if (w < 16 || h < 16 || w > 8192 || h > 8192)
-    throwInputError("{} {}: each side must lie in [16, 8192] pixels", option, text);
-  return {w, h};
+  const WidthHeight size = parseWidthHeight(text, option, 16, 8192);
+  return {size.width, size.height};
 }
 
 ImageDifference compareImages(const ImageRgb8& a, const ImageRgb8& b, int tolerance) {

@@ -2,6 +2,7 @@
 // InputError naming the option and the offending text).
 #pragma once
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <string>
@@ -35,6 +36,28 @@ inline std::vector<double> parseNumberList(std::string_view text, size_t count,
   if (count != 0 && out.size() != count)
     throwInputError("{}: expected {} comma-separated numbers, got {} in '{}'", option, count,
                     out.size(), text);
+  return out;
+}
+
+// Parses "WIDTHxHEIGHT" (two whole numbers, e.g. "640x480"), each side in
+// [lo, hi]; `option` names the argument in errors.
+struct WidthHeight {
+  int width = 0, height = 0;
+};
+inline WidthHeight parseWidthHeight(std::string_view text, std::string_view option, int lo,
+                                    int hi) {
+  const size_t x = text.find('x');
+  WidthHeight out;
+  auto whole = [](std::string_view part, int& v) {
+    const auto [ptr, ec] = std::from_chars(part.data(), part.data() + part.size(), v);
+    return !part.empty() && ec == std::errc() && ptr == part.data() + part.size();
+  };
+  if (x == std::string_view::npos || !whole(text.substr(0, x), out.width) ||
+      !whole(text.substr(x + 1), out.height))
+    throwInputError("{} {}: expected WIDTHxHEIGHT, e.g. {}x{}", option, text, std::max(lo, 8),
+                    std::max(lo, 4));
+  if (out.width < lo || out.height < lo || out.width > hi || out.height > hi)
+    throwInputError("{} {}: each side must lie in [{}, {}]", option, text, lo, hi);
   return out;
 }
 

@@ -24,7 +24,9 @@
 #include "common/raycast/ray_query.h"
 #include "common/world/free_space.h"
 #include "common/world/static_world.h"
+#include "server/cmd/impostor_commands.h"
 #include "server/cmd/pvs_bench.h"
+#include "server/cmd/scene_boxes.h"
 #include "server/cmd/walk_bench.h"
 #include "server/stream/stream_world.h"
 #include "server/visibility/epsilon_pvs.h"
@@ -38,33 +40,6 @@ namespace vistream {
 namespace {
 
 using nlohmann::json;
-
-// A box "x0,y0,z0,x1,y1,z1" in file coordinates, given as `option` (--cell,
-// --region); checked before any scene loads.
-Box3d parseFileBox(const std::string& text, const char* option) {
-  const auto v = parseNumberList(text, 6, option);
-  if (v[0] > v[3] || v[1] > v[4] || v[2] > v[5])
-    throwInputError(InputErrorCode::BadArgument,
-                    "{}: expected x0,y0,z0,x1,y1,z1 with x0<=x1, y0<=y1, z0<=z1, got '{}'", option,
-                    text);
-  return Box3d({v[0], v[1], v[2]}, {v[3], v[4], v[5]});
-}
-
-Box3f toLocal(const Scene& scene, const Box3d& fileBox) {
-  return Box3f(scene.toLocal(fileBox.lo), scene.toLocal(fileBox.hi));
-}
-
-// A box that misses the scene's bounds sees nothing of it, or only its
-// outside: worth a word, since a typo in one coordinate does that.
-void warnIfOutsideScene(const Scene& scene, const Box3d& fileBox, const char* option,
-                        const std::string& text) {
-  const Box3d b = scene.fileBounds();
-  if (b.empty() || fileBox.overlaps(b)) return;
-  spdlog::warn(
-      "{} {} lies outside the scene's bounds ({:.3f},{:.3f},{:.3f} .. {:.3f},{:.3f},{:.3f}, file "
-      "coordinates)",
-      option, text, b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z);
-}
 
 int cmdCell(const std::string& spec, const SceneLimits& limits, const std::string& cellText,
             const std::string& method, const PvsOptions& options,
@@ -513,6 +488,8 @@ int runPvsTool(int argc, char** argv) {
                         "write .dat files and a PNG of Figures 8-11 per scene here");
   walkBench->add_flag("--json", walkBenchOptions.json, "one JSON array on stdout");
 
+  ImpostorCommand impostors(app, limits);
+
   // The acceleration switches shared by cell and bake.
   auto pvsOptionsFromFlags = [&] {
     PvsOptions options;
@@ -538,6 +515,7 @@ int runPvsTool(int argc, char** argv) {
     if (*walk) return cmdWalk(scene, limits, pathFile, walkMethod, cullOptions, asJson, withFaces);
     if (*walkBench) return runWalkBench(walkBenchOptions);
     if (*bench) return runPvsBench(benchOptions);
+    if (impostors.chosen()) return impostors.run();
     if (*merge) {
       std::vector<std::filesystem::path> paths(inputs.begin(), inputs.end());
       mergePvsDatabases(paths, out);

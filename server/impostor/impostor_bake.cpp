@@ -40,10 +40,6 @@ std::pair<float, float> clipToBox(const glm::vec3& org, const glm::vec3& dir, co
   return {t0, t1};
 }
 
-float boxPointDistance(const Box3f& b, const glm::vec3& p) {
-  return glm::length(glm::max(glm::vec3(0.0f), glm::max(b.lo - p, p - b.hi)));
-}
-
 glm::vec3 unitNormal(const FlatTriangles& t, uint32_t k) {
   const glm::vec3 a = t.vertex(k, 0);
   const glm::vec3 n = glm::cross(t.vertex(k, 1) - a, t.vertex(k, 2) - a);
@@ -299,23 +295,128 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
   stats.samples = samples.size();
   stats.sampleSeconds = watch.ms() / 1000.0;
 
+  // Hidden points: kept when some viewpoint in the cell sees them.
+  watch.reset();
+  auto visibleFrom = [&](const glm::vec3& eye, const glm::vec3& p) {
+    const glm::vec3 w = p - eye;
+    const float distance = glm::length(w);
+    const float slack = std::max(1e-4f, 0.01f / std::max(distance, 1e-3f));
+    return !ownRays->occluded(Ray{eye, w, 0.0f, 1.0f - slack});
+  };
+  if (options.cullHidden && options.visibilityViews > 0) {
+    const uint32_t views = options.visibilityViews;
+    const uint32_t grid = std::max(1u, uint32_t(std::cbrt(double(views)) + 1e-9));
+    std::vector<uint8_t> keep(samples.size(), 0);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, samples.size(), 256), [&](const auto& range) {
+      for (size_t i = range.begin(); i != range.end(); ++i) {
+        SplitMix rng(mixBits(options.seed ^ 0x5eedf00dULL ^ mixBits(i)));
+        for (uint32_t v = 0; v < views && !keep[i]; ++v) {
+          // First a jittered grid over the cell, then random viewpoints.
+          glm::vec3 f;
+          if (v < grid * grid * grid) {
+            const glm::uvec3 cellOfGrid(v % grid, (v / grid) % grid, v / (grid * grid));
+            f = (glm::vec3(cellOfGrid) +
+                 glm::vec3(float(rng.uniform()), float(rng.uniform()), float(rng.uniform()))) /
+                float(grid);
+          } else {
+            f = glm::vec3(float(rng.uniform()), float(rng.uniform()), float(rng.uniform()));
+          }
+          if (visibleFrom(cell.lo + f * cell.extent(), samples[i].position)) keep[i] = 1;
+        }
+      }
+    });
+    size_t kept = 0;
+    for (size_t i = 0; i < samples.size(); ++i)
+      if (keep[i]) samples[kept++] = samples[i];
+    stats.hidden = samples.size() - kept;
+    samples.resize(kept);
+  }
+  stats.hiddenSeconds = watch.ms() / 1000.0;
+
   // Point removal: drop a point that another camera samples better and
   // sufficiently.
   watch.reset();
   if (options.removePoints) {
     const float sampleAngle = options.screen.sampleAngle();
+    // Each camera's samples by LDI pixel (CSR), to find a camera's samples
+    // near a point.
+    std::array<std::vector<uint32_t>, 3> first, index;
+    auto pixelOf = [&](size_t cam, const glm::vec3& p) {
+      const LdiCamera& c = cameras[cam];
+      const glm::vec3 w = p - c.eye;
+      const float z = glm::dot(w, axis);
+      return glm::vec2((glm::dot(w, uDir) / z - c.x0) / c.pixel,
+                       (glm::dot(w, vDir) / z - c.y0) / c.pixel);
+    };
+    auto linearPixel = [&](size_t cam, int64_t x, int64_t y) -> int64_t {
+      const LdiCamera& c = cameras[cam];
+      if (x < 0 || y < 0 || x >= int64_t(c.width) || y >= int64_t(c.height)) return -1;
+      return y * int64_t(c.width) + x;
+    };
+    for (size_t cam = 0; cam < 3; ++cam) {
+      first[cam].assign(size_t(cameras[cam].width) * cameras[cam].height + 1, 0);
+      std::vector<int64_t> at(samples.size(), -1);
+      for (size_t i = 0; i < samples.size(); ++i) {
+        if (samples[i].camera != cam) continue;
+        const glm::vec2 q = pixelOf(cam, samples[i].position);
+        at[i] = linearPixel(cam, int64_t(std::floor(q.x)), int64_t(std::floor(q.y)));
+        if (at[i] >= 0) ++first[cam][size_t(at[i]) + 1];
+      }
+      for (size_t k = 1; k < first[cam].size(); ++k) first[cam][k] += first[cam][k - 1];
+      index[cam].resize(first[cam].back());
+      std::vector<uint32_t> next(first[cam].begin(), first[cam].end() - 1);
+      for (size_t i = 0; i < samples.size(); ++i)
+        if (at[i] >= 0) index[cam][next[size_t(at[i])]++] = uint32_t(i);
+    }
+    // Whether camera `cam` has a sample within `reach` of p on a surface
+    // facing like `normal`, in the 3x3 LDI pixels round p's projection.
+    auto nearbySample = [&](size_t cam, const glm::vec3& p, const glm::vec3& normal, float reach) {
+      const glm::vec2 q = pixelOf(cam, p);
+      const int64_t x = int64_t(std::floor(q.x)), y = int64_t(std::floor(q.y));
+      for (int64_t dy = -1; dy <= 1; ++dy)
+        for (int64_t dx = -1; dx <= 1; ++dx) {
+          const int64_t at = linearPixel(cam, x + dx, y + dy);
+          if (at < 0) continue;
+          for (uint32_t k = first[cam][size_t(at)]; k < first[cam][size_t(at) + 1]; ++k) {
+            const Sample& o = samples[index[cam][k]];
+            if (glm::distance(o.position, p) <= reach &&
+                glm::dot(unitNormal(scene.triangles, o.triangle), normal) >= 0.9f)
+              return true;
+          }
+        }
+      return false;
+    };
     std::vector<uint8_t> keep(samples.size(), 1);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, samples.size()), [&](const auto& range) {
       for (size_t i = range.begin(); i != range.end(); ++i) {
         const Sample& s = samples[i];
         const glm::vec3 normal = unitNormal(scene.triangles, s.triangle);
-        const float enough = sampleAngle * boxPointDistance(cell, s.position);
+        // The largest foreshortened angle per metre of spacing any viewer
+        // sees: |n . w_v| / |p - v| over the cell's corners and centre.
+        float worst = 0.0f;
+        for (int c = 0; c < 9; ++c) {
+          const glm::vec3 v =
+              c == 8 ? cell.center()
+                     : glm::vec3{c & 1 ? cell.hi.x : cell.lo.x, c & 2 ? cell.hi.y : cell.lo.y,
+                                 c & 4 ? cell.hi.z : cell.lo.z};
+          const glm::vec3 w = s.position - v;
+          const float d2 = glm::dot(w, w);
+          worst = std::max(worst, std::abs(glm::dot(normal, w)) / std::max(d2, 1e-12f));
+        }
+        // Spacing s_j is sufficient when s_j * worst <= sampleAngle.
+        const float enough = worst > 0.0f ? sampleAngle / worst : 1e30f;
         std::array<float, 3> spacing;
         for (size_t j = 0; j < 3; ++j)
           spacing[j] = sampleSpacing(cameras[j], axis, s.position, normal);
         for (size_t j = 0; j < 3; ++j) {
           if (j == s.camera || !(spacing[j] <= enough)) continue;
-          if (spacing[j] < spacing[s.camera] || (spacing[j] == spacing[s.camera] && j < s.camera)) {
+          if (!(spacing[j] < spacing[s.camera] ||
+                (spacing[j] == spacing[s.camera] && j < s.camera)))
+            continue;
+          // Camera j must have a point of this surface beside p (after the
+          // hidden ones are gone): at an occluding edge its samples may lie
+          // on the hidden side, and p is then the only one there.
+          if (nearbySample(j, s.position, normal, 2.0f * spacing[j])) {
             keep[i] = 0;
             break;
           }
@@ -357,12 +458,11 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
           ss = std::clamp(ss, 0.0f, 1.0f);
           st = std::clamp(st, 0.0f, 1.0f);
           const glm::vec3 eye = frame.plane.at(ss, st);
-          const glm::vec3 w = s.position - eye;
-          const float distance = glm::length(w);
           // Visible in the points' z-buffer: nothing of the impostor between.
           ++occlusionRays;
-          const float slack = std::max(1e-4f, 0.01f / std::max(distance, 1e-3f));
-          if (ownRays->occluded(Ray{eye, w, 0.0f, 1.0f - slack})) continue;
+          if (!visibleFrom(eye, s.position)) continue;
+          const glm::vec3 w = s.position - eye;
+          const float distance = glm::length(w);
           // A random orientation puts the point anywhere in its pixel; the
           // monitor's Gaussian picks the ray about that pixel's centre.
           const glm::vec3 forward = w / distance;

@@ -19,13 +19,30 @@
 // bounded by s_j = a z_j / |n . w_j| (a its pixel size, z_j the depth of p
 // along its axis, w_j the unit direction from it, n the surface normal): the
 // side of a pixel's footprint perpendicular to the ray, stretched by the
-// surface's slant. Camera j samples p sufficiently when s_j <= the screen's
-// sample angle (ScreenSpec::sampleAngle) times p's distance from the
-// nearest point of the view cell: no viewer in the cell sees two of its
-// neighbouring samples more than a pixel apart. A point from camera k is
+// surface's slant. A viewer at v sees that spacing foreshortened by the same
+// slant from its own side, under the angle s_j |n . w_v| / |p - v|; camera j
+// samples p sufficiently when that angle stays within the screen's sample
+// angle (ScreenSpec::sampleAngle) for every viewer in the cell (taken at the
+// cell's corners and centre: the cell is small against p's distance), so no
+// viewer sees two neighbouring samples more than a pixel apart (the thesis:
+// no edge of the camera's sampling pattern projects to more than a pixel in
+// any view). Judging s_j against the distance alone would call every
+// surface seen obliquely undersampled and keep all three cameras' points
+// there, three times what a street's side walls need. A point from camera k is
 // dropped when another camera samples its surface sufficiently and better
 // (smaller s, ties to the lower camera); the better camera's own samples of
 // that surface remain, so no region loses all its points.
+//
+// Hidden points (optional, on by default). The LDIs keep every layer, and
+// most of those layers (the backs and insides of buildings, rows behind
+// rows) are hidden from the whole view cell by the impostor's own surfaces:
+// in the thesis's terms their visibility term v_j is 0 for every camera, so
+// their weight c_j is undefined and they only cost memory and fill. A point
+// is kept when an occlusion ray against the impostor's triangles reaches it
+// from at least one of `visibilityViews` viewpoints in the view cell
+// (stratified: a jittered grid, then random ones). A point seen from less
+// than about 1/visibilityViews of the cell can be lost; the no-holes tests
+// bound what that costs.
 //
 // Appearance (the plenoptic image function). For texel i of point p, c_i is
 // the integral of PIF(s, theta, x) against the texel's filter over viewer
@@ -49,10 +66,12 @@
 // the same bytes on any thread count.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <vector>
 
+#include "common/core/stats_fields.h"
 #include "common/impostor/impostor.h"
 #include "common/light/lighting.h"
 #include "common/raycast/ray_query.h"
@@ -76,6 +95,8 @@ struct ImpostorOptions {
   ScreenSpec screen;
   float resolutionFactor = 1.0f;  // LDI pixels per heuristic pixel, per axis
   bool removePoints = true;
+  bool cullHidden = true;         // drop points no viewpoint in the cell sees
+  uint32_t visibilityViews = 64;  // viewpoints tried per point before it counts as hidden
   uint32_t maxLayers = 8;
   uint32_t textureWidth = 8, textureHeight = 2;
   float varianceThreshold = 4.0f;      // standard error of a texel's mean, 8-bit levels
@@ -93,6 +114,7 @@ struct ImpostorStats {
   uint64_t samples = 0;        // LDI hits in the box (candidate points), thin ones included
   uint64_t thinSamples = 0;    // added for thin geometry between LDI rays
   uint64_t removed = 0;        // dropped by point removal
+  uint64_t hidden = 0;         // dropped as hidden from the whole cell
   uint64_t points = 0;
   uint64_t singleColour = 0;    // points keeping one colour
   uint64_t appearanceRays = 0;  // PIF rays
@@ -105,7 +127,39 @@ struct ImpostorStats {
   double pointsPerPixel = 0.0;         // points / screenPixels (Table 5.1)
   double pointsPerCoveredPixel = 0.0;  // points / coveredPixels
   uint64_t bytes = 0, bytesUncompressed = 0;
-  double sampleSeconds = 0.0, removeSeconds = 0.0, appearanceSeconds = 0.0, seconds = 0.0;
+  double sampleSeconds = 0.0, removeSeconds = 0.0, hiddenSeconds = 0.0, appearanceSeconds = 0.0,
+         seconds = 0.0;
+
+  uint64_t ldiPixels() const {
+    return ldiWidth[0] * ldiHeight[0] + ldiWidth[1] * ldiHeight[1] + ldiWidth[2] * ldiHeight[2];
+  }
+  // Every field once, for JSON and tables (common/core/stats_output.h); the
+  // three LDIs' sizes as their total.
+  template <class F>
+  void forEachField(F&& f) const {
+    f(StatField{"ldi_pixels", "LDI pixels (three cameras)", ""}, ldiPixels());
+    f(StatField{"ldi_pixel_angle", "LDI pixel angle", "rad"}, ldiPixelAngle);
+    f(StatField{"samples", "samples", ""}, samples);
+    f(StatField{"thin_samples", "of which for thin geometry", ""}, thinSamples);
+    f(StatField{"removed", "removed", ""}, removed);
+    f(StatField{"hidden", "hidden from the cell", ""}, hidden);
+    f(StatField{"points", "points", ""}, points);
+    f(StatField{"single_colour", "single-colour points", ""}, singleColour);
+    f(StatField{"appearance_rays", "appearance rays", ""}, appearanceRays);
+    f(StatField{"visibility_rays", "visibility rays", ""}, visibilityRays);
+    f(StatField{"unseen_points", "points unseen from the cell", ""}, unseenPoints);
+    f(StatField{"screen_pixels", "screen pixels (bounding box)", ""}, screenPixels);
+    f(StatField{"covered_pixels", "screen pixels covered", ""}, coveredPixels);
+    f(StatField{"points_per_pixel", "points per screen pixel", ""}, pointsPerPixel);
+    f(StatField{"points_per_covered_pixel", "points per covered pixel", ""}, pointsPerCoveredPixel);
+    f(StatField{"bytes", "bytes", ""}, bytes);
+    f(StatField{"bytes_uncompressed", "bytes without single colours", ""}, bytesUncompressed);
+    f(StatField{"sample_s", "sampling", "s"}, sampleSeconds);
+    f(StatField{"remove_s", "point removal", "s"}, removeSeconds);
+    f(StatField{"hidden_s", "hidden points", "s"}, hiddenSeconds);
+    f(StatField{"appearance_s", "appearance", "s"}, appearanceSeconds);
+    f(StatField{"bake_s", "bake", "s"}, seconds);
+  }
 };
 
 // Bakes the impostor of `triangles` (indices into scene.triangles, the

@@ -12,6 +12,7 @@
 #include "common/raycast/ray_query.h"
 #include "common/world/free_space.h"
 #include "common/world/static_world.h"
+#include "protocol/geometry/scene_faces.h"
 #include "server/visibility/pvs_bake.h"
 
 namespace vistream {
@@ -75,32 +76,7 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
     backdrop_ = lit->backdrop;
   }
   // Per-face triangles, colours and bounds, in face-ID order.
-  faces_.resize(scene_.faceCount);
-  faceBoxes_.resize(scene_.faceCount);
-  for (uint32_t i = 0; i < scene_.faceCount; ++i) faces_[i].face = i;
-  size_t flat = 0;  // the static triangle's index in the lighting grid
-  for (const Object& o : scene_.objects) {
-    for (size_t t = 0; t < o.mesh.triangles.size(); ++t) {
-      const uint32_t id = o.mesh.faceIds[t];
-      const size_t lightIndex = o.dynamic ? SIZE_MAX : flat++;
-      if (id >= faces_.size()) continue;
-      wire::FaceTriangles& f = faces_[id];
-      if (lit && lightIndex != SIZE_MAX) {
-        const LightingGrid& g = lit->load.grid;
-        const uint8_t n = g.level[lightIndex];
-        f.levels.push_back(n);
-        f.colours.insert(f.colours.end(), g.colours.begin() + g.first[lightIndex],
-                         g.colours.begin() + g.first[lightIndex] + LightingGrid::pointsOf(n));
-      }
-      f.material = uint16_t(
-          t < o.mesh.materials.size() ? std::min<uint32_t>(o.mesh.materials[t], 65535) : 0);
-      for (int k = 0; k < 3; ++k) {
-        const glm::vec3 p = o.mesh.positions[o.mesh.triangles[t][k]];
-        f.corners.push_back(p);
-        faceBoxes_[id].extend(p);
-      }
-    }
-  }
+  faces_ = wire::sceneFaces(scene_, lit ? &lit->load.grid : nullptr, &faceBoxes_);
   // Faces by X/Z cell: at least 8 m cells, at most about 512 along the longer side.
   const Box3f b = scene_.bounds();
   if (!b.empty())

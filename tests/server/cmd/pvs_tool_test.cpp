@@ -171,6 +171,71 @@ TEST(PvsTool, OutOfRangeNumbersAndBadBoxesFailBeforeTheSceneLoadsNamingTheOption
   expectEachOptionNamed(pvs, {"--district -1", "--bake-cell 0", "--gt-probes -1"});
 }
 
+// A street cell at the origin and, 120-170 m ahead (-z, a little to +x), a
+// row of boxes: a far field beyond d = 100 m in one sector (azimuth -83 to
+// -66 degrees) and band.
+std::string farRowScene() {
+  vistream::testing::GroundAndBoxesObj o(-300, -300, 300, 300);
+  for (int k = 0; k < 8; ++k)
+    o.box("far" + std::to_string(k), 15 + 5 * k, -170 + 3 * (k % 3), 19 + 5 * k, -120,
+          8 + 3 * (k % 4));
+  return o.obj;
+}
+
+TEST(PvsTool, ImpostorsPrintTheContractedJsonForEachImpostorOfTheCell) {
+  vistream::testing::TempDir dir;
+  const fs::path scene = dir.write("row.obj", farRowScene());
+  const std::string common = "impostors --scene " + scene.string() +
+                             " --cell -2,1,-2,2,3,2 --near-distance 100 "
+                             "--lighting-cache none --max-rays 8 ";
+  const ToolRun r = runPvs(common + "--json --min-triangles 20");
+  ASSERT_EQ(r.status, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  ASSERT_EQ(j["impostors"].size(), 1u) << r.out;
+  const auto& imp = j["impostors"][0];
+  // Every far-field triangle of the PVS is in it: at most each box's walls
+  // and roof, fewer by the walls facing away from the cell.
+  EXPECT_EQ(imp["triangles"], j["stats"]["far_triangles"]);
+  EXPECT_LE(imp["triangles"].get<size_t>(), 8u * 10u);
+  EXPECT_GT(imp["points"].get<uint64_t>(), 1000u);
+  EXPECT_GT(imp["screen_pixels"].get<uint64_t>(), 100u);
+  EXPECT_NEAR(imp["points_per_pixel"].get<double>(),
+              imp["points"].get<double>() / imp["screen_pixels"].get<double>(), 1e-9);
+  EXPECT_GT(imp["bytes"].get<uint64_t>(), 16 * imp["points"].get<uint64_t>());
+  EXPECT_GT(imp["bake_s"].get<double>(), 0.0);
+  EXPECT_EQ(imp["stats"]["points"], imp["points"]);
+  const auto& stats = j["stats"];
+  EXPECT_EQ(stats["impostors"], 1);
+  EXPECT_EQ(stats["far_triangles"].get<size_t>() + stats["near_triangles"].get<size_t>(),
+            stats["pvs_triangles"].get<size_t>());
+  EXPECT_EQ(stats["points"], imp["points"]);
+  // The same cell with a heavier threshold keeps its far field as geometry
+  // and says so.
+  const ToolRun light = runPvs(common + "--json --min-triangles 500");
+  ASSERT_EQ(light.status, 0) << light.err;
+  const auto lj = nlohmann::json::parse(light.out);
+  EXPECT_TRUE(lj["impostors"].empty());
+  EXPECT_NE(lj["stats"]["why"].get<std::string>().find("500"), std::string::npos)
+      << lj["stats"]["why"];
+  // People get a table with one row per impostor and a total.
+  const ToolRun table = runPvs(common + "--min-triangles 20");
+  ASSERT_EQ(table.status, 0) << table.err;
+  EXPECT_NE(table.out.find("pts/px"), std::string::npos) << table.out;
+  EXPECT_NE(table.out.find("total"), std::string::npos) << table.out;
+}
+
+TEST(PvsTool, ImpostorArgumentsFailBeforeTheSceneLoadsNamingTheOption) {
+  using vistream::testing::expectEachOptionNamed;
+  const std::string missing = "/nonexistent/scene.obj";
+  vistream::testing::RefusedCommand pvs{
+      .tool = "vistream-pvs", .common = "impostors --scene " + missing, .unopened = missing};
+  expectEachOptionNamed(pvs, {"--cell 1,2,3"});
+  pvs.common = "impostors --scene " + missing + " --cell 0,0,0,1,1,1";
+  expectEachOptionNamed(
+      pvs, {"--texture 0x2", "--texture eight", "--screen 8x8", "--resolution 0", "--sectors 0",
+            "--near-distance -5", "--min-rays 10 --max-rays 5", "--visibility-views 0"});
+}
+
 TEST(PvsTool, BenchPrintsOneRowPerSceneSizeAndMethodWithNoMissingFacesAndTheDistrictBakes) {
   vistream::testing::TempDir dir;
   const fs::path scene = dir.write("wall.obj", wallScene());

@@ -1,0 +1,217 @@
+#include "server/cmd/impostor_commands.h"
+
+#include <fmt/format.h>
+#include <tbb/global_control.h>
+
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <optional>
+
+#include "common/cmd/cli.h"
+#include "common/core/error.h"
+#include "common/core/parse.h"
+#include "common/core/stats_output.h"
+#include "common/generate/scene_spec.h"
+#include "server/cmd/scene_boxes.h"
+#include "server/impostor/impostor_world.h"
+
+namespace vistream {
+
+using nlohmann::json;
+
+struct ImpostorCommand::Arguments {
+  std::string scene, cell, texture = "8x2", screen = "640x480";
+  unsigned threads = 0;
+  bool json = false, noRemoval = false, keepHidden = false;
+  GroundChoice ground;
+  std::filesystem::path lightingCache;
+  ImpostorPlacementOptions placement;
+  ImpostorOptions bake;
+};
+
+ImpostorCommand::ImpostorCommand(CLI::App& app, SceneLimits& limits)
+    : limits_(limits), a_(std::make_unique<Arguments>()) {
+  Arguments& a = *a_;
+  sub_ = app.add_subcommand(
+      "impostors",
+      "point-based impostors of a view cell's far field (Wimmer 2001, chapter 5): placement, "
+      "three-LDI sampling, point removal, Monte Carlo appearance textures");
+  sub_->add_option("--scene", a.scene, "SCENE")->required();
+  sub_->add_option("--cell", a.cell, "x0,y0,z0,x1,y1,z1: the view cell (file coordinates)")
+      ->required();
+  sub_->add_option("--threads", a.threads, "worker threads (0: all cores)")
+      ->check(atLeast<unsigned>(0));
+  sub_->add_flag("--json", a.json,
+                 "one JSON object on stdout: impostors (points, screen_pixels, points_per_pixel, "
+                 "bytes, bake_s, ...) and stats");
+  // Placement (impostor_placement.h).
+  sub_->add_option("--near-distance", a.placement.nearDistance,
+                   "d: the client's near field; impostors hold the PVS beyond it (metres)")
+      ->capture_default_str()
+      ->check(positive());
+  sub_->add_option("--sectors", a.placement.sectors, "azimuth sectors around the cell")
+      ->capture_default_str()
+      ->check(inRange<uint32_t>(1, 64));
+  sub_->add_option("--bands", a.placement.bands, "distance bands [d,2d), [2d,4d), ...")
+      ->capture_default_str()
+      ->check(inRange<uint32_t>(1, 16));
+  sub_->add_option("--min-triangles", a.placement.minTriangles,
+                   "a lighter sector and band stays geometry")
+      ->capture_default_str()
+      ->check(atLeast<size_t>(1));
+  // Sampling and appearance (impostor_bake.h).
+  sub_->add_option("--resolution", a.bake.resolutionFactor,
+                   "LDI resolution factor (1: the thesis's heuristic)")
+      ->capture_default_str()
+      ->check(between(0.05, 8.0));
+  sub_->add_flag("--no-removal", a.noRemoval, "keep points another camera samples better");
+  sub_->add_flag("--keep-hidden", a.keepHidden, "keep points that no viewpoint in the cell sees");
+  sub_->add_option("--visibility-views", a.bake.visibilityViews,
+                   "viewpoints tried per point before it counts as hidden")
+      ->capture_default_str()
+      ->check(inRange<uint32_t>(1, 4096));
+  sub_->add_option("--max-layers", a.bake.maxLayers, "LDI layers per pixel")
+      ->capture_default_str()
+      ->check(inRange<uint32_t>(1, 64));
+  sub_->add_option("--texture", a.texture, "texels per point, WIDTHxHEIGHT (1x1: one colour)")
+      ->capture_default_str();
+  sub_->add_option("--variance", a.bake.varianceThreshold,
+                   "Monte Carlo stops once a texel's standard error is below this (8-bit levels)")
+      ->capture_default_str()
+      ->check(positive());
+  sub_->add_option("--min-rays", a.bake.minRays, "appearance rays per texel, at least")
+      ->capture_default_str()
+      ->check(inRange<uint32_t>(2, 1 << 16));
+  sub_->add_option("--max-rays", a.bake.maxRays, "appearance rays per texel, at most")
+      ->capture_default_str()
+      ->check(inRange<uint32_t>(2, 1 << 16));
+  sub_->add_option("--single-colour", a.bake.singleColourTolerance,
+                   "a point whose texels all lie this close to their mean keeps one colour "
+                   "(8-bit levels; 0: never)")
+      ->capture_default_str()
+      ->check(nonNegative());
+  sub_->add_option("--screen", a.screen, "the viewer's screen the samples are sized for, WxH")
+      ->capture_default_str();
+  sub_->add_option("--fov", a.bake.screen.vfovDeg, "the viewer's vertical field of view (degrees)")
+      ->capture_default_str()
+      ->check(between(1.0, 170.0));
+  sub_->add_option("--seed", a.bake.seed, "Monte Carlo seed")
+      ->capture_default_str()
+      ->check(atLeast<uint64_t>(0));
+  addGroundOption(*sub_, a.ground);
+  addLightingCacheOption(*sub_, a.lightingCache);
+  addSceneLimitsOption(*sub_, limits_);
+}
+
+ImpostorCommand::~ImpostorCommand() = default;
+
+bool ImpostorCommand::chosen() const {
+  return sub_->parsed();
+}
+
+namespace {
+
+json fileBoxJson(const Scene& scene, const Box3f& box) {
+  const glm::dvec3 lo = scene.toFile(box.lo), hi = scene.toFile(box.hi);
+  return {lo.x, lo.y, lo.z, hi.x, hi.y, hi.z};
+}
+
+}  // namespace
+
+int ImpostorCommand::run() {
+  Arguments& a = *a_;
+  // Everything the arguments decide is checked before the scene loads.
+  const Box3d fileCell = parseFileBox(a.cell, "--cell");
+  const WidthHeight texture = parseWidthHeight(a.texture, "--texture", 1, 64);
+  a.bake.textureWidth = uint32_t(texture.width);
+  a.bake.textureHeight = uint32_t(texture.height);
+  const WidthHeight screen = parseWidthHeight(a.screen, "--screen", 16, 8192);
+  a.bake.screen.width = screen.width;
+  a.bake.screen.height = screen.height;
+  if (a.bake.minRays > a.bake.maxRays)
+    throwInputError("--min-rays {} exceeds --max-rays {}", a.bake.minRays, a.bake.maxRays);
+  a.bake.removePoints = !a.noRemoval;
+  a.bake.cullHidden = !a.keepHidden;
+  std::optional<tbb::global_control> threadLimit;
+  if (a.threads > 0) threadLimit.emplace(tbb::global_control::max_allowed_parallelism, a.threads);
+
+  const Scene scene = openScene(a.scene, limits_);
+  warnIfOutsideScene(scene, fileCell, "--cell", a.cell);
+  const Box3f cell = toLocal(scene, fileCell);
+  const ImpostorWorld world(scene, {a.ground, LightingOptions{}, a.lightingCache});
+  const CellImpostors r = world.bakeCell(cell, a.placement, a.bake);
+
+  // Per impostor: what it replaces and what it costs against that geometry.
+  struct Row {
+    size_t faces = 0, geometryBytes = 0;
+  };
+  std::vector<Row> rows;
+  size_t points = 0, bytes = 0, geometryBytes = 0;
+  for (size_t i = 0; i < r.impostors.size(); ++i) {
+    const ImpostorSite& site = r.placement.sites[r.siteOf[i]];
+    const std::vector<uint32_t> faces = world.replacedFaces(site.triangles);
+    rows.push_back({faces.size(), world.geometryBytes(faces)});
+    points += r.stats[i].points;
+    bytes += r.stats[i].bytes;
+    geometryBytes += rows.back().geometryBytes;
+  }
+  if (a.json) {
+    json impostors = json::array();
+    for (size_t i = 0; i < r.impostors.size(); ++i) {
+      const ImpostorSite& site = r.placement.sites[r.siteOf[i]];
+      const ImpostorStats& s = r.stats[i];
+      impostors.push_back({{"sector", site.sector},
+                           {"band", site.band},
+                           {"box", fileBoxJson(scene, site.box)},
+                           {"triangles", site.triangles.size()},
+                           {"faces_replaced", rows[i].faces},
+                           {"geometry_bytes", rows[i].geometryBytes},
+                           {"points", s.points},
+                           {"screen_pixels", s.screenPixels},
+                           {"points_per_pixel", s.pointsPerPixel},
+                           {"covered_pixels", s.coveredPixels},
+                           {"bytes", s.bytes},
+                           {"bake_s", s.seconds},
+                           {"stats", statsJson(s)}});
+    }
+    const json stats = {{"pvs_triangles", r.pvsTriangles},
+                        {"far_triangles", r.placement.farTriangles},
+                        {"near_triangles", r.placement.nearTriangles},
+                        {"light_groups", r.placement.lightGroups},
+                        {"impostors", r.impostors.size()},
+                        {"refused", r.refused},
+                        {"points", points},
+                        {"bytes", bytes},
+                        {"geometry_bytes", geometryBytes},
+                        {"pvs_s", r.pvsSeconds},
+                        {"bake_s", r.seconds},
+                        {"why", r.placement.why}};
+    std::cout << json{{"cell", fileBoxJson(scene, cell)},
+                      {"impostors", impostors},
+                      {"stats", stats}}
+                     .dump()
+              << "\n";
+    return 0;
+  }
+  fmt::print("impostors of cell {} in {}: {}\n", a.cell, scene.name, r.placement.why);
+  fmt::print("  PVS {} triangles ({:.2f} s): {} within d = {} m, {} beyond\n", r.pvsTriangles,
+             r.pvsSeconds, r.placement.nearTriangles, a.placement.nearDistance,
+             r.placement.farTriangles);
+  for (const std::string& why : r.refused) fmt::print("  refused: {}\n", why);
+  if (r.impostors.empty()) return 0;
+  fmt::print("\n  {:>6} {:>4} {:>9} {:>9} {:>9} {:>8} {:>9} {:>10} {:>10} {:>7}\n", "sector",
+             "band", "triangles", "points", "screen px", "pts/px", "covered", "bytes", "geometry B",
+             "bake s");
+  for (size_t i = 0; i < r.impostors.size(); ++i) {
+    const ImpostorSite& site = r.placement.sites[r.siteOf[i]];
+    const ImpostorStats& s = r.stats[i];
+    fmt::print("  {:>6} {:>4} {:>9} {:>9} {:>9} {:>8.2f} {:>9} {:>10} {:>10} {:>7.1f}\n",
+               site.sector, site.band, site.triangles.size(), s.points, s.screenPixels,
+               s.pointsPerPixel, s.coveredPixels, s.bytes, rows[i].geometryBytes, s.seconds);
+  }
+  fmt::print("  {:>6} {:>4} {:>9} {:>9} {:>9} {:>8} {:>9} {:>10} {:>10} {:>7.1f}\n", "total", "",
+             "", points, "", "", "", bytes, geometryBytes, r.seconds);
+  return 0;
+}
+
+}  // namespace vistream

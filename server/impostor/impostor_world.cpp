@@ -1,0 +1,115 @@
+#include "server/impostor/impostor_world.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+
+#include "common/core/error.h"
+#include "common/core/timer.h"
+#include "common/light/lighting_cache.h"
+#include "protocol/geometry/scene_faces.h"
+#include "protocol/wire/messages.h"
+#include "server/visibility/epsilon_pvs.h"
+#include "server/visibility/horizon_fusion.h"
+
+namespace vistream {
+
+ImpostorWorld::ImpostorWorld(const Scene& scene, const ImpostorWorldOptions& options)
+    : scene_(scene) {
+  StaticWorldOptions worldOptions;
+  worldOptions.ground = options.ground;
+  worldOptions.parts = StaticWorldParts::Ground;
+  world_ = buildStaticWorld(scene, worldOptions);
+  SceneLighting lit = lightScene(scene, *world_.triangles, options.lighting, options.lightingCache,
+                                 /*progress=*/true);
+  lighting_ = std::move(lit.load.grid);
+  backdrop_ = lit.backdrop;
+  horizons_ = makeHorizonFusion(scene, FusionChoice::Auto);
+  pvs_ = std::make_unique<EpsilonPvs>(scene);
+  pvs_->setFusion(horizons_.get());
+
+  faces_ = wire::sceneFaces(scene, &lighting_);
+  grid_ = wire::QuantizationGrid::forBounds(scene.bounds());
+
+  const FlatTriangles& t = *world_.triangles;
+  faceFirst_.assign(size_t(scene.faceCount) + 1, 0);
+  for (uint32_t id : t.faceIds)
+    if (id < scene.faceCount) ++faceFirst_[id + 1];
+  for (size_t f = 0; f < scene.faceCount; ++f) faceFirst_[f + 1] += faceFirst_[f];
+  faceTriangles_.resize(faceFirst_.back());
+  std::vector<uint32_t> next(faceFirst_.begin(), faceFirst_.end() - 1);
+  for (uint32_t k = 0; k < t.size(); ++k)
+    if (t.faceIds[k] < scene.faceCount) faceTriangles_[next[t.faceIds[k]]++] = k;
+}
+
+ImpostorWorld::~ImpostorWorld() = default;
+
+ImpostorScene ImpostorWorld::view() const {
+  return ImpostorScene{*world_.triangles, *world_.rays, lighting_, backdrop_, world_.ground.y};
+}
+
+std::vector<uint32_t> ImpostorWorld::pvsTriangles(const Box3f& cell, double* seconds) const {
+  Stopwatch watch;
+  const PvsResult r = pvs_->compute(cell);
+  std::vector<uint32_t> out;
+  for (uint32_t f : r.faces)
+    if (f < scene_.faceCount)
+      out.insert(out.end(), faceTriangles_.begin() + faceFirst_[f],
+                 faceTriangles_.begin() + faceFirst_[f + 1]);
+  if (seconds) *seconds = watch.ms() / 1000.0;
+  return out;
+}
+
+CellImpostors ImpostorWorld::bakeCell(const Box3f& cell, const ImpostorPlacementOptions& placement,
+                                      const ImpostorOptions& options) const {
+  Stopwatch watch;
+  CellImpostors out;
+  out.cell = cell;
+  const std::vector<uint32_t> pvs = pvsTriangles(cell, &out.pvsSeconds);
+  out.pvsTriangles = pvs.size();
+  out.placement = placeImpostors(cell, triangles(), pvs, placement);
+  for (uint32_t s = 0; s < out.placement.sites.size(); ++s) {
+    const ImpostorSite& site = out.placement.sites[s];
+    try {
+      ImpostorStats stats;
+      out.impostors.push_back(
+          bakeImpostor(view(), cell, site.box, site.triangles, options, &stats));
+      out.stats.push_back(stats);
+      out.siteOf.push_back(s);
+    } catch (const InputError& e) {
+      spdlog::warn("impostor of sector {} band {} left as geometry: {}", site.sector, site.band,
+                   e.what());
+      out.refused.push_back(e.what());
+    }
+  }
+  out.seconds = watch.ms() / 1000.0;
+  return out;
+}
+
+std::vector<uint32_t> ImpostorWorld::replacedFaces(const std::vector<uint32_t>& triangles) const {
+  std::vector<uint32_t> faces;
+  faces.reserve(triangles.size());
+  for (uint32_t k : triangles) faces.push_back(world_.triangles->faceIds[k]);
+  std::sort(faces.begin(), faces.end());
+  std::vector<uint32_t> out;
+  for (size_t i = 0; i < faces.size();) {
+    size_t j = i;
+    while (j < faces.size() && faces[j] == faces[i]) ++j;
+    const uint32_t f = faces[i];
+    // Triangle indices are distinct, so a face is whole when it was met as
+    // often as it has triangles.
+    if (f < scene_.faceCount && j - i == faceFirst_[f + 1] - faceFirst_[f]) out.push_back(f);
+    i = j;
+  }
+  return out;
+}
+
+size_t ImpostorWorld::geometryBytes(const std::vector<uint32_t>& faces) const {
+  if (faces.empty()) return 0;
+  std::vector<wire::FaceTriangles> batch;
+  batch.reserve(faces.size());
+  for (uint32_t f : faces) batch.push_back(faces_.at(f));
+  return wire::encodeMessage(wire::encodeGeometry(batch, grid_)).size();
+}
+
+}  // namespace vistream
