@@ -17,6 +17,7 @@
 #include <optional>
 
 #include "common/core/check.h"
+#include "protocol/geometry/byte_coding.h"
 
 namespace vistream::wire {
 
@@ -40,98 +41,6 @@ constexpr uint32_t pointIndexOf(uint32_t n, uint32_t i, uint32_t j) {
   return j * (n + 1) - j * (j - 1) / 2 + i;
 }
 constexpr uint32_t kMaxColourStep = 16;
-
-// ---- writing -------------------------------------------------------------------
-
-void putVarint(std::vector<uint8_t>& out, uint64_t v) {
-  while (v >= 0x80) {
-    out.push_back(uint8_t(v) | 0x80);
-    v >>= 7;
-  }
-  out.push_back(uint8_t(v));
-}
-
-uint64_t zigzag(int64_t v) {
-  return (uint64_t(v) << 1) ^ uint64_t(v >> 63);
-}
-
-// (run length, value) pairs covering `values`.
-template <class T>
-void putRuns(std::vector<uint8_t>& out, const std::vector<T>& values) {
-  for (size_t i = 0; i < values.size();) {
-    size_t j = i + 1;
-    while (j < values.size() && values[j] == values[i]) ++j;
-    putVarint(out, j - i);
-    putVarint(out, values[i]);
-    i = j;
-  }
-}
-
-// ---- reading (untrusted) ---------------------------------------------------------
-
-// Reads varints and bytes from a payload; every read is bounds-checked and the
-// first failure names the field.
-class PayloadReader {
- public:
-  explicit PayloadReader(std::span<const uint8_t> bytes) : bytes_(bytes) {}
-
-  // An unsigned varint of at most `max`, or nothing (error set).
-  std::optional<uint64_t> varint(const char* field, uint64_t max) {
-    uint64_t v = 0;
-    for (int shift = 0; shift < 64; shift += 7) {
-      if (at_ >= bytes_.size()) return fail(fmt::format("{} is cut off", field));
-      const uint8_t b = bytes_[at_++];
-      if (shift == 63 && b > 1) return fail(fmt::format("{} overflows 64 bits", field));
-      v |= uint64_t(b & 0x7f) << shift;
-      if (!(b & 0x80)) {
-        if (v > max) return fail(fmt::format("{} is {}, more than {}", field, v, max));
-        return v;
-      }
-    }
-    return fail(fmt::format("{} overflows 64 bits", field));
-  }
-  std::optional<std::span<const uint8_t>> bytes(const char* field, uint64_t n) {
-    if (n > remaining())
-      return fail(fmt::format("{} claims {} bytes, {} are left", field, n, remaining()));
-    const auto s = bytes_.subspan(at_, size_t(n));
-    at_ += size_t(n);
-    return s;
-  }
-  std::span<const uint8_t> rest() {
-    const auto s = bytes_.subspan(at_);
-    at_ = bytes_.size();
-    return s;
-  }
-  size_t remaining() const { return bytes_.size() - at_; }
-  const std::string& error() const { return error_; }
-  // Records the first failure.
-  std::nullopt_t fail(std::string text) {
-    if (error_.empty()) error_ = std::move(text);
-    return std::nullopt;
-  }
-
- private:
-  std::span<const uint8_t> bytes_;
-  size_t at_ = 0;
-  std::string error_;
-};
-
-// Runs (length, value) covering exactly `count` entries, each value <= max.
-template <class T>
-bool readRuns(PayloadReader& r, size_t count, uint64_t max, const char* field,
-              std::vector<T>& out) {
-  out.clear();
-  out.reserve(count);
-  while (out.size() < count) {
-    const auto length = r.varint(field, count - out.size());
-    if (!length) return false;
-    if (*length == 0) return r.fail(fmt::format("{} has length 0", field)), false;
-    const auto value = r.varint(field, max);
-    if (!value) return false;
-    out.insert(out.end(), size_t(*length), T(*value));
-  }
-  return true;
-}
 
 // ---- the parts of a batch ---------------------------------------------------------
 
@@ -233,22 +142,6 @@ std::vector<uint8_t> varintPayload(const IndexedBatch& b, std::vector<uint8_t> o
   return out;
 }
 
-struct ZstdContextFree {
-  void operator()(ZSTD_CCtx* c) const { ZSTD_freeCCtx(c); }
-};
-
-// The zstd frame of `raw`, its content size in its header.
-std::vector<uint8_t> compressed(const std::vector<uint8_t>& raw) {
-  thread_local std::unique_ptr<ZSTD_CCtx, ZstdContextFree> context(ZSTD_createCCtx());
-  VS_CHECK(context != nullptr);
-  std::vector<uint8_t> out(ZSTD_compressBound(raw.size()));
-  const size_t n =
-      ZSTD_compressCCtx(context.get(), out.data(), out.size(), raw.data(), raw.size(), kZstdLevel);
-  VS_CHECK(!ZSTD_isError(n));  // the bound holds for any input
-  out.resize(n);
-  return out;
-}
-
 // ---- lighting -------------------------------------------------------------------------
 
 // The prediction of grid point (i, j) of a level-n grid from the points
@@ -311,7 +204,7 @@ std::vector<uint8_t> lightingSection(std::span<const FaceTriangles> input, const
       at += pointsOfLevel(n);
     }
   }
-  std::vector<uint8_t> z = compressed(raw);
+  std::vector<uint8_t> z = zstdCompress(raw);
   std::vector<uint8_t> out;
   out.reserve(1 + std::min(z.size(), raw.size()));
   if (z.size() < raw.size()) {
@@ -436,7 +329,7 @@ GeometryT encodeGeometry(std::span<const FaceTriangles> faces, const Quantizatio
   auto consider = [&](GeometryCodec codec, std::vector<uint8_t> raw) {
     using Zstd = GeometryCodings::Zstd;
     if (codings.zstd != Zstd::Never) {
-      std::vector<uint8_t> z = compressed(raw);
+      std::vector<uint8_t> z = zstdCompress(raw);
       if (codings.zstd == Zstd::Always || z.size() < raw.size())
         return offer(codec, GeometryCompression::Zstd, std::move(z));
     }

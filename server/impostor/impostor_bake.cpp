@@ -11,6 +11,7 @@
 #include "common/core/error.h"
 #include "common/core/random.h"
 #include "common/core/timer.h"
+#include "protocol/impostor/impostor_codec.h"
 
 namespace vistream {
 namespace {
@@ -557,7 +558,8 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
       coverage.boxPixels ? double(stats.points) / double(coverage.boxPixels) : 0.0;
   stats.pointsPerCoveredPixel =
       coverage.pixels ? double(stats.points) / double(coverage.pixels) : 0.0;
-  stats.bytes = imp.bytes();
+  stats.bytes = wire::encodeImpostor(imp).size();
+  stats.memoryBytes = imp.bytes();
   stats.bytesUncompressed = imp.bytesUncompressed();
   stats.seconds = total.ms() / 1000.0;
   if (statsOut) *statsOut = stats;

@@ -60,7 +60,9 @@
 // seen from the rectangle the colour of its surface.
 //
 // Compression: a point whose texels all lie within singleColourTolerance of
-// their mean (per channel) keeps one colour.
+// their mean (per channel) keeps one colour. The default, 12 levels, is three
+// standard errors at the default variance threshold: texels that differ by
+// no more than the Monte Carlo's own noise are one colour.
 //
 // Determinism: every point's rays are seeded by the point, so a bake gives
 // the same bytes on any thread count.
@@ -99,9 +101,9 @@ struct ImpostorOptions {
   uint32_t visibilityViews = 64;  // viewpoints tried per point before it counts as hidden
   uint32_t maxLayers = 8;
   uint32_t textureWidth = 8, textureHeight = 2;
-  float varianceThreshold = 4.0f;      // standard error of a texel's mean, 8-bit levels
-  uint32_t minRays = 8, maxRays = 64;  // per texel
-  float singleColourTolerance = 3.0f;  // 8-bit levels
+  float varianceThreshold = 4.0f;       // standard error of a texel's mean, 8-bit levels
+  uint32_t minRays = 8, maxRays = 64;   // per texel
+  float singleColourTolerance = 12.0f;  // 8-bit levels
   uint64_t seed = 1;
   // Bounded work: an impostor whose LDIs would need more pixels is refused
   // (InputError naming the figure), before any ray is cast.
@@ -126,7 +128,9 @@ struct ImpostorStats {
   uint64_t screenPixels = 0, coveredPixels = 0;
   double pointsPerPixel = 0.0;         // points / screenPixels (Table 5.1)
   double pointsPerCoveredPixel = 0.0;  // points / coveredPixels
-  uint64_t bytes = 0, bytesUncompressed = 0;
+  uint64_t bytes = 0;        // encoded (protocol/impostor): what the wire and the database hold
+  uint64_t memoryBytes = 0;  // in memory (Impostor::bytes)
+  uint64_t bytesUncompressed = 0;  // in memory, every point with its whole texture
   double sampleSeconds = 0.0, removeSeconds = 0.0, hiddenSeconds = 0.0, appearanceSeconds = 0.0,
          seconds = 0.0;
 
@@ -152,8 +156,10 @@ struct ImpostorStats {
     f(StatField{"covered_pixels", "screen pixels covered", ""}, coveredPixels);
     f(StatField{"points_per_pixel", "points per screen pixel", ""}, pointsPerPixel);
     f(StatField{"points_per_covered_pixel", "points per covered pixel", ""}, pointsPerCoveredPixel);
-    f(StatField{"bytes", "bytes", ""}, bytes);
-    f(StatField{"bytes_uncompressed", "bytes without single colours", ""}, bytesUncompressed);
+    f(StatField{"bytes", "bytes encoded", ""}, bytes);
+    f(StatField{"memory_bytes", "bytes in memory", ""}, memoryBytes);
+    f(StatField{"bytes_uncompressed", "bytes in memory without single colours", ""},
+      bytesUncompressed);
     f(StatField{"sample_s", "sampling", "s"}, sampleSeconds);
     f(StatField{"remove_s", "point removal", "s"}, removeSeconds);
     f(StatField{"hidden_s", "hidden points", "s"}, hiddenSeconds);

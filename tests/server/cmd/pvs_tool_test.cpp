@@ -201,7 +201,9 @@ TEST(PvsTool, ImpostorsPrintTheContractedJsonForEachImpostorOfTheCell) {
   EXPECT_GT(imp["screen_pixels"].get<uint64_t>(), 100u);
   EXPECT_NEAR(imp["points_per_pixel"].get<double>(),
               imp["points"].get<double>() / imp["screen_pixels"].get<double>(), 1e-9);
-  EXPECT_GT(imp["bytes"].get<uint64_t>(), 16 * imp["points"].get<uint64_t>());
+  // The encoded impostor (what the wire carries) is smaller than in memory.
+  EXPECT_GT(imp["bytes"].get<uint64_t>(), 0u);
+  EXPECT_LT(imp["bytes"].get<uint64_t>(), imp["stats"]["memory_bytes"].get<uint64_t>());
   EXPECT_GT(imp["bake_s"].get<double>(), 0.0);
   EXPECT_EQ(imp["stats"]["points"], imp["points"]);
   const auto& stats = j["stats"];

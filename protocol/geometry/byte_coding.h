@@ -1,0 +1,117 @@
+// Byte-level coding shared by the wire's compact payloads (Geometry,
+// impostors): LEB128 varints, zigzag signed values, (run, value) pairs, a
+// bounds-checked reader for untrusted payloads whose first failure names the
+// field, and zstd frames that state their size, decompressed only within a
+// bound given before anything is allocated.
+// Thread safety: free functions (zstdCompress keeps one context per thread);
+// a PayloadReader belongs to one thread.
+#pragma once
+
+#include <fmt/format.h>
+
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace vistream::wire {
+
+inline void putVarint(std::vector<uint8_t>& out, uint64_t v) {
+  while (v >= 0x80) {
+    out.push_back(uint8_t(v) | 0x80);
+    v >>= 7;
+  }
+  out.push_back(uint8_t(v));
+}
+
+inline uint64_t zigzag(int64_t v) {
+  return (uint64_t(v) << 1) ^ uint64_t(v >> 63);
+}
+
+// (run length, value) pairs covering `values`.
+template <class T>
+void putRuns(std::vector<uint8_t>& out, const std::vector<T>& values) {
+  for (size_t i = 0; i < values.size();) {
+    size_t j = i + 1;
+    while (j < values.size() && values[j] == values[i]) ++j;
+    putVarint(out, j - i);
+    putVarint(out, values[i]);
+    i = j;
+  }
+}
+
+// Reads varints and bytes from a payload; every read is bounds-checked and the
+// first failure names the field.
+class PayloadReader {
+ public:
+  explicit PayloadReader(std::span<const uint8_t> bytes) : bytes_(bytes) {}
+
+  // An unsigned varint of at most `max`, or nothing (error set).
+  std::optional<uint64_t> varint(const char* field, uint64_t max) {
+    uint64_t v = 0;
+    for (int shift = 0; shift < 64; shift += 7) {
+      if (at_ >= bytes_.size()) return fail(fmt::format("{} is cut off", field));
+      const uint8_t b = bytes_[at_++];
+      if (shift == 63 && b > 1) return fail(fmt::format("{} overflows 64 bits", field));
+      v |= uint64_t(b & 0x7f) << shift;
+      if (!(b & 0x80)) {
+        if (v > max) return fail(fmt::format("{} is {}, more than {}", field, v, max));
+        return v;
+      }
+    }
+    return fail(fmt::format("{} overflows 64 bits", field));
+  }
+  std::optional<std::span<const uint8_t>> bytes(const char* field, uint64_t n) {
+    if (n > remaining())
+      return fail(fmt::format("{} claims {} bytes, {} are left", field, n, remaining()));
+    const auto s = bytes_.subspan(at_, size_t(n));
+    at_ += size_t(n);
+    return s;
+  }
+  std::span<const uint8_t> rest() {
+    const auto s = bytes_.subspan(at_);
+    at_ = bytes_.size();
+    return s;
+  }
+  size_t remaining() const { return bytes_.size() - at_; }
+  const std::string& error() const { return error_; }
+  // Records the first failure.
+  std::nullopt_t fail(std::string text) {
+    if (error_.empty()) error_ = std::move(text);
+    return std::nullopt;
+  }
+
+ private:
+  std::span<const uint8_t> bytes_;
+  size_t at_ = 0;
+  std::string error_;
+};
+
+// Runs (length, value) covering exactly `count` entries, each value <= max.
+template <class T>
+bool readRuns(PayloadReader& r, size_t count, uint64_t max, const char* field,
+              std::vector<T>& out) {
+  out.clear();
+  out.reserve(count);
+  while (out.size() < count) {
+    const auto length = r.varint(field, count - out.size());
+    if (!length) return false;
+    if (*length == 0) return r.fail(fmt::format("{} has length 0", field)), false;
+    const auto value = r.varint(field, max);
+    if (!value) return false;
+    out.insert(out.end(), size_t(*length), T(*value));
+  }
+  return true;
+}
+
+// A zstd frame of `raw` at `level`, its content size in its header.
+std::vector<uint8_t> zstdCompress(std::span<const uint8_t> raw, int level = 3);
+
+// The content of a zstd frame that states its size, if that size is at most
+// `maxBytes` and the frame holds exactly that; otherwise nothing, with
+// `error` naming what is wrong.
+std::optional<std::vector<uint8_t>> zstdDecompress(std::span<const uint8_t> frame,
+                                                   uint64_t maxBytes, std::string& error);
+
+}  // namespace vistream::wire
