@@ -1,21 +1,19 @@
 #include "server/visibility/pvs_bake.h"
 
-#include <fcntl.h>
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for_each.h>
-#include <unistd.h>
 
+#include <array>
 #include <atomic>
-#include <cstring>
 #include <map>
 #include <memory>
 #include <mutex>
 
 #include "common/core/check.h"
 #include "common/core/error.h"
-#include "common/core/mapped_file.h"
 #include "common/core/timer.h"
+#include "server/bake/bake_journal.h"
 
 namespace vistream {
 namespace {
@@ -23,10 +21,7 @@ namespace {
 constexpr float kEyeLow = 0.2f, kEyeHigh = 2.0f;  // metres above the floor a viewer's eye can be
 // Journal format 2 (format 1 seeded its hashes with a wrong FNV offset
 // basis, and its fingerprint missed the coarse-to-fine switch).
-constexpr char kJournalMagic[8] = {'V', 'S', 'J', 'R', 'N', 'L', '2', '\0'};
-constexpr size_t kJournalHeaderBytes = 16;  // magic, fingerprint
-constexpr size_t kRecordHeadBytes = 12, kRecordSumBytes = 8;
-constexpr uint32_t kMaxRecordPayload = 64u << 20;
+constexpr std::array<char, 8> kJournalMagic = {'V', 'S', 'J', 'R', 'N', 'L', '2', '\0'};
 
 // Everything that changes a bake's answer: a journal from other parameters
 // must not be resumed.
@@ -47,215 +42,6 @@ uint64_t bakeFingerprint(const PvsDatabaseHeader& h, const BakeOptions& o) {
   const uint64_t large = o.pvs.largeOccluders;
   return fnv1a64(&large, sizeof large, f);
 }
-
-// One journal record as read back: Ok, Incomplete (the file ends inside it)
-// or Corrupt (complete by its length field, but failing a check).
-struct JournalRecord {
-  enum class Status { Ok, Incomplete, Corrupt } status = Status::Ok;
-  size_t end = 0;   // offset just past the record; 0 if its length field is implausible
-  std::string why;  // what is wrong, unless Ok
-  uint32_t index = 0;
-  std::vector<uint32_t> faces;  // only when decoded
-};
-
-// Reads the record at `pos` of a journal of `size` bytes. Checks its
-// checksum and, with `decode`, that it names a cell below `cellLimit` and
-// holds a valid face list (faces below `faceLimit`): a record passes into
-// the database only if all of that holds.
-JournalRecord readJournalRecord(const uint8_t* data, size_t size, size_t pos, uint64_t cellLimit,
-                                uint32_t faceLimit, bool decode) {
-  using Status = JournalRecord::Status;
-  JournalRecord r;
-  if (size - pos < kRecordHeadBytes) {
-    r.status = Status::Incomplete;
-    r.why = fmt::format("the file ends {} bytes into the record's 12-byte head", size - pos);
-    return r;
-  }
-  uint32_t head[3];
-  std::memcpy(head, data + pos, kRecordHeadBytes);
-  if (head[2] > kMaxRecordPayload) {
-    r.status = Status::Corrupt;
-    r.why = fmt::format("its length field says {} bytes", head[2]);
-    return r;
-  }
-  const size_t total = kRecordHeadBytes + head[2] + kRecordSumBytes;
-  if (size - pos < total) {
-    r.status = Status::Incomplete;
-    r.why = fmt::format("the file ends {} bytes into a record of {} bytes", size - pos, total);
-    return r;
-  }
-  r.end = pos + total;
-  uint64_t sum = 0;
-  std::memcpy(&sum, data + pos + kRecordHeadBytes + head[2], kRecordSumBytes);
-  if (fnv1a64(data + pos, kRecordHeadBytes + head[2]) != sum) {
-    r.status = Status::Corrupt;
-    r.why = "checksum mismatch";
-    return r;
-  }
-  r.index = head[0];
-  if (!decode) return r;
-  if (head[0] >= cellLimit) {
-    r.status = Status::Corrupt;
-    r.why = fmt::format("cell index {} is outside the grid of {} cells", head[0], cellLimit);
-    return r;
-  }
-  try {
-    r.faces = decodeFaceList(data + pos + kRecordHeadBytes, head[2], head[1], faceLimit);
-  } catch (const InputError& e) {
-    r.status = Status::Corrupt;
-    r.why = e.what();
-  }
-  return r;
-}
-
-// Journal: magic, fingerprint, then records
-// [index u32][count u32][bytes u32][face list][FNV-1a 64 of the 12 + bytes before it, u64], host
-// byte order.
-class Journal {
- public:
-  // Opens (creating if needed) the journal at `path` and puts the cells of
-  // its valid prefix into `done` (records for cells < cellLimit, with faces
-  // < faceLimit).
-  Journal(const std::filesystem::path& path, uint64_t fingerprint, uint64_t cellLimit,
-          uint32_t faceLimit, std::map<uint32_t, std::vector<uint32_t>>& done)
-      : path_(path) {
-    const bool exists = std::filesystem::exists(path);
-    if (exists) readExisting(fingerprint, cellLimit, faceLimit, done);
-    fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-    if (fd_ < 0)
-      throwInputError("{}: cannot open bake journal: {}", path.string(), std::strerror(errno));
-    if (::lseek(fd_, 0, SEEK_END) == 0) {
-      char header[kJournalHeaderBytes];
-      std::memcpy(header, kJournalMagic, 8);
-      std::memcpy(header + 8, &fingerprint, 8);
-      writeAll(header, sizeof header);
-    }
-  }
-  ~Journal() {
-    if (fd_ >= 0) ::close(fd_);
-  }
-
-  // Thread-safe append of one finished cell.
-  void append(uint32_t index, const std::vector<uint32_t>& faces) {
-    const std::vector<uint8_t> bytes = encodeFaceList(faces);
-    std::vector<uint8_t> rec(kRecordHeadBytes + bytes.size() + kRecordSumBytes);
-    const uint32_t head[3] = {index, uint32_t(faces.size()), uint32_t(bytes.size())};
-    std::memcpy(rec.data(), head, kRecordHeadBytes);
-    std::memcpy(rec.data() + kRecordHeadBytes, bytes.data(), bytes.size());
-    const uint64_t sum = fnv1a64(rec.data(), kRecordHeadBytes + bytes.size());
-    std::memcpy(rec.data() + kRecordHeadBytes + bytes.size(), &sum, kRecordSumBytes);
-    std::lock_guard lock(mutex_);
-    writeAll(rec.data(), rec.size());
-  }
-
-  void remove() {
-    if (fd_ >= 0) ::close(fd_);
-    fd_ = -1;
-    std::error_code ec;
-    std::filesystem::remove(path_, ec);
-  }
-
- private:
-  void writeAll(const void* data, size_t n) {
-    const auto* p = static_cast<const uint8_t*>(data);
-    while (n > 0) {
-      const ssize_t w = ::write(fd_, p, n);
-      if (w < 0) {
-        if (errno == EINTR) continue;
-        throwInputError("{}: journal write failed: {}", path_.string(), std::strerror(errno));
-      }
-      p += w;
-      n -= size_t(w);
-    }
-  }
-
-  // Takes the journal's valid prefix: every record up to the first one that
-  // is incomplete or fails a check. Records after a bad one are dropped, not
-  // trusted (their cells are computed again), and a warning says how much
-  // was dropped from where. The file is cut to the prefix so appends
-  // continue cleanly.
-  void readExisting(uint64_t fingerprint, uint64_t cellLimit, uint32_t faceLimit,
-                    std::map<uint32_t, std::vector<uint32_t>>& done) {
-    const std::string name = path_.string();
-    const MappedFile file = MappedFile::open(path_, "bake journal");
-    const size_t size = file.size();
-    const uint8_t* data = file.data();
-    size_t valid = 0;
-    if (size < kJournalHeaderBytes) {
-      spdlog::warn("{}: bake journal is only {} bytes, less than its header; starting over", name,
-                   size);
-    } else if (std::memcmp(data, kJournalMagic, 6) == 0 &&
-               std::memcmp(data, kJournalMagic, 8) != 0) {
-      spdlog::warn(
-          "{}: bake journal of another format (magic '{}', this build writes '{}'); starting over",
-          name, std::string(reinterpret_cast<const char*>(data), 7), std::string(kJournalMagic, 7));
-    } else if (std::memcmp(data, kJournalMagic, 8) != 0) {
-      spdlog::warn("{}: not a bake journal (bad magic); starting over", name);
-    } else if (std::memcmp(data + 8, &fingerprint, 8) != 0) {
-      spdlog::warn("{}: journal is from a bake with other parameters; starting over", name);
-    } else {
-      valid = kJournalHeaderBytes;
-      size_t records = 0;
-      JournalRecord r;
-      while (valid < size) {
-        r = readJournalRecord(data, size, valid, cellLimit, faceLimit, true);
-        if (r.status != JournalRecord::Status::Ok) break;
-        done[r.index] = std::move(r.faces);
-        valid = r.end;
-        ++records;
-      }
-      if (valid < size) warnDropped(data, size, valid, records, r, cellLimit, faceLimit);
-    }
-    std::error_code ec;
-    std::filesystem::resize_file(path_, valid, ec);
-    if (ec) throwInputError("{}: cannot truncate journal: {}", name, ec.message());
-    if (!done.empty()) spdlog::info("resuming bake: {} cells already in {}", done.size(), name);
-  }
-
-  // Says what is dropped from the bad record `bad` at `offset` on: its bytes
-  // and how many well-formed records follow it (by their checksums; parsing
-  // stops where the record chain breaks).
-  void warnDropped(const uint8_t* data, size_t size, size_t offset, size_t recordsBefore,
-                   const JournalRecord& bad, uint64_t cellLimit, uint32_t faceLimit) const {
-    if (bad.status == JournalRecord::Status::Incomplete) {
-      spdlog::warn(
-          "{}: incomplete record at byte offset {} ({}) after {} good records; dropping the last "
-          "{} "
-          "bytes (a bake killed mid-write leaves such a record, and so does a corrupt length "
-          "field). "
-          "Resuming from the {} good records",
-          path_.string(), offset, bad.why, recordsBefore, size - offset, recordsBefore);
-      return;
-    }
-    std::string dropped;
-    if (bad.end == 0) {
-      dropped =
-          "that record and everything after it (with its length unusable, later records cannot be "
-          "counted)";
-    } else {
-      size_t after = 0, pos = bad.end;
-      while (pos < size) {
-        const JournalRecord r = readJournalRecord(data, size, pos, cellLimit, faceLimit, false);
-        if (r.status != JournalRecord::Status::Ok) break;
-        ++after;
-        pos = r.end;
-      }
-      dropped =
-          fmt::format("that record and the {} record{} after it", after, after == 1 ? "" : "s");
-      if (pos < size)
-        dropped += fmt::format(", then {} bytes that do not parse as records", size - pos);
-    }
-    spdlog::warn(
-        "{}: corrupt record at byte offset {} ({}) after {} good records; dropping the {} bytes "
-        "from "
-        "there: {}. Resuming from the {} good records; the dropped cells are computed again",
-        path_.string(), offset, bad.why, recordsBefore, size - offset, dropped, recordsBefore);
-  }
-
-  std::filesystem::path path_;
-  int fd_ = -1;
-  std::mutex mutex_;  // guards appends to fd_
-};
 
 }  // namespace
 
@@ -350,8 +136,20 @@ BakeReport bakePvs(const Scene& scene, const EpsilonPvs& pvs, const FreeSpace& f
   for (const auto& b : mine) report.shardCells += b.size();
 
   std::map<uint32_t, std::vector<uint32_t>> done;
-  Journal journal(out.string() + ".journal", bakeFingerprint(header, options), grid.cellCount(),
-                  header.sceneFaces, done);
+  // A journal record: the cell's face count as `aux`, its face list as payload.
+  BakeJournal journal(out.string() + ".journal", kJournalMagic, bakeFingerprint(header, options),
+                      [&](const JournalRecordView& r) -> std::string {
+                        if (r.index >= grid.cellCount())
+                          return fmt::format("cell index {} is outside the grid of {} cells",
+                                             r.index, grid.cellCount());
+                        try {
+                          done[r.index] = decodeFaceList(r.payload.data(), r.payload.size(),
+                                                         r.aux, header.sceneFaces);
+                        } catch (const InputError& e) {
+                          return e.what();
+                        }
+                        return {};
+                      });
   std::mutex doneMutex;  // guards `done` while workers add cells
   std::atomic<size_t> progress{0};
   for (const auto& b : mine)
@@ -390,7 +188,7 @@ BakeReport bakePvs(const Scene& scene, const EpsilonPvs& pvs, const FreeSpace& f
     }
     for (uint32_t c : pending) {
       PvsResult r = pvs.compute(grid.cellBox(grid.cellAt(c)), cellOptions);
-      journal.append(c, r.faces);
+      journal.append(c, uint32_t(r.faces.size()), encodeFaceList(r.faces));
       {
         std::lock_guard lock(doneMutex);
         done[c] = std::move(r.faces);
