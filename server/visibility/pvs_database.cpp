@@ -1,46 +1,27 @@
 #include "server/visibility/pvs_database.h"
 
-#include <fcntl.h>
 #include <spdlog/spdlog.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_invoke.h>
 #include <tbb/parallel_reduce.h>
-#include <unistd.h>
 
 #include <algorithm>
-#include <cstring>
 #include <fstream>
 #include <limits>
 
 #include "common/core/error.h"
+#include "server/bake/checked_file.h"
 #include "pvs_database_generated.h"
 
 namespace vistream {
 namespace {
 
-constexpr char kMagic[8] = {'V', 'S', 'P', 'V', 'S', 'D', 'B', '\0'};
-constexpr size_t kHeaderBytes = 32;
+constexpr std::array<char, 8> kMagic = {'V', 'S', 'P', 'V', 'S', 'D', 'B', '\0'};
+constexpr size_t kHeaderBytes = kCheckedFileHeaderBytes;
 
 template <typename T>
 uint64_t fnvValue(uint64_t h, const T& v) {
   return fnv1a64(&v, sizeof(T), h);
-}
-
-void putU32(uint8_t* p, uint32_t v) {
-  for (int i = 0; i < 4; ++i) p[i] = uint8_t(v >> (8 * i));
-}
-void putU64(uint8_t* p, uint64_t v) {
-  for (int i = 0; i < 8; ++i) p[i] = uint8_t(v >> (8 * i));
-}
-uint32_t getU32(const uint8_t* p) {
-  uint32_t v = 0;
-  for (int i = 0; i < 4; ++i) v |= uint32_t(p[i]) << (8 * i);
-  return v;
-}
-uint64_t getU64(const uint8_t* p) {
-  uint64_t v = 0;
-  for (int i = 0; i < 8; ++i) v |= uint64_t(p[i]) << (8 * i);
-  return v;
 }
 
 // Reads one LEB128 varint of at most 5 bytes (a 32-bit value needs no more)
@@ -182,58 +163,19 @@ void writePvsDatabase(const std::filesystem::path& path, const PvsDatabaseHeader
                                                 &size, &dims, h.method.c_str(), &cellOffsets);
   pvsdb::FinishDatabaseBuffer(b, root);
 
-  uint8_t header[kHeaderBytes] = {};
-  std::memcpy(header, kMagic, 8);
-  putU32(header + 8, kPvsDbVersion);
-  putU64(header + 16, b.GetSize());
-  putU64(header + 24, fnv1a64(b.GetBufferPointer(), b.GetSize()));
-
-  const std::filesystem::path tmp = path.string() + ".tmp";
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  if (fd < 0)
-    throwInputError("{}: cannot open for writing: {}", tmp.string(), std::strerror(errno));
-  auto writeAll = [&](const uint8_t* p, size_t n) {
-    while (n > 0) {
-      const ssize_t w = ::write(fd, p, n);
-      if (w < 0) {
-        if (errno == EINTR) continue;
-        const std::string err = std::strerror(errno);
-        ::close(fd);
-        throwInputError("{}: write failed: {}", tmp.string(), err);
-      }
-      p += w;
-      n -= size_t(w);
-    }
-  };
-  writeAll(header, kHeaderBytes);
-  writeAll(b.GetBufferPointer(), b.GetSize());
-  if (::fsync(fd) != 0 || ::close(fd) != 0)
-    throwInputError("{}: cannot flush to disk: {}", tmp.string(), std::strerror(errno));
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) throwInputError("{}: cannot rename into place: {}", path.string(), ec.message());
+  writeCheckedFile(path, kMagic, kPvsDbVersion, std::span(b.GetBufferPointer(), b.GetSize()));
 }
 
 PvsDatabase PvsDatabase::open(const std::filesystem::path& path) {
   PvsDatabase db;
-  db.file_ = MappedFile::open(path, "PVS database");
-  const std::string name = path.string();
-  const size_t size = db.file_.size();
-  if (size < kHeaderBytes) throwInputError("{}: not a PVS database (only {} bytes)", name, size);
+  CheckedFile checked = openCheckedFile(
+      path, kMagic, kPvsDbVersion, "PVS database",
+      "; re-bake it with this build's vistream-pvs bake (version 1 seeded its checksum with a "
+      "wrong FNV offset basis)");
   db.path_ = path;
-  const uint8_t* p = db.file_.data();
-  if (std::memcmp(p, kMagic, 8) != 0) throwInputError("{}: not a PVS database (bad magic)", name);
-  const uint32_t version = getU32(p + 8);
-  if (version != kPvsDbVersion)
-    throwInputError(
-        "{}: PVS database format version {} is not supported (this build reads version {}{}); "
-        "re-bake it with this build's vistream-pvs bake",
-        name, version, kPvsDbVersion,
-        version == 1 ? "; version 1 seeded its checksum with a wrong FNV offset basis" : "");
-  const uint64_t payload = getU64(p + 16);
-  if (payload != size - kHeaderBytes)
-    throwInputError("{}: truncated or padded: header says {} payload bytes, file has {}", name,
-                    payload, size - kHeaderBytes);
+  db.checksum_ = checked.checksum;
+  db.file_ = std::move(checked.file);
+  const std::string name = path.string();
   // The checksum and the structure (verifier, header fields, every cell's
   // face list) are two passes over the payload of about the same length, so
   // they run side by side. The verifier makes reading the payload safe
@@ -241,14 +183,18 @@ PvsDatabase PvsDatabase::open(const std::filesystem::path& path) {
   // explains any other fault.
   bool checksumOk = false;
   std::optional<std::string> fault;
-  tbb::parallel_invoke([&] { checksumOk = fnv1a64(p + kHeaderBytes, payload) == getU64(p + 24); },
-                       [&] {
-                         try {
-                           db.readPayload();
-                         } catch (const InputError& e) {
-                           fault = e.what();
-                         }
-                       });
+  tbb::parallel_invoke(
+      [&] {
+        const auto p = db.file_.bytes().subspan(kCheckedFileHeaderBytes);
+        checksumOk = fnv1a64(p.data(), p.size()) == db.checksum_;
+      },
+      [&] {
+        try {
+          db.readPayload();
+        } catch (const InputError& e) {
+          fault = e.what();
+        }
+      });
   if (!checksumOk) throwInputError("{}: checksum mismatch: the database is corrupt", name);
   if (fault) throw InputError(*fault);
   return db;

@@ -115,6 +115,7 @@ class PvsDatabase {
   void readPayload();
   std::filesystem::path path_;
   MappedFile file_;
+  uint64_t checksum_ = 0;       // the header's
   const void* root_ = nullptr;  // const pvsdb::Database*
   PvsDatabaseHeader header_;
 };
