@@ -76,11 +76,14 @@ CheckedFile openCheckedFile(const std::filesystem::path& path, const std::array<
   f.file = MappedFile::open(path, what);
   const std::string name = path.string();
   const size_t size = f.file.size();
+  const char* article =
+      !what.empty() && std::string_view("aeiou").find(what[0]) != std::string_view::npos ? "an"
+                                                                                         : "a";
   if (size < kCheckedFileHeaderBytes)
-    throwInputError("{}: not a {} (only {} bytes)", name, what, size);
+    throwInputError("{}: not {} {} (only {} bytes)", name, article, what, size);
   const uint8_t* p = f.file.data();
   if (std::memcmp(p, magic.data(), 8) != 0)
-    throwInputError("{}: not a {} (bad magic)", name, what);
+    throwInputError("{}: not {} {} (bad magic)", name, article, what);
   f.version = getU32(p + 8);
   if (f.version != version)
     throwInputError("{}: {} format version {} is not supported (this build reads version {}){}",

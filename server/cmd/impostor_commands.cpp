@@ -10,9 +10,11 @@
 #include "common/cmd/cli.h"
 #include "common/core/error.h"
 #include "common/core/parse.h"
+#include "common/core/progress.h"
 #include "common/core/stats_output.h"
 #include "common/generate/scene_spec.h"
 #include "server/cmd/scene_boxes.h"
+#include "server/impostor/impostor_database.h"
 #include "server/impostor/impostor_world.h"
 
 namespace vistream {
@@ -20,7 +22,7 @@ namespace vistream {
 using nlohmann::json;
 
 struct ImpostorCommand::Arguments {
-  std::string scene, cell, texture = "8x2", screen = "640x480";
+  std::string scene, cell, texture = "8x2", screen = "640x480", db, out, cells;
   unsigned threads = 0;
   bool json = false, noRemoval = false, keepHidden = false;
   GroundChoice ground;
@@ -37,13 +39,19 @@ ImpostorCommand::ImpostorCommand(CLI::App& app, SceneLimits& limits)
       "point-based impostors of a view cell's far field (Wimmer 2001, chapter 5): placement, "
       "three-LDI sampling, point removal, Monte Carlo appearance textures");
   sub_->add_option("--scene", a.scene, "SCENE")->required();
-  sub_->add_option("--cell", a.cell, "x0,y0,z0,x1,y1,z1: the view cell (file coordinates)")
-      ->required();
+  sub_->add_option("--cell", a.cell,
+                   "x0,y0,z0,x1,y1,z1: bake this view cell's impostors and report them (file "
+                   "coordinates)");
+  sub_->add_option("--db", a.db, "bake every cell of this PVS database (with --out)");
+  sub_->add_option("--out,-o", a.out, "the impostor database to write (with --db)");
+  sub_->add_option("--cells", a.cells,
+                   "with --db: only the cells overlapping this box, x0,y0,z0,x1,y1,z1 (file "
+                   "coordinates)");
   sub_->add_option("--threads", a.threads, "worker threads (0: all cores)")
       ->check(atLeast<unsigned>(0));
   sub_->add_flag("--json", a.json,
-                 "one JSON object on stdout: impostors (points, screen_pixels, points_per_pixel, "
-                 "bytes, bake_s, ...) and stats");
+                 "one JSON object on stdout: with --cell, impostors (points, screen_pixels, "
+                 "points_per_pixel, bytes, bake_s, ...) and stats; with --db, the bake's figures");
   // Placement (impostor_placement.h).
   sub_->add_option("--near-distance", a.placement.nearDistance,
                    "d: the client's near field; impostors hold the PVS beyond it (metres)")
@@ -118,10 +126,96 @@ json fileBoxJson(const Scene& scene, const Box3f& box) {
 
 }  // namespace
 
+// The bake's options as JSON, stored in the database (and its fingerprint).
+std::string ImpostorCommand::settingsJson() const {
+  const Arguments& a = *a_;
+  const ImpostorOptions& o = a.bake;
+  return json{{"near_distance", a.placement.nearDistance},
+              {"sectors", a.placement.sectors},
+              {"bands", a.placement.bands},
+              {"min_triangles", a.placement.minTriangles},
+              {"resolution", o.resolutionFactor},
+              {"remove_points", o.removePoints},
+              {"cull_hidden", o.cullHidden},
+              {"visibility_views", o.visibilityViews},
+              {"max_layers", o.maxLayers},
+              {"texture", {o.textureWidth, o.textureHeight}},
+              {"variance", o.varianceThreshold},
+              {"min_rays", o.minRays},
+              {"max_rays", o.maxRays},
+              {"single_colour", o.singleColourTolerance},
+              {"screen", {o.screen.width, o.screen.height}},
+              {"fov", o.screen.vfovDeg},
+              {"seed", o.seed}}
+      .dump();
+}
+
+int ImpostorCommand::bakeDatabase(const Scene& scene, const PvsDatabase& pvs,
+                                  const std::optional<Box3d>& fileCells) {
+  const Arguments& a = *a_;
+  ImpostorBakeOptions options;
+  options.placement = a.placement;
+  options.impostor = a.bake;
+  options.threads = a.threads;
+  options.settings = settingsJson();
+  if (fileCells) {
+    warnIfOutsideScene(scene, *fileCells, "--cells", a.cells);
+    options.region = toLocal(scene, *fileCells);
+  }
+  std::unique_ptr<ProgressBar> bar;
+  options.progress = [&](size_t done, size_t total) {
+    if (!bar) {
+      bar = std::make_unique<ProgressBar>("baking impostors", total);
+      bar->advance(done);
+    } else {
+      bar->advance(1);
+    }
+  };
+  const ImpostorWorld world(scene, {a.ground, LightingOptions{}, a.lightingCache});
+  const ImpostorBakeReport r = bakeImpostorDatabase(world, pvs, options, a.out);
+  if (bar) bar->finish();
+  if (a.json) {
+    std::cout << json{{"out", a.out},
+                      {"cells", r.cells},
+                      {"resumed_cells", r.resumedCells},
+                      {"computed_cells", r.computedCells},
+                      {"cells_with_impostors", r.cellsWithImpostors},
+                      {"impostors", r.impostors},
+                      {"points", r.points},
+                      {"bytes", r.bytes},
+                      {"geometry_bytes", r.geometryBytes},
+                      {"time_ms", r.timeMs}}
+                     .dump(2)
+              << "\n";
+    return 0;
+  }
+  fmt::print("baked impostors of {} -> {}\n", scene.name, a.out);
+  fmt::print("  {:<28} {:>12}\n", "cells", r.cells);
+  fmt::print("  {:<28} {:>12}\n", "resumed from journal", r.resumedCells);
+  fmt::print("  {:<28} {:>12}\n", "computed", r.computedCells);
+  fmt::print("  {:<28} {:>12}\n", "cells with impostors", r.cellsWithImpostors);
+  fmt::print("  {:<28} {:>12}\n", "impostors", r.impostors);
+  fmt::print("  {:<28} {:>12}\n", "points", r.points);
+  fmt::print("  {:<28} {:>12}\n", "bytes", r.bytes);
+  fmt::print("  {:<28} {:>12}\n", "geometry bytes replaced", r.geometryBytes);
+  fmt::print("  {:<28} {:>12.1f}\n", "time (s)", r.timeMs / 1000.0);
+  return 0;
+}
+
 int ImpostorCommand::run() {
   Arguments& a = *a_;
   // Everything the arguments decide is checked before the scene loads.
-  const Box3d fileCell = parseFileBox(a.cell, "--cell");
+  const bool oneCell = !a.cell.empty();
+  if (oneCell == !a.db.empty())
+    throwInputError(
+        "--cell or --db: give one (--cell bakes one view cell and reports it, --db "
+        "bakes every cell of a PVS database into --out)");
+  if (!a.db.empty() && a.out.empty()) throwInputError("--out: required with --db");
+  if (oneCell && (!a.out.empty() || !a.cells.empty()))
+    throwInputError("--out and --cells: only with --db");
+  const Box3d fileCell = oneCell ? parseFileBox(a.cell, "--cell") : Box3d();
+  std::optional<Box3d> fileCells;
+  if (!a.cells.empty()) fileCells = parseFileBox(a.cells, "--cells");
   const WidthHeight texture = parseWidthHeight(a.texture, "--texture", 1, 64);
   a.bake.textureWidth = uint32_t(texture.width);
   a.bake.textureHeight = uint32_t(texture.height);
@@ -135,25 +229,20 @@ int ImpostorCommand::run() {
   std::optional<tbb::global_control> threadLimit;
   if (a.threads > 0) threadLimit.emplace(tbb::global_control::max_allowed_parallelism, a.threads);
 
+  std::optional<PvsDatabase> pvsDb;
+  if (!oneCell) pvsDb.emplace(PvsDatabase::open(a.db));
   const Scene scene = openScene(a.scene, limits_);
+  if (!oneCell) return bakeDatabase(scene, *pvsDb, fileCells);
   warnIfOutsideScene(scene, fileCell, "--cell", a.cell);
   const Box3f cell = toLocal(scene, fileCell);
   const ImpostorWorld world(scene, {a.ground, LightingOptions{}, a.lightingCache});
   const CellImpostors r = world.bakeCell(cell, a.placement, a.bake);
 
-  // Per impostor: what it replaces and what it costs against that geometry.
-  struct Row {
-    size_t faces = 0, geometryBytes = 0;
-  };
-  std::vector<Row> rows;
   size_t points = 0, bytes = 0, geometryBytes = 0;
   for (size_t i = 0; i < r.impostors.size(); ++i) {
-    const ImpostorSite& site = r.placement.sites[r.siteOf[i]];
-    const std::vector<uint32_t> faces = world.replacedFaces(site.triangles);
-    rows.push_back({faces.size(), world.geometryBytes(faces)});
     points += r.stats[i].points;
     bytes += r.stats[i].bytes;
-    geometryBytes += rows.back().geometryBytes;
+    geometryBytes += r.geometryBytes[i];
   }
   if (a.json) {
     json impostors = json::array();
@@ -164,8 +253,8 @@ int ImpostorCommand::run() {
                            {"band", site.band},
                            {"box", fileBoxJson(scene, site.box)},
                            {"triangles", site.triangles.size()},
-                           {"faces_replaced", rows[i].faces},
-                           {"geometry_bytes", rows[i].geometryBytes},
+                           {"faces_replaced", r.replacedFaces[i].size()},
+                           {"geometry_bytes", r.geometryBytes[i]},
                            {"points", s.points},
                            {"screen_pixels", s.screenPixels},
                            {"points_per_pixel", s.pointsPerPixel},
@@ -207,7 +296,7 @@ int ImpostorCommand::run() {
     const ImpostorStats& s = r.stats[i];
     fmt::print("  {:>6} {:>4} {:>9} {:>9} {:>9} {:>8.2f} {:>9} {:>10} {:>10} {:>7.1f}\n",
                site.sector, site.band, site.triangles.size(), s.points, s.screenPixels,
-               s.pointsPerPixel, s.coveredPixels, s.bytes, rows[i].geometryBytes, s.seconds);
+               s.pointsPerPixel, s.coveredPixels, s.bytes, r.geometryBytes[i], s.seconds);
   }
   fmt::print("  {:>6} {:>4} {:>9} {:>9} {:>9} {:>8} {:>9} {:>10} {:>10} {:>7.1f}\n", "total", "",
              "", points, "", "", "", bytes, geometryBytes, r.seconds);

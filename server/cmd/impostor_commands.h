@@ -6,10 +6,15 @@
 
 #include <CLI/CLI.hpp>
 #include <memory>
+#include <optional>
+#include <string>
 
+#include "common/core/box.h"
 #include "common/scene/scene_loader.h"
 
 namespace vistream {
+
+class PvsDatabase;
 
 class ImpostorCommand {
  public:
@@ -23,6 +28,9 @@ class ImpostorCommand {
 
  private:
   struct Arguments;
+  std::string settingsJson() const;
+  int bakeDatabase(const Scene& scene, const PvsDatabase& pvs,
+                   const std::optional<Box3d>& fileCells);
   CLI::App* sub_ = nullptr;
   SceneLimits& limits_;
   std::unique_ptr<Arguments> a_;

@@ -48,42 +48,65 @@ ImpostorScene ImpostorWorld::view() const {
   return ImpostorScene{*world_.triangles, *world_.rays, lighting_, backdrop_, world_.ground.y};
 }
 
-std::vector<uint32_t> ImpostorWorld::pvsTriangles(const Box3f& cell, double* seconds) const {
-  Stopwatch watch;
-  const PvsResult r = pvs_->compute(cell);
+std::vector<uint32_t> ImpostorWorld::trianglesOfFaces(const std::vector<uint32_t>& faces) const {
   std::vector<uint32_t> out;
-  for (uint32_t f : r.faces)
+  for (uint32_t f : faces)
     if (f < scene_.faceCount)
       out.insert(out.end(), faceTriangles_.begin() + faceFirst_[f],
                  faceTriangles_.begin() + faceFirst_[f + 1]);
+  return out;
+}
+
+std::vector<uint32_t> ImpostorWorld::pvsTriangles(const Box3f& cell, double* seconds) const {
+  Stopwatch watch;
+  const PvsResult r = pvs_->compute(cell);
+  std::vector<uint32_t> out = trianglesOfFaces(r.faces);
   if (seconds) *seconds = watch.ms() / 1000.0;
   return out;
 }
 
-CellImpostors ImpostorWorld::bakeCell(const Box3f& cell, const ImpostorPlacementOptions& placement,
-                                      const ImpostorOptions& options) const {
+namespace {
+
+CellImpostors bakeSites(const ImpostorWorld& world, const Box3f& cell,
+                        const std::vector<uint32_t>& pvs, const ImpostorPlacementOptions& placement,
+                        const ImpostorOptions& options, CellImpostors out) {
   Stopwatch watch;
-  CellImpostors out;
   out.cell = cell;
-  const std::vector<uint32_t> pvs = pvsTriangles(cell, &out.pvsSeconds);
   out.pvsTriangles = pvs.size();
-  out.placement = placeImpostors(cell, triangles(), pvs, placement);
+  out.placement = placeImpostors(cell, world.triangles(), pvs, placement);
   for (uint32_t s = 0; s < out.placement.sites.size(); ++s) {
     const ImpostorSite& site = out.placement.sites[s];
     try {
       ImpostorStats stats;
       out.impostors.push_back(
-          bakeImpostor(view(), cell, site.box, site.triangles, options, &stats));
+          bakeImpostor(world.view(), cell, site.box, site.triangles, options, &stats));
       out.stats.push_back(stats);
       out.siteOf.push_back(s);
+      out.replacedFaces.push_back(world.replacedFaces(site.triangles));
+      out.geometryBytes.push_back(world.geometryBytes(out.replacedFaces.back()));
     } catch (const InputError& e) {
       spdlog::warn("impostor of sector {} band {} left as geometry: {}", site.sector, site.band,
                    e.what());
       out.refused.push_back(e.what());
     }
   }
-  out.seconds = watch.ms() / 1000.0;
+  out.seconds = watch.ms() / 1000.0 + out.pvsSeconds;
   return out;
+}
+
+}  // namespace
+
+CellImpostors ImpostorWorld::bakeCell(const Box3f& cell, const ImpostorPlacementOptions& placement,
+                                      const ImpostorOptions& options) const {
+  CellImpostors out;
+  const std::vector<uint32_t> pvs = pvsTriangles(cell, &out.pvsSeconds);
+  return bakeSites(*this, cell, pvs, placement, options, std::move(out));
+}
+
+CellImpostors ImpostorWorld::bakeCell(const Box3f& cell, const std::vector<uint32_t>& pvsFaces,
+                                      const ImpostorPlacementOptions& placement,
+                                      const ImpostorOptions& options) const {
+  return bakeSites(*this, cell, trianglesOfFaces(pvsFaces), placement, options, CellImpostors{});
 }
 
 std::vector<uint32_t> ImpostorWorld::replacedFaces(const std::vector<uint32_t>& triangles) const {

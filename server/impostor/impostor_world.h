@@ -39,6 +39,9 @@ struct ImpostorWorldOptions {
 struct CellImpostors {
   Box3f cell;
   size_t pvsTriangles = 0;
+  // Per impostor: the faces it replaces and what they cost as geometry.
+  std::vector<std::vector<uint32_t>> replacedFaces;
+  std::vector<size_t> geometryBytes;
   ImpostorPlacement placement;
   std::vector<Impostor> impostors;  // one a baked site, in placement order
   std::vector<ImpostorStats> stats;
@@ -61,6 +64,12 @@ class ImpostorWorld {
   std::vector<uint32_t> pvsTriangles(const Box3f& cell, double* seconds = nullptr) const;
   CellImpostors bakeCell(const Box3f& cell, const ImpostorPlacementOptions& placement,
                          const ImpostorOptions& options) const;
+  // The same with the cell's PVS given (face IDs, as a PVS database holds it).
+  CellImpostors bakeCell(const Box3f& cell, const std::vector<uint32_t>& pvsFaces,
+                         const ImpostorPlacementOptions& placement,
+                         const ImpostorOptions& options) const;
+  // The triangles (indices into triangles()) of the given faces.
+  std::vector<uint32_t> trianglesOfFaces(const std::vector<uint32_t>& faces) const;
   // The faces an impostor of `triangles` (indices into triangles()) replaces:
   // those whose every triangle is among them (a face reaching out of the
   // impostor stays geometry), ascending.

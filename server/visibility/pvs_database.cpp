@@ -10,8 +10,9 @@
 #include <limits>
 
 #include "common/core/error.h"
-#include "server/bake/checked_file.h"
 #include "pvs_database_generated.h"
+#include "server/bake/checked_file.h"
+#include "server/bake/scene_grid_fields.h"
 
 namespace vistream {
 namespace {
@@ -214,26 +215,9 @@ void PvsDatabase::readPayload() {
     throwInputError("{}: database structure fails verification", name);
   const auto* root = pvsdb::GetDatabase(payload);
   root_ = root;
-  auto vec3 = [&](const auto* v, const char* what) {
-    if (!v || v->size() != 3) throwInputError("{}: field '{}' must hold 3 values", name, what);
-    return v;
-  };
   PvsDatabaseHeader& h = header_;
-  h.sceneName = root->scene_name() ? root->scene_name()->str() : "";
-  h.sceneFingerprint = root->scene_fingerprint();
-  h.sceneFaces = root->scene_faces();
-  const auto* o = vec3(root->origin(), "origin");
-  h.origin = {o->Get(0), o->Get(1), o->Get(2)};
-  const auto* lo = vec3(root->grid_lo(), "grid_lo");
-  h.gridLo = {lo->Get(0), lo->Get(1), lo->Get(2)};
-  const auto* cs = vec3(root->cell_size(), "cell_size");
-  h.cellSize = {cs->Get(0), cs->Get(1), cs->Get(2)};
-  const auto* d = vec3(root->dims(), "dims");
-  h.dims = {d->Get(0), d->Get(1), d->Get(2)};
+  readSceneGridFields(root, name, h);
   h.method = root->method() ? root->method()->str() : "";
-  for (int a = 0; a < 3; ++a)
-    if (!(h.cellSize[a] > 0.0f) || h.dims[a] <= 0 || h.dims[a] > (1 << 20))
-      throwInputError("{}: invalid grid (cell size and dims must be positive)", name);
   const uint64_t cellsTotal = uint64_t(h.dims.x) * uint64_t(h.dims.y) * uint64_t(h.dims.z);
   const auto* cells = root->cells();
   if (!cells) return;

@@ -226,6 +226,32 @@ TEST(PvsTool, ImpostorsPrintTheContractedJsonForEachImpostorOfTheCell) {
   EXPECT_NE(table.out.find("total"), std::string::npos) << table.out;
 }
 
+TEST(PvsTool, ImpostorsBakeAPvsDatabasesCellsIntoAnImpostorDatabase) {
+  vistream::testing::TempDir dir;
+  const fs::path scene = dir.write("row.obj", farRowScene());
+  const fs::path pvsDb = dir / "row.pvsdb", impDb = dir / "row.impdb";
+  const ToolRun bake = runPvs("bake --scene " + scene.string() +
+                              " --cell-size 4 --region -4,0,-4,4,4,4 --out " + pvsDb.string());
+  ASSERT_EQ(bake.status, 0) << bake.err;
+  const std::string common = "impostors --scene " + scene.string() + " --db " + pvsDb.string() +
+                             " --out " + impDb.string() +
+                             " --near-distance 100 --min-triangles 20 --lighting-cache none "
+                             "--max-rays 8 --screen 320x240";
+  const ToolRun r = runPvs(common + " --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_GT(j["cells"].get<size_t>(), 0u);
+  EXPECT_EQ(j["computed_cells"], j["cells"]);
+  EXPECT_EQ(j["cells_with_impostors"], j["cells"]);  // every cell sees the row beyond d
+  EXPECT_GT(j["bytes"].get<uint64_t>(), 0u);
+  EXPECT_TRUE(fs::exists(impDb));
+  // Neither --cell nor --db, and --db without --out, are refused.
+  const ToolRun neither = runPvs("impostors --scene " + scene.string());
+  vistream::testing::expectFailedSaying(neither, 1, "--cell or --db");
+  const ToolRun noOut = runPvs("impostors --scene " + scene.string() + " --db " + pvsDb.string());
+  vistream::testing::expectFailedSaying(noOut, 1, "--out: required with --db");
+}
+
 TEST(PvsTool, ImpostorArgumentsFailBeforeTheSceneLoadsNamingTheOption) {
   using vistream::testing::expectEachOptionNamed;
   const std::string missing = "/nonexistent/scene.obj";

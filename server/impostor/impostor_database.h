@@ -1,0 +1,122 @@
+// The impostor database: the impostors of every view cell of a baked PVS
+// database (vistream-pvs impostors --db PVS.db --out IMP.db), for the
+// streaming server to send.
+//
+// File: the checked envelope of server/bake/checked_file.h (magic
+// "VSIMPDB\0", version kImpostorDbVersion, size, FNV-1a checksum), then a
+// FlatBuffer with root impdb::Database (impostor_database.fbs): the scene's
+// identity and the PVS database's grid, the bake's settings (JSON and their
+// fingerprint), and per cell one record (CellRecord, below): why the cell
+// got impostors or none, and per impostor its sector and band, the faces it
+// replaces (face IDs: the geometry a client no longer needs beyond d), its
+// encoded bytes (protocol/impostor) and its figures. A cell the bake visited
+// is present even with no impostor, so "not baked" and "nothing to replace"
+// stay apart.
+//
+// Opening validates everything but the impostors' own bytes: envelope,
+// checksum, FlatBuffers verifier, grid, cell indices, and every record's
+// structure and face lists (InputError naming the file and cell). An
+// impostor's bytes are decoded when used; should that fail (the file changed
+// after it was opened), the cell is reported as not baked with an error logged.
+//
+// Baking (bakeImpostorDatabase) is resumable through a bake journal
+// (server/bake/bake_journal.h; OUT.journal), and writes the database
+// atomically at the end.
+//
+// Thread safety: an ImpostorDatabase is immutable once opened; lookups may
+// run concurrently.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <glm/glm.hpp>
+#include <map>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "common/core/mapped_file.h"
+#include "common/impostor/impostor.h"
+#include "server/impostor/impostor_world.h"
+#include "server/visibility/pvs_database.h"
+
+namespace vistream {
+
+inline constexpr uint32_t kImpostorDbVersion = 1;
+
+// One impostor of a cell as stored.
+struct StoredImpostor {
+  uint32_t sector = 0, band = 0;
+  std::vector<uint32_t> faces;  // replaced faces, ascending
+  std::vector<uint8_t> bytes;   // protocol/impostor encoding
+  // Its figures (no times: a resumed bake writes the same bytes as one run
+  // straight through).
+  uint64_t points = 0, screenPixels = 0, coveredPixels = 0, geometryBytes = 0;
+};
+
+// A cell's record: why, and its impostors.
+struct CellRecord {
+  std::string why;
+  std::vector<StoredImpostor> impostors;
+};
+std::vector<uint8_t> encodeCellRecord(const CellRecord& record);
+// Throws InputError (starting "cell record") unless the bytes are one
+// well-formed record whose face IDs lie below `faceLimit`.
+CellRecord decodeCellRecord(std::span<const uint8_t> bytes, uint32_t faceLimit);
+
+struct ImpostorDatabaseHeader {
+  PvsDatabaseHeader pvs;  // scene and grid of the PVS database baked from
+  std::string settings;   // JSON
+  uint64_t settingsFingerprint = 0;
+};
+
+void writeImpostorDatabase(const std::filesystem::path& path, const ImpostorDatabaseHeader& header,
+                           const std::map<uint32_t, std::vector<uint8_t>>& records);
+
+class ImpostorDatabase {
+ public:
+  // Memory-maps and validates the file (see above). Throws InputError.
+  static ImpostorDatabase open(const std::filesystem::path& path);
+  ImpostorDatabase(ImpostorDatabase&&) noexcept = default;
+  ImpostorDatabase& operator=(ImpostorDatabase&&) noexcept = default;
+
+  const ImpostorDatabaseHeader& header() const { return header_; }
+  size_t cellCount() const { return index_.size(); }
+  std::vector<uint32_t> cellIndices() const;
+  // The cell's record, or nothing if the bake did not visit it.
+  std::optional<CellRecord> cell(uint32_t linearIndex) const;
+  const std::filesystem::path& path() const { return path_; }
+
+ private:
+  ImpostorDatabase() = default;
+  std::filesystem::path path_;
+  MappedFile file_;
+  ImpostorDatabaseHeader header_;
+  std::map<uint32_t, std::span<const uint8_t>> index_;  // cell -> its record in the mapping
+};
+
+struct ImpostorBakeOptions {
+  ImpostorPlacementOptions placement;
+  ImpostorOptions impostor;
+  std::optional<Box3f> region;  // local frame: only cells overlapping it
+  unsigned threads = 0;         // 0: all cores
+  std::string settings;         // JSON of the options, stored in the database
+  std::function<void(size_t done, size_t total)> progress;  // from worker threads
+};
+
+struct ImpostorBakeReport {
+  size_t cells = 0, resumedCells = 0, computedCells = 0;
+  size_t cellsWithImpostors = 0, impostors = 0;
+  uint64_t points = 0, bytes = 0, geometryBytes = 0;
+  double timeMs = 0.0;
+};
+
+// Bakes the impostors of every cell of `pvs` (within the region) into `out`.
+// Throws InputError when the database does not belong to the world's scene.
+ImpostorBakeReport bakeImpostorDatabase(const ImpostorWorld& world, const PvsDatabase& pvs,
+                                        const ImpostorBakeOptions& options,
+                                        const std::filesystem::path& out);
+
+}  // namespace vistream

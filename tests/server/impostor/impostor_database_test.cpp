@@ -1,0 +1,205 @@
+// The impostor database (server/impostor/impostor_database.h): a bake over a
+// PVS database's cells gives every cell a record whose impostors decode and
+// replace only faces of the cell's PVS; a bake killed midway resumes from its
+// journal to the same bytes; a corrupt, foreign or mismatched file is refused
+// naming what is wrong.
+#include "server/impostor/impostor_database.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <iterator>
+
+#include "common/scene/scene_loader.h"
+#include "common/world/static_world.h"
+#include "protocol/impostor/impostor_codec.h"
+#include "server/visibility/pvs_bake.h"
+#include "tests/common/support/box_scenes.h"
+#include "tests/common/support/temp_dir.h"
+
+namespace vistream {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::TempDir;
+
+// Street cells round the origin and, 120-170 m ahead, a row of boxes.
+std::string rowScene() {
+  testing::GroundAndBoxesObj o(-300, -300, 300, 300);
+  for (int k = 0; k < 8; ++k)
+    o.box("far" + std::to_string(k), 15 + 5 * k, -170 + 3 * (k % 3), 19 + 5 * k, -120,
+          8 + 3 * (k % 4));
+  return o.obj;
+}
+
+std::string readAll(const fs::path& p) {
+  std::ifstream f(p, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(f)), {});
+}
+
+struct Baked {
+  TempDir dir;
+  Scene scene;
+  std::unique_ptr<ImpostorWorld> world;
+  fs::path pvsPath;
+
+  Baked() {
+    const fs::path obj = dir.write("row.obj", rowScene());
+    scene = loadScene(obj);
+    const StaticWorld statics = buildStaticWorld(scene, {});
+    EpsilonPvs pvs(scene);
+    BakeOptions bake;
+    bake.cellSize = glm::vec3(4.0f);
+    bake.region = Box3f(scene.toLocal({-6.0, 0.0, -6.0}), scene.toLocal({6.0, 4.0, 6.0}));
+    pvsPath = dir / "row.pvsdb";
+    bakePvs(scene, pvs, statics.freeSpace, bake, pvsPath);
+    world = std::make_unique<ImpostorWorld>(scene, ImpostorWorldOptions{});
+  }
+  static ImpostorBakeOptions options() {
+    ImpostorBakeOptions o;
+    o.placement.nearDistance = 100.0f;
+    o.placement.minTriangles = 20;
+    o.impostor.maxRays = 8;
+    o.impostor.screen.width = 320;
+    o.impostor.screen.height = 240;
+    o.settings = "{\"test\":1}";
+    return o;
+  }
+};
+
+TEST(ImpostorDatabase, GivesEveryCellARecordWhoseImpostorsDecodeAndReplaceOnlyPvsFaces) {
+  Baked b;
+  const PvsDatabase pvs = PvsDatabase::open(b.pvsPath);
+  const ImpostorBakeReport report =
+      bakeImpostorDatabase(*b.world, pvs, Baked::options(), b.dir / "row.impdb");
+  EXPECT_EQ(report.cells, pvs.cellCount());
+  EXPECT_EQ(report.computedCells, pvs.cellCount());
+  EXPECT_GT(report.impostors, 0u);
+  EXPECT_FALSE(fs::exists(b.dir / "row.impdb.journal"));
+
+  const ImpostorDatabase db = ImpostorDatabase::open(b.dir / "row.impdb");
+  EXPECT_EQ(db.header().pvs.sceneFingerprint, pvs.header().sceneFingerprint);
+  EXPECT_EQ(db.header().settings, "{\"test\":1}");
+  EXPECT_EQ(db.cellIndices(), pvs.cellIndices());
+  size_t impostors = 0;
+  for (uint32_t c : db.cellIndices()) {
+    const auto record = db.cell(c);
+    ASSERT_TRUE(record.has_value());
+    EXPECT_FALSE(record->why.empty());
+    const std::vector<uint32_t> cellPvs = *pvs.cell(c);
+    for (const StoredImpostor& s : record->impostors) {
+      ++impostors;
+      Impostor imp;
+      std::string error;
+      ASSERT_TRUE(wire::decodeImpostor(s.bytes, imp, error)) << error;
+      EXPECT_EQ(imp.size(), s.points);
+      EXPECT_FALSE(s.faces.empty());
+      for (uint32_t f : s.faces)
+        EXPECT_TRUE(std::binary_search(cellPvs.begin(), cellPvs.end(), f)) << f;
+      // The view cell the impostor was baked for is the grid's cell.
+      const Box3f box = pvs.header().grid().cellBox(pvs.header().grid().cellAt(c));
+      EXPECT_EQ(imp.cell.lo, box.lo);
+    }
+  }
+  EXPECT_EQ(impostors, report.impostors);
+  // A region bakes only the cells it overlaps; the others are absent, not empty.
+  const ViewCellGrid grid = pvs.header().grid();
+  const std::vector<uint32_t> all = pvs.cellIndices();
+  const Box3f first = grid.cellBox(grid.cellAt(all.front()));
+  ImpostorBakeOptions one = Baked::options();
+  one.region = Box3f(first.center() - 0.1f, first.center() + 0.1f);
+  const ImpostorBakeReport partial = bakeImpostorDatabase(*b.world, pvs, one, b.dir / "one.impdb");
+  EXPECT_EQ(partial.cells, 1u);
+  const ImpostorDatabase oneDb = ImpostorDatabase::open(b.dir / "one.impdb");
+  EXPECT_EQ(oneDb.cellIndices(), std::vector<uint32_t>{all.front()});
+  EXPECT_TRUE(oneDb.cell(all.front()).has_value());
+  EXPECT_FALSE(oneDb.cell(all.back()).has_value());
+}
+
+TEST(ImpostorDatabase, ResumesAKilledBakeFromItsJournalToTheSameBytes) {
+  Baked b;
+  const PvsDatabase pvs = PvsDatabase::open(b.pvsPath);
+  ASSERT_GE(pvs.cellCount(), 3u);
+  bakeImpostorDatabase(*b.world, pvs, Baked::options(), b.dir / "fresh.impdb");
+  ImpostorBakeOptions dying = Baked::options();
+  size_t calls = 0;
+  dying.progress = [&](size_t, size_t) {
+    if (++calls == 3) throw std::runtime_error("killed");  // after two cells
+  };
+  EXPECT_THROW(bakeImpostorDatabase(*b.world, pvs, dying, b.dir / "resumed.impdb"),
+               std::runtime_error);
+  const fs::path journal = b.dir / "resumed.impdb.journal";
+  ASSERT_TRUE(fs::exists(journal));
+  EXPECT_FALSE(fs::exists(b.dir / "resumed.impdb"));
+  // A torn last record, as a crash mid-write leaves.
+  fs::resize_file(journal, fs::file_size(journal) - 5);
+  const ImpostorBakeReport report =
+      bakeImpostorDatabase(*b.world, pvs, Baked::options(), b.dir / "resumed.impdb");
+  EXPECT_EQ(report.resumedCells, 1u);  // the second record was torn
+  EXPECT_EQ(report.computedCells, pvs.cellCount() - 1);
+  EXPECT_EQ(readAll(b.dir / "fresh.impdb"), readAll(b.dir / "resumed.impdb"));
+}
+
+TEST(ImpostorDatabase, RefusesCorruptForeignAndMismatchedFilesNamingWhatIsWrong) {
+  Baked b;
+  const PvsDatabase pvs = PvsDatabase::open(b.pvsPath);
+  const fs::path good = b.dir / "row.impdb";
+  bakeImpostorDatabase(*b.world, pvs, Baked::options(), good);
+  const std::string bytes = readAll(good);
+  auto refusal = [&](const std::string& name, const std::string& content) {
+    const fs::path p = b.dir / name;
+    std::ofstream(p, std::ios::binary) << content;
+    try {
+      ImpostorDatabase::open(p);
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("opened");
+  };
+  std::string flipped = bytes;
+  flipped[bytes.size() / 2] ^= 0x10;
+  EXPECT_NE(refusal("flipped.impdb", flipped).find("checksum mismatch"), std::string::npos);
+  EXPECT_NE(refusal("cut.impdb", bytes.substr(0, bytes.size() - 9)).find("truncated"),
+            std::string::npos);
+  EXPECT_NE(refusal("magic.impdb", "NOTADB!!" + bytes.substr(8)).find("bad magic"),
+            std::string::npos);
+  // A PVS database is not an impostor database.
+  EXPECT_NE(refusal("pvs.impdb", readAll(b.pvsPath)).find("not an impostor database"),
+            std::string::npos);
+  // Baking against another scene's PVS database is refused.
+  testing::GroundAndBoxesObj other(-50, -50, 50, 50);
+  other.box("lonely", 0, -30, 4, -26, 5);
+  const fs::path otherObj = b.dir.write("other.obj", other.obj);
+  const Scene otherScene = loadScene(otherObj);
+  const ImpostorWorld otherWorld(otherScene, {});
+  try {
+    bakeImpostorDatabase(otherWorld, pvs, Baked::options(), b.dir / "other.impdb");
+    ADD_FAILURE() << "baked against another scene's PVS database";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("not for this scene"), std::string::npos) << e.what();
+  }
+}
+
+TEST(ImpostorDatabase, CellRecordsRefuseCutAndOutOfRangeBytes) {
+  CellRecord record;
+  record.why = "1 impostor";
+  StoredImpostor s;
+  s.sector = 3;
+  s.faces = {4, 9, 17};
+  s.bytes = {1, 2, 3, 4, 5};
+  s.points = 40;
+  record.impostors.push_back(s);
+  const std::vector<uint8_t> bytes = encodeCellRecord(record);
+  const CellRecord back = decodeCellRecord(bytes, 100);
+  ASSERT_EQ(back.impostors.size(), 1u);
+  EXPECT_EQ(back.why, record.why);
+  EXPECT_EQ(back.impostors[0].faces, s.faces);
+  EXPECT_EQ(back.impostors[0].bytes, s.bytes);
+  EXPECT_EQ(back.impostors[0].points, 40u);
+  for (size_t n = 0; n < bytes.size(); ++n)
+    EXPECT_THROW(decodeCellRecord(std::span(bytes.data(), n), 100), InputError) << n;
+  EXPECT_THROW(decodeCellRecord(bytes, 10), InputError);  // face 17 is beyond the scene
+}
+
+}  // namespace
+}  // namespace vistream
