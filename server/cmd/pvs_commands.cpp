@@ -24,6 +24,7 @@
 #include "common/raycast/ray_query.h"
 #include "common/world/free_space.h"
 #include "common/world/static_world.h"
+#include "server/cmd/impostor_bench.h"
 #include "server/cmd/impostor_commands.h"
 #include "server/cmd/pvs_bench.h"
 #include "server/cmd/scene_boxes.h"
@@ -490,6 +491,39 @@ int runPvsTool(int argc, char** argv) {
 
   ImpostorCommand impostors(app, limits);
 
+  auto* impostorBench = app.add_subcommand(
+      "impostor-bench",
+      "Table 5.1 of Wimmer 2001 (points, points per screen pixel, bake time, memory) for three "
+      "impostors of a street cell per scene, and a sweep of the bake's accuracy knobs");
+  ImpostorBenchOptions impostorBenchOptions = defaultImpostorBenchOptions();
+  addScenesOption(impostorBench, impostorBenchOptions.scenes);
+  impostorBench
+      ->add_option("--cell", impostorBenchOptions.cell,
+                   "x0,y0,z0,x1,y1,z1: the view cell in every scene (file coordinates)")
+      ->capture_default_str();
+  impostorBench
+      ->add_option("--repeats", impostorBenchOptions.repeats,
+                   "bakes per configuration; times are medians")
+      ->capture_default_str()
+      ->check(atLeast<size_t>(1));
+  impostorBench
+      ->add_option("--near-distance", impostorBenchOptions.placement.nearDistance,
+                   "d: impostors hold the PVS beyond it (metres)")
+      ->capture_default_str()
+      ->check(positive());
+  impostorBench
+      ->add_option("--min-triangles", impostorBenchOptions.placement.minTriangles,
+                   "a lighter sector and band stays geometry")
+      ->capture_default_str()
+      ->check(atLeast<size_t>(1));
+  std::string benchScreen = "640x480";
+  impostorBench->add_option("--screen", benchScreen, "the viewer's screen, WIDTHxHEIGHT")
+      ->capture_default_str();
+  addLightingCacheOption(*impostorBench, impostorBenchOptions.lightingCache);
+  impostorBench->add_flag(
+      "--no-sweep", [&](int64_t) { impostorBenchOptions.sweep = false; }, "only Table 5.1");
+  impostorBench->add_flag("--json", impostorBenchOptions.json, "one JSON array on stdout");
+
   // The acceleration switches shared by cell and bake.
   auto pvsOptionsFromFlags = [&] {
     PvsOptions options;
@@ -516,6 +550,12 @@ int runPvsTool(int argc, char** argv) {
     if (*walkBench) return runWalkBench(walkBenchOptions);
     if (*bench) return runPvsBench(benchOptions);
     if (impostors.chosen()) return impostors.run();
+    if (*impostorBench) {
+      const WidthHeight screen = parseWidthHeight(benchScreen, "--screen", 16, 8192);
+      impostorBenchOptions.screen.width = screen.width;
+      impostorBenchOptions.screen.height = screen.height;
+      return runImpostorBench(impostorBenchOptions);
+    }
     if (*merge) {
       std::vector<std::filesystem::path> paths(inputs.begin(), inputs.end());
       mergePvsDatabases(paths, out);

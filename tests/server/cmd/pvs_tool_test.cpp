@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <string>
@@ -250,6 +251,38 @@ TEST(PvsTool, ImpostorsBakeAPvsDatabasesCellsIntoAnImpostorDatabase) {
   vistream::testing::expectFailedSaying(neither, 1, "--cell or --db");
   const ToolRun noOut = runPvs("impostors --scene " + scene.string() + " --db " + pvsDb.string());
   vistream::testing::expectFailedSaying(noOut, 1, "--out: required with --db");
+}
+
+TEST(PvsTool, ImpostorBenchPrintsTable51AndEveryKnobOfTheSweep) {
+  vistream::testing::TempDir dir;
+  const fs::path scene = dir.write("row.obj", farRowScene());
+  const ToolRun r = runPvs("impostor-bench --scenes " + scene.string() +
+                           " --cell -2,1,-2,2,3,2 --near-distance 100 --min-triangles 20 "
+                           "--repeats 1 --screen 240x180 --lighting-cache none --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  ASSERT_EQ(j.size(), 1u);
+  const auto& table = j[0]["table_5_1"];
+  ASSERT_EQ(table.size(), 1u);  // the row is one sector and band
+  EXPECT_NEAR(table[0]["points_per_pixel"].get<double>(),
+              table[0]["points"].get<double>() / table[0]["screen_pixels"].get<double>(), 1e-9);
+  const auto& sweep = j[0]["sweep"];
+  std::map<std::string, nlohmann::json> rows;
+  for (const auto& row : sweep) rows[row["setting"].get<std::string>()] = row;
+  ASSERT_EQ(rows.size(), 13u);
+  auto points = [&](const char* s) { return rows.at(s)["points"].get<uint64_t>(); };
+  // The defaults are resolution 1, 8x2 texels and variance 4: those rows are
+  // the table's impostor again.
+  EXPECT_EQ(points("resolution 1.0"), table[0]["points"].get<uint64_t>());
+  EXPECT_EQ(points("texture 8x2"), table[0]["points"].get<uint64_t>());
+  // Coarser LDIs sample fewer points; removal and hidden culling drop points.
+  EXPECT_LT(points("resolution 0.5"), points("resolution 1.4"));
+  EXPECT_GT(points("no point removal"), points("resolution 1.0"));
+  EXPECT_GT(points("hidden points kept"), points("resolution 1.0"));
+  // One texel a point is one colour a point, and the smallest.
+  EXPECT_DOUBLE_EQ(rows.at("texture 1x1")["single_colour_share"].get<double>(), 1.0);
+  EXPECT_LT(rows.at("texture 1x1")["bytes"].get<uint64_t>(),
+            rows.at("texture 16x4")["bytes"].get<uint64_t>());
 }
 
 TEST(PvsTool, ImpostorArgumentsFailBeforeTheSceneLoadsNamingTheOption) {
