@@ -37,9 +37,7 @@ struct CheckedFile {
   uint32_t version = 0;
   uint64_t checksum = 0;  // as the header states it
 
-  std::span<const uint8_t> payload() const {
-    return file.bytes().subspan(kCheckedFileHeaderBytes);
-  }
+  std::span<const uint8_t> payload() const { return file.bytes().subspan(kCheckedFileHeaderBytes); }
   // Whether the payload matches the header's checksum (one pass over it).
   bool checksumOk() const;
 };

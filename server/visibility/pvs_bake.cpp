@@ -143,8 +143,8 @@ BakeReport bakePvs(const Scene& scene, const EpsilonPvs& pvs, const FreeSpace& f
                           return fmt::format("cell index {} is outside the grid of {} cells",
                                              r.index, grid.cellCount());
                         try {
-                          done[r.index] = decodeFaceList(r.payload.data(), r.payload.size(),
-                                                         r.aux, header.sceneFaces);
+                          done[r.index] = decodeFaceList(r.payload.data(), r.payload.size(), r.aux,
+                                                         header.sceneFaces);
                         } catch (const InputError& e) {
                           return e.what();
                         }
