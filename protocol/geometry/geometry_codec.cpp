@@ -204,7 +204,7 @@ std::vector<uint8_t> lightingSection(std::span<const FaceTriangles> input, const
       at += pointsOfLevel(n);
     }
   }
-  std::vector<uint8_t> z = zstdCompress(raw);
+  std::vector<uint8_t> z = zstdCompress(raw, kZstdLevel);
   std::vector<uint8_t> out;
   out.reserve(1 + std::min(z.size(), raw.size()));
   if (z.size() < raw.size()) {
@@ -329,7 +329,7 @@ GeometryT encodeGeometry(std::span<const FaceTriangles> faces, const Quantizatio
   auto consider = [&](GeometryCodec codec, std::vector<uint8_t> raw) {
     using Zstd = GeometryCodings::Zstd;
     if (codings.zstd != Zstd::Never) {
-      std::vector<uint8_t> z = zstdCompress(raw);
+      std::vector<uint8_t> z = zstdCompress(raw, kZstdLevel);
       if (codings.zstd == Zstd::Always || z.size() < raw.size())
         return offer(codec, GeometryCompression::Zstd, std::move(z));
     }
