@@ -120,7 +120,7 @@ nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const Pip
   const Means m = means(frames);
   nlohmann::json perFrame = nlohmann::json::array();
   std::map<std::string, std::map<std::string, size_t>> why;  // stage -> reason -> frames
-  size_t farRan = 0, horizonRan = 0, cacheRan = 0, avatarsRan = 0;
+  size_t farRan = 0, horizonRan = 0, cacheRan = 0, avatarsRan = 0, impostorsRan = 0;
   for (const FrameRecord& f : frames) {
     nlohmann::json j = f.report.toJson();
     j["frame"] = f.frame;
@@ -148,6 +148,8 @@ nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const Pip
     ++why["far_field"][f.report.farFieldWhy];
     ++why["horizon_tracing"][f.report.horizonWhy];
     ++why["image_cache"][f.report.cacheWhy];
+    ++why["impostors"][f.report.impostorsWhy];
+    impostorsRan += f.report.impostorsRan;
     farRan += f.report.farFieldRan;
     horizonRan += f.report.horizonRan;
     cacheRan += f.report.cacheRan;
@@ -159,6 +161,7 @@ nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const Pip
     stages[stage] = {{"frames_ran", stage == "far_field"         ? farRan
                                     : stage == "horizon_tracing" ? horizonRan
                                     : stage == "avatars"         ? avatarsRan
+                                    : stage == "impostors"       ? impostorsRan
                                                                  : cacheRan},
                      {"reasons", r}};
   }
@@ -237,6 +240,7 @@ std::string walkthroughTable(const std::vector<FrameRecord>& frames, const Pipel
     ++why["far field"][(f.report.farFieldRan ? "ran: " : "off: ") + f.report.farFieldWhy];
     ++why["horizon tracing"][(f.report.horizonRan ? "ran: " : "off: ") + f.report.horizonWhy];
     ++why["image cache"][(f.report.cacheRan ? "ran: " : "off: ") + f.report.cacheWhy];
+    ++why["impostors"][(f.report.impostorsRan ? "ran: " : "off: ") + f.report.impostorsWhy];
     if (f.avatars) ++why["avatars"][(f.avatars->inView ? "ran: " : "off: ") + f.avatars->why];
   }
   s += "\n";

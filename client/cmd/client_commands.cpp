@@ -72,7 +72,8 @@ RenderMode parseMode(const std::string& m) {
   if (m == "pipeline") return RenderMode::Pipeline;
   if (m == "raycast-all") return RenderMode::RaycastAll;
   if (m == "geometry-all") return RenderMode::GeometryAll;
-  throwInputError("--mode {}: expected pipeline, raycast-all or geometry-all", m);
+  if (m == "impostor-off") return RenderMode::ImpostorOff;
+  throwInputError("--mode {}: expected pipeline, raycast-all, geometry-all or impostor-off", m);
 }
 
 std::string frameName(size_t i) {
@@ -155,6 +156,8 @@ struct ConnectionFigures {
   double waitMs = 0.0;  // in waitForCell: the first view cell and each frame's
   size_t waits = 0;
   size_t timeouts = 0;  // waits that ended without the cell complete
+  bool impostorsOffered = false;
+  StreamClient::ImpostorFigures impostors;
 };
 
 void printSummary(const Args& a, const std::vector<FrameRecord>& records, const PipelineOptions& o,
@@ -165,7 +168,11 @@ void printSummary(const Args& a, const std::vector<FrameRecord>& records, const 
       j["connection"] = {{"bytes_received", connection->bytesReceived},
                          {"wait_for_geometry_ms", connection->waitMs},
                          {"waits", connection->waits},
-                         {"wait_timeouts", connection->timeouts}};
+                         {"wait_timeouts", connection->timeouts},
+                         {"impostors_offered", connection->impostorsOffered},
+                         {"impostor_cells", connection->impostors.cells},
+                         {"impostors", connection->impostors.impostors},
+                         {"impostor_bytes", connection->impostors.bytes}};
     std::printf("%s\n", j.dump(2).c_str());
   } else {
     std::printf("%s", walkthroughTable(records, o).c_str());
@@ -173,6 +180,9 @@ void printSummary(const Args& a, const std::vector<FrameRecord>& records, const 
       std::printf("received %.2f MB; waited %.0f ms for geometry in %zu waits (%zu timed out)\n",
                   double(connection->bytesReceived) / 1e6, connection->waitMs, connection->waits,
                   connection->timeouts);
+    if (connection && connection->impostorsOffered)
+      std::printf("impostors: %zu of %zu cells, %.2f MB\n", connection->impostors.impostors,
+                  connection->impostors.cells, double(connection->impostors.bytes) / 1e6);
     if (!a.outDir.empty())
       std::printf("\nframes written to %s/frame_00000.png ...\n", a.outDir.c_str());
   }
@@ -376,6 +386,7 @@ int runHeadless(const Args& a, LiveGeometry& live, const std::vector<Camera>& ca
     Stopwatch wall;
     if (net) live.refresh(*net, /*force=*/true);
     r.geometryIntakeMs = wall.ms();
+    if (net) live.renderer->setImpostors(net->impostorsAt(cameras[i].eye));
     r.report = live.renderer->render(cameras[i], image);
     if (avatars) {
       r.avatars = avatars.build(times[i], cameras[i], live.renderer->polygonDistance(),
@@ -397,7 +408,11 @@ int runHeadless(const Args& a, LiveGeometry& live, const std::vector<Camera>& ca
   }
   bar.finish();
   sheet.write();
-  if (net) connection.bytesReceived = net->bytesReceived();
+  if (net) {
+    connection.bytesReceived = net->bytesReceived();
+    connection.impostorsOffered = net->impostorsOffered();
+    connection.impostors = net->impostorFigures();
+  }
   printSummary(a, records, live.options, size, net ? &connection : nullptr);
   return 0;
 }
@@ -434,6 +449,7 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras,
       }
       FrameRecord r;
       r.frame = i;
+      if (net) live.renderer->setImpostors(net->impostorsAt(cameras[i].eye));
       r.report = live.renderer->renderFarField(cameras[i], farImage, near);
       if (avatars) {
         r.avatars = avatars.build(times[i], cameras[i], live.renderer->polygonDistance(),
@@ -477,6 +493,7 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras,
         uploaded = live.generation;
       }
     }
+    if (net) live.renderer->setImpostors(net->impostorsAt(cam.eye));
     const FrameReport rep = live.renderer->renderFarField(cam, farImage, near);
     std::string avatarWhy = "no dynamic objects";
     if (avatars) {
@@ -551,6 +568,7 @@ int run(const Args& a) {
     so.token = a.token;
     so.radius = a.streamRadius;
     so.wantsAvatars = !a.noAvatars;
+    so.wantsImpostors = mode != RenderMode::ImpostorOff;
     net = std::make_unique<StreamClient>(so);
     origin = net->origin();
   }
@@ -649,7 +667,9 @@ int runClientTool(int argc, char** argv) {
                  "below the rows FILE already holds");
   app.add_flag("--json", a.json,
                "print one JSON object (frames, mean_frame_ms, pixels, per_frame, ...)");
-  app.add_option("--mode", a.mode, "pipeline | raycast-all | geometry-all");
+  app.add_option("--mode", a.mode,
+                 "pipeline | raycast-all | geometry-all | impostor-off (the pipeline without "
+                 "impostors; connected, the server then sends the far geometry they replace)");
   app.add_option("--near-distance", a.nearDistance, "near-field distance d, metres")
       ->check(positive())
       ->default_str("the scene's, or the server's");

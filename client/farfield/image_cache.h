@@ -103,6 +103,8 @@ class PanoramicCache {
   size_t invalidate(std::span<const Box3f> added, std::span<const uint8_t> removed);
   // Whether a texel holds a traced colour (not forgotten, never traced).
   bool traced(int64_t texel) const { return texelRecord_[size_t(texel)] != 0; }
+  // Metres from the eye to the texel's stored hit (infinity for a miss).
+  float hitDistance(int64_t texel) const { return hitDistance_[size_t(texel)]; }
   // The unit direction through a texel's centre.
   glm::vec3 texelDirection(int64_t texel) const;
 

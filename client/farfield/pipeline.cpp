@@ -33,7 +33,8 @@ void castRays(const RayQuery& query, const std::vector<Ray>& rays, std::vector<H
 }  // namespace
 
 const char* renderModeName(RenderMode m) {
-  constexpr std::array<const char*, 3> kNames{"pipeline", "raycast-all", "geometry-all"};
+  constexpr std::array<const char*, 4> kNames{"pipeline", "raycast-all", "geometry-all",
+                                              "impostor-off"};
   return size_t(m) < kNames.size() ? kNames[size_t(m)] : "?";
 }
 
@@ -46,7 +47,12 @@ nlohmann::json FrameReport::toJson() const {
       {"stages",
        {{"far_field", {{"ran", farFieldRan}, {"why", farFieldWhy}}},
         {"horizon_tracing", {{"ran", horizonRan}, {"why", horizonWhy}}},
-        {"image_cache", {{"ran", cacheRan}, {"why", cacheWhy}}}}},
+        {"image_cache", {{"ran", cacheRan}, {"why", cacheWhy}}},
+        {"impostors",
+         {{"ran", impostorsRan},
+          {"why", impostorsWhy},
+          {"drawn", impostorsDrawn},
+          {"points_on_screen", impostorPoints}}}}},
       {"cache_plan",
        {{"must_trace", cachePlan.mustTrace},
         {"budgeted", cachePlan.budgeted},
@@ -147,9 +153,8 @@ void FrameRenderer::reset() {
 }
 
 float FrameRenderer::polygonDistance() const {
-  return options_.mode == RenderMode::Pipeline && !wholeScene_
-             ? options_.nearDistance
-             : std::numeric_limits<float>::infinity();
+  return isPipeline(options_.mode) && !wholeScene_ ? options_.nearDistance
+                                                   : std::numeric_limits<float>::infinity();
 }
 
 FrameReport FrameRenderer::render(const Camera& camera, ImageRgb8& out) {
@@ -176,11 +181,13 @@ struct FrameRun {
   bool turned = false;
   bool wholeScene = false;
   FrameReport rep;
-  std::vector<float> slopes;         // per column: the horizon's slope
-  std::vector<uint32_t> candidates;  // far-field pixels
-  std::vector<glm::vec3> dirs;       // their ray directions
-  std::vector<uint8_t> trace;        // per candidate: cast a ray this frame
-  std::vector<int64_t> texels;       // per candidate: its cache texel
+  std::vector<float> slopes;               // per column: the horizon's slope
+  std::vector<uint32_t> candidates;        // far-field pixels
+  std::vector<uint32_t> skyPixels;         // culled as sky by the horizon of the geometry held
+  std::vector<uint32_t> backgroundPixels;  // no polygon, and no far field held to look at
+  std::vector<glm::vec3> dirs;             // their ray directions
+  std::vector<uint8_t> trace;              // per candidate: cast a ray this frame
+  std::vector<int64_t> texels;             // per candidate: its cache texel
   bool useCache = false;
   std::vector<Ray> rays;
   std::vector<uint32_t> rayOf;  // per ray: its candidate
@@ -210,7 +217,7 @@ struct FrameRun {
     r.previousYaw_ = camera.yawDeg;
     r.previousPitch_ = camera.pitchDeg;
     if (out.width != W || out.height != H) out = ImageRgb8(W, H);
-    wholeScene = mode == RenderMode::Pipeline && r.wholeScene_;
+    wholeScene = isPipeline(mode) && r.wholeScene_;
   }
 
   // 1. Near field: the triangles to draw as polygons.
@@ -275,7 +282,7 @@ struct FrameRun {
   // Why horizon tracing and the cache cannot run in this frame at all (empty
   // when they may): another mode, or no far field.
   std::string farStagesOff() const {
-    if (mode != RenderMode::Pipeline) return fmt::format("{} mode", renderModeName(mode));
+    if (!isPipeline(mode)) return fmt::format("{} mode", renderModeName(mode));
     if (!rep.farFieldRan) return "no far field";
     return {};
   }
@@ -356,6 +363,7 @@ struct FrameRun {
         const glm::vec3 dir = pixelRays.at(float(x) + 0.5f, float(y) + 0.5f);
         if (!rep.farFieldRan) {
           ++rep.pixels.background;
+          if (covered[p] == kUncovered) backgroundPixels.push_back(uint32_t(p));
           continue;
         }
         // Only pixels no polygon reaches can be sky: the horizon bounds the far
@@ -363,6 +371,7 @@ struct FrameRun {
         if (rep.horizonRan && covered[p] == kUncovered &&
             HorizonMap::raySlope(dir) > slopes[size_t(x)]) {
           ++rep.pixels.horizon;
+          skyPixels.push_back(uint32_t(p));
           continue;
         }
         candidates.push_back(uint32_t(p));
@@ -377,7 +386,7 @@ struct FrameRun {
   void planCache() {
     Stopwatch clock;
     const PipelineOptions& options = r.options_;
-    useCache = mode == RenderMode::Pipeline && options.cache && rep.farFieldRan;
+    useCache = isPipeline(mode) && options.cache && rep.farFieldRan;
     if (std::string why = farStagesOff(); !why.empty()) {
       rep.cacheWhy = std::move(why);
     } else if (!options.cache) {
@@ -420,7 +429,61 @@ struct FrameRun {
     rep.ms.raycast = clock.ms();
   }
 
-  // 7. Compose: ray colours (stored in the cache), then cached colours.
+  // 7. Impostors of the viewer's cell, splatted; compose() keeps a point
+  // where the far field's own hit is not nearer.
+  bool impostorsOn = false;
+  void splatImpostors() {
+    Stopwatch clock;
+    const ImpostorSet* set = r.impostors_.get();
+    if (!isPipeline(mode)) {
+      rep.impostorsWhy = fmt::format("{} mode", renderModeName(mode));
+    } else if (mode == RenderMode::ImpostorOff) {
+      rep.impostorsWhy = "impostor-off mode";
+    } else if (!set) {
+      rep.impostorsWhy = "no impostors held for the viewer's cell";
+    } else if (!set->cell.contains(camera.eye)) {
+      rep.impostorsWhy =
+          fmt::format("the impostors held are for cell ({}, {}, {}), not the viewer's",
+                      set->index.x, set->index.y, set->index.z);
+    } else if (set->impostors.empty()) {
+      rep.impostorsWhy = "the viewer's cell has no impostors: " + set->why;
+    } else if (candidates.empty() && skyPixels.empty() && backgroundPixels.empty()) {
+      rep.impostorsWhy = "no far-field pixels to fill";
+    } else {
+      r.splatter_.begin(camera);
+      if (r.impostorImage_.width != W || r.impostorImage_.height != H)
+        r.impostorImage_ = ImageRgb8(W, H);
+      for (const auto& impostor : set->impostors) {
+        rep.impostorPoints += r.splatter_.draw(*impostor, r.impostorImage_);
+        ++rep.impostorsDrawn;
+      }
+      impostorsOn = true;
+      rep.impostorsRan = true;
+      rep.impostorsWhy = fmt::format("{} impostor{} of the viewer's cell ({}, {}, {})",
+                                     set->impostors.size(), set->impostors.size() == 1 ? "" : "s",
+                                     set->index.x, set->index.y, set->index.z);
+    }
+    rep.ms.impostors = clock.ms();
+  }
+  // Whether candidate i shows the impostor rather than the far field's hit
+  // at view depth `farDepth` (infinity: a miss).
+  bool impostorWins(size_t i, float farDepth) const {
+    return impostorsOn && impostorCovers(candidates[i], farDepth);
+  }
+  bool impostorCovers(size_t p, float farDepth) const {
+    const float z = r.splatter_.depth()[p];
+    // A point lies on the surface it samples: within a few millimetres of
+    // the same surface's ray hit, so the impostor wins ties.
+    return z < ImpostorSplatter::kEmpty && z <= farDepth * 1.001f + 0.01f;
+  }
+  void takeImpostor(size_t i) { takeImpostorPixel(candidates[i]); }
+  void takeImpostorPixel(size_t p) {
+    setPixel(p, r.impostorImage_.at(int(p % size_t(W)), int(p / size_t(W))));
+    ++rep.pixels.impostor;
+  }
+
+  // 8. Compose: ray colours (stored in the cache), then cached colours,
+  // impostors in front of either.
   void compose() {
     Stopwatch clock;
     for (size_t k = 0; k < rays.size(); ++k) {
@@ -429,19 +492,43 @@ struct FrameRun {
       const glm::u8vec3 c =
           h.valid() ? r.geometry_.colourAt(h.triangle, h.u, h.v, h.t * glm::length(dirs[i]))
                     : r.geometry_.background(camera.eye, dirs[i]);
-      hits[k].valid() ? ++rep.pixels.rayHit : ++rep.pixels.rayMiss;
-      setPixel(candidates[i], c);
       if (useCache && texels[i] >= 0)
         r.cache_->store(texels[i], c,
                         hits[k].valid() ? hits[k].t * glm::length(dirs[i])
                                         : std::numeric_limits<float>::infinity(),
                         hits[k].valid() ? hits[k].triangle : PanoramicCache::kNoTexelHit);
+      // dirs[i] has unit view depth: the hit's t is its view depth.
+      if (impostorWins(i, h.valid() ? h.t : std::numeric_limits<float>::infinity())) {
+        takeImpostor(i);
+        continue;
+      }
+      hits[k].valid() ? ++rep.pixels.rayHit : ++rep.pixels.rayMiss;
+      setPixel(candidates[i], c);
     }
     if (useCache)
       for (size_t i = 0; i < candidates.size(); ++i)
         if (!trace[i]) {
+          if (impostorWins(i, r.cache_->hitDistance(texels[i]) / glm::length(dirs[i]))) {
+            takeImpostor(i);
+            continue;
+          }
           ++rep.pixels.cache;
           setPixel(candidates[i], r.cache_->colour(texels[i]));
+        }
+    // Above the horizon of the geometry held there is none: an impostor's
+    // far geometry (which the client does not hold) may rise there.
+    if (impostorsOn)
+      for (const uint32_t p : skyPixels)
+        if (impostorCovers(p, std::numeric_limits<float>::infinity())) {
+          --rep.pixels.horizon;
+          takeImpostorPixel(p);
+        }
+    // Nor where the client holds no far field at all.
+    if (impostorsOn)
+      for (const uint32_t p : backgroundPixels)
+        if (impostorCovers(p, std::numeric_limits<float>::infinity())) {
+          --rep.pixels.background;
+          takeImpostorPixel(p);
         }
     rep.ms.compose = clock.ms();
   }
@@ -459,6 +546,7 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out,
   f.classifyPixels();
   f.planCache();
   f.castFarRays();
+  f.splatImpostors();
   f.compose();
   f.rep.ms.total = total.ms();
   return std::move(f.rep);

@@ -1,9 +1,12 @@
 // The client's frame pipeline (thesis chapter 4, Figure 4.4): near field as
 // polygons, then for every pixel the polygons leave uncovered, in order:
-// horizon tracing (sky), the panoramic image cache, and ray casting.
+// horizon tracing (sky), the panoramic image cache, and ray casting; then
+// point-based impostors (thesis chapter 5) where the viewer's cell has them.
 //
 // Modes:
 //  - Pipeline:    the thesis's pipeline as above;
+//  - ImpostorOff: the same without impostors (the comparison: a connected
+//                 client in this mode does not ask the server for them);
 //  - RaycastAll:  every pixel ray cast (the reference image);
 //  - GeometryAll: every triangle in the view frustum drawn, no far field
 //                 (full polygon rendering, the baseline of Figure 4.8).
@@ -15,6 +18,16 @@
 // renderFarField() leaves the near field to the caller (OpenGL) and fills
 // only the pixels its opacity buffer (with a 1/8-pixel inset, see
 // SoftwareRasterizer::coverage) leaves uncovered.
+//
+// Impostors (setImpostors): the impostors of the view cell holding the
+// viewer, drawn by the software splatter (client/render/impostor_splat.h)
+// over the far-field pixels. A far-field pixel takes the impostor's colour
+// when an impostor point covers it and the far field's own first hit there
+// (ray cast this frame, or the cache's) is not nearer: geometry the client
+// holds beyond d that no impostor replaces (a lighter group, a nearer band)
+// still hides the impostor behind it. The far field's rays therefore still
+// run; what impostors add is the far geometry the client does not hold
+// (replaced faces are not streamed), prefiltered.
 //
 // Near field and far field meet at distance d along each pixel's ray, not at
 // a grid cell: polygons are drawn only up to d (fragments beyond are
@@ -37,6 +50,7 @@
 #include "client/farfield/image_cache.h"
 #include "client/render/camera.h"
 #include "client/render/image.h"
+#include "client/render/impostor_splat.h"
 #include "client/render/render_geometry.h"
 #include "client/render/soft_raster.h"
 #include "client/render/streamed_geometry.h"
@@ -45,8 +59,12 @@
 
 namespace vistream {
 
-enum class RenderMode { Pipeline, RaycastAll, GeometryAll };
+enum class RenderMode { Pipeline, RaycastAll, GeometryAll, ImpostorOff };
 const char* renderModeName(RenderMode m);
+// The pipeline's stages run (Pipeline or ImpostorOff).
+inline bool isPipeline(RenderMode m) {
+  return m == RenderMode::Pipeline || m == RenderMode::ImpostorOff;
+}
 
 struct PipelineOptions {
   RenderMode mode = RenderMode::Pipeline;
@@ -78,6 +96,7 @@ struct PixelCounts {
   size_t rayHit = 0;      // ray cast and hit
   size_t rayMiss = 0;     // ray cast and missed (sky)
   size_t background = 0;  // no far field to look at (far field off): sky colour
+  size_t impostor = 0;    // drawn from an impostor (nearer than the far field's hit)
 
   PixelCounts& operator+=(const PixelCounts& o) {
     polygon += o.polygon;
@@ -86,6 +105,7 @@ struct PixelCounts {
     rayHit += o.rayHit;
     rayMiss += o.rayMiss;
     background += o.background;
+    impostor += o.impostor;
     return *this;
   }
   // Every field above, once: FrameReport::toJson, walkthroughJson and
@@ -98,16 +118,17 @@ struct PixelCounts {
     f(StatField{"ray_hit", "ray cast and hit", ""}, rayHit);
     f(StatField{"ray_miss", "ray cast and missed", ""}, rayMiss);
     f(StatField{"background", "background (no far field)", ""}, background);
+    f(StatField{"impostor", "drawn from impostors", ""}, impostor);
   }
 };
-static_assert(sizeof(PixelCounts) == 6 * sizeof(size_t),
+static_assert(sizeof(PixelCounts) == 7 * sizeof(size_t),
               "PixelCounts changed: update PixelCounts::forEachField");
 
 struct StageTimes {
   // shade: the colours of polygon pixels (software near field) and of the
   // background, looked up (RenderGeometry::shadeSpan, shadeBackground).
   double nearSelect = 0, nearDraw = 0, shade = 0, opacity = 0, horizon = 0, cache = 0, raycast = 0,
-         compose = 0, total = 0;
+         compose = 0, impostors = 0, total = 0;
 
   StageTimes& operator+=(const StageTimes& o) {
     nearSelect += o.nearSelect;
@@ -118,6 +139,7 @@ struct StageTimes {
     cache += o.cache;
     raycast += o.raycast;
     compose += o.compose;
+    impostors += o.impostors;
     total += o.total;
     return *this;
   }
@@ -132,10 +154,11 @@ struct StageTimes {
     f(StatField{"cache", "cache planning", "ms"}, cache);
     f(StatField{"raycast", "ray casting", "ms"}, raycast);
     f(StatField{"compose", "composition", "ms"}, compose);
+    f(StatField{"impostors", "impostor splatting", "ms"}, impostors);
     f(StatField{"total", "frame", "ms"}, total);
   }
 };
-static_assert(sizeof(StageTimes) == 9 * sizeof(double),
+static_assert(sizeof(StageTimes) == 10 * sizeof(double),
               "StageTimes changed: update StageTimes::forEachField");
 
 struct FrameReport {
@@ -143,8 +166,9 @@ struct FrameReport {
   StageTimes ms;
   size_t nearTriangles = 0;
   bool moving = false;
-  bool farFieldRan = false, horizonRan = false, cacheRan = false;
-  std::string farFieldWhy, horizonWhy, cacheWhy;
+  bool farFieldRan = false, horizonRan = false, cacheRan = false, impostorsRan = false;
+  std::string farFieldWhy, horizonWhy, cacheWhy, impostorsWhy;
+  size_t impostorsDrawn = 0, impostorPoints = 0;  // impostors splatted, their points on screen
   CachePlanStats cachePlan;
   HorizonStats horizonStats;
   nlohmann::json toJson() const;
@@ -176,6 +200,9 @@ class FrameRenderer {
   float polygonDistance() const;
   // Forgets the cache and the motion history.
   void reset();
+  // The impostors frames may draw from now on (null: none held). Frames whose
+  // viewer is outside set->cell draw none and say so.
+  void setImpostors(std::shared_ptr<const ImpostorSet> set) { impostors_ = std::move(set); }
 
   // Takes up a change of the geometry (a StreamedGeometry's slots, changed
   // in place; `geometry` is the object given to the constructor): the new
@@ -219,6 +246,9 @@ class FrameRenderer {
   SoftwareRasterizer raster_;
   IdBuffer ids_;
   bool idsDrawn_ = false;  // ids_ holds the last frame's near field (not an OpenGL frame)
+  std::shared_ptr<const ImpostorSet> impostors_;
+  ImpostorSplatter splatter_;
+  ImageRgb8 impostorImage_;
   SoftwareRasterizer dynamicRaster_;
   IdBuffer dynamicIds_;
   std::vector<uint32_t> dynamicWhich_;

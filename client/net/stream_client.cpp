@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
+#include <deque>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -19,6 +20,8 @@
 #include "common/core/error.h"
 #include "common/core/ivec_less.h"
 #include "protocol/geometry/geometry_codec.h"
+#include "protocol/impostor/impostor_codec.h"
+#include "protocol/impostor/impostor_message.h"
 #include "protocol/wire/peer.h"
 
 namespace vistream {
@@ -76,6 +79,14 @@ struct StreamClient::Impl : PeerHandler {
   std::vector<AvatarModelOffer> models;
   std::vector<uint8_t> modelRequested;
   std::optional<AvatarLight> avatarLight;
+
+  // Impostors of the last cells received, oldest first (at most
+  // wire::kImpostorCellsHeld, the rule the server mirrors).
+  bool impostorsOffered = false;
+  size_t maxImpostorBytes = size_t(1) << 30;
+  std::deque<std::shared_ptr<ImpostorSet>> impostorCells;
+  size_t impostorMemory = 0;
+  ImpostorFigures impostorFigures;
 
   // Called with `mutex` held.
   void noteChanged(uint32_t face) {
@@ -174,6 +185,7 @@ struct StreamClient::Impl : PeerHandler {
                [this](const Bye&) { finish("the server said bye"); },
                [this](const Avatar& a) { onAvatar(a); },
                [this](const AvatarModelData& m) { onAvatarModel(m); },
+               [this](const ImpostorData& m) { onImpostor(m); },
                [](Payload) {},  // Stats, PvsReply: not used here
            });
   }
@@ -200,6 +212,7 @@ struct StreamClient::Impl : PeerHandler {
           backdrop = b;
         }
         readAvatarOffers(w);
+        impostorsOffered = w.impostors();
         if (w.materials())
           for (const MaterialInfo* m : *w.materials())
             materials.push_back(m && isFinite(m->diffuse())
@@ -292,6 +305,56 @@ struct StreamClient::Impl : PeerHandler {
     }
     models[m.model()].glb = std::make_shared<const std::string>(
         reinterpret_cast<const char*>(glb->data()), glb->size());
+  }
+  void onImpostor(const ImpostorData& wire) {
+    ImpostorMessage m;
+    std::string error;
+    if (!readImpostorMessage(wire, grid.faceCount, m, error))  // grid: set on this strand
+      return finish("bad impostor from the server: " + error);
+    Impostor impostor;
+    if (m.count > 0 && !decodeImpostor(m.data, impostor, error))
+      return finish(fmt::format("bad impostor from the server: cell ({}, {}, {}) #{}: {}", m.cell.x,
+                                m.cell.y, m.cell.z, m.index, error));
+    std::lock_guard lock(mutex);
+    if (!impostorsOffered) return finish("impostors from a server that did not offer them");
+    const size_t wireBytes = wire.data() ? wire.data()->size() : 0;
+    if (m.index == 0) {
+      // A new cell (or one sent again): it replaces what is held for it.
+      for (auto it = impostorCells.begin(); it != impostorCells.end(); ++it)
+        if ((*it)->index == m.cell) {
+          dropImpostorCell(it);
+          break;
+        }
+      auto set = std::make_shared<ImpostorSet>();
+      set->index = m.cell;
+      set->cell = Box3f(grid.gridOrigin + glm::vec3(m.cell) * grid.cellSize,
+                        grid.gridOrigin + glm::vec3(m.cell + 1) * grid.cellSize);
+      set->why = m.why;
+      set->expected = m.count;
+      impostorCells.push_back(std::move(set));
+      if (impostorCells.size() > kImpostorCellsHeld) dropImpostorCell(impostorCells.begin());
+      ++impostorFigures.cells;
+    } else if (impostorCells.empty() || impostorCells.back()->index != m.cell ||
+               impostorCells.back()->impostors.size() != m.index) {
+      return finish(fmt::format("impostor {} of cell ({}, {}, {}) out of order", m.index, m.cell.x,
+                                m.cell.y, m.cell.z));
+    }
+    if (m.count == 0) return;
+    // Copy on write: a renderer may hold the previous snapshot.
+    auto next = std::make_shared<ImpostorSet>(*impostorCells.back());
+    impostorMemory += impostor.bytes();
+    if (impostorMemory > maxImpostorBytes)
+      return finish(fmt::format("the impostors held would exceed {} bytes", maxImpostorBytes));
+    next->impostors.push_back(std::make_shared<const Impostor>(std::move(impostor)));
+    next->bytes += wireBytes;
+    impostorCells.back() = std::move(next);
+    ++impostorFigures.impostors;
+    impostorFigures.bytes += wireBytes;
+  }
+  // Called with `mutex` held.
+  void dropImpostorCell(std::deque<std::shared_ptr<ImpostorSet>>::iterator it) {
+    for (const auto& i : (*it)->impostors) impostorMemory -= i->bytes();
+    impostorCells.erase(it);
   }
   void onGeometry(const Geometry& geometry) {
     DecodedGeometry g;
@@ -393,6 +456,8 @@ StreamClient::StreamClient(const StreamClientOptions& o) : impl_(std::make_share
   hello.capabilities = std::make_unique<CapabilitiesT>();
   hello.capabilities->near_field_radius_m = o.radius;
   hello.capabilities->wants_avatars = o.wantsAvatars;
+  hello.capabilities->wants_impostors = o.wantsImpostors;
+  s.maxImpostorBytes = o.maxImpostorBytes;
   s.peer->start(impl_);
   s.send(encodeMessage(std::move(hello)));
   // The io thread never owns the Impl: the StreamClient joins it first.
@@ -530,6 +595,25 @@ std::vector<AvatarModelOffer> StreamClient::avatarModels() const {
 std::optional<AvatarLight> StreamClient::avatarLight() const {
   std::lock_guard lock(impl_->mutex);
   return impl_->avatarLight;
+}
+
+bool StreamClient::impostorsOffered() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->impostorsOffered;
+}
+
+std::shared_ptr<const ImpostorSet> StreamClient::impostorsAt(const glm::vec3& eye) const {
+  std::lock_guard lock(impl_->mutex);
+  if (!impl_->welcomed) return nullptr;
+  const glm::ivec3 cell = impl_->grid.cellOf(eye);
+  for (const auto& set : impl_->impostorCells)
+    if (set->index == cell) return set;
+  return nullptr;
+}
+
+StreamClient::ImpostorFigures StreamClient::impostorFigures() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->impostorFigures;
 }
 
 std::string StreamClient::error() const {

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "client/avatar/avatar_view.h"
+#include "client/render/impostor_splat.h"
 #include "client/render/render_geometry.h"
 #include "client/render/streamed_geometry.h"
 
@@ -31,6 +32,11 @@ struct StreamClientOptions {
   size_t maxTriangles =
       50'000'000;            // the session ends if the server sends more (no unbounded memory)
   bool wantsAvatars = true;  // other users' Avatar updates, and their models when first seen
+  // Impostors of the cells the client stands in (if the server has them),
+  // in place of the far faces they replace.
+  bool wantsImpostors = true;
+  // The session ends if the impostors held would take more memory.
+  size_t maxImpostorBytes = size_t(1) << 30;
 };
 
 // An avatar model the server offers (Welcome.avatar_models) and, once it
@@ -78,6 +84,17 @@ class StreamClient {
   // to now, so 2 updates a second draw as smooth walking.
   std::vector<AvatarState> avatars() const;
   std::vector<AvatarModelOffer> avatarModels() const;
+  // Whether the server sends impostors (it has them and we asked).
+  bool impostorsOffered() const;
+  // The impostors held for the view cell holding `eye` (local frame), as
+  // far as they arrived; null when none are held for that cell.
+  std::shared_ptr<const ImpostorSet> impostorsAt(const glm::vec3& eye) const;
+  // Impostor cells received, impostors in them, and their bytes on the wire.
+  struct ImpostorFigures {
+    size_t cells = 0, impostors = 0;
+    uint64_t bytes = 0;
+  };
+  ImpostorFigures impostorFigures() const;
   // The light avatars are shaded with (Welcome.avatar_light), if sent.
   std::optional<AvatarLight> avatarLight() const;
 

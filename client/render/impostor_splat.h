@@ -13,6 +13,8 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
+#include <string>
 #include <vector>
 
 #include "client/render/camera.h"
@@ -20,6 +22,17 @@
 #include "common/impostor/impostor.h"
 
 namespace vistream {
+
+// The impostors of one view cell, as received (connected) or baked: valid
+// for viewpoints inside `cell`.
+struct ImpostorSet {
+  glm::ivec3 index{0};
+  Box3f cell;
+  std::vector<std::shared_ptr<const Impostor>> impostors;
+  uint32_t expected = 0;  // impostors the cell has (received: as announced)
+  std::string why;        // the bake's reason (why these, or why none)
+  size_t bytes = 0;       // as received
+};
 
 class ImpostorSplatter {
  public:

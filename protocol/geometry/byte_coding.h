@@ -41,6 +41,17 @@ void putRuns(std::vector<uint8_t>& out, const std::vector<T>& values) {
   }
 }
 
+// An ascending (non-decreasing) list of IDs as varint deltas, the first from
+// 0 (Geometry's face IDs, the faces an impostor replaces). Read it back with
+// readAscending.
+inline void putAscending(std::vector<uint8_t>& out, const std::vector<uint32_t>& ids) {
+  uint32_t previous = 0;
+  for (const uint32_t id : ids) {
+    putVarint(out, id - previous);
+    previous = id;
+  }
+}
+
 // Reads varints and bytes from a payload; every read is bounds-checked and the
 // first failure names the field.
 class PayloadReader {
@@ -101,6 +112,24 @@ bool readRuns(PayloadReader& r, size_t count, uint64_t max, const char* field,
     const auto value = r.varint(field, max);
     if (!value) return false;
     out.insert(out.end(), size_t(*length), T(*value));
+  }
+  return true;
+}
+
+// `count` IDs written by putAscending, each below `limit`; false (error set)
+// if one is cut off or reaches the limit.
+inline bool readAscending(PayloadReader& r, size_t count, uint64_t limit, const char* field,
+                          std::vector<uint32_t>& out) {
+  out.clear();
+  out.reserve(count);
+  uint64_t id = 0;
+  for (size_t i = 0; i < count; ++i) {
+    if (limit == 0 || id > limit - 1)
+      return r.fail(fmt::format("{} reaches {}", field, limit)), false;
+    const auto delta = r.varint(field, limit - 1 - id);
+    if (!delta) return false;
+    id += *delta;
+    out.push_back(uint32_t(id));
   }
   return true;
 }

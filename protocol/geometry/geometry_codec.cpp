@@ -100,11 +100,7 @@ std::vector<uint8_t> payloadHead(const IndexedBatch& b) {
   std::vector<uint8_t> out;
   putVarint(out, b.faces.size());
   putVarint(out, b.vertices.size());
-  uint32_t previous = 0;
-  for (uint32_t f : b.faces) {
-    putVarint(out, f - previous);
-    previous = f;
-  }
+  putAscending(out, b.faces);
   putRuns(out, b.materials);
   putRuns(out, b.triangleCounts);
   return out;
@@ -490,14 +486,9 @@ bool decodeGeometryPayload(std::span<const uint8_t> payload, GeometryCodec codec
   const auto vertexCount =
       faceCount ? r.varint("the vertex count", kMaxGeometryVertices) : std::nullopt;
   if (!vertexCount) return readFailed();
-  out.faces.reserve(size_t(*faceCount));
-  uint64_t id = 0;
-  for (uint64_t i = 0; i < *faceCount; ++i) {
-    const auto delta = r.varint("a face ID", std::numeric_limits<uint32_t>::max() - id);
-    if (!delta) return readFailed();
-    id += *delta;
-    out.faces.push_back(uint32_t(id));
-  }
+  if (!readAscending(r, size_t(*faceCount), uint64_t(std::numeric_limits<uint32_t>::max()) + 1,
+                     "a face ID", out.faces))
+    return readFailed();
   if (!readRuns(r, size_t(*faceCount), std::numeric_limits<uint16_t>::max(), "a material run",
                 out.materials) ||
       !readRuns(r, size_t(*faceCount), std::numeric_limits<uint16_t>::max(), "a triangle count run",

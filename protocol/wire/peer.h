@@ -121,6 +121,8 @@ void dispatchPayload(const Envelope& envelope, Handler&& handler) {
       return detail::dispatchAs(envelope, envelope.payload_as_AvatarModelRequest(), handler);
     case Payload::AvatarModelData:
       return detail::dispatchAs(envelope, envelope.payload_as_AvatarModelData(), handler);
+    case Payload::ImpostorData:
+      return detail::dispatchAs(envelope, envelope.payload_as_ImpostorData(), handler);
     default:
       return handler(envelope.payload_type());
   }

@@ -65,6 +65,10 @@ int runServerTool(int argc, char** argv) {
   app.add_option("--pvs-db", pvsDb,
                  "baked PVS database (vistream-pvs bake); without one, PVSs are computed on "
                  "demand and the first clients in a cell wait for them");
+  app.add_option("--impostor-db", worldOptions.impostorDatabase,
+                 "impostor database (vistream-pvs impostors --db PVS.db --out IMP.db), baked from "
+                 "--pvs-db: clients that ask for impostors get those of their cells and not the "
+                 "far faces they replace");
   app.add_option("--cell-size", worldOptions.cellSize,
                  "view cell size in metres without a database")
       ->check(positive());
@@ -176,6 +180,11 @@ int runServerTool(int argc, char** argv) {
       }
     }
     worldOptions.pvsDatabase = pvsDb;
+    if (!worldOptions.impostorDatabase.empty() && pvsDb.empty())
+      throwInputError("--impostor-db needs --pvs-db (the PVS database it was baked from)");
+    if (!worldOptions.impostorDatabase.empty() &&
+        !std::filesystem::exists(worldOptions.impostorDatabase))
+      throwInputError("--impostor-db {}: no such file", worldOptions.impostorDatabase.string());
     worldOptions.fusion = *parseFusionChoice(fusion);
     worldOptions.lighting = !noLighting;
     StreamWorld world(openScene(scene, sceneLimits), worldOptions);

@@ -9,6 +9,7 @@
 #include <cmath>
 
 #include "protocol/geometry/geometry_codec.h"
+#include "protocol/impostor/impostor_message.h"
 #include "server/stream/stream_server.h"
 
 namespace vistream {
@@ -193,6 +194,7 @@ void Session::onHello(const Hello& hello) {
     budget_ = caps->memory_budget_bytes();
     wantsGeometry_ = caps->wants_geometry();
     wantsAvatars_ = caps->wants_avatars();
+    wantsImpostors_ = caps->wants_impostors() && world_.hasImpostors() && wantsGeometry_;
   }
   state_ = State::Active;
   StreamSchedulerConfig sc;
@@ -206,6 +208,7 @@ void Session::onHello(const Hello& hello) {
   sc.coalesceBytes = std::min<size_t>(8u << 10, cfg.batchBytes);
   sc.coarseFirst = world_.coarseFirst();
   sc.unculledAfterS = cfg.unculledAfterS;
+  sc.impostors = wantsImpostors_;
   scheduler_ = std::make_unique<StreamScheduler>(world_, sc, radius_, budget_);
   {
     std::lock_guard lock(snapshotMutex_);
@@ -252,6 +255,7 @@ void Session::onHello(const Hello& hello) {
   const QuantizationGrid quantization = QuantizationGrid::forBounds(b);  // as every Geometry's
   w.quant_origin = std::make_unique<Vec3d>(toWire(quantization.origin));
   w.quant_step = quantization.step;
+  w.impostors = wantsImpostors_;
   if (const auto& avatars = cfg.avatarModels; avatars && !avatars->models.empty()) {
     for (const ServedAvatarModel& m : avatars->models) {
       auto info = std::make_unique<AvatarModelInfoT>();
@@ -605,6 +609,63 @@ void Session::sendReadyCells() {
   if (!cells.empty()) send(std::make_shared<const std::vector<uint8_t>>(encodeCellReady(cells)));
 }
 
+bool Session::sendImpostors() {
+  const std::vector<uint32_t>& needed = scheduler_->neededCells();
+  if (needed.empty()) return false;
+  if (needed.front() != impostorCurrent_) {
+    impostorCurrent_ = needed.front();
+    batchesInCell_ = 0;
+  }
+  // The current cell's impostors after its first batch (the faces in view
+  // go first); the cells ahead only when no geometry is due. Never more
+  // cells than the client keeps.
+  const size_t reach = std::min(needed.size(), wire::kImpostorCellsHeld);
+  for (size_t k = 0; k < reach; ++k) {
+    const uint32_t cell = needed[k];
+    if (std::find(impostorCells_.begin(), impostorCells_.end(), cell) != impostorCells_.end())
+      continue;
+    const bool due =
+        k == 0 ? batchesInCell_ > 0 || !scheduler_->worthABatch() : !scheduler_->worthABatch();
+    if (!due) return false;
+    impostorCells_.push_back(cell);
+    if (impostorCells_.size() > wire::kImpostorCellsHeld) impostorCells_.pop_front();
+    produceInFlight_ = true;
+    runFirst([self = shared_from_this(), cell] {
+      const std::shared_ptr<const CellRecord> record = self->world_.impostorRecord(cell);
+      std::vector<std::shared_ptr<const std::vector<uint8_t>>> frames;
+      wire::ImpostorMessage m;
+      m.cell = self->world_.grid().cellAt(cell);
+      m.why = record ? record->why : std::string("the impostor bake did not visit this cell");
+      if (!record || record->impostors.empty()) {
+        frames.push_back(
+            std::make_shared<const std::vector<uint8_t>>(wire::encodeImpostorMessage(m)));
+      } else {
+        m.count = uint32_t(record->impostors.size());
+        for (size_t i = 0; i < record->impostors.size(); ++i) {
+          const StoredImpostor& s = record->impostors[i];
+          m.index = uint32_t(i);
+          m.sector = s.sector;
+          m.band = s.band;
+          m.replacedFaces = s.faces;
+          m.data = s.bytes;
+          frames.push_back(
+              std::make_shared<const std::vector<uint8_t>>(wire::encodeImpostorMessage(m)));
+          m.why.clear();  // said with the first
+        }
+      }
+      asio::post(self->strand_, [self, frames = std::move(frames)] {
+        self->produceInFlight_ = false;
+        if (self->state_ != State::Active) return;
+        // One frame a pump, below the outbox's watermark like geometry.
+        self->impostorFrames_.insert(self->impostorFrames_.end(), frames.begin(), frames.end());
+        self->pump();
+      });
+    });
+    return true;
+  }
+  return false;
+}
+
 void Session::pump() {
   const StreamServerConfig& cfg = server_.config();
   if (state_ != State::Active || cfg.pvsOnly || !wantsGeometry_ || !scheduler_ ||
@@ -637,8 +698,20 @@ void Session::pump() {
     evict.face_ids = std::move(evicted);
     send(std::make_shared<const std::vector<uint8_t>>(encodeMessage(std::move(evict))));
   }
+  // Pending impostor frames take turns with geometry that is due, so a
+  // cell's megabytes of impostors do not hold back the faces of the next.
+  if (!impostorFrames_.empty() && (impostorTurn_ || !scheduler_->worthABatch())) {
+    impostorTurn_ = false;
+    const auto frame = impostorFrames_.front();
+    impostorFrames_.pop_front();
+    tokens_ -= double(frame->size());
+    return send(frame);  // the write's completion pumps again
+  }
+  if (wantsImpostors_ && impostorFrames_.empty() && sendImpostors()) return;
   std::vector<uint32_t> batch = scheduler_->takeBatch();
   if (batch.empty()) return sendReadyCells();
+  ++batchesInCell_;
+  impostorTurn_ = true;
   produceInFlight_ = true;
   runFirst([self = shared_from_this(), batch = std::move(batch)] {
     std::vector<FaceTriangles> faces;

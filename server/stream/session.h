@@ -4,7 +4,9 @@
 // Error and closes). Then the client sends Pose whenever it moves; the server
 // streams Geometry for the faces of the client's current cell first (those
 // visible from the pose before the rest), then the cells ahead of it, sends
-// CellReady when the client holds a cell's whole face set, Evict when the
+// CellReady when the client holds a cell's whole face set, ImpostorData (when
+// the Hello asked for impostors and the server has them) for the current
+// cell after its first batch and for the cells ahead when nothing else is due, Evict when the
 // client's memory budget would be exceeded, Avatar updates and Stats. A
 // PvsRequest is answered with a PvsReply at any time after Welcome. Bye
 // from either side ends the session.
@@ -105,6 +107,9 @@ class Session : public std::enable_shared_from_this<Session> {
   void requestFaceSets();
   void maybeCull();
   void sendReadyCells();
+  // Sends the impostors of the next needed cell the client does not hold,
+  // if one is due now; true if it started.
+  bool sendImpostors();
   // Runs `job` on the workers before any visibility computation waiting.
   void runFirst(std::function<void()> job);
 
@@ -132,6 +137,16 @@ class Session : public std::enable_shared_from_this<Session> {
   double statsIntervalS_ = 0.0;  // seconds between Stats frames (the client's, or the server's)
   uint64_t budget_ = 0;
   bool wantsGeometry_ = true, wantsAvatars_ = true;
+  // Impostors (the client asked, the server has them): the cells whose
+  // impostors the client holds, oldest first, as the client keeps them
+  // (at most wire::kImpostorCellsHeld); batches sent since the current cell
+  // changed (its impostors go after its first batch).
+  bool wantsImpostors_ = false;
+  std::deque<uint32_t> impostorCells_;
+  std::deque<std::shared_ptr<const std::vector<uint8_t>>> impostorFrames_;  // made, not yet queued
+  uint32_t impostorCurrent_ = UINT32_MAX;
+  unsigned batchesInCell_ = 0;
+  bool impostorTurn_ = false;  // the next pending impostor frame goes before the next batch
 
   // Pose (as last received; the scheduler has its own copy).
   bool hasPose_ = false;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 
 namespace vistream {
 
@@ -198,6 +199,16 @@ bool StreamScheduler::onFaceSet(uint32_t cell, FaceListPtr faces, CellLevel leve
   for (CellLevel looser : {CellLevel::Coarse, CellLevel::Unculled})
     if (uint8_t(looser) > uint8_t(level)) requested_.erase(requestKey(cell, looser));
   levels_[cell] = level;
+  // Impostors stand in for the far faces they replace: those are not sent.
+  if (config_.impostors) {
+    const FaceListPtr replaced = world_.replacedFaces(cell);
+    if (!replaced->empty()) {
+      auto kept = std::make_shared<FaceList>();
+      std::set_difference(faces->begin(), faces->end(), replaced->begin(), replaced->end(),
+                          std::back_inserter(*kept));
+      faces = std::move(kept);
+    }
+  }
   // Announced ready with a looser set: the client held a superset. Should
   // the budget have kept some of the tighter set back, the cell is announced
   // again once whole.

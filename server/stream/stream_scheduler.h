@@ -51,6 +51,9 @@
 // - Memory budget: a face that would take the client over its budget is not
 //   sent; above 90% of the budget, faces outside every needed cell are
 //   evicted, farthest first, down to 70%.
+// - Impostors (config.impostors): a cell's face set leaves out the faces its
+//   impostors replace (StreamWorld::replacedFaces); the session sends the
+//   impostors themselves (session.h).
 // - CellReady once the client holds every face of a needed cell (again after
 //   an eviction took some of them).
 // - Coalescing (coalesceBytes > 0): a small batch waits while nothing in it
@@ -95,6 +98,9 @@ struct StreamSchedulerConfig {
   // bigcity (0.15-0.35 s on one core, 20 clients), so a client alone gets
   // the PVS rather than the larger unculled set.
   double unculledAfterS = 0.75;
+  // The client draws the impostors of its cells (StreamWorld::hasImpostors):
+  // a cell's face set leaves out the faces its impostors replace.
+  bool impostors = false;
 };
 
 class StreamScheduler {

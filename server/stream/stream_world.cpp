@@ -65,6 +65,22 @@ StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
     bo.cellSize = glm::vec3(options.cellSize);
     grid_ = bakeGrid(scene_, statics_->freeSpace, bo);
   }
+  if (!options.impostorDatabase.empty()) {
+    if (!database_)
+      throwInputError(
+          "--impostor-db {} needs --pvs-db: its cells are those of the PVS database it "
+          "was baked from",
+          options.impostorDatabase.string());
+    impostors_.emplace(ImpostorDatabase::open(options.impostorDatabase));
+    if (!impostors_->header().pvs.compatible(database_->header()))
+      throwInputError(
+          "--impostor-db {}: baked from another PVS database (scene '{}', {} cells) "
+          "than --pvs-db {}",
+          options.impostorDatabase.string(), impostors_->header().pvs.sceneName,
+          impostors_->cellCount(), options.pvsDatabase.string());
+    spdlog::info("impostors of {} cells from {}", impostors_->cellCount(),
+                 options.impostorDatabase.string());
+  }
   VS_CHECK_LT(grid_.cellCount(), size_t(kCoarseKey));  // keys leave the top bit for coarse cells
   culling_ = std::make_unique<CullingScene>(scene_);
 
@@ -338,6 +354,39 @@ StreamWorld::CacheStats StreamWorld::cacheStats() const {
           coarseComputed_,
           pvsCache_->dropped() + faceSetCache_->dropped(),
           unculledComputed_};
+}
+
+StreamWorld::ImpostorEntry StreamWorld::impostorEntry(uint32_t linearCell) const {
+  if (!impostors_) return {nullptr, std::make_shared<const FaceList>()};
+  {
+    std::lock_guard lock(impostorMutex_);
+    if (auto it = impostorCells_.find(linearCell); it != impostorCells_.end()) return it->second;
+  }
+  // Decoded outside the lock (a record holds megabytes of impostors);
+  // two threads decoding the same cell at once keep the first.
+  ImpostorEntry entry;
+  auto replaced = std::make_shared<FaceList>();
+  if (std::optional<CellRecord> record = impostors_->cell(linearCell)) {
+    for (const StoredImpostor& s : record->impostors)
+      replaced->insert(replaced->end(), s.faces.begin(), s.faces.end());
+    std::sort(replaced->begin(), replaced->end());
+    replaced->erase(std::unique(replaced->begin(), replaced->end()), replaced->end());
+    entry.record = std::make_shared<const CellRecord>(std::move(*record));
+  }
+  entry.replaced = std::move(replaced);
+  std::lock_guard lock(impostorMutex_);
+  // Bounded: the records of the cells clients stand in and ahead of them;
+  // past the bound the map starts afresh (a record is decoded again on demand).
+  if (impostorCells_.size() >= kImpostorCellsKept) impostorCells_.clear();
+  return impostorCells_.emplace(linearCell, std::move(entry)).first->second;
+}
+
+std::shared_ptr<const CellRecord> StreamWorld::impostorRecord(uint32_t linearCell) const {
+  return impostorEntry(linearCell).record;
+}
+
+FaceListPtr StreamWorld::replacedFaces(uint32_t linearCell) const {
+  return impostorEntry(linearCell).replaced;
 }
 
 }  // namespace vistream

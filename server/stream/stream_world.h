@@ -54,6 +54,7 @@
 #include "common/spatial/xz_grid.h"
 #include "common/world/static_world.h"
 #include "protocol/geometry/geometry_codec.h"
+#include "server/impostor/impostor_database.h"
 #include "server/stream/async_cache.h"
 #include "server/visibility/epsilon_pvs.h"
 #include "server/visibility/hierarchical_culling.h"
@@ -69,8 +70,11 @@ const char* streamPolicyName(StreamPolicy p);
 
 struct StreamWorldOptions {
   std::filesystem::path pvsDatabase;  // empty: compute every PVS on demand
-  float cellSize = 4.0f;              // without a database (metres), the paper's scale
-  GroundChoice ground;  // without a database: the free space's ground (static_world.h)
+  // Impostors for clients that want them (server/impostor/impostor_database.h);
+  // baked from pvsDatabase, which it needs. Empty: none.
+  std::filesystem::path impostorDatabase;
+  float cellSize = 4.0f;  // without a database (metres), the paper's scale
+  GroundChoice ground;    // without a database: the free space's ground (static_world.h)
   size_t pvsCacheCells = 4096;
   size_t faceSetCacheEntries = 4096;
   // Memory bounds of the two caches (face IDs at 4 bytes each). Clients pick
@@ -194,6 +198,16 @@ class StreamWorld {
   CacheStats cacheStats() const;
   bool hasDatabase() const { return database_.has_value(); }
 
+  // ---- impostors (with an impostor database) ------------------------------------
+  bool hasImpostors() const { return impostors_.has_value(); }
+  // A cell's impostor record (why, and its impostors with the faces they
+  // replace), or null when the bake did not visit the cell. Decoded once per
+  // cell and kept (bounded); thread-safe.
+  std::shared_ptr<const CellRecord> impostorRecord(uint32_t linearCell) const;
+  // The faces the cell's impostors replace (sorted; empty without impostors):
+  // what a client drawing those impostors is not sent as geometry.
+  FaceListPtr replacedFaces(uint32_t linearCell) const;
+
  private:
   // PVS cache keys: a fine cell's linear index, or kCoarseKey | the linear
   // index of its block's first cell.
@@ -222,6 +236,15 @@ class StreamWorld {
   ViewCellGrid grid_;
   GroundPlane ground_;
   std::optional<PvsDatabase> database_;
+  std::optional<ImpostorDatabase> impostors_;
+  struct ImpostorEntry {
+    std::shared_ptr<const CellRecord> record;
+    FaceListPtr replaced;
+  };
+  mutable std::mutex impostorMutex_;
+  mutable std::unordered_map<uint32_t, ImpostorEntry> impostorCells_;  // decoded records (bounded)
+  ImpostorEntry impostorEntry(uint32_t linearCell) const;
+  static constexpr size_t kImpostorCellsKept = 64;
   WorkQueue work_;  // before the caches, which submit to it
   std::unique_ptr<CullingScene> culling_;
   std::once_flag pvsOnce_;

@@ -17,14 +17,15 @@
 namespace vistream {
 namespace {
 
-static_assert(sizeof(PixelCounts) == 6 * sizeof(size_t));
-static_assert(sizeof(StageTimes) == 9 * sizeof(double));
+static_assert(sizeof(PixelCounts) == 7 * sizeof(size_t));
+static_assert(sizeof(StageTimes) == 10 * sizeof(double));
 
 // JSON key -> table label.
 const std::map<std::string, std::string> kPixelFields = {
-    {"polygon", "covered by polygons"},  {"horizon", "culled by horizon"},
-    {"cache", "taken from the cache"},   {"ray_hit", "ray cast and hit"},
-    {"ray_miss", "ray cast and missed"}, {"background", "background (no far field)"},
+    {"polygon", "covered by polygons"},   {"horizon", "culled by horizon"},
+    {"cache", "taken from the cache"},    {"ray_hit", "ray cast and hit"},
+    {"ray_miss", "ray cast and missed"},  {"background", "background (no far field)"},
+    {"impostor", "drawn from impostors"},
 };
 const std::map<std::string, std::string> kStageFields = {
     {"near_select", "near-field selection"},
@@ -35,6 +36,7 @@ const std::map<std::string, std::string> kStageFields = {
     {"cache", "cache planning"},
     {"raycast", "ray casting"},
     {"compose", "composition"},
+    {"impostors", "impostor splatting"},
     {"total", "frame"},
 };
 
@@ -51,6 +53,7 @@ FrameRecord frame(size_t k) {
   p.rayHit = k * 100 + 40;
   p.rayMiss = k * 100 + 50;
   p.background = k * 100 + 60;
+  p.impostor = k * 100 + 70;
   StageTimes& t = f.report.ms;
   const double base = double(k);
   t.nearSelect = base + 0.125;
@@ -61,6 +64,7 @@ FrameRecord frame(size_t k) {
   t.cache = base + 0.625;
   t.raycast = base + 0.75;
   t.compose = base + 0.875;
+  t.impostors = base + 0.9375;
   t.total = base + 1.0;
   return f;
 }
@@ -68,12 +72,14 @@ FrameRecord frame(size_t k) {
 // Values of frame(k) by JSON key, written out again.
 std::map<std::string, double> pixelValues(double k) {
   return {{"polygon", k * 100 + 10}, {"horizon", k * 100 + 20},  {"cache", k * 100 + 30},
-          {"ray_hit", k * 100 + 40}, {"ray_miss", k * 100 + 50}, {"background", k * 100 + 60}};
+          {"ray_hit", k * 100 + 40}, {"ray_miss", k * 100 + 50}, {"background", k * 100 + 60},
+          {"impostor", k * 100 + 70}};
 }
 std::map<std::string, double> stageValues(double k) {
   return {{"near_select", k + 0.125}, {"near_draw", k + 0.25}, {"shade", k + 0.3125},
           {"opacity", k + 0.375},     {"horizon", k + 0.5},    {"cache", k + 0.625},
-          {"raycast", k + 0.75},      {"compose", k + 0.875},  {"total", k + 1.0}};
+          {"raycast", k + 0.75},      {"compose", k + 0.875},  {"impostors", k + 0.9375},
+          {"total", k + 1.0}};
 }
 
 TEST(FrameReport, JsonHasEveryPixelClassAndStageTimeUnderItsKey) {

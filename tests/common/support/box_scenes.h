@@ -111,4 +111,15 @@ struct GroundAndBoxesObj {
   int base = 5;  // the OBJ index of the next box's first vertex
 };
 
+// An OBJ of 600 m of ground with a row of eight boxes 120-170 m ahead of
+// the origin (-Z): street cells round the origin whose far field is the
+// row (the impostor tests' scene).
+inline std::string farRowObj() {
+  GroundAndBoxesObj o(-300, -300, 300, 300);
+  for (int k = 0; k < 8; ++k)
+    o.box("far" + std::to_string(k), 15 + 5 * k, -170 + 3 * (k % 3), 19 + 5 * k, -120,
+          8 + 3 * (k % 4));
+  return o.obj;
+}
+
 }  // namespace vistream::testing

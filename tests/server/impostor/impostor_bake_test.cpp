@@ -4,17 +4,21 @@
 // microgeometry that changes colour across the cell, a cell touching its
 // box, coordinates far from the origin. Oracles: random rays from the cell to
 // the box, a 1D search over the symmetric triangle, and per-pixel ray casts
-// of the impostor's own geometry.
+// of the impostor's own geometry. Then the client's pipeline drawing an
+// impostor: against a ray-cast reference of the whole scene, with held
+// geometry in front of it, and outside its cell.
 #include "server/impostor/impostor_bake.h"
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <cmath>
 #include <glm/gtc/constants.hpp>
 #include <random>
 
+#include "client/farfield/pipeline.h"
 #include "client/render/camera.h"
 #include "client/render/impostor_splat.h"
 #include "common/core/error.h"
@@ -499,6 +503,158 @@ TEST(ImpostorBake, RefusesAnImpostorTooLargeToSample) {
   o = quickOptions(320, 240);
   o.resolutionFactor = 0.0f;
   EXPECT_THROW(bakeImpostor(s.view(), cell, boundsOf(s.triangles), s.all, o), InputError);
+}
+
+// ---- the client's pipeline drawing impostors (client/farfield/pipeline.h) ----
+
+// The block of buildingBlock() beyond a far blocker (a tower 150 m ahead,
+// beyond d but not part of the impostor) and a near box: the client holds
+// the blocker and the near box, and the block only as its impostor.
+struct ClientView {
+  ColouredScene full;
+  RenderGeometry held;  // what a connected client holds: everything but the block
+  std::vector<uint32_t> block;
+  std::shared_ptr<ImpostorSet> set = std::make_shared<ImpostorSet>();
+  Box3f cell{{-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f}};
+
+  ClientView() {
+    full = buildingBlock();
+    const size_t blockTriangles = full.triangles.size();
+    for (uint32_t t = 0; t < blockTriangles; ++t) block.push_back(t);
+    // Rebuild with the blocker and the near box after the block's triangles.
+    ColouredScene s;
+    s.scene = full.scene;
+    addBox(s.scene, "blocker", {-12.0f, 0.0f, -160.0f}, {-2.0f, 40.0f, -150.0f});
+    addBox(s.scene, "near", {8.0f, 0.0f, -30.0f}, {10.0f, 3.0f, -28.0f});
+    s.finish([](size_t t, const glm::vec3& n) {
+      const glm::vec3 u = glm::normalize(n);
+      return glm::u8vec3(uint8_t(128 + 100 * u.x), uint8_t(128 + 100 * u.y),
+                         uint8_t(100 + (t * 37) % 120));
+    });
+    full = std::move(s);
+    for (size_t t = blockTriangles; t < full.triangles.size(); ++t) {
+      for (int k = 0; k < 3; ++k) {
+        held.triangles.positions.push_back(full.triangles.vertex(t, k));
+        held.bounds.extend(full.triangles.vertex(t, k));
+      }
+      held.triangles.faceIds.push_back(full.triangles.faceIds[t]);
+      held.triangles.objectIds.push_back(full.triangles.objectIds[t]);
+      held.triangles.degenerate.push_back(full.triangles.degenerate[t]);
+      held.lighting.appendFrom(full.lighting, t);
+    }
+    held.haze.scale = 0.0f;
+    Box3f box;
+    for (uint32_t t : block) {
+      box.extend(full.triangles.triangleBounds(t).lo);
+      box.extend(full.triangles.triangleBounds(t).hi);
+    }
+    set->cell = cell;
+    set->impostors.push_back(std::make_shared<const Impostor>(
+        bakeImpostor(full.view(), cell, box, full.facingCell(cell), quickOptions(320, 240))));
+    set->expected = 1;
+  }
+  static PipelineOptions options(RenderMode mode) {
+    PipelineOptions o;
+    o.mode = mode;
+    o.nearDistance = 50.0f;
+    o.polygonBudget = 0;  // always split at d
+    o.cache = false;
+    return o;
+  }
+  // The reference: every triangle (block included) ray cast.
+  ImageRgb8 reference(const Camera& c) const {
+    RenderGeometry g;
+    g.triangles = full.triangles;
+    g.lighting = full.lighting;
+    g.haze.scale = 0.0f;
+    g.bounds = boundsOf(full.triangles);
+    FrameRenderer r(g, options(RenderMode::RaycastAll));
+    ImageRgb8 out;
+    r.render(c, out);
+    return out;
+  }
+};
+
+Camera towardsTheBlock(const glm::vec3& eye) {
+  Camera c;
+  c.width = 320;
+  c.height = 240;
+  c.eye = eye;
+  c.pitchDeg = 3.0f;
+  return c;
+}
+
+TEST(ImpostorPipeline,
+     DrawsTheImpostorWhereTheClientHoldsNoGeometryAndCutsTheErrorAgainstTheReference) {
+  const ClientView v;
+  for (const glm::vec3& eye : {glm::vec3(0.0f, 2.0f, 0.0f), glm::vec3(-5.0f, 1.2f, 5.0f)}) {
+    const Camera c = towardsTheBlock(eye);
+    const ImageRgb8 reference = v.reference(c);
+    FrameRenderer on(v.held, ClientView::options(RenderMode::Pipeline));
+    on.setImpostors(v.set);
+    ImageRgb8 withImpostors, without;
+    const FrameReport rep = on.render(c, withImpostors);
+    EXPECT_TRUE(rep.impostorsRan) << rep.impostorsWhy;
+    EXPECT_GT(rep.pixels.impostor, 500u);
+    EXPECT_EQ(rep.impostorsDrawn, 1u);
+    FrameRenderer off(v.held, ClientView::options(RenderMode::ImpostorOff));
+    off.setImpostors(v.set);
+    const FrameReport offRep = off.render(c, without);
+    EXPECT_FALSE(offRep.impostorsRan);
+    EXPECT_EQ(offRep.pixels.impostor, 0u);
+    EXPECT_EQ(offRep.impostorsWhy, "impostor-off mode");
+    // Pixels more than 48 levels off the reference in some channel: the
+    // block's pixels without impostors; edges and a few texels with them.
+    auto wrong = [&](const ImageRgb8& image) {
+      size_t n = 0;
+      for (int y = 0; y < c.height; ++y)
+        for (int x = 0; x < c.width; ++x) {
+          const glm::ivec3 d =
+              glm::abs(glm::ivec3(image.at(x, y)) - glm::ivec3(reference.at(x, y)));
+          n += std::max({d.x, d.y, d.z}) > 48;
+        }
+      return n;
+    };
+    const size_t wrongWith = wrong(withImpostors), wrongWithout = wrong(without);
+    EXPECT_GT(wrongWithout, 400u);
+    EXPECT_LT(wrongWith * 2, wrongWithout) << "with " << wrongWith << ", without " << wrongWithout;
+  }
+}
+
+TEST(ImpostorPipeline, HeldGeometryInFrontOfTheImpostorHidesIt) {
+  const ClientView v;
+  const Camera c = towardsTheBlock({0.0f, 2.0f, 0.0f});
+  FrameRenderer r(v.held, ClientView::options(RenderMode::Pipeline));
+  r.setImpostors(v.set);
+  ImageRgb8 image;
+  r.render(c, image);
+  const ImageRgb8 reference = v.reference(c);
+  // Pixels whose centre ray hits the blocker (held, beyond d) show it.
+  const auto rays = makeEmbreeRayQuery(v.held.triangles);
+  size_t blocker = 0, shown = 0;
+  for (int y = 0; y < c.height; y += 2)
+    for (int x = 0; x < c.width; x += 2) {
+      const glm::vec3 dir = c.rayDirection(float(x) + 0.5f, float(y) + 0.5f);
+      const Hit h = rays->firstHit(Ray{c.eye, dir, 0.0f, 1e30f});
+      if (!h.valid() || h.t * glm::length(dir) < 140.0f) continue;  // only the blocker's pixels
+      ++blocker;
+      shown += image.at(x, y) == reference.at(x, y);
+    }
+  ASSERT_GT(blocker, 100u);
+  EXPECT_GT(double(shown), 0.98 * double(blocker));
+}
+
+TEST(ImpostorPipeline, SaysWhyWhenTheViewerIsOutsideTheCellOfItsImpostors) {
+  const ClientView v;
+  const Camera c = towardsTheBlock({0.0f, 2.0f, 20.0f});
+  FrameRenderer r(v.held, ClientView::options(RenderMode::Pipeline));
+  ImageRgb8 image;
+  EXPECT_EQ(r.render(c, image).impostorsWhy, "no impostors held for the viewer's cell");
+  r.setImpostors(v.set);
+  const FrameReport rep = r.render(c, image);
+  EXPECT_FALSE(rep.impostorsRan);
+  EXPECT_NE(rep.impostorsWhy.find("not the viewer's"), std::string::npos) << rep.impostorsWhy;
+  EXPECT_EQ(rep.pixels.impostor, 0u);
 }
 
 }  // namespace

@@ -23,15 +23,6 @@ namespace {
 namespace fs = std::filesystem;
 using testing::TempDir;
 
-// Street cells round the origin and, 120-170 m ahead, a row of boxes.
-std::string rowScene() {
-  testing::GroundAndBoxesObj o(-300, -300, 300, 300);
-  for (int k = 0; k < 8; ++k)
-    o.box("far" + std::to_string(k), 15 + 5 * k, -170 + 3 * (k % 3), 19 + 5 * k, -120,
-          8 + 3 * (k % 4));
-  return o.obj;
-}
-
 std::string readAll(const fs::path& p) {
   std::ifstream f(p, std::ios::binary);
   return std::string((std::istreambuf_iterator<char>(f)), {});
@@ -44,7 +35,7 @@ struct Baked {
   fs::path pvsPath;
 
   Baked() {
-    const fs::path obj = dir.write("row.obj", rowScene());
+    const fs::path obj = dir.write("row.obj", testing::farRowObj());
     scene = loadScene(obj);
     const StaticWorld statics = buildStaticWorld(scene, {});
     EpsilonPvs pvs(scene);

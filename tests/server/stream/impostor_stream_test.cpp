@@ -1,0 +1,148 @@
+// Impostors over the wire (server/stream/session.h, --impostor-db): a client
+// whose Hello asks for impostors gets those of its cell, as the impostor
+// database holds them, and none of the faces they replace as geometry; a
+// client that does not ask gets those faces and no impostor. Oracle: the
+// impostor database's own record of the cell.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <set>
+
+#include "common/scene/scene_loader.h"
+#include "common/world/static_world.h"
+#include "protocol/impostor/impostor_codec.h"
+#include "protocol/impostor/impostor_message.h"
+#include "server/impostor/impostor_database.h"
+#include "server/visibility/pvs_bake.h"
+#include "tests/common/support/temp_dir.h"
+#include "tests/server/stream/stream_test_support.h"
+
+namespace vistream {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::ServerFixture;
+using testing::TestClient;
+using wire::Payload;
+
+struct BakedRow {
+  testing::TempDir dir;
+  fs::path obj, pvs, impostors;
+  BakedRow() {
+    obj = dir.write("row.obj", testing::farRowObj());
+    const Scene scene = loadScene(obj);
+    BakeOptions bake;
+    bake.cellSize = glm::vec3(4.0f);
+    bake.region = Box3f(scene.toLocal({-6.0, 0.0, -6.0}), scene.toLocal({6.0, 4.0, 6.0}));
+    pvs = dir / "row.pvsdb";
+    bakePvs(scene, EpsilonPvs(scene), buildStaticWorld(scene, {}).freeSpace, bake, pvs);
+    ImpostorBakeOptions o;
+    o.placement.nearDistance = 100.0f;
+    o.placement.minTriangles = 20;
+    o.impostor.maxRays = 8;
+    o.impostor.screen.width = 320;
+    o.impostor.screen.height = 240;
+    impostors = dir / "row.impdb";
+    bakeImpostorDatabase(ImpostorWorld(scene, ImpostorWorldOptions{}), PvsDatabase::open(pvs), o,
+                         impostors);
+  }
+};
+
+struct Received {
+  bool offered = false;
+  std::set<uint32_t> geometryFaces;
+  std::vector<wire::ImpostorMessage> impostors;  // in the order received
+};
+
+// Joins (radius 400 m: every face of the row is within it), stands at the
+// origin and reads until the server has nothing more to send for 1.5 s.
+Received walkIn(uint16_t port, bool wantsImpostors) {
+  TestClient c(port);
+  wire::HelloT h;
+  h.protocol_version = wire::kProtocolVersion;
+  h.capabilities = std::make_unique<wire::CapabilitiesT>();
+  h.capabilities->near_field_radius_m = 400.0f;
+  h.capabilities->wants_impostors = wantsImpostors;
+  h.capabilities->wants_avatars = false;
+  c.sendRaw(wire::encodeMessage(std::move(h)));
+  Received r;
+  const auto welcome = c.nextOf(Payload::Welcome);
+  EXPECT_TRUE(welcome);
+  if (!welcome) return r;
+  const wire::Welcome* w = wire::envelopeOf(*welcome)->payload_as_Welcome();
+  r.offered = w->impostors();
+  const wire::QuantizationGrid grid{wire::fromWire(*w->quant_origin()), w->quant_step()};
+  c.pose({0.5, 2.0, 0.5});
+  while (const auto f = c.next(1.5)) {
+    const wire::Envelope* e = wire::envelopeOf(*f);
+    if (e->payload_type() == Payload::Geometry) {
+      wire::DecodedGeometry g;
+      std::string error;
+      EXPECT_TRUE(wire::decodeGeometry(*e->payload_as_Geometry(), grid, g, error)) << error;
+      r.geometryFaces.insert(g.faces.begin(), g.faces.end());
+    } else if (e->payload_type() == Payload::ImpostorData) {
+      wire::ImpostorMessage m;
+      std::string error;
+      EXPECT_TRUE(readImpostorMessage(*e->payload_as_ImpostorData(), w->face_count(), m, error))
+          << error;
+      r.impostors.push_back(std::move(m));
+    }
+  }
+  return r;
+}
+
+TEST(ImpostorStream, AClientThatAsksGetsItsCellsImpostorsAndNotTheFacesTheyReplace) {
+  const BakedRow b;
+  StreamWorldOptions wo;
+  wo.pvsDatabase = b.pvs;
+  wo.impostorDatabase = b.impostors;
+  ServerFixture fx({}, loadScene(b.obj), wo);
+  const ImpostorDatabase db = ImpostorDatabase::open(b.impostors);
+  const glm::ivec3 cell =
+      *fx.world().cellOf(glm::vec3(0.5f, 2.0f, 0.5f) - glm::vec3(fx.world().scene().origin));
+  const auto record = db.cell(fx.world().grid().linearIndex(cell));
+  ASSERT_TRUE(record);
+  ASSERT_FALSE(record->impostors.empty()) << record->why;
+  std::set<uint32_t> replaced;
+  for (const StoredImpostor& s : record->impostors) replaced.insert(s.faces.begin(), s.faces.end());
+
+  const Received with = walkIn(fx.port(), true);
+  EXPECT_TRUE(with.offered);
+  // The current cell's impostors, in order, byte for byte as stored.
+  std::vector<const wire::ImpostorMessage*> ofCell;
+  for (const auto& m : with.impostors)
+    if (m.cell == cell) ofCell.push_back(&m);
+  ASSERT_EQ(ofCell.size(), record->impostors.size());
+  for (size_t i = 0; i < ofCell.size(); ++i) {
+    EXPECT_EQ(ofCell[i]->index, i);
+    EXPECT_EQ(ofCell[i]->count, record->impostors.size());
+    EXPECT_EQ(ofCell[i]->replacedFaces, record->impostors[i].faces);
+    EXPECT_EQ(ofCell[i]->data, record->impostors[i].bytes);
+    Impostor decoded;
+    std::string error;
+    EXPECT_TRUE(wire::decodeImpostor(ofCell[i]->data, decoded, error)) << error;
+  }
+  EXPECT_EQ(ofCell.front()->why, record->why);
+  EXPECT_FALSE(with.geometryFaces.empty());
+  for (const uint32_t f : replaced) EXPECT_FALSE(with.geometryFaces.count(f)) << "face " << f;
+
+  const Received without = walkIn(fx.port(), false);
+  EXPECT_FALSE(without.offered);
+  EXPECT_TRUE(without.impostors.empty());
+  for (const uint32_t f : replaced) EXPECT_TRUE(without.geometryFaces.count(f)) << "face " << f;
+}
+
+TEST(ImpostorStream, AnImpostorDatabaseWithoutItsPvsDatabaseIsRefused) {
+  const BakedRow b;
+  StreamWorldOptions wo;
+  wo.impostorDatabase = b.impostors;
+  try {
+    StreamWorld w(loadScene(b.obj), wo);
+    ADD_FAILURE() << "an impostor database without --pvs-db was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("needs --pvs-db"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace vistream
