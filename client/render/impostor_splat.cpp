@@ -17,6 +17,28 @@ size_t ImpostorSplatter::draw(const Impostor& impostor, ImageRgb8& out) {
   const glm::mat4 rp = camera_.rotationProjection();
   const glm::vec3 forward = camera_.forward();
   const float w = float(camera_.width), h = float(camera_.height);
+  // A box wholly outside the view (beyond a side by more than the 2x2
+  // footprint, or behind the near plane) has no point to draw.
+  {
+    const float mx = 1.0f + 4.0f / w, my = 1.0f + 4.0f / h;
+    int left = 0, right = 0, below = 0, above = 0, behind = 0;
+    for (int k = 0; k < 8; ++k) {
+      const glm::vec3 corner{k & 1 ? impostor.box.hi.x : impostor.box.lo.x,
+                             k & 2 ? impostor.box.hi.y : impostor.box.lo.y,
+                             k & 4 ? impostor.box.hi.z : impostor.box.lo.z};
+      const glm::vec3 rel = corner - camera_.eye;
+      if (!(glm::dot(rel, forward) > camera_.zNear)) {
+        ++behind;
+        continue;
+      }
+      const glm::vec4 clip = rp * glm::vec4(rel, 1.0f);
+      left += clip.x < -mx * clip.w;
+      right += clip.x > mx * clip.w;
+      below += clip.y < -my * clip.w;
+      above += clip.y > my * clip.w;
+    }
+    if (behind == 8 || left == 8 || right == 8 || below == 8 || above == 8) return 0;
+  }
   size_t landed = 0;
   for (size_t k = 0; k < impostor.size(); ++k) {
     const glm::vec3 rel = impostor.points[k] - camera_.eye;

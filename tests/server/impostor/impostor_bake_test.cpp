@@ -505,6 +505,43 @@ TEST(ImpostorBake, RefusesAnImpostorTooLargeToSample) {
   EXPECT_THROW(bakeImpostor(s.view(), cell, boundsOf(s.triangles), s.all, o), InputError);
 }
 
+// The splatter skips an impostor whose box is wholly out of view; a point
+// whose 2x2 footprint touches the screen is never skipped with it. Oracle:
+// every point projected on its own, from cameras looking at, beside and away
+// from the box.
+TEST(ImpostorSplat, SkipsOnlyBoxesWhollyOutOfView) {
+  const ColouredScene s = buildingBlock();
+  const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
+  const Impostor imp = bakeImpostor(s.view(), cell, boundsOf(s.triangles), s.facingCell(cell),
+                                    quickOptions(160, 120));
+  size_t culledViews = 0;
+  for (int k = 0; k < 24; ++k) {
+    Camera c;
+    c.width = 160;
+    c.height = 120;
+    c.eye = glm::vec3(0.0f, 2.0f, 0.0f);
+    c.yawDeg = float(k) * 15.0f;  // full turn: towards, beside and away from the block
+    c.pitchDeg = k % 3 == 0 ? 25.0f : 0.0f;
+    const glm::mat4 rp = c.rotationProjection();
+    size_t expected = 0;
+    for (const glm::vec3& p : imp.points) {
+      const glm::vec3 rel = p - c.eye;
+      if (!(glm::dot(rel, c.forward()) > c.zNear)) continue;
+      const glm::vec4 clip = rp * glm::vec4(rel, 1.0f);
+      const float px = (clip.x / clip.w * 0.5f + 0.5f) * float(c.width);
+      const float py = (0.5f - clip.y / clip.w * 0.5f) * float(c.height);
+      const int x0 = int(std::floor(px - 0.5f)), y0 = int(std::floor(py - 0.5f));
+      expected += x0 + 1 >= 0 && y0 + 1 >= 0 && x0 < c.width && y0 < c.height;
+    }
+    ImpostorSplatter splatter;
+    splatter.begin(c);
+    ImageRgb8 image(c.width, c.height);
+    EXPECT_EQ(splatter.draw(imp, image), expected) << "yaw " << c.yawDeg;
+    culledViews += expected == 0;
+  }
+  EXPECT_GT(culledViews, 8u);  // the views away from the block
+}
+
 // ---- the client's pipeline drawing impostors (client/farfield/pipeline.h) ----
 
 // The block of buildingBlock() beyond a far blocker (a tower 150 m ahead,
