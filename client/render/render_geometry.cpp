@@ -133,6 +133,18 @@ void RenderGeometry::shadeSpan(size_t t, const EyeTriangle& seen, const glm::vec
   }
 }
 
+void appendTriangle(RenderGeometry& to, const FlatTriangles& from, const LightingGrid& lighting,
+                    size_t t) {
+  for (int k = 0; k < 3; ++k) {
+    to.triangles.positions.push_back(from.vertex(t, k));
+    to.bounds.extend(from.vertex(t, k));
+  }
+  to.triangles.faceIds.push_back(from.faceIds[t]);
+  to.triangles.objectIds.push_back(from.objectIds[t]);
+  to.triangles.degenerate.push_back(from.degenerate[t]);
+  to.lighting.appendFrom(lighting, t);
+}
+
 void setBackdrop(RenderGeometry& g, const Backdrop& backdrop) {
   g.sky = backdrop.sky;
   g.ground = backdrop.ground;

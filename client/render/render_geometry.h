@@ -84,6 +84,10 @@ struct RenderGeometry {
 // empty: no cache).
 RenderGeometry renderGeometryFromScene(const Scene& scene, const LightingOptions& options = {},
                                        const std::filesystem::path& lightingCache = {});
+// Appends triangle t of `from` with its colours (`lighting`, parallel to
+// `from`) to `to`, and grows its bounds.
+void appendTriangle(RenderGeometry& to, const FlatTriangles& from, const LightingGrid& lighting,
+                    size_t t);
 // Takes the sky, ground and haze of a backdrop.
 void setBackdrop(RenderGeometry& g, const Backdrop& backdrop);
 // Recomputes bounds and gives every triangle one flat colour after

@@ -68,19 +68,8 @@ RenderGeometry StreamedGeometry::compacted() const {
   g.haze = geometry_.haze;
   g.groundY = geometry_.groundY;
   g.ground = geometry_.ground;
-  const FlatTriangles& from = geometry_.triangles;
-  FlatTriangles& to = g.triangles;
-  for (size_t t = 0; t < geometry_.size(); ++t) {
-    if (!alive_[t]) continue;
-    for (int k = 0; k < 3; ++k) {
-      to.positions.push_back(from.vertex(t, k));
-      g.bounds.extend(from.vertex(t, k));
-    }
-    to.faceIds.push_back(from.faceIds[t]);
-    to.objectIds.push_back(from.objectIds[t]);
-    to.degenerate.push_back(from.degenerate[t]);
-    g.lighting.appendFrom(geometry_.lighting, t);
-  }
+  for (size_t t = 0; t < geometry_.size(); ++t)
+    if (alive_[t]) appendTriangle(g, geometry_.triangles, geometry_.lighting, t);
   return g;
 }
 

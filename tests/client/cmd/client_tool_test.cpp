@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <string>
 
@@ -232,6 +233,33 @@ TEST(ClientTool, BadArgumentsGetAClearErrorAndANonZeroExit) {
   EXPECT_EQ(help.status, 0);
   EXPECT_NE(help.out.find("--headless"), std::string::npos);
   EXPECT_EQ(runTool("vistream-client-bench", "--help").status, 0);
+}
+
+// The impostor image benchmark on a small street cell of city1: every far
+// field it compares is measured against the same supersampled reference,
+// and the impostors must fill in most of what the client without them lacks.
+TEST(ClientTool, TheImpostorImageBenchComparesEveryFarFieldWithTheReference) {
+  vistream::testing::TempDir dir;
+  const fs::path png = dir.path() / "crops.png";
+  const auto r = runTool("bench_impostor_image",
+                         "--scene city1 --cell 0,1,0,4,3,4 --near-distance 40 --min-triangles 30 "
+                         "--frames 3 --size 120x90 --supersample 2 --json --png " +
+                             png.string());
+  ASSERT_EQ(r.status, 0) << r.err;
+  const nlohmann::json j = parseJson(r.out);
+  ASSERT_GT(j["impostors"].size(), 0u);
+  EXPECT_GT(j["footprint_pixels"].get<size_t>(), 0u);
+  std::map<std::string, double> mae;
+  for (const auto& m : j["modes"]) mae[m["mode"].get<std::string>()] = m["footprint_mae"];
+  ASSERT_EQ(mae.size(), 4u) << j["modes"].dump();
+  EXPECT_LT(2.0 * mae["impostors"], mae["held-only"]) << j["modes"].dump();
+  EXPECT_GT(mae["held-only"], 0.0);
+  const vistream::ImageRgb8 crops = vistream::readPng(png);
+  EXPECT_GT(crops.width, 4 * crops.height / 2);  // five crops side by side
+  const auto bad = runTool("bench_impostor_image", "--cell 1,2,3 --frames 2");
+  EXPECT_NE(bad.status, 0);
+  EXPECT_NE(bad.err.find("--cell"), std::string::npos) << bad.err;
+  EXPECT_EQ(runTool("bench_impostor_image", "--help").status, 0);
 }
 
 // Simulated users walk beside the path as Fox avatars: the JSON says per

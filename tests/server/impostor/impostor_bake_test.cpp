@@ -569,16 +569,8 @@ struct ClientView {
                          uint8_t(100 + (t * 37) % 120));
     });
     full = std::move(s);
-    for (size_t t = blockTriangles; t < full.triangles.size(); ++t) {
-      for (int k = 0; k < 3; ++k) {
-        held.triangles.positions.push_back(full.triangles.vertex(t, k));
-        held.bounds.extend(full.triangles.vertex(t, k));
-      }
-      held.triangles.faceIds.push_back(full.triangles.faceIds[t]);
-      held.triangles.objectIds.push_back(full.triangles.objectIds[t]);
-      held.triangles.degenerate.push_back(full.triangles.degenerate[t]);
-      held.lighting.appendFrom(full.lighting, t);
-    }
+    for (size_t t = blockTriangles; t < full.triangles.size(); ++t)
+      appendTriangle(held, full.triangles, full.lighting, t);
     held.haze.scale = 0.0f;
     Box3f box;
     for (uint32_t t : block) {

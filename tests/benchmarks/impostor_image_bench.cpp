@@ -1,0 +1,518 @@
+// bench_impostor_image: what point-based impostors (Wimmer 2001, chapter 5)
+// buy in the image, and what they cost in time, against the alternatives a
+// thin client has for the far field.
+//
+// One view cell of a scene is baked (the server's PVS and placement, as
+// `vistream-pvs impostors --cell` does); then a walk through the cell (the
+// cell's diagonal, the heading turning once round) is drawn five ways, each
+// frame against a ray-cast reference with 4x4 samples a pixel (box filter)
+// over every triangle of the scene:
+//   impostors    the connected client: the PVS without the faces the
+//                impostors replace, plus the impostors (the pipeline);
+//   geometry     the replaced faces drawn as raw polygons, one sample a pixel
+//                (the aliasing of the thesis's Figures 5.13-5.15);
+//   ray-cast     today's far field: the PVS in the pipeline, far field ray
+//                cast with the image cache and horizon tracing;
+//   held-only    the connected client without impostors (its far field is
+//                empty where the impostors' geometry was);
+// Error is measured on the impostors' footprint (pixels where any reference
+// sample meets a replaced face) and over the whole frame. `--sweep` bakes the
+// heaviest impostor once per knob setting (LDI resolution, point removal,
+// texture size, variance threshold) and reports the same error against bake
+// time and bytes.
+//
+// It lives with the tests because it needs both sides: the server's bake
+// and the client's renderers (server/ and client/ never include each other).
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <numeric>
+
+#include "client/app/walkthrough.h"
+#include "client/farfield/pipeline.h"
+#include "client/render/image.h"
+#include "client/render/impostor_splat.h"
+#include "common/cmd/cli.h"
+#include "common/core/median.h"
+#include "common/core/progress.h"
+#include "common/generate/scene_spec.h"
+#include "server/cmd/scene_boxes.h"
+#include "server/impostor/impostor_world.h"
+
+namespace vistream {
+namespace {
+
+using nlohmann::json;
+
+struct Args {
+  std::string scene = "bigcity";
+  std::string cell = "0,1,0,4,3,4";
+  size_t frames = 12;
+  std::string size = "320x240";
+  int supersample = 4;
+  std::string png;
+  bool json = false;
+  bool sweep = false;
+  ImpostorPlacementOptions placement;
+  std::string lightingCache = defaultLightingCacheDir().string();
+};
+
+// A subset of the world's triangles with their colours and the backdrop.
+RenderGeometry subset(const ImpostorScene& view, const std::vector<uint32_t>& triangles) {
+  RenderGeometry g;
+  for (uint32_t t : triangles) appendTriangle(g, view.triangles, view.lighting, t);
+  setBackdrop(g, view.backdrop);
+  g.groundY = view.groundY;
+  return g;
+}
+
+std::vector<uint32_t> without(const std::vector<uint32_t>& all, const std::vector<bool>& drop) {
+  std::vector<uint32_t> out;
+  for (uint32_t t : all)
+    if (!drop[t]) out.push_back(t);
+  return out;
+}
+
+// The reference frame: k x k rays a pixel over every triangle, box
+// filtered, and the footprint: pixels where a sample meets a marked triangle.
+struct Reference {
+  ImageRgb8 image;
+  std::vector<uint8_t> footprint;
+  size_t footprintPixels = 0;
+};
+
+Reference reference(const RenderGeometry& all, const RayQuery& rays,
+                    const std::vector<bool>& marked, const Camera& c, int k) {
+  Reference r;
+  r.image = ImageRgb8(c.width, c.height);
+  r.footprint.assign(size_t(c.width) * size_t(c.height), 0);
+  const Camera::PixelRays pr = c.pixelRays();
+  tbb::parallel_for(0, c.height, [&](int y) {
+    for (int x = 0; x < c.width; ++x) {
+      glm::vec3 sum(0.0f);
+      bool inFootprint = false;
+      for (int sy = 0; sy < k; ++sy)
+        for (int sx = 0; sx < k; ++sx) {
+          const glm::vec3 dir = pr.at(float(x) + (float(sx) + 0.5f) / float(k),
+                                      float(y) + (float(sy) + 0.5f) / float(k));
+          const Hit h = rays.firstHit(Ray{c.eye, dir, 0.0f, 1e30f});
+          glm::u8vec3 colour;
+          if (h.valid()) {
+            colour = all.colourAt(h.triangle, h.u, h.v, h.t * glm::length(dir));
+            inFootprint = inFootprint || marked[h.triangle];
+          } else {
+            colour = all.background(c.eye, dir);
+          }
+          sum += glm::vec3(colour);
+        }
+      r.image.set(x, y, glm::u8vec3(glm::round(sum / float(k * k))));
+      r.footprint[size_t(y) * size_t(c.width) + size_t(x)] = inFootprint;
+    }
+  });
+  r.footprintPixels = size_t(std::count(r.footprint.begin(), r.footprint.end(), uint8_t(1)));
+  return r;
+}
+
+// Sums of a frame's error against the reference (8-bit levels, the mean
+// over channels per pixel).
+struct ErrorSums {
+  double footAbs = 0, footSq = 0, frameAbs = 0;
+  size_t footPixels = 0, footWrong = 0, framePixels = 0;
+  void add(const ImageRgb8& image, const Reference& ref) {
+    for (int y = 0; y < image.height; ++y)
+      for (int x = 0; x < image.width; ++x) {
+        const glm::vec3 d = glm::abs(glm::vec3(image.at(x, y)) - glm::vec3(ref.image.at(x, y)));
+        const double e = (d.x + d.y + d.z) / 3.0;
+        frameAbs += e;
+        ++framePixels;
+        if (!ref.footprint[size_t(y) * size_t(image.width) + size_t(x)]) continue;
+        footAbs += e;
+        footSq += (double(d.x) * d.x + double(d.y) * d.y + double(d.z) * d.z) / 3.0;
+        ++footPixels;
+        footWrong += std::max({d.x, d.y, d.z}) > 32.0f;
+      }
+  }
+  double footMae() const { return footPixels ? footAbs / double(footPixels) : 0.0; }
+  double footRmse() const { return footPixels ? std::sqrt(footSq / double(footPixels)) : 0.0; }
+  double footWrongShare() const {
+    return footPixels ? double(footWrong) / double(footPixels) : 0.0;
+  }
+  double frameMae() const { return framePixels ? frameAbs / double(framePixels) : 0.0; }
+};
+
+struct ModeResult {
+  std::string name;
+  ErrorSums error;
+  std::vector<double> ms;
+  std::vector<ImageRgb8> frames;
+};
+
+std::vector<Camera> walk(const Box3f& cell, size_t frames, int width, int height) {
+  std::vector<Camera> out;
+  for (size_t k = 0; k < frames; ++k) {
+    const float s = frames > 1 ? float(k) / float(frames - 1) : 0.5f;
+    Camera c;
+    c.width = width;
+    c.height = height;
+    const glm::vec3 lo = glm::mix(cell.lo, cell.hi, 0.1f), hi = glm::mix(cell.lo, cell.hi, 0.9f);
+    c.eye = glm::mix(lo, hi, s);
+    c.eye.y = 0.5f * (cell.lo.y + cell.hi.y);
+    c.yawDeg = 360.0f * float(k) / float(frames);
+    c.pitchDeg = 2.0f;
+    out.push_back(c);
+  }
+  return out;
+}
+
+PipelineOptions pipelineOptions(RenderMode mode, float nearDistance) {
+  PipelineOptions o;
+  o.mode = mode;
+  o.nearDistance = nearDistance;
+  o.polygonBudget = 0;  // split at d, as a client of a large scene does
+  return o;
+}
+
+// Draws the walk with `renderer`, against the references.
+ModeResult runMode(const std::string& name, FrameRenderer& renderer,
+                   const std::vector<Camera>& cameras, const std::vector<Reference>& refs,
+                   bool keepFrames) {
+  ModeResult m;
+  m.name = name;
+  for (size_t i = 0; i < cameras.size(); ++i) {
+    ImageRgb8 image;
+    const auto start = std::chrono::steady_clock::now();
+    renderer.render(cameras[i], image);
+    m.ms.push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+            .count());
+    m.error.add(image, refs[i]);
+    if (keepFrames) m.frames.push_back(std::move(image));
+  }
+  return m;
+}
+
+// The crop of every mode's frame around the footprint, scaled 2x, side by side.
+ImageRgb8 crops(const Reference& ref, const std::vector<const ImageRgb8*>& frames) {
+  const int w = ref.image.width, h = ref.image.height;
+  int x0 = w, y0 = h, x1 = -1, y1 = -1;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (ref.footprint[size_t(y) * size_t(w) + size_t(x)]) {
+        x0 = std::min(x0, x);
+        y0 = std::min(y0, y);
+        x1 = std::max(x1, x);
+        y1 = std::max(y1, y);
+      }
+  if (x1 < 0) return {};
+  const int cw = std::min(w, std::max(96, x1 - x0 + 17)),
+            ch = std::min(h, std::max(72, y1 - y0 + 17));
+  const int cx = std::clamp((x0 + x1) / 2 - cw / 2, 0, w - cw);
+  const int cy = std::clamp((y0 + y1) / 2 - ch / 2, 0, h - ch);
+  std::vector<ImageRgb8> tiles;
+  for (const ImageRgb8* f : frames) {
+    ImageRgb8 t(cw * 2, ch * 2);
+    for (int y = 0; y < ch * 2; ++y)
+      for (int x = 0; x < cw * 2; ++x) t.set(x, y, f->at(cx + x / 2, cy + y / 2));
+    tiles.push_back(std::move(t));
+  }
+  return contactSheet(tiles, int(tiles.size()));
+}
+
+double medianOf(std::vector<double> v) {
+  return v.empty() ? 0.0 : median(v);
+}
+
+json errorJson(const ModeResult& m) {
+  return {{"mode", m.name},
+          {"footprint_mae", m.error.footMae()},
+          {"footprint_rmse", m.error.footRmse()},
+          {"footprint_wrong_share", m.error.footWrongShare()},
+          {"frame_mae", m.error.frameMae()},
+          {"median_frame_ms", medianOf(m.ms)}};
+}
+
+struct SweepRow {
+  std::string knob, value;
+  ImpostorOptions options;
+};
+
+std::vector<SweepRow> sweepRows(const ImpostorOptions& base) {
+  std::vector<SweepRow> rows;
+  auto add = [&](std::string knob, std::string value, auto&& change) {
+    SweepRow r{std::move(knob), std::move(value), base};
+    change(r.options);
+    rows.push_back(std::move(r));
+  };
+  add("defaults", "-", [](ImpostorOptions&) {});
+  for (float f : {0.5f, 0.7f, 1.4f})
+    add("resolution", fmt::format("{}", f), [f](ImpostorOptions& o) { o.resolutionFactor = f; });
+  add("removal", "off", [](ImpostorOptions& o) { o.removePoints = false; });
+  for (auto [tw, th] : {std::pair{1u, 1u}, {4u, 2u}, {16u, 4u}})
+    add("texture", fmt::format("{}x{}", tw, th), [tw, th](ImpostorOptions& o) {
+      o.textureWidth = tw;
+      o.textureHeight = th;
+    });
+  for (float v : {2.0f, 8.0f})
+    add("variance", fmt::format("{}", v), [v](ImpostorOptions& o) { o.varianceThreshold = v; });
+  return rows;
+}
+
+int run(const Args& a) {
+  const Box3d fileCell = parseFileBox(a.cell, "--cell");
+  const glm::ivec2 wh = parseImageSize(a.size);
+  const int width = wh.x, height = wh.y;
+  const Scene scene = openScene(a.scene);
+  warnIfOutsideScene(scene, fileCell, "--cell", a.cell);
+  const Box3f cell = toLocal(scene, fileCell);
+  const ImpostorWorld world(scene, {GroundChoice{}, LightingOptions{}, a.lightingCache});
+  const ImpostorScene view = world.view();
+  ImpostorOptions bake;
+  bake.screen.width = width;
+  bake.screen.height = height;
+
+  spdlog::info("baking the impostors of cell {} in {}", a.cell, scene.name);
+  const CellImpostors baked = world.bakeCell(cell, a.placement, bake);
+  if (baked.impostors.empty()) {
+    fmt::print(stderr, "bench_impostor_image: the cell has no impostor: {}\n", baked.placement.why);
+    return 1;
+  }
+  const std::vector<uint32_t> pvs = world.pvsTriangles(cell);
+  std::vector<bool> replaced(view.triangles.size(), false);
+  size_t impostorBytes = 0, geometryBytes = 0;
+  for (size_t i = 0; i < baked.impostors.size(); ++i) {
+    for (uint32_t t : world.trianglesOfFaces(baked.replacedFaces[i])) replaced[t] = true;
+    impostorBytes += baked.stats[i].bytes;
+    geometryBytes += baked.geometryBytes[i];
+  }
+  std::vector<uint32_t> every(view.triangles.size());
+  std::iota(every.begin(), every.end(), 0u);
+  const RenderGeometry all = subset(view, every);
+  const RenderGeometry pvsGeometry = subset(view, pvs);
+  const RenderGeometry held = subset(view, without(pvs, replaced));
+  auto set = std::make_shared<ImpostorSet>();
+  set->cell = cell;
+  for (const Impostor& imp : baked.impostors)
+    set->impostors.push_back(std::make_shared<const Impostor>(imp));
+  set->expected = uint32_t(baked.impostors.size());
+
+  const std::vector<Camera> cameras = walk(cell, a.frames, width, height);
+  const auto rays = makeEmbreeRayQuery(all.triangles);
+  std::vector<Reference> refs;
+  {
+    ProgressBar bar("reference frames", cameras.size());
+    for (const Camera& c : cameras) {
+      refs.push_back(reference(all, *rays, replaced, c, a.supersample));
+      bar.advance();
+    }
+    bar.finish();
+  }
+  const float d = a.placement.nearDistance;
+  const bool png = !a.png.empty();
+  std::vector<ModeResult> modes;
+  {
+    FrameRenderer r(held, pipelineOptions(RenderMode::Pipeline, d));
+    r.setImpostors(set);
+    modes.push_back(runMode("impostors", r, cameras, refs, png));
+  }
+  {
+    FrameRenderer r(pvsGeometry, pipelineOptions(RenderMode::GeometryAll, d));
+    modes.push_back(runMode("geometry", r, cameras, refs, png));
+  }
+  {
+    FrameRenderer r(pvsGeometry, pipelineOptions(RenderMode::ImpostorOff, d));
+    modes.push_back(runMode("ray-cast", r, cameras, refs, png));
+  }
+  {
+    FrameRenderer r(held, pipelineOptions(RenderMode::ImpostorOff, d));
+    modes.push_back(runMode("held-only", r, cameras, refs, png));
+  }
+  // The splat alone, per impostor: software points a second.
+  std::vector<double> splatMs(baked.impostors.size());
+  for (size_t i = 0; i < baked.impostors.size(); ++i) {
+    std::vector<double> ms;
+    for (const Camera& c : cameras) {
+      Camera towards = c;
+      const glm::vec3 to = baked.impostors[i].box.center() - c.eye;
+      towards.yawDeg = glm::degrees(std::atan2(-to.x, -to.z));
+      ImpostorSplatter s;
+      ImageRgb8 image(width, height);
+      const auto start = std::chrono::steady_clock::now();
+      s.begin(towards);
+      s.draw(baked.impostors[i], image);
+      ms.push_back(
+          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+              .count());
+    }
+    splatMs[i] = medianOf(ms);
+  }
+
+  if (png) {
+    size_t best = 0;
+    for (size_t i = 0; i < refs.size(); ++i)
+      if (refs[i].footprintPixels > refs[best].footprintPixels) best = i;
+    std::vector<const ImageRgb8*> frames{&refs[best].image};
+    for (const ModeResult& m : modes) frames.push_back(&m.frames[best]);
+    const ImageRgb8 sheet = crops(refs[best], frames);
+    if (sheet.width > 0) {
+      writePng(sheet, a.png);
+      spdlog::info("wrote {} (frame {}: reference, {})", a.png, best,
+                   "impostors, geometry, "
+                   "ray-cast, held-only");
+    }
+  }
+
+  // The knob sweep on the heaviest impostor.
+  json sweep = json::array();
+  if (a.sweep) {
+    size_t heaviest = 0;
+    for (size_t i = 0; i < baked.impostors.size(); ++i)
+      if (baked.placement.sites[baked.siteOf[i]].triangles.size() >
+          baked.placement.sites[baked.siteOf[heaviest]].triangles.size())
+        heaviest = i;
+    const ImpostorSite& site = baked.placement.sites[baked.siteOf[heaviest]];
+    std::vector<bool> mine(view.triangles.size(), false);
+    for (uint32_t t : world.trianglesOfFaces(baked.replacedFaces[heaviest])) mine[t] = true;
+    const RenderGeometry heldOne = subset(view, without(pvs, mine));
+    // Frames that see this impostor, their references marked by its faces.
+    std::vector<Camera> views;
+    std::vector<Reference> viewRefs;
+    for (const Camera& c : cameras) {
+      Camera towards = c;
+      const glm::vec3 to = site.box.center() - c.eye;
+      towards.yawDeg = glm::degrees(std::atan2(-to.x, -to.z));
+      views.push_back(towards);
+      viewRefs.push_back(reference(all, *rays, mine, towards, a.supersample));
+    }
+    ProgressBar bar("sweep", sweepRows(bake).size());
+    for (const SweepRow& row : sweepRows(bake)) {
+      ImpostorStats stats;
+      auto one = std::make_shared<ImpostorSet>();
+      one->cell = cell;
+      one->impostors.push_back(std::make_shared<const Impostor>(
+          bakeImpostor(view, cell, site.box, site.triangles, row.options, &stats)));
+      one->expected = 1;
+      FrameRenderer r(heldOne, pipelineOptions(RenderMode::Pipeline, d));
+      r.setImpostors(one);
+      const ModeResult m = runMode("impostor", r, views, viewRefs, false);
+      sweep.push_back({{"knob", row.knob},
+                       {"value", row.value},
+                       {"points", stats.points},
+                       {"points_per_pixel", stats.pointsPerPixel},
+                       {"bytes", stats.bytes},
+                       {"bake_s", stats.seconds},
+                       {"footprint_mae", m.error.footMae()},
+                       {"footprint_rmse", m.error.footRmse()},
+                       {"footprint_wrong_share", m.error.footWrongShare()},
+                       {"median_frame_ms", medianOf(m.ms)}});
+      bar.advance();
+    }
+    bar.finish();
+  }
+
+  json impostors = json::array();
+  for (size_t i = 0; i < baked.impostors.size(); ++i) {
+    const ImpostorSite& site = baked.placement.sites[baked.siteOf[i]];
+    const ImpostorStats& s = baked.stats[i];
+    impostors.push_back({{"sector", site.sector},
+                         {"band", site.band},
+                         {"triangles", site.triangles.size()},
+                         {"points", s.points},
+                         {"points_per_pixel", s.pointsPerPixel},
+                         {"bytes", s.bytes},
+                         {"geometry_bytes", baked.geometryBytes[i]},
+                         {"bake_s", s.seconds},
+                         {"splat_ms", splatMs[i]},
+                         {"splat_fps", splatMs[i] > 0 ? 1000.0 / splatMs[i] : 0.0}});
+  }
+  size_t footprint = 0;
+  for (const Reference& r : refs) footprint += r.footprintPixels;
+  json modesJson = json::array();
+  for (const ModeResult& m : modes) modesJson.push_back(errorJson(m));
+  if (a.json) {
+    std::cout << json{{"scene", scene.name},
+                      {"cell", a.cell},
+                      {"frames", cameras.size()},
+                      {"size", a.size},
+                      {"supersample", a.supersample},
+                      {"footprint_pixels", footprint},
+                      {"impostor_bytes", impostorBytes},
+                      {"geometry_bytes", geometryBytes},
+                      {"impostors", impostors},
+                      {"modes", modesJson},
+                      {"sweep", sweep}}
+                     .dump()
+              << "\n";
+    return 0;
+  }
+  fmt::print("{} cell {}: {} impostors ({} bytes; the faces they replace: {} bytes as geometry)\n",
+             scene.name, a.cell, baked.impostors.size(), impostorBytes, geometryBytes);
+  fmt::print("walk of {} frames at {}, reference {}x{} rays a pixel; footprint {} pixels\n\n",
+             cameras.size(), a.size, a.supersample, a.supersample, footprint);
+  fmt::print("  {:<10} {:>13} {:>14} {:>16} {:>10} {:>9}\n", "far field", "footprint MAE",
+             "footprint RMSE", "off > 32 levels", "frame MAE", "frame ms");
+  for (const ModeResult& m : modes)
+    fmt::print("  {:<10} {:>13.2f} {:>14.2f} {:>15.1f}% {:>10.2f} {:>9.2f}\n", m.name,
+               m.error.footMae(), m.error.footRmse(), 100.0 * m.error.footWrongShare(),
+               m.error.frameMae(), medianOf(m.ms));
+  fmt::print("\n  {:>6} {:>4} {:>9} {:>9} {:>7} {:>9} {:>10} {:>8} {:>9} {:>9}\n", "sector", "band",
+             "triangles", "points", "pts/px", "bytes", "geometry B", "bake s", "splat ms",
+             "splat fps");
+  for (const json& i : impostors)
+    fmt::print("  {:>6} {:>4} {:>9} {:>9} {:>7.2f} {:>9} {:>10} {:>8.2f} {:>9.2f} {:>9.0f}\n",
+               i["sector"].get<int>(), i["band"].get<int>(), i["triangles"].get<size_t>(),
+               i["points"].get<size_t>(), i["points_per_pixel"].get<double>(),
+               i["bytes"].get<size_t>(), i["geometry_bytes"].get<size_t>(),
+               i["bake_s"].get<double>(), i["splat_ms"].get<double>(),
+               i["splat_fps"].get<double>());
+  if (!sweep.empty()) {
+    fmt::print("\n  knob sweep on the heaviest impostor (error on its footprint):\n");
+    fmt::print("  {:<10} {:>6} {:>8} {:>7} {:>9} {:>7} {:>6} {:>7} {:>9}\n", "knob", "value",
+               "points", "pts/px", "bytes", "bake s", "MAE", "RMSE", "frame ms");
+    for (const json& r : sweep)
+      fmt::print("  {:<10} {:>6} {:>8} {:>7.2f} {:>9} {:>7.2f} {:>6.2f} {:>7.2f} {:>9.2f}\n",
+                 r["knob"].get<std::string>(), r["value"].get<std::string>(),
+                 r["points"].get<size_t>(), r["points_per_pixel"].get<double>(),
+                 r["bytes"].get<size_t>(), r["bake_s"].get<double>(),
+                 r["footprint_mae"].get<double>(), r["footprint_rmse"].get<double>(),
+                 r["median_frame_ms"].get<double>());
+  }
+  return 0;
+}
+
+}  // namespace
+}  // namespace vistream
+
+int main(int argc, char** argv) {
+  using namespace vistream;
+  Args a;
+  std::string logLevel = "warn";
+  CLI::App app(
+      "Image error of point-based impostors against a supersampled ray-cast reference, beside "
+      "raw far-field geometry and the ray-cast far field, along a walk through one view cell");
+  showDefaultsInHelp(app);
+  app.add_option("--scene", a.scene, "scene: a built-in name, a file or a manifest");
+  app.add_option("--cell", a.cell, "the view cell x0,y0,z0,x1,y1,z1 (file coordinates)");
+  app.add_option("--frames", a.frames, "frames of the walk")->check(inRange<size_t>(1, 1000));
+  app.add_option("--size", a.size, "frame size WxH");
+  app.add_option("--supersample", a.supersample, "reference rays a pixel per axis")
+      ->check(inRange(1, 8));
+  app.add_option("--near-distance", a.placement.nearDistance, "d: the client's near field (m)")
+      ->check(positive());
+  app.add_option("--min-triangles", a.placement.minTriangles,
+                 "a sector-band with fewer triangles stays geometry")
+      ->check(atLeast<size_t>(1));
+  app.add_option("--png", a.png,
+                 "write the crops (reference, impostors, geometry, ray-cast, "
+                 "held-only) of the frame that sees most of the impostors");
+  app.add_flag("--sweep", a.sweep, "sweep the bake's knobs on the heaviest impostor");
+  app.add_option("--lighting-cache", a.lightingCache, "where baked lighting is kept");
+  app.add_flag("--json", a.json, "one JSON object instead of tables");
+  app.add_option("--log-level", logLevel, "trace, debug, info, warn, error, critical, off");
+  return runFlatToolApp("bench_impostor_image", app, argc, argv, logLevel, [&] { return run(a); });
+}
