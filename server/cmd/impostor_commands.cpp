@@ -67,6 +67,11 @@ ImpostorCommand::ImpostorCommand(CLI::App& app, SceneLimits& limits)
                    "a lighter sector and band stays geometry")
       ->capture_default_str()
       ->check(atLeast<size_t>(1));
+  sub_->add_option("--max-bytes-ratio", a.placement.maxBytesRatio,
+                   "an impostor costing more than this many times the Geometry bytes of the "
+                   "faces it replaces stays geometry (0: no limit)")
+      ->capture_default_str()
+      ->check(nonNegative());
   // Sampling and appearance (impostor_bake.h).
   sub_->add_option("--resolution", a.bake.resolutionFactor,
                    "LDI resolution factor (1: the thesis's heuristic)")
@@ -134,6 +139,7 @@ std::string ImpostorCommand::settingsJson() const {
               {"sectors", a.placement.sectors},
               {"bands", a.placement.bands},
               {"min_triangles", a.placement.minTriangles},
+              {"max_bytes_ratio", a.placement.maxBytesRatio},
               {"resolution", o.resolutionFactor},
               {"remove_points", o.removePoints},
               {"cull_hidden", o.cullHidden},

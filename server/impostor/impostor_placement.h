@@ -20,7 +20,11 @@
 // heuristic sizes the LDI for the nearest depth, so a box reaching from d to
 // 8d would sample its far part far too densely. Why a threshold: simulate
 // only what the scene calls for; a light far field is cheaper as triangles
-// (or ray casting) than as points with textures.
+// (or ray casting) than as points with textures. Bytes are weighed after the
+// bake (maxBytesRatio, off by default): on cities of plain boxes the Geometry
+// codec spends a few bytes a triangle and a near band's impostor costs more,
+// but beyond the server's stream radius the thin client's alternative is an
+// empty far field, so a deployment that streams far enough opts in.
 //
 // Framing (frameImpostor), as in the thesis: the sampling plane has its
 // normal from the cell's centre towards the box's centre and lies at the
@@ -89,6 +93,11 @@ struct ImpostorPlacementOptions {
   uint32_t sectors = 8;
   uint32_t bands = 3;           // [d, 2d), [2d, 4d), [4d, inf)
   size_t minTriangles = 2'000;  // a lighter group stays geometry
+  // After the bake: an impostor whose encoded bytes exceed this many times
+  // the Geometry bytes of the faces it replaces stays geometry (0: no limit).
+  // Off by default: beyond the server's stream radius the alternative to an
+  // impostor is no far field at all, not the geometry.
+  float maxBytesRatio = 0.0f;
 };
 
 struct ImpostorSite {

@@ -1,5 +1,6 @@
 #include "server/impostor/impostor_world.h"
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -78,18 +79,33 @@ CellImpostors bakeSites(const ImpostorWorld& world, const Box3f& cell,
     const ImpostorSite& site = out.placement.sites[s];
     try {
       ImpostorStats stats;
-      out.impostors.push_back(
-          bakeImpostor(world.view(), cell, site.box, site.triangles, options, &stats));
+      Impostor impostor =
+          bakeImpostor(world.view(), cell, site.box, site.triangles, options, &stats);
+      std::vector<uint32_t> faces = world.replacedFaces(site.triangles);
+      const size_t geometryBytes = world.geometryBytes(faces);
+      if (placement.maxBytesRatio > 0.0f &&
+          double(stats.bytes) > double(placement.maxBytesRatio) * double(geometryBytes)) {
+        const std::string why = fmt::format(
+            "sector {} band {}: {} bytes as an impostor against {} as geometry (more than {}x)",
+            site.sector, site.band, stats.bytes, geometryBytes, placement.maxBytesRatio);
+        spdlog::info("impostor left as geometry: {}", why);
+        out.refused.push_back(why);
+        continue;
+      }
+      out.impostors.push_back(std::move(impostor));
       out.stats.push_back(stats);
       out.siteOf.push_back(s);
-      out.replacedFaces.push_back(world.replacedFaces(site.triangles));
-      out.geometryBytes.push_back(world.geometryBytes(out.replacedFaces.back()));
+      out.replacedFaces.push_back(std::move(faces));
+      out.geometryBytes.push_back(geometryBytes);
     } catch (const InputError& e) {
       spdlog::warn("impostor of sector {} band {} left as geometry: {}", site.sector, site.band,
                    e.what());
       out.refused.push_back(e.what());
     }
   }
+  if (!out.refused.empty())
+    out.placement.why +=
+        fmt::format("; {} left as geometry ({})", out.refused.size(), out.refused.front());
   out.seconds = watch.ms() / 1000.0 + out.pvsSeconds;
   return out;
 }

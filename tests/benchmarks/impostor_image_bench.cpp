@@ -507,6 +507,10 @@ int main(int argc, char** argv) {
   app.add_option("--min-triangles", a.placement.minTriangles,
                  "a sector-band with fewer triangles stays geometry")
       ->check(atLeast<size_t>(1));
+  app.add_option("--max-bytes-ratio", a.placement.maxBytesRatio,
+                 "impostors costlier than this many times their geometry stay geometry (0: no "
+                 "limit)")
+      ->check(nonNegative());
   app.add_option("--png", a.png,
                  "write the crops (reference, impostors, geometry, ray-cast, "
                  "held-only) of the frame that sees most of the impostors");

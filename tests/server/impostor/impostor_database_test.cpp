@@ -107,6 +107,43 @@ TEST(ImpostorDatabase, GivesEveryCellARecordWhoseImpostorsDecodeAndReplaceOnlyPv
   EXPECT_FALSE(oneDb.cell(all.back()).has_value());
 }
 
+// The bytes rule: an impostor costing more than the ratio times the
+// Geometry bytes of the faces it replaces stays geometry, and the cell says so.
+TEST(ImpostorDatabase, AnImpostorCostlierThanItsGeometryByTheRatioStaysGeometry) {
+  Baked b;
+  const PvsDatabase pvs = PvsDatabase::open(b.pvsPath);
+  const ViewCellGrid grid = pvs.header().grid();
+  const uint32_t c = pvs.cellIndices().front();
+  const Box3f cell = grid.cellBox(grid.cellAt(c));
+  ImpostorBakeOptions o = Baked::options();
+  const CellImpostors free = b.world->bakeCell(cell, *pvs.cell(c), o.placement, o.impostor);
+  ASSERT_GT(free.impostors.size(), 0u);
+  EXPECT_TRUE(free.refused.empty());
+  // A ratio just below each impostor's own bytes / geometry bytes refuses
+  // exactly the impostors above it.
+  std::vector<double> ratios;
+  for (size_t i = 0; i < free.impostors.size(); ++i)
+    ratios.push_back(double(free.stats[i].bytes) / double(free.geometryBytes[i]));
+  const double median = ratios[ratios.size() / 2];
+  o.placement.maxBytesRatio = float(median);
+  const CellImpostors capped = b.world->bakeCell(cell, *pvs.cell(c), o.placement, o.impostor);
+  size_t above = 0;
+  for (double r : ratios) above += r > double(float(median));
+  ASSERT_GT(above, 0u) << "impostors of one cost ratio: the test needs a spread";
+  EXPECT_EQ(capped.refused.size(), above);
+  EXPECT_EQ(capped.impostors.size(), free.impostors.size() - above);
+  for (size_t i = 0; i < capped.impostors.size(); ++i)
+    EXPECT_LE(double(capped.stats[i].bytes), median * double(capped.geometryBytes[i]) * 1.0001);
+  EXPECT_NE(capped.placement.why.find("left as geometry"), std::string::npos)
+      << capped.placement.why;
+  EXPECT_NE(capped.refused.front().find("as geometry"), std::string::npos);
+  // A ratio below every impostor's leaves the cell without impostors.
+  o.placement.maxBytesRatio = 1e-6f;
+  const CellImpostors none = b.world->bakeCell(cell, *pvs.cell(c), o.placement, o.impostor);
+  EXPECT_TRUE(none.impostors.empty());
+  EXPECT_EQ(none.refused.size(), free.impostors.size());
+}
+
 TEST(ImpostorDatabase, ResumesAKilledBakeFromItsJournalToTheSameBytes) {
   Baked b;
   const PvsDatabase pvs = PvsDatabase::open(b.pvsPath);
