@@ -433,6 +433,7 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras,
   uint64_t uploaded = live.generation;
   ImageRgb8 farImage;
   std::vector<uint32_t> near;
+  GpuImpostors impostors;  // drawn by the point shader
   std::vector<FrameRecord> records;
   if (!cameras.empty()) {
     ContactSheetRow sheet(a.sheetFile, cameras.size());
@@ -450,13 +451,13 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras,
       FrameRecord r;
       r.frame = i;
       if (net) live.renderer->setImpostors(net->impostorsAt(cameras[i].eye));
-      r.report = live.renderer->renderFarField(cameras[i], farImage, near);
+      r.report = live.renderer->renderFarField(cameras[i], farImage, near, &impostors);
       if (avatars) {
         r.avatars = avatars.build(times[i], cameras[i], live.renderer->polygonDistance(),
                                   live.renderer->rays());
         gl.uploadDynamic(avatars.dynamic);
       }
-      gl.draw(cameras[i], farImage, near, live.renderer->polygonDistance());
+      gl.draw(cameras[i], farImage, near, live.renderer->polygonDistance(), {}, &impostors);
       if (!a.outDir.empty() || !a.sheetFile.empty()) {
         const ImageRgb8 frame = gl.readBack(size.x, size.y);
         if (!a.outDir.empty()) writePng(frame, std::filesystem::path(a.outDir) / frameName(i));
@@ -494,7 +495,7 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras,
       }
     }
     if (net) live.renderer->setImpostors(net->impostorsAt(cam.eye));
-    const FrameReport rep = live.renderer->renderFarField(cam, farImage, near);
+    const FrameReport rep = live.renderer->renderFarField(cam, farImage, near, &impostors);
     std::string avatarWhy = "no dynamic objects";
     if (avatars) {
       avatarWhy =
@@ -513,7 +514,7 @@ int runWindow(const Args& a, LiveGeometry& live, std::vector<Camera> cameras,
                      rep.cacheRan ? "on" : "off")},
         {"avatars: " + avatarWhy},
     };
-    gl.draw(cam, farImage, near, live.renderer->polygonDistance(), hud);
+    gl.draw(cam, farImage, near, live.renderer->polygonDistance(), hud, &impostors);
     window.swapBuffers();
   }
   return 0;

@@ -162,8 +162,8 @@ FrameReport FrameRenderer::render(const Camera& camera, ImageRgb8& out) {
 }
 
 FrameReport FrameRenderer::renderFarField(const Camera& camera, ImageRgb8& farImage,
-                                          std::vector<uint32_t>& near) {
-  return run(camera, farImage, &near);
+                                          std::vector<uint32_t>& near, GpuImpostors* gpu) {
+  return run(camera, farImage, &near, gpu);
 }
 
 // One frame of the pipeline as named steps (the thesis's stages 1-7). Built
@@ -173,6 +173,7 @@ struct FrameRun {
   const Camera& camera;
   ImageRgb8& out;
   std::vector<uint32_t>* glNear;  // OpenGL draws the near field: only its triangles are wanted
+  GpuImpostors* gpu;              // OpenGL splats the impostors: their depth limits are wanted
   const int W, H;
   const size_t pixels;
   const RenderMode mode;
@@ -193,11 +194,13 @@ struct FrameRun {
   std::vector<uint32_t> rayOf;  // per ray: its candidate
   std::vector<Hit> hits;
 
-  FrameRun(FrameRenderer& renderer, const Camera& c, ImageRgb8& o, std::vector<uint32_t>* gl)
+  FrameRun(FrameRenderer& renderer, const Camera& c, ImageRgb8& o, std::vector<uint32_t>* gl,
+           GpuImpostors* g)
       : r(renderer),
         camera(c),
         out(o),
         glNear(gl),
+        gpu(g),
         W(c.width),
         H(c.height),
         pixels(size_t(c.width) * size_t(c.height)),
@@ -449,6 +452,15 @@ struct FrameRun {
       rep.impostorsWhy = "the viewer's cell has no impostors: " + set->why;
     } else if (candidates.empty() && skyPixels.empty() && backgroundPixels.empty()) {
       rep.impostorsWhy = "no far-field pixels to fill";
+    } else if (gpu) {
+      gpu->impostors = set->impostors;
+      gpu->depthLimit.assign(pixels, 0.0f);
+      impostorsOn = true;
+      rep.impostorsRan = true;
+      rep.impostorsDrawn = set->impostors.size();
+      rep.impostorsWhy = fmt::format("{} impostor{} of the viewer's cell ({}, {}, {}), by OpenGL",
+                                     set->impostors.size(), set->impostors.size() == 1 ? "" : "s",
+                                     set->index.x, set->index.y, set->index.z);
     } else {
       r.splatter_.begin(camera);
       if (r.impostorImage_.width != W || r.impostorImage_.height != H)
@@ -470,11 +482,16 @@ struct FrameRun {
   bool impostorWins(size_t i, float farDepth) const {
     return impostorsOn && impostorCovers(candidates[i], farDepth);
   }
+  // A point lies on the surface it samples: within a few millimetres of the
+  // same surface's ray hit, so the impostor wins ties.
+  static float impostorDepthLimit(float farDepth) { return farDepth * 1.001f + 0.01f; }
   bool impostorCovers(size_t p, float farDepth) const {
+    if (gpu) {  // the GPU splats; it needs the limit, the far field keeps its pixel
+      gpu->depthLimit[p] = impostorDepthLimit(farDepth);
+      return false;
+    }
     const float z = r.splatter_.depth()[p];
-    // A point lies on the surface it samples: within a few millimetres of
-    // the same surface's ray hit, so the impostor wins ties.
-    return z < ImpostorSplatter::kEmpty && z <= farDepth * 1.001f + 0.01f;
+    return z < ImpostorSplatter::kEmpty && z <= impostorDepthLimit(farDepth);
   }
   void takeImpostor(size_t i) { takeImpostorPixel(candidates[i]); }
   void takeImpostorPixel(size_t p) {
@@ -534,10 +551,14 @@ struct FrameRun {
   }
 };
 
-FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out,
-                               std::vector<uint32_t>* glNear) {
+FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector<uint32_t>* glNear,
+                               GpuImpostors* gpu) {
   Stopwatch total;
-  FrameRun f(*this, camera, out, glNear);
+  if (gpu) {
+    gpu->impostors.clear();
+    gpu->depthLimit.clear();
+  }
+  FrameRun f(*this, camera, out, glNear, gpu);
   f.trackMotion();
   f.selectNearField();
   f.drawPolygons();

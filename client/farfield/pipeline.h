@@ -174,6 +174,17 @@ struct FrameReport {
   nlohmann::json toJson() const;
 };
 
+// The impostors an OpenGL frame splats itself (renderFarField with it; the
+// point shader of client/gl/gl_renderer.h): those of the viewer's cell, and
+// per pixel (row 0 at the top) the greatest view depth at which a point
+// still shows there, the rule the software compose applies: 0 where the
+// near field covers the pixel, the far field's own hit (with the splat's tie
+// margin) where it has one, infinity on sky and background pixels.
+struct GpuImpostors {
+  std::vector<std::shared_ptr<const Impostor>> impostors;  // empty: none this frame
+  std::vector<float> depthLimit;
+};
+
 class FrameRenderer {
  public:
   // `geometry` must outlive the renderer.
@@ -185,8 +196,11 @@ class FrameRenderer {
   FrameReport render(const Camera& camera, ImageRgb8& out);
   // For an OpenGL near field: the triangles to draw (`near`) and the
   // far-field image (valid wherever the opacity buffer is uncovered).
-  FrameReport renderFarField(const Camera& camera, ImageRgb8& farImage,
-                             std::vector<uint32_t>& near);
+  // With `gpu`, impostors are left to the OpenGL renderer: the far-field
+  // image holds none and `gpu` says what to splat where (pixels.impostor
+  // stays 0: the GPU decides the pixels).
+  FrameReport renderFarField(const Camera& camera, ImageRgb8& farImage, std::vector<uint32_t>& near,
+                             GpuImpostors* gpu = nullptr);
   // Dynamic objects (avatars, client/avatar/avatar_view.h) over the frame
   // render() just drew into `out`, with a depth test against it: against the
   // near field's depth where polygons cover a pixel; elsewhere in
@@ -235,7 +249,8 @@ class FrameRenderer {
 
  private:
   friend struct FrameRun;  // one frame's steps (pipeline.cpp)
-  FrameReport run(const Camera& camera, ImageRgb8& out, std::vector<uint32_t>* glNear);
+  FrameReport run(const Camera& camera, ImageRgb8& out, std::vector<uint32_t>* glNear,
+                  GpuImpostors* gpu = nullptr);
 
   const RenderGeometry& geometry_;
   PipelineOptions options_;

@@ -169,6 +169,80 @@ void main() {
 }
 )";
 
+// The far-field image with its depth limits (GpuImpostors::depthLimit, a
+// view depth per pixel) written as depth, so that the impostors' points that
+// follow show only where the software compose would show them.
+constexpr const char* kImageDepthFragment = R"(#version 330 core
+uniform sampler2D image;
+uniform sampler2D limit;
+uniform float depthRange;
+out vec4 fragColour;
+void main() {
+  ivec2 size = textureSize(image, 0);
+  ivec2 p = ivec2(gl_FragCoord.xy);
+  ivec2 texel = ivec2(p.x, size.y - 1 - p.y);
+  fragColour = vec4(texelFetch(image, texel, 0).rgb, 1.0);
+  gl_FragDepth = clamp(texelFetch(limit, texel, 0).r / depthRange, 0.0, 1.0);
+}
+)";
+
+// Point-based impostors (Wimmer 2001, section 5.4.3), what the thesis's
+// vertex program did: each point takes its colour seen from the eye (the
+// texel footprint where the line from the eye through the point crosses the
+// sampling plane, bilinear between the point's texels, as
+// Impostor::colourSeenFrom), covers the 2x2 pixels round its projection
+// (a point of size 2) and is depth tested by its view depth, linear, so the
+// depth limits of the far-field image compare exactly.
+constexpr const char* kPointVertex = R"(#version 330 core
+layout(location = 0) in vec3 position;
+layout(location = 1) in uint texel;  // the point's first texel; the top bit: one colour
+uniform mat4 rotationProjection;
+uniform vec3 eye;
+uniform vec3 planeOrigin;
+uniform vec3 planeU;
+uniform vec3 planeV;
+uniform vec3 planeNormal;
+uniform ivec2 texels;               // texture width and height a point
+uniform samplerBuffer colours;      // RGBA8
+uniform float depthRange;
+flat out vec3 colour;
+flat out float depth;
+vec3 at(int first, int i, int j) {
+  return texelFetch(colours, first + j * texels.x + i).rgb * 255.0;
+}
+void main() {
+  vec3 rel = position - eye;
+  gl_Position = rotationProjection * vec4(rel, 1.0);
+  depth = gl_Position.w / depthRange;
+  int first = int(texel & 0x7fffffffu);
+  if ((texel & 0x80000000u) != 0u) {
+    colour = at(first, 0, 0);
+    return;
+  }
+  float across = dot(planeNormal, rel);
+  vec3 x = eye;
+  if (abs(across) > 1e-12 * dot(rel, rel)) x = eye + rel * (dot(planeNormal, planeOrigin - eye) / across);
+  vec3 r = x - planeOrigin;
+  vec2 st = vec2(dot(r, planeU) / dot(planeU, planeU), dot(r, planeV) / dot(planeV, planeV));
+  float fx = clamp(st.x * float(texels.x) - 0.5, 0.0, float(texels.x - 1));
+  float fy = clamp(st.y * float(texels.y) - 0.5, 0.0, float(texels.y - 1));
+  int i0 = min(int(fx), texels.x - 1), j0 = min(int(fy), texels.y - 1);
+  int i1 = min(i0 + 1, texels.x - 1), j1 = min(j0 + 1, texels.y - 1);
+  float ax = fx - float(i0), ay = fy - float(j0);
+  colour = (at(first, i0, j0) * (1.0 - ax) + at(first, i1, j0) * ax) * (1.0 - ay) +
+           (at(first, i0, j1) * (1.0 - ax) + at(first, i1, j1) * ax) * ay;
+}
+)";
+constexpr const char* kPointFragment = R"(#version 330 core
+flat in vec3 colour;
+flat in float depth;
+out vec4 fragColour;
+void main() {
+  gl_FragDepth = depth;
+  fragColour = vec4(clamp(colour, 0.0, 255.0) / 255.0, 1.0);
+}
+)";
+
 // The HUD: positions in pixels, row 0 at the top, one colour per draw.
 constexpr const char* kHudVertex = R"(#version 330 core
 layout(location = 0) in vec2 pixel;
@@ -286,6 +360,8 @@ static_assert(sizeof(FontVertex) == 16);
 struct GlRenderer::Impl {
   Program nearProgram{kNearVertex, kNearFragment};
   Program imageProgram{kImageVertex, kImageFragment};
+  Program imageDepthProgram{kImageVertex, kImageDepthFragment};
+  Program pointProgram{kPointVertex, kPointFragment};
   Program hudProgram{kHudVertex, kHudFragment};
   GLint rotationProjection = nearProgram.uniform("rotationProjection");
   GLint eye = nearProgram.uniform("eye");
@@ -295,6 +371,22 @@ struct GlRenderer::Impl {
   GLint hazeColour = nearProgram.uniform("hazeColour");
   GLint hazeScale = nearProgram.uniform("hazeScale");
   GLint image = imageProgram.uniform("image");
+  GLint depthImage = imageDepthProgram.uniform("image");
+  GLint depthLimit = imageDepthProgram.uniform("limit");
+  GLint imageDepthRange = imageDepthProgram.uniform("depthRange");
+  struct PointUniforms {
+    GLint rotationProjection, eye, planeOrigin, planeU, planeV, planeNormal, texels, colours,
+        depthRange;
+  };
+  PointUniforms point{pointProgram.uniform("rotationProjection"),
+                      pointProgram.uniform("eye"),
+                      pointProgram.uniform("planeOrigin"),
+                      pointProgram.uniform("planeU"),
+                      pointProgram.uniform("planeV"),
+                      pointProgram.uniform("planeNormal"),
+                      pointProgram.uniform("texels"),
+                      pointProgram.uniform("colours"),
+                      pointProgram.uniform("depthRange")};
   GLint hudViewport = hudProgram.uniform("viewport");
   GLint hudColour = hudProgram.uniform("colour");
 
@@ -343,9 +435,44 @@ struct GlRenderer::Impl {
   TriangleSet staticSet, dynamicSet;
   std::vector<GLuint> indices;  // scratch, reused every frame
 
+  // One impostor's points on the GPU: positions, per point its first texel
+  // (the top bit set for a single-colour point), the texels.
+  struct PointSet {
+    VertexArray array;
+    Buffer positions, texelOffsets;
+    TextureBuffer colours;
+    size_t count = 0;
+
+    explicit PointSet(const Impostor& imp) : count(imp.size()) {
+      std::vector<uint32_t> offsets(imp.size());
+      for (size_t k = 0; k < imp.size(); ++k)
+        offsets[k] = imp.firstTexel[k] | (imp.singleColour[k] ? 0x80000000u : 0u);
+      std::vector<glm::u8vec4> texels(imp.texels.size());
+      for (size_t i = 0; i < texels.size(); ++i) texels[i] = glm::u8vec4(imp.texels[i], 255);
+      glBindVertexArray(array.id);
+      glBindBuffer(GL_ARRAY_BUFFER, positions.id);
+      glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(std::max<size_t>(1, count) * sizeof(glm::vec3)),
+                   count ? imp.points.data() : nullptr, GL_STATIC_DRAW);
+      glEnableVertexAttribArray(0);
+      glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(glm::vec3), nullptr);
+      glBindBuffer(GL_ARRAY_BUFFER, texelOffsets.id);
+      glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(std::max<size_t>(1, count) * sizeof(uint32_t)),
+                   count ? offsets.data() : nullptr, GL_STATIC_DRAW);
+      glEnableVertexAttribArray(1);
+      glVertexAttribIPointer(1, 1, GL_UNSIGNED_INT, sizeof(uint32_t), nullptr);
+      glBindVertexArray(0);
+      glBindBuffer(GL_ARRAY_BUFFER, 0);
+      colours.upload(GL_RGBA8, texels);
+    }
+  };
+  // Impostors uploaded, most recently drawn last; the shared pointer keeps
+  // an impostor's address from being reused while its points are here.
+  std::vector<std::pair<std::shared_ptr<const Impostor>, std::unique_ptr<PointSet>>> pointSets;
+  static constexpr size_t kPointSetsKept = 64;
+
   VertexArray emptyArray;  // core profile draws need a bound vertex array
-  Texture farTexture;
-  int farWidth = 0, farHeight = 0;
+  Texture farTexture, limitTexture;
+  int farWidth = 0, farHeight = 0, limitWidth = 0, limitHeight = 0;
 
   VertexArray hudArray;
   Buffer hudVertices;
@@ -358,15 +485,35 @@ struct GlRenderer::Impl {
     glVertexAttribPointer(0, 2, GL_FLOAT, GL_FALSE, sizeof(glm::vec2), nullptr);
     glBindVertexArray(0);
 
-    glBindTexture(GL_TEXTURE_2D, farTexture.id);
-    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
-    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
-    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAX_LEVEL, 0);
-    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
-    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+    for (GLuint id : {farTexture.id, limitTexture.id}) {
+      glBindTexture(GL_TEXTURE_2D, id);
+      glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+      glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+      glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAX_LEVEL, 0);
+      glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+      glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+    }
   }
 
-  void drawFarField(const ImageRgb8& farField) {
+  // The far-field image, and with `limits` (one view depth a pixel) the
+  // depth each of its pixels leaves for the impostors' points.
+  void drawFarField(const ImageRgb8& farField, const std::vector<float>* limits = nullptr,
+                    float depthRange = 1.0f) {
+    if (limits) {
+      glActiveTexture(GL_TEXTURE1);
+      glBindTexture(GL_TEXTURE_2D, limitTexture.id);
+      glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+      if (farField.width != limitWidth || farField.height != limitHeight) {
+        glTexImage2D(GL_TEXTURE_2D, 0, GL_R32F, farField.width, farField.height, 0, GL_RED,
+                     GL_FLOAT, limits->data());
+        limitWidth = farField.width;
+        limitHeight = farField.height;
+      } else {
+        glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, farField.width, farField.height, GL_RED, GL_FLOAT,
+                        limits->data());
+      }
+      glActiveTexture(GL_TEXTURE0);
+    }
     glBindTexture(GL_TEXTURE_2D, farTexture.id);
     glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
     if (farField.width != farWidth || farField.height != farHeight) {
@@ -378,11 +525,63 @@ struct GlRenderer::Impl {
       glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, farField.width, farField.height, GL_RGB,
                       GL_UNSIGNED_BYTE, farField.pixels.data());
     }
-    glUseProgram(imageProgram.id);
-    glUniform1i(image, 0);
+    if (limits) {
+      glUseProgram(imageDepthProgram.id);
+      glUniform1i(depthImage, 0);
+      glUniform1i(depthLimit, 1);
+      glUniform1f(imageDepthRange, depthRange);
+      glEnable(GL_DEPTH_TEST);
+      glDepthFunc(GL_ALWAYS);
+    } else {
+      glUseProgram(imageProgram.id);
+      glUniform1i(image, 0);
+    }
     glActiveTexture(GL_TEXTURE0);
     glBindVertexArray(emptyArray.id);
     glDrawArrays(GL_TRIANGLES, 0, 3);
+    glDisable(GL_DEPTH_TEST);
+  }
+
+  PointSet& pointSetOf(const std::shared_ptr<const Impostor>& imp) {
+    auto it = std::find_if(pointSets.begin(), pointSets.end(),
+                           [&](const auto& entry) { return entry.first == imp; });
+    if (it == pointSets.end()) {
+      if (pointSets.size() >= kPointSetsKept) pointSets.erase(pointSets.begin());
+      pointSets.emplace_back(imp, std::make_unique<PointSet>(*imp));
+      return *pointSets.back().second;
+    }
+    std::rotate(it, it + 1, pointSets.end());  // most recently drawn last
+    return *pointSets.back().second;
+  }
+
+  // The impostors' points, depth tested against the far-field image's limits.
+  void drawPoints(const Camera& camera, const GpuImpostors& gpu, float depthRange) {
+    glUseProgram(pointProgram.id);
+    const glm::mat4 rp = camera.rotationProjection();
+    glUniformMatrix4fv(point.rotationProjection, 1, GL_FALSE, &rp[0][0]);
+    glUniform3f(point.eye, camera.eye.x, camera.eye.y, camera.eye.z);
+    glUniform1i(point.colours, 1);
+    glUniform1f(point.depthRange, depthRange);
+    // Strictly nearer: of two points at one depth the first drawn keeps the
+    // pixel, as in the software splat.
+    glEnable(GL_DEPTH_TEST);
+    glDepthFunc(GL_LESS);
+    glPointSize(2.0f);
+    for (const std::shared_ptr<const Impostor>& imp : gpu.impostors) {
+      if (!imp || imp->size() == 0) continue;
+      PointSet& set = pointSetOf(imp);
+      const SamplingPlane& pl = imp->plane;
+      glUniform3f(point.planeOrigin, pl.origin.x, pl.origin.y, pl.origin.z);
+      glUniform3f(point.planeU, pl.uAxis.x, pl.uAxis.y, pl.uAxis.z);
+      glUniform3f(point.planeV, pl.vAxis.x, pl.vAxis.y, pl.vAxis.z);
+      glUniform3f(point.planeNormal, pl.normal.x, pl.normal.y, pl.normal.z);
+      glUniform2i(point.texels, GLint(imp->textureWidth), GLint(imp->textureHeight));
+      set.colours.bind(GL_TEXTURE1);
+      glBindVertexArray(set.array.id);
+      glDrawArrays(GL_POINTS, 0, GLsizei(set.count));
+    }
+    glActiveTexture(GL_TEXTURE0);
+    glDisable(GL_DEPTH_TEST);
   }
 
   // Triangles `which` of `set` (all of them if null) with a depth test.
@@ -498,7 +697,7 @@ void GlRenderer::uploadDynamic(const RenderGeometry& geometry) {
 
 void GlRenderer::draw(const Camera& camera, const ImageRgb8& farField,
                       std::span<const uint32_t> near, float nearDistance,
-                      std::span<const HudLine> hud) {
+                      std::span<const HudLine> hud, const GpuImpostors* impostors) {
   // Every byte drawn is a byte computed on the CPU: no dithering, no sRGB
   // conversion, no multisampling; triangles are two-sided.
   glDisable(GL_DITHER);
@@ -515,8 +714,30 @@ void GlRenderer::draw(const Camera& camera, const ImageRgb8& farField,
       farField.width == camera.width && farField.height == camera.height && farField.width > 0 &&
       farField.height > 0 &&
       farField.pixels.size() == size_t(farField.width) * size_t(farField.height) * 3;
-  if (farFits) {
+  const bool points = farFits && impostors && !impostors->impostors.empty() &&
+                      impostors->depthLimit.size() == farField.pixels.size() / 3;
+  if (points) {
+    // Linear view depth over the range the points span (to their boxes'
+    // farthest corner), so that 24 bits tell points apart as finely as the
+    // software splat's floats mostly do; a limit beyond the range passes
+    // every point, as it should.
+    float range = 1.0f;
+    for (const auto& imp : impostors->impostors)
+      if (imp)
+        for (int k = 0; k < 8; ++k) {
+          const glm::vec3 corner{k & 1 ? imp->box.hi.x : imp->box.lo.x,
+                                 k & 2 ? imp->box.hi.y : imp->box.lo.y,
+                                 k & 4 ? imp->box.hi.z : imp->box.lo.z};
+          range = std::max(range, 1.01f * glm::length(corner - camera.eye) + 1.0f);
+        }
+    glClearDepth(1.0);
+    glClear(GL_DEPTH_BUFFER_BIT);
+    impl_->drawFarField(farField, &impostors->depthLimit, range);
+    impl_->drawPoints(camera, *impostors, range);
+  } else if (farFits) {
     impl_->drawFarField(farField);
+  }
+  if (farFits) {
     glClearDepth(1.0);
     glClear(GL_DEPTH_BUFFER_BIT);
   } else {

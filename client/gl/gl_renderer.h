@@ -9,8 +9,11 @@
 //     farther than the near-field distance d from the eye are discarded
 //     (those pixels belong to the far field); then the dynamic objects
 //     (uploadDynamic) the same way.
+// Between the two, the impostors of the viewer's cell (GpuImpostors, from
+// FrameRenderer::renderFarField) are drawn as points by a vertex shader that
+// does what client/render/impostor_splat.h does on the CPU.
 // A pixel the near field covers shows the near field; any other pixel shows
-// the far-field image. The opacity buffer is made on the CPU with an inset
+// the far-field image or an impostor's point. The opacity buffer is made on the CPU with an inset
 // (see SoftwareRasterizer::coverage), so every pixel it calls covered is
 // covered by the GPU too and no hole can appear.
 //
@@ -25,6 +28,7 @@
 #include <string>
 #include <vector>
 
+#include "client/farfield/pipeline.h"
 #include "client/render/camera.h"
 #include "client/render/image.h"
 #include "client/render/render_geometry.h"
@@ -63,12 +67,15 @@ class GlRenderer {
   // with the same depth test and maximum distance; an empty geometry draws none.
   void uploadDynamic(const RenderGeometry& geometry);
   // Draws one frame into the current framebuffer (camera.width x camera.height):
-  // the far-field image as background, then triangles `near` (indices into
-  // the uploaded geometry) with a depth test, then the HUD lines (top left,
-  // white on a dark box) if any.
+  // the far-field image as background, then `impostors`' points where the
+  // far field leaves them room (GpuImpostors::depthLimit; each impostor's
+  // points are uploaded the first time it is drawn and kept while it is
+  // drawn now and then), then triangles `near` (indices into the uploaded
+  // geometry) with a depth test, then the HUD lines (top left, white on a
+  // dark box) if any.
   void draw(const Camera& camera, const ImageRgb8& farField, std::span<const uint32_t> near,
             float nearDistance = std::numeric_limits<float>::infinity(),
-            std::span<const HudLine> hud = {});
+            std::span<const HudLine> hud = {}, const GpuImpostors* impostors = nullptr);
   // Reads the current framebuffer back (row 0 at the top). For output files
   // and tests only; the pipeline itself never reads back.
   ImageRgb8 readBack(int width, int height) const;

@@ -17,10 +17,10 @@ size_t ImpostorSplatter::draw(const Impostor& impostor, ImageRgb8& out) {
   const glm::mat4 rp = camera_.rotationProjection();
   const glm::vec3 forward = camera_.forward();
   const float w = float(camera_.width), h = float(camera_.height);
-  // A box wholly outside the view (beyond a side by more than the 2x2
-  // footprint, or behind the near plane) has no point to draw.
+  // A box wholly outside the view (beyond a side, or behind the near
+  // plane) has no point to draw.
   {
-    const float mx = 1.0f + 4.0f / w, my = 1.0f + 4.0f / h;
+    const float mx = 1.0f, my = 1.0f;
     int left = 0, right = 0, below = 0, above = 0, behind = 0;
     for (int k = 0; k < 8; ++k) {
       const glm::vec3 corner{k & 1 ? impostor.box.hi.x : impostor.box.lo.x,
@@ -45,12 +45,14 @@ size_t ImpostorSplatter::draw(const Impostor& impostor, ImageRgb8& out) {
     const float z = glm::dot(rel, forward);
     if (!(z > camera_.zNear)) continue;
     const glm::vec4 clip = rp * glm::vec4(rel, 1.0f);
+    // A point whose projection is off the screen is clipped whole, as
+    // OpenGL clips a point by its centre.
+    if (!(std::abs(clip.x) <= clip.w && std::abs(clip.y) <= clip.w)) continue;
     // Window coordinates, row 0 at the top (camera.h).
     const float px = (clip.x / clip.w * 0.5f + 0.5f) * w;
     const float py = (0.5f - clip.y / clip.w * 0.5f) * h;
     // The 2x2 pixels whose centres (x + 0.5, y + 0.5) surround (px, py).
     const int x0 = int(std::floor(px - 0.5f)), y0 = int(std::floor(py - 0.5f));
-    if (x0 + 1 < 0 || y0 + 1 < 0 || x0 >= camera_.width || y0 >= camera_.height) continue;
     ++landed;
     bool coloured = false;
     glm::u8vec3 colour{0, 0, 0};

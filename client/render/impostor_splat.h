@@ -4,10 +4,12 @@
 //
 // Each point is projected with the camera (the same rotation-projection as
 // every renderer, camera.h) and covers the 2x2 pixels whose centres surround
-// its projection; a pixel keeps the nearest point (depth: distance along the
-// view axis) and takes that point's colour seen from the eye
-// (Impostor::colourSeenFrom: its texture at the eye's sampling-plane
-// coordinates, bilinear). Points behind the near plane are skipped.
+// its projection (an OpenGL point of size 2); a pixel keeps the nearest
+// point (depth: distance along the view axis; the first drawn on a tie) and
+// takes that point's colour seen from the eye (Impostor::colourSeenFrom: its
+// texture at the eye's sampling-plane coordinates, bilinear). Points behind
+// the near plane or projecting off the screen are skipped whole, as OpenGL
+// clips a point by its centre.
 //
 // Thread safety: one ImpostorSplatter per viewer.
 #pragma once

@@ -7,6 +7,8 @@
 
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <random>
+#include <tuple>
 
 #include "client/app/walkthrough.h"
 #include "client/farfield/pipeline.h"
@@ -15,6 +17,7 @@
 #include "common/core/error.h"
 #include "common/generate/generate.h"
 #include "common/generate/path.h"
+#include "tests/common/support/box_scenes.h"
 #include "tests/common/support/run_tool.h"
 #include "tests/common/support/temp_dir.h"
 
@@ -115,6 +118,92 @@ TEST(GlPipeline, TheWindowedClientDrawsAvatarsLikeTheHeadlessOne) {
     EXPECT_EQ(d.interiorDiffering, 0u) << name;
   }
   EXPECT_GT(withAvatars, 5u) << "frames that show avatars";
+}
+
+// A synthetic impostor: a wall of points 200 m ahead, each with a texture
+// of random colours (every fifth one a single colour), so that the colour a
+// pixel shows depends on the eye's sampling-plane coordinates.
+std::shared_ptr<ImpostorSet> wallOfPoints() {
+  Impostor imp;
+  imp.cell = Box3f({-5.0f, 0.5f, -5.0f}, {5.0f, 4.0f, 5.0f});
+  imp.box = Box3f({-80.0f, 0.0f, -201.0f}, {80.0f, 50.0f, -199.0f});
+  imp.plane.origin = {-30.0f, -5.0f, -10.0f};
+  imp.plane.uAxis = {60.0f, 0.0f, 0.0f};
+  imp.plane.vAxis = {0.0f, 30.0f, 0.0f};
+  imp.plane.normal = {0.0f, 0.0f, -1.0f};
+  std::mt19937 random(7);
+  std::uniform_int_distribution<int> level(0, 255);
+  std::vector<glm::u8vec3> texels(imp.textureTexels());
+  int k = 0;
+  for (float y = 0.0f; y <= 50.0f; y += 0.5f)
+    for (float x = -80.0f; x <= 80.0f; x += 0.5f, ++k) {
+      for (glm::u8vec3& t : texels) t = glm::u8vec3(level(random), level(random), level(random));
+      // A little depth relief, so that points also compete among themselves.
+      imp.appendPoint({x, y, -200.0f + 0.5f * std::sin(0.7f * x + 0.3f * y)}, texels.data(),
+                      k % 5 == 0);
+    }
+  auto set = std::make_shared<ImpostorSet>();
+  set->cell = imp.cell;
+  set->impostors.push_back(std::make_shared<const Impostor>(std::move(imp)));
+  set->expected = 1;
+  return set;
+}
+
+// The impostors' points drawn by the OpenGL point shader (GpuImpostors)
+// give the frame the software splat gives: same points, same depth rule
+// against the held far field (a tower in front hides part of the wall), same
+// colours seen from the eye.
+TEST(GlPipeline, ThePointShaderDrawsImpostorsAsTheSoftwareSplatterDoes) {
+  constexpr int kW = 320, kH = 240;
+  std::unique_ptr<GlWindow> window;
+  try {
+    window = std::make_unique<GlWindow>(GlWindowOptions{kW, kH, "gl_pipeline_test", false, false});
+  } catch (const InputError& e) {
+    FAIL() << "cannot open an OpenGL window: " << e.what();
+  }
+  Scene scene;
+  scene.name = "impostor wall";
+  testing::addBox(scene, "ground", {-300.0f, -1.0f, -300.0f}, {300.0f, 0.0f, 60.0f});
+  testing::addBox(scene, "tower", {-20.0f, 0.0f, -120.0f}, {5.0f, 30.0f, -110.0f});
+  testing::addBox(scene, "near", {6.0f, 0.0f, -30.0f}, {9.0f, 4.0f, -27.0f});
+  finalizeScene(scene);
+  const RenderGeometry g = renderGeometryFromScene(scene);
+  const std::shared_ptr<ImpostorSet> set = wallOfPoints();
+  PipelineOptions o;
+  o.polygonBudget = 0;
+  o.nearDistance = 50.0f;
+  FrameRenderer headless(g, o), forGl(g, o);
+  headless.setImpostors(set);
+  forGl.setImpostors(set);
+  GlRenderer gl;
+  gl.upload(g);
+  size_t impostorPixels = 0;
+  for (const auto& [yaw, pitch, x] : {std::tuple{0.0f, 3.0f, 0.0f},
+                                      {15.0f, 8.0f, -3.0f},
+                                      {-25.0f, 1.0f, 4.0f},
+                                      {40.0f, 5.0f, 2.0f}}) {
+    Camera c;
+    c.width = kW;
+    c.height = kH;
+    c.eye = {x, 2.0f, 1.0f};
+    c.yawDeg = yaw;
+    c.pitchDeg = pitch;
+    ImageRgb8 soft, farImage;
+    const FrameReport sr = headless.render(c, soft);
+    impostorPixels += sr.pixels.impostor;
+    std::vector<uint32_t> near;
+    GpuImpostors gpu;
+    const FrameReport gr = forGl.renderFarField(c, farImage, near, &gpu);
+    EXPECT_TRUE(gr.impostorsRan) << gr.impostorsWhy;
+    EXPECT_EQ(gpu.impostors.size(), 1u);
+    EXPECT_EQ(gr.pixels.impostor, 0u) << "the GPU draws the points";
+    gl.draw(c, farImage, near, forGl.polygonDistance(), {}, &gpu);
+    const ImageRgb8 frame = gl.readBack(kW, kH);
+    const ImageDifference d = compareImages(frame, soft, /*tolerance=*/1);
+    EXPECT_LT(d.differingFraction, 0.005)
+        << "yaw " << yaw << ": " << sr.pixels.impostor << " impostor pixels";
+  }
+  EXPECT_GT(impostorPixels, 15'000u) << "the wall took part";
 }
 
 }  // namespace
