@@ -752,6 +752,10 @@ void GlRenderer::draw(const Camera& camera, const ImageRgb8& farField,
   glUseProgram(0);
 }
 
+void GlRenderer::finish() const {
+  glFinish();
+}
+
 ImageRgb8 GlRenderer::readBack(int width, int height) const {
   ImageRgb8 out(width, height);
   const size_t row = size_t(width) * 3;

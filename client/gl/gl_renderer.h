@@ -76,6 +76,8 @@ class GlRenderer {
   void draw(const Camera& camera, const ImageRgb8& farField, std::span<const uint32_t> near,
             float nearDistance = std::numeric_limits<float>::infinity(),
             std::span<const HudLine> hud = {}, const GpuImpostors* impostors = nullptr);
+  // Waits until the GPU has finished every command given (for timing).
+  void finish() const;
   // Reads the current framebuffer back (row 0 at the top). For output files
   // and tests only; the pipeline itself never reads back.
   ImageRgb8 readBack(int width, int height) const;

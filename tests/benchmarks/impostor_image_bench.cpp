@@ -36,6 +36,8 @@
 
 #include "client/app/walkthrough.h"
 #include "client/farfield/pipeline.h"
+#include "client/gl/gl_renderer.h"
+#include "client/gl/gl_window.h"
 #include "client/render/image.h"
 #include "client/render/impostor_splat.h"
 #include "common/cmd/cli.h"
@@ -59,6 +61,7 @@ struct Args {
   std::string png;
   bool json = false;
   bool sweep = false;
+  bool gl = false;
   ImpostorPlacementOptions placement;
   std::string lightingCache = defaultLightingCacheDir().string();
 };
@@ -197,28 +200,36 @@ ModeResult runMode(const std::string& name, FrameRenderer& renderer,
   return m;
 }
 
-// The crop of every mode's frame around the footprint, scaled 2x, side by side.
+// The crop (at most 120 x 90 pixels, where the footprint is densest) of
+// every mode's frame, scaled 3x, side by side.
 ImageRgb8 crops(const Reference& ref, const std::vector<const ImageRgb8*>& frames) {
   const int w = ref.image.width, h = ref.image.height;
-  int x0 = w, y0 = h, x1 = -1, y1 = -1;
+  const int cw = std::min(w, 120), ch = std::min(h, 90);
+  // Footprint pixels per window, from a summed-area table.
+  std::vector<uint32_t> sum(size_t(w + 1) * size_t(h + 1), 0);
+  auto at = [&](int x, int y) -> uint32_t& { return sum[size_t(y) * size_t(w + 1) + size_t(x)]; };
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x)
-      if (ref.footprint[size_t(y) * size_t(w) + size_t(x)]) {
-        x0 = std::min(x0, x);
-        y0 = std::min(y0, y);
-        x1 = std::max(x1, x);
-        y1 = std::max(y1, y);
+      at(x + 1, y + 1) =
+          at(x, y + 1) + at(x + 1, y) - at(x, y) + ref.footprint[size_t(y) * size_t(w) + size_t(x)];
+  uint32_t best = 0;
+  int cx = 0, cy = 0;
+  for (int y = 0; y + ch <= h; y += 2)
+    for (int x = 0; x + cw <= w; x += 2) {
+      const uint32_t n = at(x + cw, y + ch) - at(x, y + ch) - at(x + cw, y) + at(x, y);
+      if (n > best) {
+        best = n;
+        cx = x;
+        cy = y;
       }
-  if (x1 < 0) return {};
-  const int cw = std::min(w, std::max(96, x1 - x0 + 17)),
-            ch = std::min(h, std::max(72, y1 - y0 + 17));
-  const int cx = std::clamp((x0 + x1) / 2 - cw / 2, 0, w - cw);
-  const int cy = std::clamp((y0 + y1) / 2 - ch / 2, 0, h - ch);
+    }
+  if (best == 0) return {};
+  constexpr int kScale = 3;
   std::vector<ImageRgb8> tiles;
   for (const ImageRgb8* f : frames) {
-    ImageRgb8 t(cw * 2, ch * 2);
-    for (int y = 0; y < ch * 2; ++y)
-      for (int x = 0; x < cw * 2; ++x) t.set(x, y, f->at(cx + x / 2, cy + y / 2));
+    ImageRgb8 t(cw * kScale, ch * kScale);
+    for (int y = 0; y < ch * kScale; ++y)
+      for (int x = 0; x < cw * kScale; ++x) t.set(x, y, f->at(cx + x / kScale, cy + y / kScale));
     tiles.push_back(std::move(t));
   }
   return contactSheet(tiles, int(tiles.size()));
@@ -351,6 +362,41 @@ int run(const Args& a) {
     }
     splatMs[i] = medianOf(ms);
   }
+  // The same by the OpenGL point shader: a frame with the impostor against
+  // the same frame without it (far-field image and limits uploaded in both).
+  std::vector<double> glMs;
+  if (a.gl) {
+    GlWindow window(GlWindowOptions{width, height, "bench_impostor_image", false, false});
+    GlRenderer gl;
+    gl.upload(RenderGeometry{});
+    const ImageRgb8 far(width, height, held.sky);
+    GpuImpostors none;
+    none.depthLimit.assign(size_t(width) * size_t(height), std::numeric_limits<float>::infinity());
+    auto timed = [&](const Camera& c, const GpuImpostors& gpu) {
+      gl.draw(c, far, {}, std::numeric_limits<float>::infinity(), {}, &gpu);
+      gl.finish();
+      const auto start = std::chrono::steady_clock::now();
+      for (int k = 0; k < 3; ++k)
+        gl.draw(c, far, {}, std::numeric_limits<float>::infinity(), {}, &gpu);
+      gl.finish();
+      return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                 .count() /
+             3.0;
+    };
+    for (size_t i = 0; i < baked.impostors.size(); ++i) {
+      GpuImpostors one = none;
+      one.impostors.push_back(set->impostors[i]);
+      std::vector<double> with, without;
+      for (const Camera& c : cameras) {
+        Camera towards = c;
+        const glm::vec3 to = baked.impostors[i].box.center() - c.eye;
+        towards.yawDeg = glm::degrees(std::atan2(-to.x, -to.z));
+        with.push_back(timed(towards, one));
+        without.push_back(timed(towards, none));
+      }
+      glMs.push_back(std::max(0.0, medianOf(with) - medianOf(without)));
+    }
+  }
 
   if (png) {
     size_t best = 0;
@@ -429,6 +475,10 @@ int run(const Args& a) {
                          {"bake_s", s.seconds},
                          {"splat_ms", splatMs[i]},
                          {"splat_fps", splatMs[i] > 0 ? 1000.0 / splatMs[i] : 0.0}});
+    if (a.gl) {
+      impostors.back()["gl_ms"] = glMs[i];
+      impostors.back()["gl_fps"] = glMs[i] > 0 ? 1000.0 / glMs[i] : 0.0;
+    }
   }
   size_t footprint = 0;
   for (const Reference& r : refs) footprint += r.footprintPixels;
@@ -460,16 +510,18 @@ int run(const Args& a) {
     fmt::print("  {:<10} {:>13.2f} {:>14.2f} {:>15.1f}% {:>10.2f} {:>9.2f}\n", m.name,
                m.error.footMae(), m.error.footRmse(), 100.0 * m.error.footWrongShare(),
                m.error.frameMae(), medianOf(m.ms));
-  fmt::print("\n  {:>6} {:>4} {:>9} {:>9} {:>7} {:>9} {:>10} {:>8} {:>9} {:>9}\n", "sector", "band",
-             "triangles", "points", "pts/px", "bytes", "geometry B", "bake s", "splat ms",
-             "splat fps");
+  fmt::print("\n  {:>6} {:>4} {:>9} {:>9} {:>7} {:>9} {:>10} {:>8} {:>9} {:>9}{}\n", "sector",
+             "band", "triangles", "points", "pts/px", "bytes", "geometry B", "bake s", "splat ms",
+             "splat fps", a.gl ? fmt::format(" {:>8} {:>8}", "GL ms", "GL fps") : "");
   for (const json& i : impostors)
-    fmt::print("  {:>6} {:>4} {:>9} {:>9} {:>7.2f} {:>9} {:>10} {:>8.2f} {:>9.2f} {:>9.0f}\n",
+    fmt::print("  {:>6} {:>4} {:>9} {:>9} {:>7.2f} {:>9} {:>10} {:>8.2f} {:>9.2f} {:>9.0f}{}\n",
                i["sector"].get<int>(), i["band"].get<int>(), i["triangles"].get<size_t>(),
                i["points"].get<size_t>(), i["points_per_pixel"].get<double>(),
                i["bytes"].get<size_t>(), i["geometry_bytes"].get<size_t>(),
-               i["bake_s"].get<double>(), i["splat_ms"].get<double>(),
-               i["splat_fps"].get<double>());
+               i["bake_s"].get<double>(), i["splat_ms"].get<double>(), i["splat_fps"].get<double>(),
+               a.gl ? fmt::format(" {:>8.2f} {:>8.0f}", i["gl_ms"].get<double>(),
+                                  i["gl_fps"].get<double>())
+                    : "");
   if (!sweep.empty()) {
     fmt::print("\n  knob sweep on the heaviest impostor (error on its footprint):\n");
     fmt::print("  {:<10} {:>6} {:>8} {:>7} {:>9} {:>7} {:>6} {:>7} {:>9}\n", "knob", "value",
@@ -515,6 +567,8 @@ int main(int argc, char** argv) {
                  "write the crops (reference, impostors, geometry, ray-cast, "
                  "held-only) of the frame that sees most of the impostors");
   app.add_flag("--sweep", a.sweep, "sweep the bake's knobs on the heaviest impostor");
+  app.add_flag("--gl", a.gl,
+               "also time each impostor drawn by the OpenGL point shader (needs a display)");
   app.add_option("--lighting-cache", a.lightingCache, "where baked lighting is kept");
   app.add_flag("--json", a.json, "one JSON object instead of tables");
   app.add_option("--log-level", logLevel, "trace, debug, info, warn, error, critical, off");
