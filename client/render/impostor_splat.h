@@ -11,10 +11,16 @@
 // the near plane or projecting off the screen are skipped whole, as OpenGL
 // clips a point by its centre.
 //
+// draw() runs in parallel inside (projection by chunks of points, the depth
+// test by bands of rows), with the result of one pass in the points' order.
+//
 // Thread safety: one ImpostorSplatter per viewer.
 #pragma once
 
+#include <tbb/enumerable_thread_specific.h>
+
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -52,8 +58,19 @@ class ImpostorSplatter {
   static constexpr float kEmpty = 3.0e38f;
 
  private:
+  static constexpr int kSkipped = std::numeric_limits<int>::min();
+  static constexpr uint32_t kNoWinner = ~0u;
+  struct Projected {
+    int x0 = 0, y0 = kSkipped;  // the 2x2 pixels' top left; y0 kSkipped: not drawn
+    float z = 0.0f;
+  };
   Camera camera_;
   std::vector<float> depth_;
+  // Scratch of draw(): per point its projection, per pixel the point that
+  // won it in this draw, per band the pixels won.
+  std::vector<Projected> projected_;
+  std::vector<uint32_t> winner_;
+  tbb::enumerable_thread_specific<std::vector<uint32_t>> wonScratch_;
 };
 
 }  // namespace vistream

@@ -539,6 +539,58 @@ TEST(ImpostorSplat, SkipsOnlyBoxesWhollyOutOfView) {
   EXPECT_GT(culledViews, 8u);  // the views away from the block
 }
 
+// The parallel splat draws what one pass over the points in order draws:
+// oracle, that pass written out here, over two impostors sharing a depth
+// buffer, from views at, beside and inside the block's footprint.
+TEST(ImpostorSplat, DrawsWhatOnePassInThePointsOrderDraws) {
+  const ColouredScene s = buildingBlock();
+  const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
+  const Impostor a = bakeImpostor(s.view(), cell, boundsOf(s.triangles), s.facingCell(cell),
+                                  quickOptions(320, 240));
+  ImpostorOptions other = quickOptions(320, 240);
+  other.resolutionFactor = 1.3f;  // another sampling of the same surfaces: depth ties and overlaps
+  const Impostor b = bakeImpostor(s.view(), cell, boundsOf(s.triangles), s.facingCell(cell), other);
+  for (int k = 0; k < 6; ++k) {
+    Camera c;
+    c.width = 320;
+    c.height = 240;
+    c.eye = glm::vec3(-4.0f + 1.6f * float(k), 1.5f + 0.2f * float(k), 2.0f);
+    c.yawDeg = -20.0f + 8.0f * float(k);
+    c.pitchDeg = float(k % 3) * 4.0f;
+    ImpostorSplatter splatter;
+    splatter.begin(c);
+    ImageRgb8 image(c.width, c.height);
+    const size_t landed = splatter.draw(a, image) + splatter.draw(b, image);
+    // One pass.
+    const glm::mat4 rp = c.rotationProjection();
+    std::vector<float> depth(size_t(c.width) * size_t(c.height), ImpostorSplatter::kEmpty);
+    ImageRgb8 expected(c.width, c.height);
+    size_t expectedLanded = 0;
+    for (const Impostor* imp : {&a, &b})
+      for (size_t p = 0; p < imp->size(); ++p) {
+        const glm::vec3 rel = imp->points[p] - c.eye;
+        const float z = glm::dot(rel, c.forward());
+        const glm::vec4 clip = rp * glm::vec4(rel, 1.0f);
+        if (!(z > c.zNear) || !(std::abs(clip.x) <= clip.w && std::abs(clip.y) <= clip.w)) continue;
+        ++expectedLanded;
+        const float px = (clip.x / clip.w * 0.5f + 0.5f) * float(c.width);
+        const float py = (0.5f - clip.y / clip.w * 0.5f) * float(c.height);
+        const int x0 = int(std::floor(px - 0.5f)), y0 = int(std::floor(py - 0.5f));
+        for (int y = std::max(y0, 0); y <= std::min(y0 + 1, c.height - 1); ++y)
+          for (int x = std::max(x0, 0); x <= std::min(x0 + 1, c.width - 1); ++x) {
+            float& d = depth[size_t(y) * size_t(c.width) + size_t(x)];
+            if (!(z < d)) continue;
+            d = z;
+            expected.set(x, y, toBytes(imp->colourSeenFrom(p, c.eye)));
+          }
+      }
+    EXPECT_GT(expectedLanded, 1000u) << "view " << k;
+    EXPECT_EQ(landed, expectedLanded) << "view " << k;
+    EXPECT_EQ(splatter.depth(), depth) << "view " << k;
+    EXPECT_TRUE(image.pixels == expected.pixels) << "view " << k;
+  }
+}
+
 // ---- the client's pipeline drawing impostors (client/farfield/pipeline.h) ----
 
 // The block of buildingBlock() beyond a far blocker (a tower 150 m ahead,
