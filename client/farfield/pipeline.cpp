@@ -417,22 +417,30 @@ struct FrameRun {
     rep.ms.cache = clock.ms();
   }
 
-  // 6. Ray casting.
+  // 7. Ray casting (after the impostors: a ray need not look beyond the
+  // point a pixel already shows).
+  std::vector<uint8_t> shortened;  // per ray: stopped at an impostor's point
   void castFarRays() {
     Stopwatch clock;
+    const bool splatted = impostorsOn && !gpu;
     for (size_t i = 0; i < candidates.size(); ++i)
       if (trace[i]) {
         // dirs[i] has a unit component along the view axis, so t is the view
         // depth: starting at zNear clips rays exactly where polygons are clipped.
-        rays.push_back(
-            Ray{camera.eye, dirs[i], camera.zNear, std::numeric_limits<float>::infinity()});
+        float tfar = std::numeric_limits<float>::infinity();
+        // A hit at or beyond this depth loses to the pixel's point
+        // (impostorCovers): no need to find it.
+        const float z = splatted ? r.splatter_.depth()[candidates[i]] : ImpostorSplatter::kEmpty;
+        if (z < ImpostorSplatter::kEmpty) tfar = std::max(camera.zNear, (z - 0.01f) / 1.001f);
+        rays.push_back(Ray{camera.eye, dirs[i], camera.zNear, tfar});
+        shortened.push_back(z < ImpostorSplatter::kEmpty);
         rayOf.push_back(uint32_t(i));
       }
     castRays(*r.rays_, rays, hits);
     rep.ms.raycast = clock.ms();
   }
 
-  // 7. Impostors of the viewer's cell, splatted; compose() keeps a point
+  // 6. Impostors of the viewer's cell, splatted; compose() keeps a point
   // where the far field's own hit is not nearer.
   bool impostorsOn = false;
   void splatImpostors() {
@@ -453,19 +461,27 @@ struct FrameRun {
     } else if (candidates.empty() && skyPixels.empty() && backgroundPixels.empty()) {
       rep.impostorsWhy = "no far-field pixels to fill";
     } else if (gpu) {
-      gpu->impostors = set->impostors;
+      const std::vector<uint8_t> tiles = fillableTiles();
+      for (const auto& impostor : set->impostors)
+        if (mayFill(tiles, *impostor)) gpu->impostors.push_back(impostor);
       gpu->depthLimit.assign(pixels, 0.0f);
       impostorsOn = true;
       rep.impostorsRan = true;
-      rep.impostorsDrawn = set->impostors.size();
+      rep.impostorsDrawn = gpu->impostors.size();
       rep.impostorsWhy = fmt::format("{} impostor{} of the viewer's cell ({}, {}, {}), by OpenGL",
                                      set->impostors.size(), set->impostors.size() == 1 ? "" : "s",
                                      set->index.x, set->index.y, set->index.z);
     } else {
-      r.splatter_.begin(camera);
+      // Only pixels compose may give an impostor are drawn (and coloured).
+      r.splatMask_.assign(pixels, 0);
+      for (const std::vector<uint32_t>* list : {&candidates, &skyPixels, &backgroundPixels})
+        for (const uint32_t p : *list) r.splatMask_[p] = 1;
+      r.splatter_.begin(camera, &r.splatMask_);
       if (r.impostorImage_.width != W || r.impostorImage_.height != H)
         r.impostorImage_ = ImageRgb8(W, H);
+      const std::vector<uint8_t> tiles = fillableTiles();
       for (const auto& impostor : set->impostors) {
+        if (!mayFill(tiles, *impostor)) continue;
         rep.impostorPoints += r.splatter_.draw(*impostor, r.impostorImage_);
         ++rep.impostorsDrawn;
       }
@@ -476,6 +492,28 @@ struct FrameRun {
                                      set->index.x, set->index.y, set->index.z);
     }
     rep.ms.impostors = clock.ms();
+  }
+  // Tiles of kTile x kTile pixels holding a pixel an impostor may fill
+  // (far-field, horizon-sky or background): an impostor whose footprint
+  // meets none of them (behind the near field's walls) is not drawn at all.
+  static constexpr int kTile = 16;
+  std::vector<uint8_t> fillableTiles() const {
+    const int tw = (W + kTile - 1) / kTile, th = (H + kTile - 1) / kTile;
+    std::vector<uint8_t> tiles(size_t(tw) * size_t(th), 0);
+    for (const std::vector<uint32_t>* list : {&candidates, &skyPixels, &backgroundPixels})
+      for (const uint32_t p : *list)
+        tiles[size_t(int(p / uint32_t(W)) / kTile) * size_t(tw) +
+              size_t(int(p % uint32_t(W)) / kTile)] = 1;
+    return tiles;
+  }
+  bool mayFill(const std::vector<uint8_t>& tiles, const Impostor& impostor) const {
+    const std::optional<glm::ivec4> f = impostorFootprint(camera, impostor.box);
+    if (!f) return false;
+    const int tw = (W + kTile - 1) / kTile;
+    for (int ty = f->y / kTile; ty <= f->w / kTile; ++ty)
+      for (int tx = f->x / kTile; tx <= f->z / kTile; ++tx)
+        if (tiles[size_t(ty) * size_t(tw) + size_t(tx)]) return true;
+    return false;
   }
   // Whether candidate i shows the impostor rather than the far field's hit
   // at view depth `farDepth` (infinity: a miss).
@@ -509,7 +547,9 @@ struct FrameRun {
       const glm::u8vec3 c =
           h.valid() ? r.geometry_.colourAt(h.triangle, h.u, h.v, h.t * glm::length(dirs[i]))
                     : r.geometry_.background(camera.eye, dirs[i]);
-      if (useCache && texels[i] >= 0)
+      // A shortened ray that missed does not know the far field's colour:
+      // its texel stays due and is traced again.
+      if (useCache && texels[i] >= 0 && !(shortened[k] && !h.valid()))
         r.cache_->store(texels[i], c,
                         hits[k].valid() ? hits[k].t * glm::length(dirs[i])
                                         : std::numeric_limits<float>::infinity(),
@@ -566,8 +606,8 @@ FrameReport FrameRenderer::run(const Camera& camera, ImageRgb8& out, std::vector
   f.traceHorizon();
   f.classifyPixels();
   f.planCache();
-  f.castFarRays();
   f.splatImpostors();
+  f.castFarRays();
   f.compose();
   f.rep.ms.total = total.ms();
   return std::move(f.rep);

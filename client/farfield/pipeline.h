@@ -263,6 +263,7 @@ class FrameRenderer {
   bool idsDrawn_ = false;  // ids_ holds the last frame's near field (not an OpenGL frame)
   std::shared_ptr<const ImpostorSet> impostors_;
   ImpostorSplatter splatter_;
+  std::vector<uint8_t> splatMask_;  // per pixel: an impostor may fill it this frame
   ImageRgb8 impostorImage_;
   SoftwareRasterizer dynamicRaster_;
   IdBuffer dynamicIds_;

@@ -14,10 +14,47 @@
 
 namespace vistream {
 
-void ImpostorSplatter::begin(const Camera& camera) {
+void ImpostorSplatter::begin(const Camera& camera, const std::vector<uint8_t>* mask) {
   camera_ = camera;
+  VS_CHECK(!mask || mask->size() == size_t(camera.width) * size_t(camera.height));
+  mask_ = mask;
   depth_.assign(size_t(camera.width) * size_t(camera.height), kEmpty);
   winner_.assign(depth_.size(), kNoWinner);
+}
+
+std::optional<glm::ivec4> impostorFootprint(const Camera& camera, const Box3f& box) {
+  const glm::mat4 rp = camera.rotationProjection();
+  const glm::vec3 forward = camera.forward();
+  int left = 0, right = 0, below = 0, above = 0, behind = 0;
+  glm::vec2 lo(std::numeric_limits<float>::infinity()), hi(-lo);
+  for (int k = 0; k < 8; ++k) {
+    const glm::vec3 corner{k & 1 ? box.hi.x : box.lo.x, k & 2 ? box.hi.y : box.lo.y,
+                           k & 4 ? box.hi.z : box.lo.z};
+    const glm::vec3 rel = corner - camera.eye;
+    if (!(glm::dot(rel, forward) > camera.zNear)) {
+      ++behind;
+      continue;
+    }
+    const glm::vec4 clip = rp * glm::vec4(rel, 1.0f);
+    left += clip.x < -clip.w;
+    right += clip.x > clip.w;
+    below += clip.y < -clip.w;
+    above += clip.y > clip.w;
+    const glm::vec2 px((clip.x / clip.w * 0.5f + 0.5f) * float(camera.width),
+                       (0.5f - clip.y / clip.w * 0.5f) * float(camera.height));
+    lo = glm::min(lo, px);
+    hi = glm::max(hi, px);
+  }
+  // Wholly beyond one side of the view, or behind the near plane: the
+  // points inside are too (the half-spaces are convex).
+  if (behind == 8 || left == 8 || right == 8 || below == 8 || above == 8) return std::nullopt;
+  if (behind > 0) return glm::ivec4(0, 0, camera.width - 1, camera.height - 1);
+  // The corners' projections bound the points'; a point covers the pixels
+  // whose centres lie within one pixel of it.
+  return glm::ivec4(std::max(0, int(std::floor(lo.x - 1.5f))),
+                    std::max(0, int(std::floor(lo.y - 1.5f))),
+                    std::min(camera.width - 1, int(std::floor(hi.x + 0.5f))),
+                    std::min(camera.height - 1, int(std::floor(hi.y + 0.5f))));
 }
 
 size_t ImpostorSplatter::draw(const Impostor& impostor, ImageRgb8& out) {
@@ -25,28 +62,7 @@ size_t ImpostorSplatter::draw(const Impostor& impostor, ImageRgb8& out) {
   const glm::mat4 rp = camera_.rotationProjection();
   const glm::vec3 forward = camera_.forward();
   const float w = float(camera_.width), h = float(camera_.height);
-  // A box wholly outside the view (beyond a side, or behind the near
-  // plane) has no point to draw.
-  {
-    const float mx = 1.0f, my = 1.0f;
-    int left = 0, right = 0, below = 0, above = 0, behind = 0;
-    for (int k = 0; k < 8; ++k) {
-      const glm::vec3 corner{k & 1 ? impostor.box.hi.x : impostor.box.lo.x,
-                             k & 2 ? impostor.box.hi.y : impostor.box.lo.y,
-                             k & 4 ? impostor.box.hi.z : impostor.box.lo.z};
-      const glm::vec3 rel = corner - camera_.eye;
-      if (!(glm::dot(rel, forward) > camera_.zNear)) {
-        ++behind;
-        continue;
-      }
-      const glm::vec4 clip = rp * glm::vec4(rel, 1.0f);
-      left += clip.x < -mx * clip.w;
-      right += clip.x > mx * clip.w;
-      below += clip.y < -my * clip.w;
-      above += clip.y > my * clip.w;
-    }
-    if (behind == 8 || left == 8 || right == 8 || below == 8 || above == 8) return 0;
-  }
+  if (!impostorFootprint(camera_, impostor.box)) return 0;
   // 1. Every point projected (in parallel): its 2x2 pixels' corner and depth.
   const size_t n = impostor.size();
   projected_.resize(n);
@@ -93,7 +109,7 @@ size_t ImpostorSplatter::draw(const Impostor& impostor, ImageRgb8& out) {
       for (int y = std::max(pt.y0, rowLo); y <= std::min(pt.y0 + 1, rowHi - 1); ++y)
         for (int x = std::max(pt.x0, 0); x <= std::min(pt.x0 + 1, width - 1); ++x) {
           const size_t p = size_t(y) * size_t(width) + size_t(x);
-          if (!(pt.z < depth_[p])) continue;
+          if (!(pt.z < depth_[p]) || (mask_ && !(*mask_)[p])) continue;
           if (winner_[p] == kNoWinner) won.push_back(uint32_t(p));
           depth_[p] = pt.z;
           winner_[p] = uint32_t(k);

@@ -22,6 +22,7 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -42,10 +43,18 @@ struct ImpostorSet {
   size_t bytes = 0;       // as received
 };
 
+// The pixels (x0, y0, x1, y1, inclusive) the points inside `box` may cover
+// in the camera's frame: the whole screen when the box reaches behind the
+// near plane, nothing when it lies wholly out of view.
+std::optional<glm::ivec4> impostorFootprint(const Camera& camera, const Box3f& box);
+
 class ImpostorSplatter {
  public:
-  // Starts a frame of the camera's size: every depth at infinity.
-  void begin(const Camera& camera);
+  // Starts a frame of the camera's size: every depth at infinity. With
+  // `mask` (one byte a pixel, row 0 at the top, kept alive until the frame's
+  // last draw), only pixels whose byte is non-zero are drawn: the others keep
+  // their depth at infinity and their colour.
+  void begin(const Camera& camera, const std::vector<uint8_t>* mask = nullptr);
   // Draws an impostor's points into the frame's depth and `out` (which has
   // the camera's size). Returns the points that landed on the screen.
   size_t draw(const Impostor& impostor, ImageRgb8& out);
@@ -65,6 +74,7 @@ class ImpostorSplatter {
     float z = 0.0f;
   };
   Camera camera_;
+  const std::vector<uint8_t>* mask_ = nullptr;
   std::vector<float> depth_;
   // Scratch of draw(): per point its projection, per pixel the point that
   // won it in this draw, per band the pixels won.

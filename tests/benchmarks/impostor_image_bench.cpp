@@ -153,6 +153,7 @@ struct ModeResult {
   std::string name;
   ErrorSums error;
   std::vector<double> ms;
+  StageTimes stages;  // summed over the frames
   std::vector<ImageRgb8> frames;
 };
 
@@ -190,7 +191,7 @@ ModeResult runMode(const std::string& name, FrameRenderer& renderer,
   for (size_t i = 0; i < cameras.size(); ++i) {
     ImageRgb8 image;
     const auto start = std::chrono::steady_clock::now();
-    renderer.render(cameras[i], image);
+    m.stages += renderer.render(cameras[i], image).ms;
     m.ms.push_back(
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
             .count());
@@ -240,12 +241,22 @@ double medianOf(std::vector<double> v) {
 }
 
 json errorJson(const ModeResult& m) {
+  const double n = double(std::max<size_t>(1, m.ms.size()));
   return {{"mode", m.name},
           {"footprint_mae", m.error.footMae()},
           {"footprint_rmse", m.error.footRmse()},
           {"footprint_wrong_share", m.error.footWrongShare()},
           {"frame_mae", m.error.frameMae()},
-          {"median_frame_ms", medianOf(m.ms)}};
+          {"median_frame_ms", medianOf(m.ms)},
+          {"mean_stage_ms",
+           {{"near", (m.stages.nearSelect + m.stages.nearDraw + m.stages.shade) / n},
+            {"opacity", m.stages.opacity / n},
+            {"horizon", m.stages.horizon / n},
+            {"cache", m.stages.cache / n},
+            {"raycast", m.stages.raycast / n},
+            {"impostors", m.stages.impostors / n},
+            {"compose", m.stages.compose / n},
+            {"total", m.stages.total / n}}}};
 }
 
 struct SweepRow {
