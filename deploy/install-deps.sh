@@ -12,6 +12,8 @@ packages=(
   libembree-dev libspdlog-dev libfmt-dev libtbb-dev libepoxy-dev
   libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev
   libtinyobjloader-dev libtinygltf-dev libstb-dev libmeshoptimizer-dev libzstd-dev
+  # the bake over MPI ranks (vistream-pvs bake --mpi, mpirun)
+  libopenmpi-dev openmpi-bin
   # headless OpenGL for tests (Mesa llvmpipe under Xvfb)
   xvfb xauth libgl1-mesa-dri libgl1-mesa-dev
   # plots in benchmarks; the demo's result check

@@ -8,10 +8,12 @@
 #include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <thread>
 
 #include "common/cmd/cli.h"
 #include "common/core/error.h"
@@ -26,6 +28,7 @@
 #include "common/world/static_world.h"
 #include "server/cmd/impostor_bench.h"
 #include "server/cmd/impostor_commands.h"
+#include "server/cmd/mpi_bake.h"
 #include "server/cmd/pvs_bench.h"
 #include "server/cmd/scene_boxes.h"
 #include "server/cmd/walk_bench.h"
@@ -92,7 +95,7 @@ int cmdCell(const std::string& spec, const SceneLimits& limits, const std::strin
 int cmdBake(const std::string& spec, const SceneLimits& limits, const GroundChoice& ground,
             const std::string& cellSizeText, const std::string& regionText, unsigned threads,
             const std::string& shardText, bool coarseToFine, const PvsOptions& pvsOptions,
-            const std::string& fusion, const std::string& out, bool asJson) {
+            const std::string& fusion, const std::string& out, bool asJson, bool mpi) {
   BakeOptions options;
   options.pvs = pvsOptions;
   options.threads = threads;
@@ -121,34 +124,75 @@ int cmdBake(const std::string& spec, const SceneLimits& limits, const GroundChoi
     options.shardIndex = i;
     options.shardCount = n;
   }
+  if (mpi && !shardText.empty())
+    throwInputError("--mpi gives each rank its shard (rank i of n bakes shard i/n): drop --shard");
   std::optional<Box3d> fileRegion;
   if (!regionText.empty()) fileRegion = parseFileBox(regionText, "--region");
-  const Scene scene = openScene(spec, limits);
-  if (fileRegion) {
-    warnIfOutsideScene(scene, *fileRegion, "--region", regionText);
-    options.region = toLocal(scene, *fileRegion);
-  }
-  StaticWorldOptions worldOptions;
-  worldOptions.ground = ground;
-  const StaticWorld world = buildStaticWorld(scene, worldOptions);
-  const FreeSpace& fs = world.freeSpace;
-  EpsilonPvs pvs(scene);
-  const std::unique_ptr<HorizonFusion> horizons =
-      makeHorizonFusion(scene, *parseFusionChoice(fusion), &world);
-  pvs.setFusion(horizons.get());
-  std::unique_ptr<ProgressBar> bar;
-  std::mutex barMutex;  // guards creation of the bar from the first progress call
-  options.progress = [&](size_t done, size_t total) {
-    std::lock_guard lock(barMutex);
-    if (!bar) {
-      bar = std::make_unique<ProgressBar>("baking cells", total);
-      bar->advance(done);
-    } else {
-      bar->advance(1);
+  // Loads the scene and bakes `o` into `path` (every rank of an MPI job does).
+  auto bakeInto = [&](BakeOptions o, const std::string& path, bool progress) {
+    const Scene scene = openScene(spec, limits);
+    if (fileRegion) {
+      warnIfOutsideScene(scene, *fileRegion, "--region", regionText);
+      o.region = toLocal(scene, *fileRegion);
     }
+    StaticWorldOptions worldOptions;
+    worldOptions.ground = ground;
+    const StaticWorld world = buildStaticWorld(scene, worldOptions);
+    EpsilonPvs pvs(scene);
+    const std::unique_ptr<HorizonFusion> horizons =
+        makeHorizonFusion(scene, *parseFusionChoice(fusion), &world);
+    pvs.setFusion(horizons.get());
+    std::unique_ptr<ProgressBar> bar;
+    std::mutex barMutex;  // guards creation of the bar from the first progress call
+    if (progress)
+      o.progress = [&](size_t done, size_t total) {
+        std::lock_guard lock(barMutex);
+        if (!bar) {
+          bar = std::make_unique<ProgressBar>("baking cells", total);
+          bar->advance(done);
+        } else {
+          bar->advance(1);
+        }
+      };
+    BakeReport r = bakePvs(scene, pvs, world.freeSpace, o, path);
+    if (bar) bar->finish();
+    return std::pair{scene.name, r};
   };
-  const BakeReport r = bakePvs(scene, pvs, fs, options, out);
-  if (bar) bar->finish();
+  if (mpi) {
+    Stopwatch clock;
+    const int status = runMpiBake(
+        out,
+        [&](const MpiShard& shard) {
+          BakeOptions o = options;
+          o.shardIndex = shard.rank;
+          o.shardCount = shard.size;
+          if (threads == 0)
+            o.threads = std::max(1u, std::thread::hardware_concurrency() / shard.localRanks);
+          const BakeReport r = bakeInto(o, shard.out, shard.rank == 0).second;
+          return MpiShardCounts{r.shardCells, r.resumedCells};
+        },
+        [&](const std::vector<std::string>& shards, const MpiShardCounts& all) {
+          std::vector<std::filesystem::path> paths(shards.begin(), shards.end());
+          mergePvsDatabases(paths, out);
+          const size_t cells = PvsDatabase::open(out).cellCount();
+          if (asJson)
+            std::cout << json{{"out", out},
+                              {"ranks", shards.size()},
+                              {"cells", cells},
+                              {"resumed_cells", all.resumed},
+                              {"computed_cells", all.cells - all.resumed},
+                              {"time_ms", clock.ms()}}
+                             .dump(2)
+                      << "\n";
+          else
+            fmt::print(
+                "baked on {} MPI ranks -> {}: {} cells ({} resumed from journals) in "
+                "{:.1f} s\n",
+                shards.size(), out, cells, all.resumed, clock.ms() / 1000.0);
+        });
+    return status;
+  }
+  const auto [sceneName, r] = bakeInto(options, out, true);
   if (asJson) {
     std::cout << json{{"out", out},
                       {"grid_cells", r.gridCells},
@@ -163,7 +207,7 @@ int cmdBake(const std::string& spec, const SceneLimits& limits, const GroundChoi
                      .dump(2)
               << "\n";
   } else {
-    fmt::print("baked {} -> {}\n", scene.name, out);
+    fmt::print("baked {} -> {}\n", sceneName, out);
     fmt::print("  {:<28} {:>12}\n", "grid cells", r.gridCells);
     fmt::print("  {:<28} {:>12}\n", "cells over free space", r.freeCells);
     fmt::print("  {:<28} {:>12}\n", "cells in this shard", r.shardCells);
@@ -371,7 +415,7 @@ int runPvsTool(int argc, char** argv) {
       app.add_subcommand("bake", "bake the PVS of every cell over the free space into a database");
   std::string cellSize, region, shard, out;
   unsigned threads = 0;
-  bool noCoarse = false;
+  bool noCoarse = false, bakeMpi = false;
   bake->add_option("--scene", scene, "SCENE")->required();
   bake->add_option("--cell-size", cellSize, "X or X,Y,Z in metres")->required();
   bake->add_option("--region", region, "x0,y0,z0,x1,y1,z1: bake only this box (file coordinates)");
@@ -380,6 +424,9 @@ int runPvsTool(int argc, char** argv) {
   bake->add_option("--shard", shard, "i/n: bake only shard i of n (merge shards with 'merge')");
   bake->add_option("--out,-o", out, "output database")->required();
   bake->add_flag("--no-coarse-to-fine", noCoarse, "bake every cell from scratch");
+  bake->add_flag("--mpi", bakeMpi,
+                 "run as one rank of an MPI job (mpirun -n N vistream-pvs bake --mpi ...): rank i "
+                 "of n bakes shard i/n, rank 0 merges them into --out");
   bake->add_option("--fusion", fusion,
                    "occlusion horizons after the single occluders: auto (where the scene has "
                    "solid columns), horizons or none")
@@ -543,7 +590,7 @@ int runPvsTool(int argc, char** argv) {
     if (*bake) {
       const PvsOptions options = pvsOptionsFromFlags();
       return cmdBake(scene, limits, ground, cellSize, region, threads, shard, !noCoarse, options,
-                     fusion, out, asJson);
+                     fusion, out, asJson, bakeMpi);
     }
     if (*query) return cmdQuery(db, point, cellIndex, asJson, queryFaces);
     if (*walk) return cmdWalk(scene, limits, pathFile, walkMethod, cullOptions, asJson, withFaces);
