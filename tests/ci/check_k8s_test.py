@@ -1,0 +1,62 @@
+#!/usr/bin/env python3
+"""Plants one slip at a time in copies of deploy/k8s and expects check_k8s.py
+to name it; the manifests as they are must pass."""
+
+import os
+import shutil
+import sys
+import tempfile
+
+here = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, here)
+import check_k8s  # noqa: E402
+
+SOURCE = os.path.join(here, "..", "..", "deploy", "k8s")
+
+# (file, text replaced, replacement, words the problem must contain)
+SLIPS = [
+    ("pvs-bake-job.yaml", "completions: 4", "completions: 3", "completions 3 != SHARDS 4"),
+    ("pvs-bake-job.yaml", "completionMode: Indexed", "completionMode: NonIndexed", "Indexed"),
+    ("pvs-bake-job.yaml", '--shard "${JOB_COMPLETION_INDEX}/${SHARDS}"', '--shard "0/${SHARDS}"',
+     "--shard"),
+    ("pvs-bake-job.yaml", "pvs-${JOB_COMPLETION_INDEX}-of-${SHARDS}.db", "pvs.db",
+     "same file for every pod"),
+    ("pvs-bake-job.yaml", "mountPath: /data", "mountPath: /scratch", "not on the shared volume"),
+    ("pvs-merge-job.yaml", 'value: "4"', 'value: "5"', "SHARDS 5 != the bake's 4"),
+    ("pvs-merge-job.yaml", "/data/shards/pvs-*-of-", "/data/shards/shard-*-of-",
+     "does not read the bake's shards"),
+    ("pvs-merge-job.yaml", "claimName: vistream-bake", "claimName: other", "mounts no volume"),
+    ("pvs-merge-job.yaml", "--out /data/pvs.db", "--out /data/shards/pvs.db", "among the shards"),
+    ("bake-volume.yaml", "- ReadWriteMany", "- ReadWriteOnce", "ReadWriteMany"),
+    ("pvs-bake-job.yaml", "runAsNonRoot: true", "runAsNonRoot: false", "non-root"),
+]
+
+
+def main():
+    failures = []
+    clean = check_k8s.check(SOURCE)
+    if clean:
+        failures.append(f"the manifests as they are fail: {clean}")
+    for name, old, new, words in SLIPS:
+        with tempfile.TemporaryDirectory() as d:
+            for f in os.listdir(SOURCE):
+                shutil.copy(os.path.join(SOURCE, f), d)
+            path = os.path.join(d, name)
+            with open(path, encoding="utf-8") as f:
+                text = f.read()
+            if old not in text:
+                failures.append(f"{name}: the slip's text {old!r} is not in the manifest")
+                continue
+            with open(path, "w", encoding="utf-8") as f:
+                f.write(text.replace(old, new, 1))
+            problems = check_k8s.check(d)
+            if not any(words in p for p in problems):
+                failures.append(f"{name}: {old!r} -> {new!r} not reported as {words!r}: {problems}")
+    for f in failures:
+        print(f"check_k8s_test: {f}")
+    print(f"check_k8s_test: {len(SLIPS) - len(failures)} of {len(SLIPS)} slips named")
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
