@@ -86,6 +86,13 @@ int runServerTool(int argc, char** argv) {
   app.add_option("--bind", cfg.bindAddress, "address to listen on");
   app.add_option("--port", cfg.port, "TCP port (0 picks a free one)")->check(tcpPort(true));
   app.add_option("--port-file", portFile, "write the port listened on to this file");
+  int httpPort = -1;
+  std::string httpPortFile;
+  app.add_option("--http-port", httpPort,
+                 "serve /healthz, /metrics (Prometheus) and /pvs?point=x,y,z|cell=i,j,k (JSON) "
+                 "on this TCP port (0 picks a free one; -1: no HTTP)")
+      ->check(inRange<int>(-1, 65535));
+  app.add_option("--http-port-file", httpPortFile, "write the HTTP port listened on to this file");
   app.add_option("--threads", cfg.ioThreads, "I/O threads")->check(atLeast<unsigned>(1));
   app.add_option("--workers", cfg.workerThreads, "visibility worker threads (0: all cores)")
       ->check(atLeast<unsigned>(0));
@@ -180,6 +187,8 @@ int runServerTool(int argc, char** argv) {
       }
     }
     worldOptions.pvsDatabase = pvsDb;
+    if (!httpPortFile.empty() && httpPort < 0)
+      throwInputError("--http-port-file needs --http-port (0 picks a free one)");
     if (!worldOptions.impostorDatabase.empty() && pvsDb.empty())
       throwInputError("--impostor-db needs --pvs-db (the PVS database it was baked from)");
     if (!worldOptions.impostorDatabase.empty() &&
@@ -190,13 +199,16 @@ int runServerTool(int argc, char** argv) {
     StreamWorld world(openScene(scene, sceneLimits), worldOptions);
     cfg.avatarModels = std::make_shared<const AvatarCatalogue>(
         AvatarCatalogue::load(avatarFiles, avatarHeight, world.scene()));
+    if (httpPort >= 0) cfg.httpPort = uint16_t(httpPort);
     StreamServer server(world, cfg);
     server.start();
-    if (!portFile.empty()) {
-      const std::filesystem::path tmp = portFile + ".tmp";
-      std::ofstream(tmp) << server.port() << "\n";
-      std::filesystem::rename(tmp, portFile);
-    }
+    auto writePort = [](const std::string& file, uint16_t port) {
+      const std::filesystem::path tmp = file + ".tmp";
+      std::ofstream(tmp) << port << "\n";
+      std::filesystem::rename(tmp, file);
+    };
+    if (!portFile.empty()) writePort(portFile, server.port());
+    if (!httpPortFile.empty()) writePort(httpPortFile, server.httpPort());
     server.run(true);
     return 0;
   });

@@ -11,6 +11,7 @@
 
 #include "common/core/error.h"
 #include "protocol/wire/messages.h"
+#include "server/stream/http_endpoint.h"
 #include "server/stream/session.h"
 
 namespace vistream {
@@ -70,6 +71,10 @@ void StreamServer::start() {
   spdlog::info("vistream-server listening on {}:{} ({} policy{}, {} I/O threads)",
                config_.bindAddress, port_, streamPolicyName(config_.policy),
                config_.pvsOnly ? ", PVS only" : "", config_.ioThreads);
+  if (config_.httpPort) {
+    http_ = std::make_unique<HttpEndpoint>(*this, config_.bindAddress, *config_.httpPort);
+    http_->start();
+  }
   accept();
   avatarTick();
   statsTick();
@@ -147,14 +152,18 @@ void StreamServer::accept() {
         {
           std::lock_guard lock(sessionsMutex_);
           id = nextId_++;
-          if (stopping_)
+          if (stopping_) {
             refusal = "server is shutting down";
-          else if (sessions_.size() >= maxClients_)
+            ++rejectedStopping_;
+          } else if (sessions_.size() >= maxClients_) {
             refusal = fmt::format("the server takes at most {} clients", maxClients_);
-          else if (config_.maxClientsPerAddress > 0 &&
-                   perAddress_[address] >= config_.maxClientsPerAddress)
+            ++rejectedFull_;
+          } else if (config_.maxClientsPerAddress > 0 &&
+                     perAddress_[address] >= config_.maxClientsPerAddress) {
             refusal = fmt::format("the server takes at most {} clients from one address",
                                   config_.maxClientsPerAddress);
+            ++rejectedPerAddress_;
+          }
           if (refusal.empty()) {
             ++perAddress_[address];
             addressOf_[id] = address;
@@ -197,8 +206,25 @@ size_t StreamServer::sessionCount() const {
   return sessions_.size();
 }
 
+StreamServer::QueueDepths StreamServer::queueDepths() const {
+  QueueDepths d;
+  std::lock_guard lock(sessionsMutex_);
+  for (auto& [id, weak] : sessions_)
+    if (auto session = weak.lock()) {
+      ++d.sessions;
+      d.totalBytes += session->queuedBytes();
+      d.maxBytes = std::max(d.maxBytes, session->queuedBytes());
+    }
+  return d;
+}
+
+uint16_t StreamServer::httpPort() const {
+  return http_ ? http_->port() : 0;
+}
+
 StreamServer::Counters StreamServer::counters() const {
-  return {accepted_, rejected_, ended_, bytesSent_};
+  return {accepted_,     rejected_,          ended_, bytesSent_, rejectedStopping_,
+          rejectedFull_, rejectedPerAddress_};
 }
 
 void StreamServer::avatarTick() {
@@ -274,16 +300,9 @@ void StreamServer::statsTick() {
   peerWarnings_.flush();
   if (sinceLog_ >= config_.statsIntervalS) {
     sinceLog_ = 0.0;
-    size_t sessions = 0, queueSum = 0, queueMax = 0;
-    {
-      std::lock_guard lock(sessionsMutex_);
-      for (auto& [id, weak] : sessions_)
-        if (auto s = weak.lock()) {
-          ++sessions;
-          queueSum += s->queuedBytes();
-          queueMax = std::max(queueMax, s->queuedBytes());
-        }
-    }
+    const QueueDepths depths = queueDepths();
+    const size_t sessions = depths.sessions, queueSum = depths.totalBytes,
+                 queueMax = depths.maxBytes;
     const uint64_t bytes = bytesSent_;
     const auto cs = world_.cacheStats();
     const double hitRate =
@@ -316,6 +335,7 @@ void StreamServer::stop() {
   asio::post(acceptStrand_, [this] {
     boost::system::error_code ignored;
     acceptor_.close(ignored);
+    if (http_) http_->stop();
     avatarTimer_.cancel();
     statsTimer_.cancel();
     acceptRetryTimer_.cancel();

@@ -24,6 +24,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -54,6 +55,9 @@ struct StreamServerConfig {
   // The models users are drawn as, offered in Welcome (null or empty: none;
   // Avatar updates still say where users are).
   std::shared_ptr<const AvatarCatalogue> avatarModels;
+  // The HTTP port (http_endpoint.h: /healthz, /metrics, /pvs): nothing
+  // for none, 0 for any free port (see StreamServer::httpPort()).
+  std::optional<uint16_t> httpPort;
   double statsIntervalS = 5.0;        // the server's log line
   double clientStatsIntervalS = 2.0;  // Stats frames to each client
   uint32_t maxInboundFrameBytes = 64u << 10;
@@ -94,6 +98,7 @@ struct StreamServerConfig {
 };
 
 class Session;
+class HttpEndpoint;
 
 class StreamServer {
  public:
@@ -132,8 +137,18 @@ class StreamServer {
 
   struct Counters {
     uint64_t accepted = 0, rejected = 0, ended = 0, bytesSent = 0;
+    // rejected, by reason
+    uint64_t rejectedStopping = 0, rejectedFull = 0, rejectedPerAddress = 0;
   };
   Counters counters() const;
+  // The sessions' send queues now: summed and the deepest.
+  struct QueueDepths {
+    size_t sessions = 0, totalBytes = 0, maxBytes = 0;
+  };
+  QueueDepths queueDepths() const;
+  bool stopping() const { return stopping_; }
+  // The HTTP port listened on (after start()), 0 without one.
+  uint16_t httpPort() const;
 
  private:
   void fitOpenFileLimit();
@@ -166,6 +181,8 @@ class StreamServer {
   std::atomic<bool> stopping_{false};
   std::atomic<bool> avatarsInFlight_{false};  // one avatar update on the workers at a time
   std::atomic<uint64_t> accepted_{0}, rejected_{0}, ended_{0}, bytesSent_{0};
+  std::atomic<uint64_t> rejectedStopping_{0}, rejectedFull_{0}, rejectedPerAddress_{0};
+  std::unique_ptr<HttpEndpoint> http_;
   uint64_t lastBytes_ = 0;
   double lastCpuMs_ = 0.0, sinceLog_ = 0.0;
   std::atomic<double> cpuMsPerS_{0.0};

@@ -256,7 +256,13 @@ std::optional<glm::ivec3> StreamWorld::cellOf(const glm::vec3& p) const {
 
 void StreamWorld::pvs(const glm::ivec3& cell, boost::asio::thread_pool& pool,
                       std::function<void(FaceListPtr)> done, const Interest& interest) {
-  pvsCache_->get(uint32_t(grid_.linearIndex(cell)), pool.get_executor(), std::move(done), interest);
+  pvsCache_->get(
+      uint32_t(grid_.linearIndex(cell)), pool.get_executor(),
+      [this, start = std::chrono::steady_clock::now(), done = std::move(done)](FaceListPtr p) {
+        pvsLatency_.observeSince(start);
+        done(std::move(p));
+      },
+      interest);
 }
 
 FaceListPtr StreamWorld::cachedPvs(const glm::ivec3& cell) {
@@ -274,6 +280,10 @@ void StreamWorld::cellFaceSet(const glm::ivec3& cell, CellLevel level, StreamPol
                               float radius, boost::asio::thread_pool& pool,
                               std::function<void(FaceListPtr)> done, CellWork work) {
   const FaceSetKey key = faceSetKey(cell, level, policy, radius);
+  done = [this, start = std::chrono::steady_clock::now(), done = std::move(done)](FaceListPtr p) {
+    faceSetLatency_.observeSince(start);
+    done(std::move(p));
+  };
   // One stage where the face set is computed from the near faces alone
   // (unculled sets are radius sets).
   if (key.policy == StreamPolicy::Radius || !database_) {

@@ -56,6 +56,7 @@
 #include "protocol/geometry/geometry_codec.h"
 #include "server/impostor/impostor_database.h"
 #include "server/stream/async_cache.h"
+#include "server/stream/latency_histogram.h"
 #include "server/visibility/epsilon_pvs.h"
 #include "server/visibility/hierarchical_culling.h"
 #include "server/visibility/horizon_fusion.h"
@@ -196,6 +197,10 @@ class StreamWorld {
     uint64_t unculled = 0;        // unculled sets computed (no PVS: the workers were behind)
   };
   CacheStats cacheStats() const;
+  // From a request to its answer (cached, read or computed): whole PVSs
+  // (pvs(): PvsRequest, avatars, HTTP) and cell face sets (cellFaceSet()).
+  const LatencyHistogram& pvsLatency() const { return pvsLatency_; }
+  const LatencyHistogram& faceSetLatency() const { return faceSetLatency_; }
   bool hasDatabase() const { return database_.has_value(); }
 
   // ---- impostors (with an impostor database) ------------------------------------
@@ -246,6 +251,7 @@ class StreamWorld {
   ImpostorEntry impostorEntry(uint32_t linearCell) const;
   static constexpr size_t kImpostorCellsKept = 64;
   WorkQueue work_;  // before the caches, which submit to it
+  LatencyHistogram pvsLatency_, faceSetLatency_;
   std::unique_ptr<CullingScene> culling_;
   std::once_flag pvsOnce_;
   std::unique_ptr<StaticWorld> statics_;     // without a database: for the horizons

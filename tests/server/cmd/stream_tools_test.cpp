@@ -335,6 +335,11 @@ TEST(StreamTools, HelpAndBadArgumentsGiveClearExits) {
   r = runTool("vistream-server",
               "--scene " + scene.string() + " --token-file " + (dir.path() / "none").string());
   vistream::testing::expectFailedSaying(r, 1, "none");
+  r = runTool("vistream-server", "--scene " + scene.string() + " --http-port 70000");
+  vistream::testing::expectFailedSaying(r, 1, "--http-port");
+  r = runTool("vistream-server",
+              "--scene " + scene.string() + " --http-port-file " + (dir.path() / "hp").string());
+  vistream::testing::expectFailedSaying(r, 1, "--http-port");
   r = runTool("vistream-server", "--no-such-option");
   EXPECT_EQ(r.status, 2);
   r = runTool("vistream-loadtest", "--clients 2 --path a.csv --paths auto");
