@@ -16,8 +16,8 @@ packages=(
   libopenmpi-dev openmpi-bin
   # headless OpenGL for tests (Mesa llvmpipe under Xvfb)
   xvfb xauth libgl1-mesa-dri libgl1-mesa-dev
-  # plots in benchmarks; the demo's result check; deploy manifests' checks
-  gnuplot-nox python3 python3-yaml yamllint
+  # plots in benchmarks; the demo's result check; deploy recipes' checks
+  gnuplot-nox python3 python3-yaml yamllint haproxy systemd
 )
 
 missing=()

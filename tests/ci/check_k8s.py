@@ -24,6 +24,9 @@ import sys
 
 import yaml
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from planted_slips import Problems  # noqa: E402
+
 
 def load(path):
     with open(path, encoding="utf-8") as f:
@@ -39,12 +42,8 @@ def command_of(container):
 
 
 def check(directory):
-    problems = []
-
-    def need(condition, text):
-        if not condition:
-            problems.append(text)
-        return condition
+    problems = Problems()
+    need = problems.need
 
     try:
         volume = load(os.path.join(directory, "bake-volume.yaml"))
