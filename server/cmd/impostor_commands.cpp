@@ -6,13 +6,16 @@
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <thread>
 
 #include "common/cmd/cli.h"
 #include "common/core/error.h"
 #include "common/core/parse.h"
 #include "common/core/progress.h"
 #include "common/core/stats_output.h"
+#include "common/core/timer.h"
 #include "common/generate/scene_spec.h"
+#include "server/cmd/mpi_bake.h"
 #include "server/cmd/scene_boxes.h"
 #include "server/impostor/impostor_database.h"
 #include "server/impostor/impostor_world.h"
@@ -22,9 +25,9 @@ namespace vistream {
 using nlohmann::json;
 
 struct ImpostorCommand::Arguments {
-  std::string scene, cell, texture = "8x2", screen = "640x480", db, out, cells;
+  std::string scene, cell, texture = "8x2", screen = "640x480", db, out, cells, shard;
   unsigned threads = 0;
-  bool json = false, noRemoval = false, keepHidden = false;
+  bool json = false, noRemoval = false, keepHidden = false, mpi = false;
   GroundChoice ground;
   std::filesystem::path lightingCache;
   ImpostorPlacementOptions placement;
@@ -49,6 +52,11 @@ ImpostorCommand::ImpostorCommand(CLI::App& app, SceneLimits& limits)
                    "coordinates)");
   sub_->add_option("--threads", a.threads, "worker threads (0: all cores)")
       ->check(atLeast<unsigned>(0));
+  sub_->add_option("--shard", a.shard,
+                   "with --db: bake only shard i/n of the cells (join shards with impostor-merge)");
+  sub_->add_flag("--mpi", a.mpi,
+                 "with --db: run as one rank of an MPI job (mpirun -n N vistream-pvs impostors "
+                 "--mpi ...): rank i of n bakes shard i/n, rank 0 merges them into --out");
   sub_->add_flag("--json", a.json,
                  "one JSON object on stdout: with --cell, impostors (points, screen_pixels, "
                  "points_per_pixel, bytes, bake_s, ...) and stats; with --db, the bake's figures");
@@ -156,30 +164,45 @@ std::string ImpostorCommand::settingsJson() const {
       .dump();
 }
 
-int ImpostorCommand::bakeDatabase(const Scene& scene, const PvsDatabase& pvs,
-                                  const std::optional<Box3d>& fileCells) {
+ImpostorBakeReport ImpostorCommand::bakeShardOf(const Scene& scene, const PvsDatabase& pvs,
+                                                const std::optional<Box3d>& fileCells,
+                                                uint32_t shardIndex, uint32_t shardCount,
+                                                const std::string& out, bool progress) const {
   const Arguments& a = *a_;
   ImpostorBakeOptions options;
   options.placement = a.placement;
   options.impostor = a.bake;
   options.threads = a.threads;
   options.settings = settingsJson();
+  options.shardIndex = shardIndex;
+  options.shardCount = shardCount;
   if (fileCells) {
     warnIfOutsideScene(scene, *fileCells, "--cells", a.cells);
     options.region = toLocal(scene, *fileCells);
   }
   std::unique_ptr<ProgressBar> bar;
-  options.progress = [&](size_t done, size_t total) {
-    if (!bar) {
-      bar = std::make_unique<ProgressBar>("baking impostors", total);
-      bar->advance(done);
-    } else {
-      bar->advance(1);
-    }
-  };
+  if (progress)
+    options.progress = [&](size_t done, size_t total) {
+      if (!bar) {
+        bar = std::make_unique<ProgressBar>("baking impostors", total);
+        bar->advance(done);
+      } else {
+        bar->advance(1);
+      }
+    };
   const ImpostorWorld world(scene, {a.ground, LightingOptions{}, a.lightingCache});
-  const ImpostorBakeReport r = bakeImpostorDatabase(world, pvs, options, a.out);
+  const ImpostorBakeReport r = bakeImpostorDatabase(world, pvs, options, out);
   if (bar) bar->finish();
+  return r;
+}
+
+int ImpostorCommand::bakeDatabase(const Scene& scene, const PvsDatabase& pvs,
+                                  const std::optional<Box3d>& fileCells) {
+  const Arguments& a = *a_;
+  uint32_t shardIndex = 0, shardCount = 1;
+  if (!a.shard.empty()) std::tie(shardIndex, shardCount) = parseShard(a.shard);
+  const ImpostorBakeReport r =
+      bakeShardOf(scene, pvs, fileCells, shardIndex, shardCount, a.out, /*progress=*/true);
   if (a.json) {
     std::cout << json{{"out", a.out},
                       {"cells", r.cells},
@@ -217,8 +240,11 @@ int ImpostorCommand::run() {
         "--cell or --db: give one (--cell bakes one view cell and reports it, --db "
         "bakes every cell of a PVS database into --out)");
   if (!a.db.empty() && a.out.empty()) throwInputError("--out: required with --db");
-  if (oneCell && (!a.out.empty() || !a.cells.empty()))
-    throwInputError("--out and --cells: only with --db");
+  if (oneCell && (!a.out.empty() || !a.cells.empty() || !a.shard.empty() || a.mpi))
+    throwInputError("--out, --cells, --shard and --mpi: only with --db");
+  if (a.mpi && !a.shard.empty())
+    throwInputError("--mpi gives each rank its shard (rank i of n bakes shard i/n): drop --shard");
+  if (!a.shard.empty()) parseShard(a.shard);
   const Box3d fileCell = oneCell ? parseFileBox(a.cell, "--cell") : Box3d();
   std::optional<Box3d> fileCells;
   if (!a.cells.empty()) fileCells = parseFileBox(a.cells, "--cells");
@@ -235,6 +261,26 @@ int ImpostorCommand::run() {
   std::optional<tbb::global_control> threadLimit;
   if (a.threads > 0) threadLimit.emplace(tbb::global_control::max_allowed_parallelism, a.threads);
 
+  if (a.mpi)
+    return runMpiBake(
+        a.out, "impostors", a.json,
+        [&](const MpiShard& shard) {
+          const PvsDatabase pvs = PvsDatabase::open(a.db);
+          const Scene scene = openScene(a.scene, limits_);
+          std::optional<tbb::global_control> rankThreads;
+          if (a.threads == 0)
+            rankThreads.emplace(
+                tbb::global_control::max_allowed_parallelism,
+                std::max(1u, std::thread::hardware_concurrency() / shard.localRanks));
+          const ImpostorBakeReport r = bakeShardOf(scene, pvs, fileCells, shard.rank, shard.size,
+                                                   shard.out, /*progress=*/shard.rank == 0);
+          return MpiShardCounts{r.cells, r.resumedCells};
+        },
+        [&](const std::vector<std::string>& shards) {
+          mergeImpostorDatabases(std::vector<std::filesystem::path>(shards.begin(), shards.end()),
+                                 a.out);
+          return ImpostorDatabase::open(a.out).cellCount();
+        });
   std::optional<PvsDatabase> pvsDb;
   if (!oneCell) pvsDb.emplace(PvsDatabase::open(a.db));
   const Scene scene = openScene(a.scene, limits_);

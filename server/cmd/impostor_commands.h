@@ -15,6 +15,7 @@
 namespace vistream {
 
 class PvsDatabase;
+struct ImpostorBakeReport;
 
 class ImpostorCommand {
  public:
@@ -31,6 +32,9 @@ class ImpostorCommand {
   std::string settingsJson() const;
   int bakeDatabase(const Scene& scene, const PvsDatabase& pvs,
                    const std::optional<Box3d>& fileCells);
+  ImpostorBakeReport bakeShardOf(const Scene& scene, const PvsDatabase& pvs,
+                                 const std::optional<Box3d>& fileCells, uint32_t shardIndex,
+                                 uint32_t shardCount, const std::string& out, bool progress) const;
   CLI::App* sub_ = nullptr;
   SceneLimits& limits_;
   std::unique_ptr<Arguments> a_;

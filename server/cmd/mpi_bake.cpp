@@ -4,10 +4,16 @@
 #include <mpi.h>
 #include <spdlog/spdlog.h>
 
+#include <charconv>
 #include <cstdio>
 #include <exception>
 #include <filesystem>
+#include <iostream>
+#include <nlohmann/json.hpp>
 #include <vector>
+
+#include "common/core/error.h"
+#include "common/core/timer.h"
 
 namespace vistream {
 namespace {
@@ -35,10 +41,22 @@ unsigned ranksOnThisMachine() {
 
 }  // namespace
 
-int runMpiBake(const std::string& out,
+std::pair<uint32_t, uint32_t> parseShard(const std::string& text, const char* option) {
+  const size_t slash = text.find('/');
+  const char* end = text.data() + text.size();
+  const char* mid = slash == std::string::npos ? end : text.data() + slash;
+  uint32_t i = 0, n = 0;
+  const auto r1 = std::from_chars(text.data(), mid, i);
+  const bool ok = r1.ec == std::errc() && r1.ptr == mid && mid != end &&
+                  std::from_chars(mid + 1, end, n).ptr == end && n > 0 && i < n;
+  if (!ok) throwInputError("{}: expected i/n with 0 <= i < n, got '{}'", option, text);
+  return {i, n};
+}
+
+int runMpiBake(const std::string& out, const char* what, bool json,
                const std::function<MpiShardCounts(const MpiShard&)>& bakeShard,
-               const std::function<void(const std::vector<std::string>& shards,
-                                        const MpiShardCounts& all)>& merge) {
+               const std::function<size_t(const std::vector<std::string>& shards)>& merge) {
+  Stopwatch clock;
   MpiScope scope;
   int rank = 0, size = 1;
   MPI_Comm_rank(MPI_COMM_WORLD, &rank);
@@ -72,8 +90,22 @@ int runMpiBake(const std::string& out,
   int merged = 1;
   if (rank == 0) {
     try {
-      merge(shards, MpiShardCounts{sums[0], sums[1]});
+      const size_t cells = merge(shards);
       for (const std::string& s : shards) std::filesystem::remove(s);
+      if (json)
+        std::cout << nlohmann::json{{"out", out},
+                                    {"ranks", size},
+                                    {"cells", cells},
+                                    {"resumed_cells", sums[1]},
+                                    {"computed_cells", sums[0] - sums[1]},
+                                    {"time_ms", clock.ms()}}
+                         .dump(2)
+                  << "\n";
+      else
+        fmt::print(
+            "baked {} on {} MPI ranks -> {}: {} cells ({} resumed from journals) in "
+            "{:.1f} s\n",
+            what, size, out, cells, sums[1], clock.ms() / 1000.0);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "vistream-pvs: error: merging the shards into %s: %s\n", out.c_str(),
                    e.what());

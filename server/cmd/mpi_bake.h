@@ -21,9 +21,13 @@
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace vistream {
+
+// "i/n" with 0 <= i < n (a bake's --shard); throws InputError naming `option`.
+std::pair<uint32_t, uint32_t> parseShard(const std::string& text, const char* option = "--shard");
 
 struct MpiShard {
   unsigned rank = 0, size = 1;
@@ -37,12 +41,12 @@ struct MpiShardCounts {
 };
 
 // Runs the MPI job described above: `bakeShard` bakes one shard (it may
-// throw), `merge` (rank 0 only) merges the shard files into the output,
-// given the counts summed over every rank. Returns the process's exit code.
-// Initializes and finalizes MPI.
-int runMpiBake(const std::string& out,
+// throw), `merge` (rank 0 only) merges the shard files into `out` and
+// returns the cells it holds; rank 0 then prints the job's report (`what`
+// baked, cells, those resumed, time), as JSON with `json`. Returns the
+// process's exit code. Initializes and finalizes MPI.
+int runMpiBake(const std::string& out, const char* what, bool json,
                const std::function<MpiShardCounts(const MpiShard&)>& bakeShard,
-               const std::function<void(const std::vector<std::string>& shards,
-                                        const MpiShardCounts& all)>& merge);
+               const std::function<size_t(const std::vector<std::string>& shards)>& merge);
 
 }  // namespace vistream

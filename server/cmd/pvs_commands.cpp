@@ -32,6 +32,7 @@
 #include "server/cmd/pvs_bench.h"
 #include "server/cmd/scene_boxes.h"
 #include "server/cmd/walk_bench.h"
+#include "server/impostor/impostor_database.h"
 #include "server/stream/stream_world.h"
 #include "server/visibility/epsilon_pvs.h"
 #include "server/visibility/fused_pvs.h"
@@ -108,22 +109,7 @@ int cmdBake(const std::string& spec, const SceneLimits& limits, const GroundChoi
     if (!(options.cellSize.x > 0 && options.cellSize.y > 0 && options.cellSize.z > 0))
       throwInputError("--cell-size: every component must be positive, got '{}'", cellSizeText);
   }
-  if (!shardText.empty()) {
-    const size_t slash = shardText.find('/');
-    unsigned i = 0, n = 0;
-    const auto r1 = std::from_chars(
-        shardText.data(),
-        shardText.data() + (slash == std::string::npos ? shardText.size() : slash), i);
-    const auto r2 =
-        slash == std::string::npos
-            ? std::from_chars_result{nullptr, std::errc::invalid_argument}
-            : std::from_chars(shardText.data() + slash + 1, shardText.data() + shardText.size(), n);
-    if (r1.ec != std::errc() || r2.ec != std::errc() ||
-        r2.ptr != shardText.data() + shardText.size() || n == 0 || i >= n)
-      throwInputError("--shard: expected i/n with 0 <= i < n, got '{}'", shardText);
-    options.shardIndex = i;
-    options.shardCount = n;
-  }
+  if (!shardText.empty()) std::tie(options.shardIndex, options.shardCount) = parseShard(shardText);
   if (mpi && !shardText.empty())
     throwInputError("--mpi gives each rank its shard (rank i of n bakes shard i/n): drop --shard");
   std::optional<Box3d> fileRegion;
@@ -159,9 +145,8 @@ int cmdBake(const std::string& spec, const SceneLimits& limits, const GroundChoi
     return std::pair{scene.name, r};
   };
   if (mpi) {
-    Stopwatch clock;
     const int status = runMpiBake(
-        out,
+        out, "the PVS", asJson,
         [&](const MpiShard& shard) {
           BakeOptions o = options;
           o.shardIndex = shard.rank;
@@ -171,24 +156,9 @@ int cmdBake(const std::string& spec, const SceneLimits& limits, const GroundChoi
           const BakeReport r = bakeInto(o, shard.out, shard.rank == 0).second;
           return MpiShardCounts{r.shardCells, r.resumedCells};
         },
-        [&](const std::vector<std::string>& shards, const MpiShardCounts& all) {
-          std::vector<std::filesystem::path> paths(shards.begin(), shards.end());
-          mergePvsDatabases(paths, out);
-          const size_t cells = PvsDatabase::open(out).cellCount();
-          if (asJson)
-            std::cout << json{{"out", out},
-                              {"ranks", shards.size()},
-                              {"cells", cells},
-                              {"resumed_cells", all.resumed},
-                              {"computed_cells", all.cells - all.resumed},
-                              {"time_ms", clock.ms()}}
-                             .dump(2)
-                      << "\n";
-          else
-            fmt::print(
-                "baked on {} MPI ranks -> {}: {} cells ({} resumed from journals) in "
-                "{:.1f} s\n",
-                shards.size(), out, cells, all.resumed, clock.ms() / 1000.0);
+        [&](const std::vector<std::string>& shards) {
+          mergePvsDatabases(std::vector<std::filesystem::path>(shards.begin(), shards.end()), out);
+          return PvsDatabase::open(out).cellCount();
         });
     return status;
   }
@@ -450,6 +420,10 @@ int runPvsTool(int argc, char** argv) {
   std::vector<std::string> inputs;
   merge->add_option("inputs", inputs, "shard databases")->required();
   merge->add_option("--out,-o", out, "merged database")->required();
+  auto* impostorMerge = app.add_subcommand(
+      "impostor-merge", "merge shard impostor databases baked from one PVS database");
+  impostorMerge->add_option("inputs", inputs, "shard impostor databases")->required();
+  impostorMerge->add_option("--out,-o", out, "merged impostor database")->required();
 
   auto* bench =
       app.add_subcommand("bench",
@@ -607,6 +581,12 @@ int runPvsTool(int argc, char** argv) {
       std::vector<std::filesystem::path> paths(inputs.begin(), inputs.end());
       mergePvsDatabases(paths, out);
       fmt::print("merged {} databases into {}\n", paths.size(), out);
+      return 0;
+    }
+    if (*impostorMerge) {
+      std::vector<std::filesystem::path> paths(inputs.begin(), inputs.end());
+      mergeImpostorDatabases(paths, out);
+      fmt::print("merged {} impostor databases into {}\n", paths.size(), out);
       return 0;
     }
     return 2;

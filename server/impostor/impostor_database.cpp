@@ -183,11 +183,15 @@ ImpostorBakeReport bakeImpostorDatabase(const ImpostorWorld& world, const PvsDat
   header.settings = options.settings;
   header.settingsFingerprint = fnv1a64(options.settings.data(), options.settings.size(),
                                        fnv1a64(&ph.sceneFingerprint, sizeof ph.sceneFingerprint));
+  if (options.shardCount == 0 || options.shardIndex >= options.shardCount)
+    throwInputError("shard {}/{} is not valid (expected i/n with 0 <= i < n)", options.shardIndex,
+                    options.shardCount);
   const ViewCellGrid grid = ph.grid();
   std::vector<uint32_t> cells;
+  size_t position = 0;
   for (uint32_t c : pvs.cellIndices())
     if (!options.region || grid.cellBox(grid.cellAt(c)).overlaps(*options.region))
-      cells.push_back(c);
+      if (position++ % options.shardCount == options.shardIndex) cells.push_back(c);
 
   ImpostorBakeReport report;
   report.cells = cells.size();
@@ -264,6 +268,33 @@ ImpostorBakeReport bakeImpostorDatabase(const ImpostorWorld& world, const PvsDat
   journal.remove();
   report.timeMs = clock.ms();
   return report;
+}
+
+void mergeImpostorDatabases(const std::vector<std::filesystem::path>& inputs,
+                            const std::filesystem::path& out) {
+  if (inputs.empty()) throwInputError("impostor-merge needs at least one database");
+  ImpostorDatabaseHeader header;
+  std::map<uint32_t, std::vector<uint8_t>> records;
+  for (size_t i = 0; i < inputs.size(); ++i) {
+    const ImpostorDatabase db = ImpostorDatabase::open(inputs[i]);
+    if (i == 0) {
+      header = db.header();
+    } else if (!header.pvs.compatible(db.header().pvs) ||
+               header.settingsFingerprint != db.header().settingsFingerprint) {
+      throwInputError("{}: baked from another PVS database or with other settings than {}",
+                      inputs[i].string(), inputs[0].string());
+    }
+    for (uint32_t c : db.cellIndices()) {
+      const std::optional<CellRecord> record = db.cell(c);
+      if (!record) throwInputError("{}: cell {} cannot be read", inputs[i].string(), c);
+      std::vector<uint8_t> bytes = encodeCellRecord(*record);
+      const auto [it, inserted] = records.try_emplace(c, bytes);
+      if (!inserted && it->second != bytes)
+        throwInputError("{}: cell {} differs from the same cell in an earlier input",
+                        inputs[i].string(), c);
+    }
+  }
+  writeImpostorDatabase(out, header, records);
 }
 
 }  // namespace vistream

@@ -101,8 +101,12 @@ struct ImpostorBakeOptions {
   ImpostorPlacementOptions placement;
   ImpostorOptions impostor;
   std::optional<Box3f> region;  // local frame: only cells overlapping it
-  unsigned threads = 0;         // 0: all cores
-  std::string settings;         // JSON of the options, stored in the database
+  // Bake only shard shardIndex of shardCount: the cells (of the region, in
+  // index order) at positions shardIndex, shardIndex + shardCount, ...;
+  // mergeImpostorDatabases joins the shards into one-process bytes.
+  uint32_t shardIndex = 0, shardCount = 1;
+  unsigned threads = 0;  // 0: all cores
+  std::string settings;  // JSON of the options, stored in the database
   std::function<void(size_t done, size_t total)> progress;  // from worker threads
 };
 
@@ -113,10 +117,17 @@ struct ImpostorBakeReport {
   double timeMs = 0.0;
 };
 
-// Bakes the impostors of every cell of `pvs` (within the region) into `out`.
-// Throws InputError when the database does not belong to the world's scene.
+// Bakes the impostors of every cell of `pvs` (within the region and shard)
+// into `out`. Throws InputError when the database does not belong to the
+// world's scene or the shard is not i/n with i < n.
 ImpostorBakeReport bakeImpostorDatabase(const ImpostorWorld& world, const PvsDatabase& pvs,
                                         const ImpostorBakeOptions& options,
                                         const std::filesystem::path& out);
+
+// Joins shard databases baked from one PVS database with one set of
+// settings; a cell in two inputs must hold the same record. Throws
+// InputError naming the input that does not match the first.
+void mergeImpostorDatabases(const std::vector<std::filesystem::path>& inputs,
+                            const std::filesystem::path& out);
 
 }  // namespace vistream

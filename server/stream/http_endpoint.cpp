@@ -107,7 +107,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     }
     const auto& req = parser_->get();
     const bool keepAlive = req.keep_alive();
-    if (req.method() != http::verb::get && req.method() != http::verb::head)
+    if (req.method() != http::verb::get)
       return answer(http::status::method_not_allowed, "text/plain", "only GET is served\n",
                     keepAlive);
     const std::string_view target(req.target().data(), req.target().size());

@@ -3,7 +3,8 @@
 #  1. the two ranks' merged database is byte for byte the one-process bake;
 #  2. a rank killed mid-bake takes the job down, and the same command run
 #     again resumes the shards from their journals to the same bytes;
-#  3. --mpi with --shard is refused before anything is baked.
+#  3. the impostor bake over two ranks gives the one-process bytes too;
+#  4. --mpi with --shard is refused before anything is baked.
 # Usage: mpi_bake_test.sh VISTREAM_PVS   (run by ctest, label mpi)
 set -euo pipefail
 pvs=$1
@@ -50,11 +51,25 @@ cmp "$dir/one.db" "$dir/killed.db"
 grep -Eq '"resumed_cells": [1-9]' "$dir/resumed.json" || { cat "$dir/resumed.json" >&2; exit 1; }
 echo "2. a killed rank's shard resumes from its journal to the same bytes"
 
-# 3. Refused before baking.
+# 3. Impostors the same way: two ranks' merged database is the one-process bake.
+imp=(impostors --scene city1 --db "$dir/one.db" --cells -3,1,-3,3,3,-1 --near-distance 40
+  --min-triangles 60 --max-rays 8 --texture 1x1 --visibility-views 8 --screen 120x90 --json)
+"$pvs" "${imp[@]}" --out "$dir/one.impdb" >"$dir/imp1.json" 2>"$dir/imp1.log"
+"${mpi[@]}" "$pvs" "${imp[@]}" --mpi --out "$dir/two.impdb" >"$dir/imp2.json" 2>"$dir/imp2.log"
+cmp "$dir/one.impdb" "$dir/two.impdb"
+grep -q '"ranks": 2' "$dir/imp2.json"
+echo "3. impostors on two ranks give the one-process bytes"
+
+# 4. Refused before baking.
 if "$pvs" "${bake[@]}" --mpi --shard 0/2 --out "$dir/bad.db" 2>"$dir/bad.log"; then
   echo "--mpi with --shard was accepted" >&2
   exit 1
 fi
 grep -q -- "--shard" "$dir/bad.log"
 [ ! -e "$dir/bad.db" ]
-echo "3. --mpi with --shard is refused"
+if "$pvs" "${imp[@]}" --mpi --shard 0/2 --out "$dir/bad.impdb" 2>"$dir/bad2.log"; then
+  echo "impostors --mpi with --shard was accepted" >&2
+  exit 1
+fi
+grep -q -- "--shard" "$dir/bad2.log"
+echo "4. --mpi with --shard is refused"

@@ -144,6 +144,45 @@ TEST(ImpostorDatabase, AnImpostorCostlierThanItsGeometryByTheRatioStaysGeometry)
   EXPECT_EQ(none.refused.size(), free.impostors.size());
 }
 
+// Shards (every n-th cell) joined by mergeImpostorDatabases give the bytes
+// of one bake of every cell; shards of other settings are refused.
+TEST(ImpostorDatabase, ShardsMergeToTheBytesOfOneBake) {
+  Baked b;
+  const PvsDatabase pvs = PvsDatabase::open(b.pvsPath);
+  ASSERT_GE(pvs.cellCount(), 2u);
+  bakeImpostorDatabase(*b.world, pvs, Baked::options(), b.dir / "all.impdb");
+  std::vector<fs::path> shards;
+  size_t cells = 0;
+  for (uint32_t i = 0; i < 2; ++i) {
+    ImpostorBakeOptions o = Baked::options();
+    o.shardIndex = i;
+    o.shardCount = 2;
+    shards.push_back(b.dir / ("s" + std::to_string(i) + ".impdb"));
+    cells += bakeImpostorDatabase(*b.world, pvs, o, shards.back()).cells;
+  }
+  EXPECT_EQ(cells, pvs.cellCount());
+  EXPECT_LT(ImpostorDatabase::open(shards[0]).cellCount(), pvs.cellCount());
+  mergeImpostorDatabases(shards, b.dir / "merged.impdb");
+  EXPECT_EQ(readAll(b.dir / "merged.impdb"), readAll(b.dir / "all.impdb"));
+
+  ImpostorBakeOptions other = Baked::options();
+  other.settings = "{\"test\":2}";
+  other.shardIndex = 1;
+  other.shardCount = 2;
+  bakeImpostorDatabase(*b.world, pvs, other, b.dir / "other.impdb");
+  try {
+    mergeImpostorDatabases({shards[0], b.dir / "other.impdb"}, b.dir / "bad.impdb");
+    FAIL() << "shards of other settings were merged";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("other.impdb"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(b.dir / "bad.impdb"));
+  ImpostorBakeOptions badShard = Baked::options();
+  badShard.shardIndex = 2;
+  badShard.shardCount = 2;
+  EXPECT_THROW(bakeImpostorDatabase(*b.world, pvs, badShard, b.dir / "x.impdb"), InputError);
+}
+
 TEST(ImpostorDatabase, ResumesAKilledBakeFromItsJournalToTheSameBytes) {
   Baked b;
   const PvsDatabase pvs = PvsDatabase::open(b.pvsPath);
