@@ -275,10 +275,10 @@ std::vector<SweepRow> sweepRows(const ImpostorOptions& base) {
   for (float f : {0.5f, 0.7f, 1.4f})
     add("resolution", fmt::format("{}", f), [f](ImpostorOptions& o) { o.resolutionFactor = f; });
   add("removal", "off", [](ImpostorOptions& o) { o.removePoints = false; });
-  for (auto [tw, th] : {std::pair{1u, 1u}, {4u, 2u}, {16u, 4u}})
-    add("texture", fmt::format("{}x{}", tw, th), [tw, th](ImpostorOptions& o) {
-      o.textureWidth = tw;
-      o.textureHeight = th;
+  for (const glm::uvec2 texture : {glm::uvec2(1, 1), glm::uvec2(4, 2), glm::uvec2(16, 4)})
+    add("texture", fmt::format("{}x{}", texture.x, texture.y), [texture](ImpostorOptions& o) {
+      o.textureWidth = texture.x;
+      o.textureHeight = texture.y;
     });
   for (float v : {2.0f, 8.0f})
     add("variance", fmt::format("{}", v), [v](ImpostorOptions& o) { o.varianceThreshold = v; });
