@@ -133,8 +133,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     const std::optional<std::string> point = queryValue(query, "point");
     const std::optional<std::string> cellText = queryValue(query, "cell");
     auto bad = [&](std::string text) {
-      answer(http::status::bad_request, "application/json",
-             json{{"error", std::move(text)}}.dump() + "\n", keepAlive);
+      answerError(http::status::bad_request, std::move(text), keepAlive);
     };
     if (point.has_value() == cellText.has_value())
       return bad("give exactly one of point=x,y,z (file coordinates) or cell=i,j,k");
@@ -144,12 +143,9 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       if (!p) return bad(fmt::format("point: expected x,y,z, got '{}'", *point));
       const std::optional<glm::ivec3> c = grid.cellOf(world.scene().toLocal(*p));
       if (!c)
-        return answer(
-            http::status::not_found, "application/json",
-            json{{"error", fmt::format("point {} lies outside the view-cell grid", *point)}}
-                    .dump() +
-                "\n",
-            keepAlive);
+        return answerError(http::status::not_found,
+                           fmt::format("point {} lies outside the view-cell grid", *point),
+                           keepAlive);
       cell = *c;
     } else {
       const std::optional<glm::dvec3> c = threeNumbers(*cellText);
@@ -157,13 +153,10 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
         return bad(fmt::format("cell: expected three integers i,j,k, got '{}'", *cellText));
       cell = glm::ivec3(*c);
       if (!grid.contains(cell))
-        return answer(
-            http::status::not_found, "application/json",
-            json{{"error", fmt::format("cell {} is outside the grid of {}x{}x{} cells", *cellText,
-                                       grid.dims().x, grid.dims().y, grid.dims().z)}}
-                    .dump() +
-                "\n",
-            keepAlive);
+        return answerError(http::status::not_found,
+                           fmt::format("cell {} is outside the grid of {}x{}x{} cells", *cellText,
+                                       grid.dims().x, grid.dims().y, grid.dims().z),
+                           keepAlive);
     }
     // The PVS on the workers; the answer on this connection's strand.
     stream_.expires_never();
@@ -176,10 +169,8 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
 
   void answerPvs(const glm::ivec3& cell, const FaceListPtr& faces, bool keepAlive) {
     if (!faces)
-      return answer(
-          http::status::internal_server_error, "application/json",
-          json{{"error", "the PVS could not be computed (see the server's log)"}}.dump() + "\n",
-          keepAlive);
+      return answerError(http::status::internal_server_error,
+                         "the PVS could not be computed (see the server's log)", keepAlive);
     const StreamWorld& world = server_.world();
     const Box3f box = world.grid().cellBox(cell);
     // File coordinates to the millimetre (the local frame's float rounding
@@ -194,6 +185,11 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
                    .dump() +
                "\n",
            keepAlive);
+  }
+
+  // A JSON error: {"error": text}.
+  void answerError(http::status status, std::string text, bool keepAlive) {
+    answer(status, "application/json", json{{"error", std::move(text)}}.dump() + "\n", keepAlive);
   }
 
   void answer(http::status status, const char* type, std::string body, bool keepAlive) {

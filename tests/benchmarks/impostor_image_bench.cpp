@@ -174,6 +174,13 @@ std::vector<Camera> walk(const Box3f& cell, size_t frames, int width, int height
   return out;
 }
 
+// The camera turned (about the vertical) to look at `target`.
+Camera facing(Camera c, const glm::vec3& target) {
+  const glm::vec3 to = target - c.eye;
+  c.yawDeg = glm::degrees(std::atan2(-to.x, -to.z));  // forward is (-sin yaw, ., -cos yaw)
+  return c;
+}
+
 PipelineOptions pipelineOptions(RenderMode mode, float nearDistance) {
   PipelineOptions o;
   o.mode = mode;
@@ -359,9 +366,7 @@ int run(const Args& a) {
   for (size_t i = 0; i < baked.impostors.size(); ++i) {
     std::vector<double> ms;
     for (const Camera& c : cameras) {
-      Camera towards = c;
-      const glm::vec3 to = baked.impostors[i].box.center() - c.eye;
-      towards.yawDeg = glm::degrees(std::atan2(-to.x, -to.z));
+      const Camera towards = facing(c, baked.impostors[i].box.center());
       ImpostorSplatter s;
       ImageRgb8 image(width, height);
       const auto start = std::chrono::steady_clock::now();
@@ -399,9 +404,7 @@ int run(const Args& a) {
       one.impostors.push_back(set->impostors[i]);
       std::vector<double> with, without;
       for (const Camera& c : cameras) {
-        Camera towards = c;
-        const glm::vec3 to = baked.impostors[i].box.center() - c.eye;
-        towards.yawDeg = glm::degrees(std::atan2(-to.x, -to.z));
+        const Camera towards = facing(c, baked.impostors[i].box.center());
         with.push_back(timed(towards, one));
         without.push_back(timed(towards, none));
       }
@@ -440,9 +443,7 @@ int run(const Args& a) {
     std::vector<Camera> views;
     std::vector<Reference> viewRefs;
     for (const Camera& c : cameras) {
-      Camera towards = c;
-      const glm::vec3 to = site.box.center() - c.eye;
-      towards.yawDeg = glm::degrees(std::atan2(-to.x, -to.z));
+      const Camera towards = facing(c, site.box.center());
       views.push_back(towards);
       viewRefs.push_back(reference(all, *rays, mine, towards, a.supersample));
     }
