@@ -14,6 +14,8 @@ packages=(
   libtinyobjloader-dev libtinygltf-dev libstb-dev libmeshoptimizer-dev libzstd-dev
   # the bake over MPI ranks (vistream-pvs bake --mpi, mpirun)
   libopenmpi-dev openmpi-bin
+  # shared presence between server replicas (--presence redis://; the scale test)
+  libhiredis-dev redis-server redis-tools
   # headless OpenGL for tests (Mesa llvmpipe under Xvfb)
   xvfb xauth libgl1-mesa-dri libgl1-mesa-dev
   # plots in benchmarks; the demo's result check; deploy recipes' checks

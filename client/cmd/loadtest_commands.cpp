@@ -77,6 +77,11 @@ int runLoadTestTool(int argc, char** argv) {
   app.add_option("--token-file", tokenFile, "auth token file (first line)");
   bool noAvatars = false;
   app.add_flag("--no-avatars", noAvatars, "do not ask for other users' avatars");
+  bool noReconnect = false;
+  app.add_flag("--no-reconnect", noReconnect,
+               "a client whose server goes away while walking fails; without this flag it "
+               "reconnects with backoff (through a proxy perhaps to another replica), naming "
+               "what it holds");
   app.add_option("--threads", o.threads, "client I/O threads")->check(atLeast<unsigned>(1));
   app.add_option("--connect-timeout", o.connectTimeoutS,
                  "seconds for a client to connect and receive the Welcome")
@@ -91,6 +96,7 @@ int runLoadTestTool(int argc, char** argv) {
   app.add_flag("--json", asJson, "one JSON object on stdout");
   return runToolApp("vistream-loadtest", app, argc, argv, logLevel, [&]() -> int {
     o.avatars = !noAvatars;
+    o.reconnect = !noReconnect;
     if (graceOption->count() > 0) o.graceS = grace;
     if (pathFile.empty() == pathsMode.empty())
       throwInputError("give exactly one of --path P.csv and --paths auto");
@@ -152,6 +158,17 @@ int runLoadTestTool(int argc, char** argv) {
       fmt::print("{:<34} {}\n", "CellReady wait ms (p50/p95/p99)", pct(j["cell_ready_wait_ms"]));
       fmt::print("{:<34} {} in {} checks\n", "visibility misses",
                  j["visibility_misses"].get<uint64_t>(), j["frames_checked"].get<uint64_t>());
+      fmt::print("{:<34} {} other users, {} of them on another replica\n", "avatars seen",
+                 j["avatars_seen"].get<uint64_t>(),
+                 j["avatars_seen_other_replica"].get<uint64_t>());
+      if (j["reconnects"].get<uint64_t>() > 0) {
+        fmt::print("{:<34} {} ({} clients)\n", "reconnects", j["reconnects"].get<uint64_t>(),
+                   j["clients_reconnected"].get<uint64_t>());
+        fmt::print("{:<34} {}\n", "failover to Welcome ms (p50/p95/p99)", pct(j["failover_ms"]));
+        fmt::print("{:<34} {}\n", "failover to cell ready ms", pct(j["failover_ready_ms"]));
+        fmt::print("{:<34} {}\n", "misses after reconnecting",
+                   j["visibility_misses_after_reconnect"].get<uint64_t>());
+      }
       fmt::print("{:<34} {}{}\n", "errors", j["errors"].get<uint64_t>(),
                  j["first_error"].get<std::string>().empty()
                      ? ""

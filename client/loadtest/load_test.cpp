@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <boost/asio.hpp>
 #include <chrono>
 #include <cmath>
@@ -16,6 +17,7 @@
 #include "common/core/ivec_less.h"
 #include "common/raycast/ray_query.h"
 #include "common/raycast/sampled_visibility.h"
+#include "protocol/geometry/byte_coding.h"
 #include "protocol/geometry/geometry_codec.h"
 #include "protocol/wire/peer.h"
 
@@ -97,8 +99,10 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
       : shared_(shared),
         opt_(shared.options),
         index_(index),
-        peer_(Peer::create(asio::make_strand(io), {.maxFrameBytes = 64u << 20})),
-        timer_(peer_->strand()) {
+        strand_(asio::make_strand(io)),
+        peer_(Peer::create(strand_, kPeerOptions)),
+        timer_(strand_),
+        reconnectTimer_(strand_) {
     path_ = &opt_.paths[opt_.paths.size() == 1 ? 0 : index % opt_.paths.size()];
     const double span = path_->back().t - path_->front().t;
     offset_ = opt_.paths.size() == 1 && opt_.clients > 0
@@ -107,7 +111,7 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
   }
 
   void start() {
-    asio::dispatch(peer_->strand(), [self = shared_from_this()] {
+    asio::dispatch(strand_, [self = shared_from_this()] {
       self->connectStarted_ = Clock::now();
       // One timeout for the connect and the Welcome; tick() replaces it.
       self->timer_.expires_after(std::chrono::duration_cast<Clock::duration>(
@@ -121,26 +125,87 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
             fmt::format("no Welcome within {:g} s of connecting", self->opt_.connectTimeoutS),
             "handshake");
       });
-      self->peer_->socket().async_connect(
-          self->shared_.endpoint, [self](const boost::system::error_code& ec) {
-            if (self->done_) return;
-            if (ec) return self->finish("connect: " + ec.message(), "connect");
-            self->connected_ = true;
-            boost::system::error_code ignored;
-            self->peer_->socket().set_option(tcp::no_delay(true), ignored);
-            self->peer_->start(self->weak_from_this());
-            HelloT hello;
-            hello.protocol_version = kProtocolVersion;
-            hello.auth_token = self->opt_.token;
-            hello.client_name = "vistream-loadtest";
-            hello.capabilities = std::make_unique<CapabilitiesT>();
-            hello.capabilities->near_field_radius_m = self->opt_.radius;
-            hello.capabilities->memory_budget_bytes = self->opt_.memoryBudget;
-            hello.capabilities->wants_avatars = self->opt_.avatars;
-            hello.capabilities->stats_interval_s = self->opt_.statsIntervalS;
-            self->helloSent_ = Clock::now();
-            self->send(encodeMessage(std::move(hello)));
-          });
+      self->connect();
+    });
+  }
+
+  // Opens a connection and says Hello: the first, or after the server
+  // went away (then naming the faces still held, so that the server, this
+  // one or another replica, sends only what is missing).
+  void connect() {
+    peer_->socket().async_connect(
+        shared_.endpoint, [self = shared_from_this()](const boost::system::error_code& ec) {
+          if (self->done_) return;
+          if (ec) {
+            if (self->reconnecting_) return self->retryLater();
+            return self->finish("connect: " + ec.message(), "connect");
+          }
+          self->connected_ = true;
+          boost::system::error_code ignored;
+          self->peer_->socket().set_option(tcp::no_delay(true), ignored);
+          self->peer_->start(self->weak_from_this());
+          HelloT hello;
+          hello.protocol_version = kProtocolVersion;
+          hello.auth_token = self->opt_.token;
+          hello.client_name = "vistream-loadtest";
+          hello.capabilities = std::make_unique<CapabilitiesT>();
+          hello.capabilities->near_field_radius_m = self->opt_.radius;
+          hello.capabilities->memory_budget_bytes = self->opt_.memoryBudget;
+          hello.capabilities->wants_avatars = self->opt_.avatars;
+          hello.capabilities->stats_interval_s = self->opt_.statsIntervalS;
+          if (self->reconnecting_) self->nameHeldFaces(hello);
+          if (!self->reconnecting_) self->helloSent_ = Clock::now();
+          self->send(encodeMessage(std::move(hello)));
+        });
+  }
+
+  // The faces held, as Hello.held_faces; as many as fit the server's
+  // inbound frame limit (the rest are sent again).
+  void nameHeldFaces(HelloT& hello) {
+    std::vector<uint32_t> faces;
+    for (size_t w = 0; w < held_.size(); ++w)
+      for (uint64_t bits = held_[w]; bits; bits &= bits - 1)
+        faces.push_back(uint32_t(w * 64 + size_t(std::countr_zero(bits))));
+    size_t n = faces.size();
+    std::vector<uint8_t> bytes;
+    do {
+      bytes.clear();
+      putIdRanges(bytes, std::span<const uint32_t>(faces.data(), n));
+      n /= 2;
+    } while (bytes.size() > kMaxHeldFacesBytes && n > 0);
+    hello.held_scene_id = sceneId_;
+    hello.held_face_count = grid_.faceCount;
+    hello.held_faces = std::move(bytes);
+  }
+
+  // The server went away while walking: reconnect (with backoff) through
+  // the same address, where a proxy may hand us to another replica.
+  void lost(const std::string& why) {
+    if (done_) return;
+    // Refused again before a Welcome (a proxy whose replica is down): retry.
+    if (reconnecting_ && !welcomed_ && !walkEnded_) return retryLater();
+    if (!opt_.reconnect || walkEnded_ || !welcomed_) return endedByServer(why);
+    spdlog::debug("client {}: {}; reconnecting", index_, why);
+    ++reconnects;
+    reconnecting_ = true;
+    welcomed_ = connected_ = false;
+    lostAt_ = Clock::now();
+    awaitingReload_ = true;
+    backoff_ = std::chrono::milliseconds(100);
+    peer_->close();
+    retryLater();
+  }
+  void endedByServer(const std::string& why) { finish(why, walkEnded_ ? "" : "closed_by_server"); }
+  void retryLater() {
+    // Jittered so that a replica's clients do not all come back at once.
+    const auto wait = backoff_ + std::chrono::milliseconds((index_ * 37) % 100);
+    backoff_ = std::min(backoff_ * 2, std::chrono::milliseconds(2000));
+    peer_->close();
+    peer_ = newPeer();
+    connected_ = false;
+    reconnectTimer_.expires_after(wait);
+    reconnectTimer_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
+      if (!ec && !self->done_) self->connect();
     });
   }
 
@@ -148,19 +213,20 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
   // connection; a client still connecting or walking is counted as cut off,
   // one already saying Bye finishes cleanly.
   void cutOffAtDeadline() {
-    asio::post(peer_->strand(), [self = shared_from_this()] {
+    asio::post(strand_, [self = shared_from_this()] {
       if (self->done_) return;
       if (self->walkEnded_) return self->finish("", "");
       self->cutOff = true;
-      const char* stage = !self->connected_  ? "connecting"
-                          : !self->welcomed_ ? "waiting for the Welcome"
-                                             : "walking";
+      const char* stage = self->reconnecting_ && !self->welcomed_ ? "reconnecting"
+                          : !self->connected_                     ? "connecting"
+                          : !self->welcomed_                      ? "waiting for the Welcome"
+                                                                  : "walking";
       self->finish(fmt::format("cut off at the deadline while {}", stage), "cut_off");
     });
   }
 
   // Results, read after the io_context has stopped.
-  uint64_t bytesReceived() const { return peer_->bytesReceived(); }
+  uint64_t bytesReceived() const { return bytesBefore_ + peer_->bytesReceived(); }
   // Whole frames received, by payload type (index: wire::Payload; types
   // newer than this build at kUnknownType): bytes with their length prefixes.
   std::array<uint64_t, kUnknownType + 1> bytesByType{}, framesByType{};
@@ -179,17 +245,32 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
   std::vector<double> cpuPerClient;
   double walkedS = 0.0;
   std::string firstError;
+  // Failover: connections lost while walking and made again; from a loss to
+  // the new Welcome, and to the CellReady of the cell the client then stands in.
+  uint64_t reconnects = 0, missesAfterReconnect = 0;
+  std::vector<double> failoverMs, failoverReadyMs;
+  // Other users seen (Avatar updates), and those of them on another replica
+  // than this client's (the replica tag: the top 8 bits of session IDs).
+  std::set<uint32_t> avatarsSeen, avatarsSeenOtherReplica;
+  uint32_t firstSession = 0, lastSession = 0;
 
  private:
+  static constexpr size_t kMaxHeldFacesBytes = 48u << 10;
+  static constexpr PeerOptions kPeerOptions{.maxFrameBytes = 64u << 20};
+
+  std::shared_ptr<Peer> newPeer() {
+    if (peer_) bytesBefore_ += peer_->bytesReceived();
+    return Peer::create(strand_, kPeerOptions);
+  }
+
   void send(std::vector<uint8_t> frame) {
-    if (!done_) peer_->send(std::move(frame));
+    if (!done_ && connected_) peer_->send(std::move(frame));
   }
 
   void onPeerEnd(PeerEnd why, const std::string& text) override {
     switch (why) {
       case PeerEnd::ConnectionLost:
-        return finish("connection closed by the server: " + text,
-                      walkEnded_ ? "" : "closed_by_server");
+        return lost("connection closed by the server: " + text);
       case PeerEnd::BadFrame:
         return finish("bad frame from the server: " + text, "bad_frame");
       case PeerEnd::WriteFailed:
@@ -205,34 +286,52 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
     bytesByType[type] += peer_->frameBytes();
     ++framesByType[type];
     dispatchPayload(
-        e,
-        Overloaded{
-            [this](const Welcome& w) { onWelcome(w); },
-            [this](const Geometry& g) { onGeometry(g); },
-            [this](const Evict& evict) { onEvict(evict); },
-            [this](const CellReady& r) { onCellReady(r); },
-            [this](const Stats& s) {
-              if (s.sessions() > 0)
-                cpuPerClient.push_back(s.server_cpu_ms_per_s() / double(s.sessions()));
-            },
-            [this](const Error& err) {
-              finish(fmt::format("server error {}: {}", EnumNameErrorCode(err.code()),
-                                 err.text() ? err.text()->str() : ""),
-                     "server_error");
-            },
-            [this](const Bye&) { finish("server said bye", walkEnded_ ? "" : "closed_by_server"); },
-            [](Payload) {},  // Avatar, PvsReply: not measured
-        });
+        e, Overloaded{
+               [this](const Welcome& w) { onWelcome(w); },
+               [this](const Geometry& g) { onGeometry(g); },
+               [this](const Evict& evict) { onEvict(evict); },
+               [this](const CellReady& r) { onCellReady(r); },
+               [this](const Stats& s) {
+                 if (s.sessions() > 0)
+                   cpuPerClient.push_back(s.server_cpu_ms_per_s() / double(s.sessions()));
+               },
+               [this](const Error& err) {
+                 finish(fmt::format("server error {}: {}", EnumNameErrorCode(err.code()),
+                                    err.text() ? err.text()->str() : ""),
+                        "server_error");
+               },
+               [this](const Bye&) { lost("server said bye"); },
+               [this](const Avatar& a) { onAvatar(a); }, [](Payload) {},  // PvsReply: not measured
+           });
   }
 
   void onWelcome(const Welcome& w) {
     // A second Welcome would restart the walk (and so its end): refused.
     if (welcomed_) return finish("a second Welcome", "protocol");
+    WelcomeGrid grid;
     try {
-      grid_ = validateWelcome(w);
+      grid = validateWelcome(w);
     } catch (const InputError& error) {
       return finish(std::string("Welcome without a usable grid: ") + error.what(), "handshake");
     }
+    const std::string sceneId = w.scene_id() ? w.scene_id()->str() : "";
+    lastSession = w.session_id();
+    if (reconnecting_) {
+      // Another server must serve the same scene; the walk goes on.
+      if (sceneId != sceneId_ || grid.faceCount != grid_.faceCount)
+        return finish(fmt::format("reconnected to scene '{}' ({} faces), not '{}' ({} faces)",
+                                  sceneId, grid.faceCount, sceneId_, grid_.faceCount),
+                      "protocol");
+      welcomed_ = true;
+      failoverMs.push_back(msSince(lostAt_, Clock::now()));
+      ready_.clear();  // the new session announces its own cells
+      pending_.clear();
+      hasCell_ = false;  // the next pose's cell is the reload's
+      return;
+    }
+    grid_ = grid;
+    sceneId_ = sceneId;
+    firstSession = lastSession;
     welcomed_ = true;
     origin_ = grid_.localOrigin;
     radius_ = grid_.radius;
@@ -264,10 +363,23 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
                                                                               : ready_.erase(it);
   }
 
+  void onAvatar(const Avatar& a) {
+    if (const auto* avatars = a.avatars())
+      for (const AvatarState* s : *avatars) {
+        avatarsSeen.insert(s->session_id());
+        if ((s->session_id() >> 24) != (lastSession >> 24))
+          avatarsSeenOtherReplica.insert(s->session_id());
+      }
+  }
+
   void onCellReady(const CellReady& r) {
     const auto now = Clock::now();
     for (const glm::ivec3& c : readyCells(r)) {
       ready_.insert(c);
+      if (awaitingReload_ && welcomed_ && hasCell_ && c == cell_) {
+        awaitingReload_ = false;
+        failoverReadyMs.push_back(msSince(lostAt_, now));
+      }
       if (initialLoadMs < 0.0 && hasCell_ && c == cell_) initialLoadMs = msSince(helloSent_, now);
       if (auto it = pending_.find(c); it != pending_.end()) {
         waits.push_back(msSince(it->second, now));
@@ -327,8 +439,14 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
         }
       }
     }
+    if (awaitingReload_ && welcomed_ && ready_.count(cell_)) {
+      awaitingReload_ = false;
+      failoverReadyMs.push_back(msSince(lostAt_, now));
+    }
     ++frame_;
-    if (shared_.rays && opt_.checkEvery > 0 && initialLoadMs >= 0.0 &&
+    // Not while the server is away or reloading: nobody could have sent
+    // what is missing.
+    if (shared_.rays && opt_.checkEvery > 0 && initialLoadMs >= 0.0 && !awaitingReload_ &&
         frame_ % opt_.checkEvery == 0)
       check(local, p.yaw, p.pitch);
     timer_.expires_after(
@@ -360,6 +478,7 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
           missing.insert(face);
       }
     misses += missing.size();
+    if (reconnects > 0) missesAfterReconnect += missing.size();
     if (!ready_.count(cell_)) missesWhilePending += missing.size();
     for (uint32_t face : missing)
       spdlog::debug(
@@ -395,8 +514,14 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
   Shared& shared_;
   const LoadTestOptions& opt_;
   size_t index_;
+  Peer::Strand strand_;
+  uint64_t bytesBefore_ = 0;  // received over earlier connections
   std::shared_ptr<Peer> peer_;
-  asio::steady_timer timer_;
+  asio::steady_timer timer_, reconnectTimer_;
+  bool reconnecting_ = false, awaitingReload_ = false;
+  Clock::time_point lostAt_;
+  std::chrono::milliseconds backoff_{100};
+  std::string sceneId_;
   const std::vector<PathSample>* path_ = nullptr;
   double offset_ = 0.0;
   bool connected_ = false, welcomed_ = false, done_ = false, walkEnded_ = false, hasCell_ = false;
@@ -468,7 +593,10 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
   io.run_for(std::chrono::seconds(2));
   const double wall = std::chrono::duration<double>(Clock::now() - started).count();
 
-  std::vector<double> latencies, waits, initial, cpu, bytesPerS;
+  std::vector<double> latencies, waits, initial, cpu, bytesPerS, failover, failoverReady;
+  uint64_t reconnects = 0, reconnected = 0, avatarsSeen = 0, avatarsOther = 0, seeingOther = 0,
+           missesAfterReconnect = 0;
+  std::map<std::string, uint64_t> byReplica, byReplicaAtEnd;
   uint64_t misses = 0, checks = 0, entries = 0, entriesReady = 0, frames = 0, faces = 0,
            lighting = 0, totalBytes = 0, pendingMisses = 0;
   size_t loaded = 0, failed = 0;
@@ -516,6 +644,16 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
     cpu.insert(cpu.end(), c->cpuPerClient.begin(), c->cpuPerClient.end());
     bytesPerS.push_back(c->walkedS > 0.0 ? double(c->bytesReceived()) / c->walkedS : 0.0);
     misses += c->misses;
+    reconnects += c->reconnects;
+    reconnected += c->reconnects > 0;
+    missesAfterReconnect += c->missesAfterReconnect;
+    failover.insert(failover.end(), c->failoverMs.begin(), c->failoverMs.end());
+    failoverReady.insert(failoverReady.end(), c->failoverReadyMs.begin(), c->failoverReadyMs.end());
+    avatarsSeen += c->avatarsSeen.size();
+    avatarsOther += c->avatarsSeenOtherReplica.size();
+    seeingOther += !c->avatarsSeenOtherReplica.empty();
+    if (c->firstSession) ++byReplica[std::to_string(c->firstSession >> 24)];
+    if (c->lastSession) ++byReplicaAtEnd[std::to_string(c->lastSession >> 24)];
     pendingMisses += c->missesWhilePending;
     checks += c->checks;
     entries += c->cellEntries;
@@ -570,6 +708,16 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
                  {"errors_by_reason", byReason},
                  {"failed_clients", failedClients},
                  {"first_error", firstError},
+                 {"reconnects", reconnects},
+                 {"clients_reconnected", reconnected},
+                 {"failover_ms", percentiles(failover)},
+                 {"failover_ready_ms", percentiles(failoverReady)},
+                 {"visibility_misses_after_reconnect", missesAfterReconnect},
+                 {"avatars_seen", avatarsSeen},
+                 {"avatars_seen_other_replica", avatarsOther},
+                 {"clients_seeing_other_replica", seeingOther},
+                 {"clients_by_replica", byReplica},
+                 {"clients_by_replica_at_end", byReplicaAtEnd},
                  {"server_cpu_ms_per_s_per_client",
                   cpu.empty() ? nlohmann::json(nullptr) : nlohmann::json(cpuMean)}};
   if (failed > 0) {

@@ -51,6 +51,9 @@ struct LoadTestOptions {
   // walking user needs none; the load test reads the server's CPU from them.
   float statsIntervalS = 10.0f;
   bool avatars = true;  // ask for avatar updates
+  // A connection lost while walking is made again (backoff 0.1 s doubling
+  // to 2 s), naming the faces still held; off: the client fails.
+  bool reconnect = true;
   std::string token;
   unsigned threads = 1;
   // Seconds from the start of a client's TCP connect to the server's Welcome;

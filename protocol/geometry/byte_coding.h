@@ -13,6 +13,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace vistream::wire {
@@ -49,6 +50,27 @@ inline void putAscending(std::vector<uint8_t>& out, const std::vector<uint32_t>&
   for (const uint32_t id : ids) {
     putVarint(out, id - previous);
     previous = id;
+  }
+}
+
+// An ascending list of distinct IDs as ranges of consecutive IDs: the range
+// count, then per range the gap from the previous range's end (the first
+// from 0) and the length minus 1, all varints. A building's faces are
+// consecutive in a file, so the faces a client holds take a few bytes a
+// building. Read it back with readIdRanges.
+inline void putIdRanges(std::vector<uint8_t>& out, std::span<const uint32_t> ids) {
+  std::vector<std::pair<uint32_t, uint32_t>> ranges;  // first, last
+  for (const uint32_t id : ids)
+    if (!ranges.empty() && ranges.back().second + 1 == id)
+      ranges.back().second = id;
+    else
+      ranges.emplace_back(id, id);
+  putVarint(out, ranges.size());
+  uint64_t end = 0;  // one past the previous range
+  for (const auto& [first, last] : ranges) {
+    putVarint(out, first - end);
+    putVarint(out, last - first);
+    end = uint64_t(last) + 1;
   }
 }
 
@@ -130,6 +152,30 @@ inline bool readAscending(PayloadReader& r, size_t count, uint64_t limit, const 
     if (!delta) return false;
     id += *delta;
     out.push_back(uint32_t(id));
+  }
+  return true;
+}
+
+// IDs written by putIdRanges, each below `limit` and at most `maxIds` of
+// them; false (error set) if the list is cut off, overlaps itself, reaches
+// the limit or holds more.
+inline bool readIdRanges(PayloadReader& r, uint64_t limit, size_t maxIds, const char* field,
+                         std::vector<uint32_t>& out) {
+  out.clear();
+  const auto count = r.varint(field, limit);
+  if (!count) return false;
+  uint64_t end = 0;
+  for (uint64_t i = 0; i < *count; ++i) {
+    const auto gap = r.varint(field, limit - end);
+    if (!gap) return false;
+    const uint64_t first = end + *gap;
+    if (first >= limit) return r.fail(fmt::format("{} reaches {}", field, limit)), false;
+    const auto extra = r.varint(field, limit - 1 - first);
+    if (!extra) return false;
+    if (out.size() + *extra + 1 > maxIds)
+      return r.fail(fmt::format("{} holds more than {} IDs", field, maxIds)), false;
+    for (uint64_t id = first; id <= first + *extra; ++id) out.push_back(uint32_t(id));
+    end = first + *extra + 1;
   }
   return true;
 }

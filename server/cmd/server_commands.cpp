@@ -93,6 +93,13 @@ int runServerTool(int argc, char** argv) {
                  "on this TCP port (0 picks a free one; -1: no HTTP)")
       ->check(inRange<int>(-1, 65535));
   app.add_option("--http-port-file", httpPortFile, "write the HTTP port listened on to this file");
+  std::string presence;
+  app.add_option("--presence", presence,
+                 "share users with the other replicas through Redis pub/sub "
+                 "(redis://host[:port]): avatars of users on any replica appear on every one");
+  app.add_option("--presence-stale", cfg.presenceStaleS,
+                 "seconds of silence after which another replica's users depart")
+      ->check(positive());
   app.add_option("--threads", cfg.ioThreads, "I/O threads")->check(atLeast<unsigned>(1));
   app.add_option("--workers", cfg.workerThreads, "visibility worker threads (0: all cores)")
       ->check(atLeast<unsigned>(0));
@@ -187,6 +194,11 @@ int runServerTool(int argc, char** argv) {
       }
     }
     worldOptions.pvsDatabase = pvsDb;
+    if (!presence.empty()) {
+      cfg.presence = parseRedisUrl(presence);
+      if (!(cfg.avatarHz > 0.0))
+        throwInputError("--presence needs avatar updates (--avatar-hz above 0): they publish it");
+    }
     if (!httpPortFile.empty() && httpPort < 0)
       throwInputError("--http-port-file needs --http-port (0 picks a free one)");
     if (!worldOptions.impostorDatabase.empty() && pvsDb.empty())

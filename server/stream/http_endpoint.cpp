@@ -328,6 +328,34 @@ std::string HttpEndpoint::metricsText() const {
   histogram(out, "vistream_cell_face_set_seconds",
             "From a cell face set request (a client's cell) to its answer.",
             world.faceSetLatency());
+  if (const RedisPresence* presence = server_.presence()) {
+    const RedisPresence::Counters pc = presence->counters();
+    gauge(out, "vistream_presence_connected", "1 while both Redis connections are up.",
+          pc.connected ? 1.0 : 0.0);
+    gauge(out, "vistream_presence_replica", "This replica's tag (top 8 bits of session IDs).",
+          double(presence->replicaTag()));
+    counter(out, "vistream_presence_published_total", "Presence snapshots published.",
+            pc.published);
+    counter(out, "vistream_presence_received_total", "Other replicas' snapshots received.",
+            pc.received);
+    counter(out, "vistream_presence_malformed_total", "Presence messages dropped as malformed.",
+            pc.malformed);
+    counter(out, "vistream_presence_lost_total", "Times the Redis connection was lost.", pc.lost);
+    gauge(out, "vistream_presence_remote_replicas", "Other replicas heard from lately.",
+          double(pc.remoteReplicas));
+    gauge(out, "vistream_presence_remote_users", "Users of other replicas known now.",
+          double(pc.remoteUsers));
+    histogram(out, "vistream_presence_seconds",
+              "Presence fan-out: from another replica's publish to its receipt here.",
+              presence->latency());
+    out +=
+        "# HELP vistream_presence_quantile_seconds Presence fan-out over the latest 4096 "
+        "snapshots.\n# TYPE vistream_presence_quantile_seconds gauge\n";
+    for (const double quantile : {0.5, 0.99})
+      if (const std::optional<double> v = presence->latencyQuantile(quantile))
+        out +=
+            fmt::format("vistream_presence_quantile_seconds{{quantile=\"{}\"}} {}\n", quantile, *v);
+  }
   return out;
 }
 

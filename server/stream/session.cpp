@@ -8,6 +8,7 @@
 #include <boost/asio/write.hpp>
 #include <cmath>
 
+#include "protocol/geometry/byte_coding.h"
 #include "protocol/geometry/geometry_codec.h"
 #include "protocol/impostor/impostor_message.h"
 #include "server/stream/stream_server.h"
@@ -210,6 +211,23 @@ void Session::onHello(const Hello& hello) {
   sc.unculledAfterS = cfg.unculledAfterS;
   sc.impostors = wantsImpostors_;
   scheduler_ = std::make_unique<StreamScheduler>(world_, sc, radius_, budget_);
+  if (const auto* held = hello.held_faces(); held && held->size() > 0 && wantsGeometry_) {
+    // A reconnecting client's faces count only for the scene they came from.
+    const std::string heldScene = hello.held_scene_id() ? hello.held_scene_id()->str() : "";
+    if (heldScene == world_.scene().name && hello.held_face_count() == world_.faceCount()) {
+      PayloadReader reader({held->data(), held->size()});
+      std::vector<uint32_t> faces;
+      if (!readIdRanges(reader, world_.faceCount(), world_.faceCount(), "Hello.held_faces", faces))
+        return fail(ErrorCode::BadRequest, reader.error());
+      scheduler_->markHeld(faces);
+      spdlog::debug("session {}: the client holds {} faces from an earlier session", id_,
+                    faces.size());
+    } else {
+      spdlog::debug(
+          "session {}: held faces of scene '{}' ({} faces) ignored: this is '{}' ({} faces)", id_,
+          heldScene, hello.held_face_count(), world_.scene().name, world_.faceCount());
+    }
+  }
   {
     std::lock_guard lock(snapshotMutex_);
     snapshot_.id = id_;

@@ -43,6 +43,10 @@ void StreamScheduler::setHeld(uint32_t face, bool on) {
   }
 }
 
+void StreamScheduler::markHeld(std::span<const uint32_t> faces) {
+  for (const uint32_t f : faces) setHeld(f, true);
+}
+
 void StreamScheduler::updateNeededCells() {
   const ViewCellGrid& grid = world_.grid();
   std::vector<uint32_t> needed{uint32_t(grid.linearIndex(cell_))};

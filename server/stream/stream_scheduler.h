@@ -71,6 +71,7 @@
 #include <map>
 #include <optional>
 #include <set>
+#include <span>
 #include <vector>
 
 #include "server/stream/stream_world.h"
@@ -188,6 +189,11 @@ class StreamScheduler {
   // Needed cells the client now holds whole, not announced before.
   std::vector<ReadyCell> takeReadyCells();
 
+  // The client already holds these faces (a Hello after a reconnect names
+  // what it kept from an earlier session): none of them is sent again. IDs
+  // must be below the scene's face count. Beyond the memory budget,
+  // takeEvictions() evicts as for faces sent.
+  void markHeld(std::span<const uint32_t> faces);
   bool held(uint32_t face) const { return (held_[face >> 6] >> (face & 63)) & 1u; }
   uint32_t heldCount() const { return heldCount_; }
   uint64_t heldBytes() const { return heldBytes_; }

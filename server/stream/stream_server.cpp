@@ -13,6 +13,7 @@
 #include "protocol/wire/messages.h"
 #include "server/stream/http_endpoint.h"
 #include "server/stream/session.h"
+#include "server/visibility/pvs_database.h"
 
 namespace vistream {
 
@@ -74,6 +75,16 @@ void StreamServer::start() {
   if (config_.httpPort) {
     http_ = std::make_unique<HttpEndpoint>(*this, config_.bindAddress, *config_.httpPort);
     http_->start();
+  }
+  if (config_.presence) {
+    if (!(config_.avatarHz > 0.0))
+      throwInputError("--presence needs avatar updates (--avatar-hz above 0): they publish it");
+    RedisPresence::Options po;
+    po.redis = *config_.presence;
+    po.sceneFingerprint = sceneFingerprint(world_.scene());
+    po.staleAfterS = config_.presenceStaleS;
+    presence_ = std::make_unique<RedisPresence>(po);
+    idTag_ = uint32_t(presence_->replicaTag()) << 24;
   }
   accept();
   avatarTick();
@@ -151,7 +162,10 @@ void StreamServer::accept() {
         std::string refusal;
         {
           std::lock_guard lock(sessionsMutex_);
-          id = nextId_++;
+          // With presence the replica tag fills the top 8 bits (unique
+          // across replicas); the rest counts, skipping 0.
+          if (idTag_ && (nextId_ & 0xFFFFFFu) == 0) ++nextId_;
+          id = idTag_ ? idTag_ | (nextId_++ & 0xFFFFFFu) : nextId_++;
           if (stopping_) {
             refusal = "server is shutting down";
             ++rejectedStopping_;
@@ -240,18 +254,46 @@ void StreamServer::avatarTick() {
     departed.swap(departed_);
   }
   // Filtering is visibility work: on the worker pool.
-  asio::post(workers_, [this, live = std::move(live), departed = std::move(departed)] {
+  asio::post(workers_, [this, live = std::move(live), departed = std::move(departed)]() mutable {
     std::vector<Session::Snapshot> snaps;
     snaps.reserve(live.size());
     for (const auto& s : live) snaps.push_back(s->snapshot());
-    std::vector<std::pair<double, size_t>> near;
     const auto now = std::chrono::steady_clock::now();
+    if (presence_) {
+      // Ours out (placed users), the other replicas' in: candidates for
+      // every receiver here, never receivers themselves.
+      std::vector<PresenceUser> ours;
+      for (const Session::Snapshot& x : snaps)
+        if (x.active && x.hasPose)
+          ours.push_back({x.id, x.position, x.yawDeg, x.pitchDeg, x.speedMps, x.gait,
+                          float(std::chrono::duration<double>(now - x.gaitSince).count())});
+      presence_->publish(std::move(ours));
+      RedisPresence::Remote remote = presence_->remote();
+      departed.insert(departed.end(), remote.departed.begin(), remote.departed.end());
+      for (const PresenceUser& u : remote.users) {
+        const std::optional<glm::ivec3> cell = world_.cellOf(glm::vec3(u.position));
+        if (!cell) continue;
+        Session::Snapshot y;
+        y.id = u.id;
+        y.active = y.hasPose = true;
+        y.position = u.position;
+        y.yawDeg = u.yawDeg;
+        y.pitchDeg = u.pitchDeg;
+        y.speedMps = u.speedMps;
+        y.gait = u.gait;
+        y.gaitSince = now - std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                std::chrono::duration<double>(u.phaseS));
+        y.cell = *cell;
+        snaps.push_back(y);
+      }
+    }
+    std::vector<std::pair<double, size_t>> near;
     for (size_t i = 0; i < live.size(); ++i) {
       const Session::Snapshot& x = snaps[i];
       if (!x.active || !x.hasPose || !x.wantsAvatars) continue;
       // The nearest others within the radius, then the visible ones among them.
       near.clear();
-      for (size_t j = 0; j < live.size(); ++j) {
+      for (size_t j = 0; j < snaps.size(); ++j) {
         const Session::Snapshot& y = snaps[j];
         const double d = glm::length(y.position - x.position);
         if (i != j && y.active && y.hasPose && d <= double(x.radius)) near.emplace_back(d, j);

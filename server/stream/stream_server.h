@@ -31,6 +31,7 @@
 
 #include "common/core/log.h"
 #include "server/stream/avatar_catalogue.h"
+#include "server/stream/presence.h"
 #include "server/stream/stream_scheduler.h"
 #include "server/stream/stream_world.h"
 
@@ -58,6 +59,10 @@ struct StreamServerConfig {
   // The HTTP port (http_endpoint.h: /healthz, /metrics, /pvs): nothing
   // for none, 0 for any free port (see StreamServer::httpPort()).
   std::optional<uint16_t> httpPort;
+  // Shared presence with the other replicas through Redis (presence.h):
+  // nothing for none. Needs avatar updates (avatarHz > 0), which publish it.
+  std::optional<RedisAddress> presence;
+  double presenceStaleS = 3.0;        // a replica silent this long has gone
   double statsIntervalS = 5.0;        // the server's log line
   double clientStatsIntervalS = 2.0;  // Stats frames to each client
   uint32_t maxInboundFrameBytes = 64u << 10;
@@ -149,6 +154,11 @@ class StreamServer {
   bool stopping() const { return stopping_; }
   // The HTTP port listened on (after start()), 0 without one.
   uint16_t httpPort() const;
+  // Shared presence (after start()), null without it.
+  const RedisPresence* presence() const { return presence_.get(); }
+  // The replica tag in the top 8 bits of every session ID (presence.h); 0
+  // without presence.
+  uint8_t replicaTag() const { return uint8_t(idTag_ >> 24); }
 
  private:
   void fitOpenFileLimit();
@@ -183,6 +193,8 @@ class StreamServer {
   std::atomic<uint64_t> accepted_{0}, rejected_{0}, ended_{0}, bytesSent_{0};
   std::atomic<uint64_t> rejectedStopping_{0}, rejectedFull_{0}, rejectedPerAddress_{0};
   std::unique_ptr<HttpEndpoint> http_;
+  std::unique_ptr<RedisPresence> presence_;
+  uint32_t idTag_ = 0;  // the replica tag << 24 (presence), or 0
   uint64_t lastBytes_ = 0;
   double lastCpuMs_ = 0.0, sinceLog_ = 0.0;
   std::atomic<double> cpuMsPerS_{0.0};

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <memory>
 #include <optional>
+#include <set>
 #include <thread>
 #include <vector>
 
@@ -185,6 +186,40 @@ class TestClient {
   bool closed_ = false;
   uint64_t bytes_ = 0;
 };
+
+// Faces decoded from every Geometry frame until CellReady for `cell` (or the timeout).
+struct Received {
+  std::vector<uint32_t> faces;  // in arrival order, duplicates kept
+  std::vector<wire::DecodedGeometry> batches;
+  bool ready = false;
+  size_t evictions = 0;
+  std::set<uint32_t> held() const { return {faces.begin(), faces.end()}; }
+};
+
+// `grid`: the scene's quantization grid, as the server's Welcome sends it.
+inline Received receiveUntilReady(TestClient& c, const glm::ivec3& cell,
+                                  const wire::QuantizationGrid& grid, double timeoutS = 10.0) {
+  Received r;
+  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(int(timeoutS));
+  while (!r.ready && std::chrono::steady_clock::now() < end) {
+    auto f = c.next(0.5);
+    if (!f) continue;
+    const auto* e = wire::envelopeOf(*f);
+    if (e->payload_type() == wire::Payload::Geometry) {
+      wire::DecodedGeometry g;
+      std::string error;
+      EXPECT_TRUE(wire::decodeGeometry(*e->payload_as_Geometry(), grid, g, error)) << error;
+      r.faces.insert(r.faces.end(), g.faces.begin(), g.faces.end());
+      r.batches.push_back(std::move(g));
+    } else if (e->payload_type() == wire::Payload::CellReady) {
+      for (const glm::ivec3& announced : wire::readyCells(*e->payload_as_CellReady()))
+        r.ready = r.ready || announced == cell;
+    } else if (e->payload_type() == wire::Payload::Evict) {
+      ++r.evictions;
+    }
+  }
+  return r;
+}
 
 // The code of the next Error frame within the timeout, or nothing.
 inline std::optional<wire::ErrorCode> nextErrorCode(TestClient& c, double timeoutS = 5.0) {
