@@ -12,8 +12,10 @@
 # non-zero if a check fails.
 #
 #   deploy/scale-test.sh [--scene S] [--clients N] [--duration S] [--kill-after S]
-#                        [--bin DIR] [--keep DIR]
+#                        [--replicas 1|2] [--no-kill] [--bin DIR] [--keep DIR]
 #
+# --replicas 1 and --no-kill measure baselines (one replica behind the same
+# HAProxy; no failover): the checks that need them are then left out.
 # Without --bin it installs what is missing and builds Release first; with
 # --bin it uses the binaries there (ctest runs it so). HAProxy runs the
 # shipped deploy/haproxy/haproxy.cfg with loopback addresses put in, no
@@ -25,6 +27,8 @@ scene=city1
 clients=40
 duration=20
 kill_after=8
+replicas=2
+kill=1
 bin=""
 keep=""
 usage() { sed -n '2,19p' "$0"; }
@@ -34,6 +38,8 @@ while [ $# -gt 0 ]; do
     --clients) clients=${2:?--clients needs a value}; shift 2 ;;
     --duration) duration=${2:?--duration needs a value}; shift 2 ;;
     --kill-after) kill_after=${2:?--kill-after needs a value}; shift 2 ;;
+    --replicas) replicas=${2:?--replicas needs 1 or 2}; shift 2 ;;
+    --no-kill) kill=0; shift ;;
     --bin) bin=${2:?--bin needs a directory}; shift 2 ;;
     --keep) keep=${2:?--keep needs a directory}; shift 2 ;;
     -h|--help) usage; exit 0 ;;
@@ -43,6 +49,8 @@ done
 for n in "$clients" "$duration" "$kill_after"; do
   [[ "$n" =~ ^[0-9]+$ ]] || { echo "scale-test.sh: '$n' is not a whole number" >&2; exit 2; }
 done
+[ "$replicas" = 1 ] || [ "$replicas" = 2 ] || { echo "scale-test.sh: --replicas must be 1 or 2" >&2; exit 2; }
+[ "$replicas" = 2 ] || kill=0
 [ "$clients" -ge 2 ] || { echo "scale-test.sh: --clients must be at least 2" >&2; exit 2; }
 [ "$kill_after" -lt "$duration" ] || { echo "scale-test.sh: --kill-after must be below --duration" >&2; exit 2; }
 
@@ -100,14 +108,14 @@ redis-cli -p "$redis_port" ping >/dev/null || { echo "scale-test.sh: redis-serve
 
 declare -a server_pid port http
 rm -f "$work"/port? "$work"/http? "$work"/metrics?.txt "$work/loadtest.json"
-for i in 1 2; do
+for i in $(seq 1 "$replicas"); do
   "$bin/vistream-server" --scene "$scene" --pvs-db "$work/walk.db" --port 0 --port-file "$work/port$i" \
     --http-port 0 --http-port-file "$work/http$i" --presence "redis://127.0.0.1:$redis_port" \
     --workers 1 --log-level info > "$work/server$i.log" 2>&1 &
   server_pid[$i]=$!
   pids+=($!)
 done
-for i in 1 2; do
+for i in $(seq 1 "$replicas"); do
   wait_file "$work/port$i" "${server_pid[$i]}" "server$i"
   wait_file "$work/http$i" "${server_pid[$i]}" "server$i"
   port[$i]=$(cat "$work/port$i")
@@ -123,9 +131,10 @@ sed -e "s/^\(    default-server.*\) resolvers docker/\1/" \
     -e "s/bind :8404/bind 127.0.0.1:$stats_port/" \
     -e "s/^\(    log stdout.*\)/    log stderr format raw local0 info/" \
     -e "s/server vistream-1 vistream-1:7070 port 8080/server vistream-1 127.0.0.1:${port[1]} port ${http[1]}/" \
-    -e "s/server vistream-2 vistream-2:7070 port 8080/server vistream-2 127.0.0.1:${port[2]} port ${http[2]}/" \
+    -e "s/server vistream-2 vistream-2:7070 port 8080/server vistream-2 127.0.0.1:${port[2]:-0} port ${http[2]:-0}/" \
     deploy/haproxy/haproxy.cfg > "$work/haproxy.cfg"
-grep -q "127.0.0.1:${port[2]}" "$work/haproxy.cfg" || { echo "scale-test.sh: could not adapt deploy/haproxy/haproxy.cfg" >&2; exit 1; }
+[ "$replicas" = 2 ] || sed -i "/server vistream-2 /d" "$work/haproxy.cfg"
+grep -q "127.0.0.1:${port[$replicas]}" "$work/haproxy.cfg" || { echo "scale-test.sh: could not adapt deploy/haproxy/haproxy.cfg" >&2; exit 1; }
 haproxy -f "$work/haproxy.cfg" > "$work/haproxy.log" 2>&1 &
 pids+=($!)
 for _ in $(seq 1 100); do
@@ -133,7 +142,7 @@ for _ in $(seq 1 100); do
   sleep 0.1
 done
 
-log "$clients clients through HAProxy (127.0.0.1:$lb_port) to replicas :${port[1]} and :${port[2]} for $duration s; replica 1 dies after $kill_after s"
+log "$clients clients through HAProxy (127.0.0.1:$lb_port) to $replicas replicas for $duration s$([ "$kill" = 1 ] && echo "; replica 1 dies after $kill_after s")"
 "$bin/vistream-loadtest" --host 127.0.0.1 --port "$lb_port" --clients "$clients" --path "$work/walk.csv" \
   --duration "$duration" --scene "$scene" --json --log-level warn > "$work/loadtest.json" 2> "$work/loadtest.log" &
 loadtest=$!
@@ -143,17 +152,20 @@ sleep "$kill_after"
 curl_metrics() { python3 -c "import urllib.request,sys; print(urllib.request.urlopen('http://127.0.0.1:$1/metrics', timeout=5).read().decode())"; }
 curl_metrics "${http[1]}" > "$work/metrics1.txt" || true
 sessions_before=$(awk '/^vistream_sessions /{print $2}' "$work/metrics1.txt")
-disown "${server_pid[1]}"  # no job-control notice for the kill
-kill -9 "${server_pid[1]}"
-killed_at=$(date +%s.%N)
-log "killed replica 1 (${sessions_before:-?} sessions)"
+if [ "$kill" = 1 ]; then
+  disown "${server_pid[1]}"  # no job-control notice for the kill
+  kill -9 "${server_pid[1]}"
+  log "killed replica 1 (${sessions_before:-?} sessions)"
+fi
 loadtest_rc=0
 wait "$loadtest" || loadtest_rc=$?
-curl_metrics "${http[2]}" > "$work/metrics2.txt" || true
+[ "$replicas" = 1 ] || curl_metrics "${http[2]}" > "$work/metrics2.txt" || true
 
-python3 - "$work" "$clients" "$loadtest_rc" "${sessions_before:-0}" <<'PY'
+python3 - "$work" "$clients" "$loadtest_rc" "${sessions_before:-0}" "$replicas" "$kill" <<'PY'
 import json, sys
 work, clients, rc, before = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4])
+replicas, kill = int(sys.argv[5]), sys.argv[6] == "1"
+if not kill: before = 0
 try:
     lt = json.load(open(f"{work}/loadtest.json"))
 except Exception as e:
@@ -193,15 +205,18 @@ out = {
     "errors": lt["errors"],
     "first_error": lt["first_error"],
     "cell_ready_latency_ms": lt["cell_ready_latency_ms"],
+    "initial_load_ms": lt["initial_load_ms"],
+    "bytes_per_client_per_s": lt["bytes_per_client_per_s"],
+    "server_cpu_ms_per_s_per_client": lt["server_cpu_ms_per_s_per_client"],
     "presence_latency_ms": presence,
     "loadtest_exit": rc,
 }
 print(json.dumps(out, indent=2))
 problems = []
-if out["replicas"] != 2: problems.append(f"clients landed on {out['replicas']} replicas, not 2")
-if out["clients_seeing_other_replica"] != clients:
+if out["replicas"] != replicas: problems.append(f"clients landed on {out['replicas']} replicas, not {replicas}")
+if replicas == 2 and out["clients_seeing_other_replica"] != clients:
     problems.append(f"{clients - out['clients_seeing_other_replica']} clients saw no avatar of the other replica")
-if out["reconnects"] < 1 or out["clients_reconnected"] < int(before):
+if kill and (out["reconnects"] < 1 or out["clients_reconnected"] < int(before)):
     problems.append(f"{out['clients_reconnected']} clients reconnected, {int(before)} were on the killed replica")
 if lt["failover_ready_ms"]["count"] < out["clients_reconnected"]:
     problems.append("a reconnected client never held its cell again")

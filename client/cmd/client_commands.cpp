@@ -63,6 +63,7 @@ struct Args {
   double waitS = 20.0;
   size_t avatars = 0;         // simulated users walking local paths
   bool noAvatars = false;     // connected: do not ask for or draw other users
+  bool noReconnect = false;   // connected: a lost server ends the walk
   bool realtime = false;      // headless: frames at the path's clock, not as fast as possible
   std::string avatarModel;    // skinned glTF; empty: the default
   float avatarHeight = 1.2f;  // metres
@@ -569,6 +570,7 @@ int run(const Args& a) {
     so.token = a.token;
     so.radius = a.streamRadius;
     so.wantsAvatars = !a.noAvatars;
+    so.reconnect = !a.noReconnect;
     so.wantsImpostors = mode != RenderMode::ImpostorOff;
     net = std::make_unique<StreamClient>(so);
     origin = net->origin();
@@ -715,6 +717,10 @@ int runClientTool(int argc, char** argv) {
                "rather than as fast as possible");
   app.add_flag("--no-avatars", a.noAvatars,
                "connected: neither ask the server for other users nor draw them");
+  app.add_flag("--no-reconnect", a.noReconnect,
+               "connected: end when the server goes away; without this flag the client "
+               "reconnects with backoff (through a proxy perhaps to another replica), keeping "
+               "what it holds and drawing it meanwhile");
   app.add_option("--avatar-model", a.avatarModel,
                  "the avatars' skinned glTF model, or 'walker' (a built-in figure)")
       ->default_str(std::filesystem::path(VISTREAM_DEFAULT_AVATAR).filename().string() +

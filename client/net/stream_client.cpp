@@ -19,6 +19,7 @@
 
 #include "common/core/error.h"
 #include "common/core/ivec_less.h"
+#include "protocol/geometry/byte_coding.h"
 #include "protocol/geometry/geometry_codec.h"
 #include "protocol/impostor/impostor_codec.h"
 #include "protocol/impostor/impostor_message.h"
@@ -44,9 +45,28 @@ struct HeldFace {
 // Impl weakly; StreamClient joins the io thread before the Impl goes, and
 // drains the handlers left (drain()), so none outlives the io_context.
 struct StreamClient::Impl : PeerHandler {
+  static constexpr PeerOptions kPeerOptions{.maxFrameBytes = 64u << 20};
+  // Faces named in a reconnecting Hello fit well within a server's inbound
+  // frame limit (64 KiB by default); beyond this the rest are sent again.
+  static constexpr size_t kMaxHeldFacesBytes = 48u << 10;
+
   asio::io_context io;
-  std::shared_ptr<Peer> peer = Peer::create(asio::make_strand(io), {.maxFrameBytes = 64u << 20});
+  Peer::Strand strand = asio::make_strand(io);
+  // The connection; replaced (under `mutex`) when it is made again.
+  std::shared_ptr<Peer> peer = Peer::create(strand, kPeerOptions);
+  std::weak_ptr<Impl> self;
   std::thread thread;
+
+  // Reconnection (see StreamClientOptions); the Hello's settings.
+  StreamClientOptions options;
+  tcp::resolver::results_type endpoints;
+  std::string sceneId;
+  bool reconnectingNow = false;
+  uint64_t reconnectCount = 0, bytesBefore = 0;
+  std::chrono::steady_clock::time_point lostAt;
+  std::chrono::milliseconds backoff{100};
+  asio::steady_timer retryTimer{strand};
+  std::vector<uint8_t> lastPose;  // sent again after reconnecting
 
   mutable std::mutex mutex;
   std::condition_variable changed;
@@ -136,33 +156,134 @@ struct StreamClient::Impl : PeerHandler {
   size_t trianglesHeld = 0, maxTriangles = 0;
 
   void finish(const std::string& why) {
+    std::shared_ptr<Peer> p;
     {
       std::lock_guard lock(mutex);
       if (ended) return;
       ended = true;
       endReason = why;
+      p = peer;
     }
     changed.notify_all();
-    peer->close();
+    p->close();
+    retryTimer.cancel();  // on the strand, or once the io thread has gone
+  }
+  std::shared_ptr<Peer> currentPeer() const {
+    std::lock_guard lock(mutex);
+    return peer;
   }
   void send(std::vector<uint8_t> frame) {
+    std::shared_ptr<Peer> p;
     {
       std::lock_guard lock(mutex);
-      if (ended) return;  // nothing would carry it, and the post would never run
+      // Nothing would carry it (and the post would never run), or it would
+      // reach a new server before the Hello.
+      if (ended || reconnectingNow) return;
+      p = peer;
     }
-    peer->send(std::move(frame));
+    p->send(std::move(frame));
   }
   // Runs what is left on the io_context once its thread has gone: after
   // close() every pending operation ends at once, releasing the Peer.
   void drain() {
-    peer->close();
+    currentPeer()->close();
     io.restart();
     io.run();
   }
+
+  // The Hello; on a reconnection it names the faces held (as many as fit
+  // kMaxHeldFacesBytes) and the scene they belong to (`mutex` held).
+  std::vector<uint8_t> helloFrame(bool resuming) const {
+    HelloT hello;
+    hello.protocol_version = kProtocolVersion;
+    hello.auth_token = options.token;
+    hello.client_name = "vistream-client";
+    hello.capabilities = std::make_unique<CapabilitiesT>();
+    hello.capabilities->near_field_radius_m = options.radius;
+    hello.capabilities->wants_avatars = options.wantsAvatars;
+    hello.capabilities->wants_impostors = options.wantsImpostors;
+    if (resuming) {
+      std::vector<uint32_t> ids;
+      ids.reserve(faces.size());
+      for (const auto& [id, f] : faces) ids.push_back(id);  // ascending: a map
+      size_t n = ids.size();
+      do {
+        hello.held_faces.clear();
+        putIdRanges(hello.held_faces, std::span<const uint32_t>(ids.data(), n));
+        n /= 2;
+      } while (hello.held_faces.size() > kMaxHeldFacesBytes && n > 0);
+      hello.held_scene_id = sceneId;
+      hello.held_face_count = grid.faceCount;
+    }
+    return encodeMessage(std::move(hello));
+  }
+
+  // The connection ended after the Welcome: make it again, or end.
+  void lost(const std::string& why) {
+    bool retry = false;
+    {
+      std::lock_guard lock(mutex);
+      if (ended) return;
+      retry = options.reconnect && welcomed;
+      if (retry) {
+        if (!reconnectingNow) {
+          reconnectingNow = true;
+          lostAt = Clock::now();
+          backoff = std::chrono::milliseconds(100);
+          ++reconnectCount;
+          ready.clear();  // the next server announces its own cells
+          spdlog::warn("{}; reconnecting to {}:{}", why, options.host, options.port);
+        }
+      }
+    }
+    if (!retry) return finish(why);
+    retryLater(why);
+  }
+  void retryLater(const std::string& why) {
+    const double since = std::chrono::duration<double>(Clock::now() - lostAt).count();
+    if (since > options.reconnectForS)
+      return finish(fmt::format("{}; no server took the session again within {:g} s", why,
+                                options.reconnectForS));
+    retryTimer.expires_after(backoff);
+    backoff = std::min(backoff * 2, std::chrono::milliseconds(2000));
+    retryTimer.async_wait([weak = self, why](const boost::system::error_code& ec) {
+      if (auto s = weak.lock(); s && !ec) s->attempt(why);
+    });
+  }
+  void attempt(const std::string& why) {
+    {
+      std::lock_guard lock(mutex);
+      if (ended) return;
+    }
+    auto next = Peer::create(strand, kPeerOptions);
+    asio::async_connect(
+        next->socket(), endpoints,
+        [weak = self, next, why](const boost::system::error_code& ec, const tcp::endpoint&) {
+          auto s = weak.lock();
+          if (!s) return;
+          {
+            std::lock_guard lock(s->mutex);
+            if (s->ended) return next->close();
+          }
+          if (ec) return s->retryLater(why);
+          boost::system::error_code ignored;
+          next->socket().set_option(tcp::no_delay(true), ignored);
+          std::vector<uint8_t> hello;
+          {
+            std::lock_guard lock(s->mutex);
+            s->bytesBefore += s->peer->bytesReceived();
+            s->peer = next;
+            hello = s->helloFrame(true);
+          }
+          next->start(s);
+          next->send(std::move(hello));
+        });
+  }
+
   void onPeerEnd(PeerEnd why, const std::string& text) override {
     switch (why) {
       case PeerEnd::ConnectionLost:
-        return finish("connection closed: " + text);
+        return lost("connection closed: " + text);
       case PeerEnd::BadFrame:
         return finish("bad frame from the server: " + text);
       case PeerEnd::WriteFailed:
@@ -182,7 +303,7 @@ struct StreamClient::Impl : PeerHandler {
                  finish(fmt::format("the server refused: {}: {}", EnumNameErrorCode(err.code()),
                                     err.text() ? err.text()->str() : ""));
                },
-               [this](const Bye&) { finish("the server said bye"); },
+               [this](const Bye&) { lost("the server said bye"); },
                [this](const Avatar& a) { onAvatar(a); },
                [this](const AvatarModelData& m) { onAvatarModel(m); },
                [this](const ImpostorData& m) { onImpostor(m); },
@@ -196,9 +317,26 @@ struct StreamClient::Impl : PeerHandler {
     } catch (const InputError& error) {
       return finish(std::string("the server's Welcome has no usable grid: ") + error.what());
     }
+    std::string refusal = "the server sent a second Welcome";
     {
       std::lock_guard lock(mutex);
+      if (welcomed && reconnectingNow) {
+        // Another session of the same scene: what is held stays valid.
+        const std::string id = w.scene_id() ? w.scene_id()->str() : "";
+        reconnectingNow = false;
+        if (id == sceneId && checked.faceCount == grid.faceCount) {
+          spdlog::info("reconnected to {}:{} after {:.2f} s, holding {} faces", options.host,
+                       options.port, std::chrono::duration<double>(Clock::now() - lostAt).count(),
+                       faces.size());
+          if (!lastPose.empty()) peer->send(std::vector<uint8_t>(lastPose));
+          changed.notify_all();
+          return;
+        }
+        refusal = fmt::format("reconnected to scene '{}' ({} faces), not '{}' ({} faces)", id,
+                              checked.faceCount, sceneId, grid.faceCount);
+      }
       if (!welcomed) {
+        sceneId = w.scene_id() ? w.scene_id()->str() : "";
         grid = checked;
         if (isFinite(w.environment_colour()))
           sky = glm::clamp(fromWire(*w.environment_colour()), 0.0f, 1.0f);
@@ -223,7 +361,7 @@ struct StreamClient::Impl : PeerHandler {
         return;
       }
     }
-    finish("the server sent a second Welcome");
+    finish(refusal);
   }
   // Welcome's avatar models and light (`mutex` held). A light of the wrong
   // length or with non-finite values is ignored (avatars then take the sky).
@@ -418,6 +556,8 @@ struct StreamClient::Impl : PeerHandler {
 
 StreamClient::StreamClient(const StreamClientOptions& o) : impl_(std::make_shared<Impl>()) {
   Impl& s = *impl_;
+  s.self = impl_;
+  s.options = o;
   s.maxTriangles = o.maxTriangles;
   const std::string where = fmt::format("{}:{}", o.host, o.port);
   tcp::resolver::results_type endpoints;
@@ -449,17 +589,10 @@ StreamClient::StreamClient(const StreamClientOptions& o) : impl_(std::make_share
   s.io.restart();
   boost::system::error_code ignored;
   s.peer->socket().set_option(tcp::no_delay(true), ignored);
-  HelloT hello;
-  hello.protocol_version = kProtocolVersion;
-  hello.auth_token = o.token;
-  hello.client_name = "vistream-client";
-  hello.capabilities = std::make_unique<CapabilitiesT>();
-  hello.capabilities->near_field_radius_m = o.radius;
-  hello.capabilities->wants_avatars = o.wantsAvatars;
-  hello.capabilities->wants_impostors = o.wantsImpostors;
+  s.endpoints = endpoints;
   s.maxImpostorBytes = o.maxImpostorBytes;
   s.peer->start(impl_);
-  s.send(encodeMessage(std::move(hello)));
+  s.send(s.helloFrame(false));
   // The io thread never owns the Impl: the StreamClient joins it first.
   s.thread = std::thread([&io = s.io] { io.run(); });
   std::unique_lock lock(s.mutex);
@@ -480,10 +613,9 @@ StreamClient::StreamClient(const StreamClientOptions& o) : impl_(std::make_share
 StreamClient::~StreamClient() {
   if (!impl_) return;
   impl_->send(encodeBye("client closed"));
-  asio::post(impl_->peer->strand(), [self = impl_.get()] {
+  asio::post(impl_->strand, [self = impl_.get()] {
     // Let the Bye leave, then close.
-    auto timer =
-        std::make_shared<asio::steady_timer>(self->peer->strand(), std::chrono::milliseconds(100));
+    auto timer = std::make_shared<asio::steady_timer>(self->strand, std::chrono::milliseconds(100));
     timer->async_wait([self, timer](const boost::system::error_code&) { self->finish("closed"); });
   });
   if (impl_->thread.joinable()) impl_->thread.join();
@@ -520,7 +652,12 @@ void StreamClient::sendPose(const glm::vec3& eye, float yawDeg, float pitchDeg,
   pose.yaw_deg = yawDeg;
   pose.pitch_deg = pitchDeg;
   pose.velocity = std::make_unique<Vec3f>(toWire(velocity));
-  impl_->send(encodeMessage(std::move(pose)));
+  std::vector<uint8_t> frame = encodeMessage(std::move(pose));
+  {
+    std::lock_guard lock(impl_->mutex);
+    impl_->lastPose = frame;
+  }
+  impl_->send(std::move(frame));
 }
 
 bool StreamClient::waitForCell(double timeoutS) {
@@ -565,7 +702,18 @@ uint64_t StreamClient::version() const {
 }
 
 uint64_t StreamClient::bytesReceived() const {
-  return impl_->peer->bytesReceived();
+  std::lock_guard lock(impl_->mutex);
+  return impl_->bytesBefore + impl_->peer->bytesReceived();
+}
+
+uint64_t StreamClient::reconnects() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->reconnectCount;
+}
+
+bool StreamClient::reconnecting() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->reconnectingNow;
 }
 
 size_t StreamClient::facesHeld() const {

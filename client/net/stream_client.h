@@ -3,7 +3,9 @@
 // of the triangles held so far. Everything from the server is checked: a
 // Welcome that wire::validateWelcome refuses, a second Welcome, geometry that does not
 // decode or has non-finite positions, or more than maxTriangles held end the
-// session with a message in error(); once ended, poses are dropped.
+// session with a message in error(); once ended, poses are dropped. A lost
+// connection is made again (see StreamClientOptions::reconnect); meanwhile
+// poses are dropped and what is held stays.
 //
 // Thread safety: every public method may be called from any thread; the
 // socket lives on an internal io thread.
@@ -37,6 +39,13 @@ struct StreamClientOptions {
   bool wantsImpostors = true;
   // The session ends if the impostors held would take more memory.
   size_t maxImpostorBytes = size_t(1) << 30;
+  // A connection lost after the Welcome (the server died or stopped) is
+  // made again to the same address, perhaps through a proxy to another
+  // replica of the same scene: backoff from 0.1 s doubling to 2 s, for at
+  // most reconnectForS seconds. The Hello names the faces held, so only
+  // what is missing comes; the last pose is sent again. Off: the session ends.
+  bool reconnect = true;
+  double reconnectForS = 30.0;
 };
 
 // An avatar model the server offers (Welcome.avatar_models) and, once it
@@ -74,8 +83,11 @@ class StreamClient {
   // with replaceAll), for a StreamedGeometry to take up; `version` is that of
   // the state it brings the consumer to. Faces are in ascending ID order.
   GeometryDelta takeDelta();
-  uint64_t version() const;  // changes whenever geometry arrives or is evicted
-  uint64_t bytesReceived() const;
+  uint64_t version() const;        // changes whenever geometry arrives or is evicted
+  uint64_t bytesReceived() const;  // over every connection
+  // Connections lost and (being) made again, and whether one is under way.
+  uint64_t reconnects() const;
+  bool reconnecting() const;
   size_t facesHeld() const;
   std::string error() const;  // why the session ended, empty while it runs
 

@@ -8,12 +8,15 @@
 #include <algorithm>
 #include <array>
 #include <boost/asio.hpp>
+#include <functional>
 #include <limits>
+#include <mutex>
 #include <optional>
 #include <thread>
 #include <utility>  // before Boost.Asio
 
 #include "common/core/error.h"
+#include "protocol/geometry/byte_coding.h"
 #include "protocol/geometry/geometry_codec.h"
 #include "protocol/wire/messages.h"
 
@@ -223,6 +226,161 @@ TEST(StreamClient, DeltasCarryEvictionsAndFacesSentAgain) {
     EXPECT_NE(id, 7u);
     EXPECT_EQ(corners[1], id == 3 ? 5.0f : id == 4 ? 6.0f : 0.0f) << "face " << id;
   }
+}
+
+}  // namespace
+}  // namespace vistream
+
+namespace vistream {
+namespace {
+
+namespace asio = boost::asio;
+using asio::ip::tcp;
+using namespace vistream::wire;
+
+// A server that dies once: the first connection gets `first` and is then
+// closed; the second (the client coming back to the same address) has its
+// frames recorded, gets `second` after its first frame and stays open until
+// the client leaves (it stops waiting after 5 s if none comes back).
+class DyingServer {
+ public:
+  DyingServer(std::vector<std::vector<uint8_t>> first, std::vector<std::vector<uint8_t>> second)
+      : acceptor_(io_, {asio::ip::make_address("127.0.0.1"), 0}) {
+    port_ = acceptor_.local_endpoint().port();
+    thread_ = std::thread([this, first = std::move(first), second = std::move(second)] {
+      boost::system::error_code ec;
+      {
+        tcp::socket s(io_);
+        acceptor_.accept(s, ec);
+        if (ec) return;
+        for (const auto& f : first) asio::write(s, asio::buffer(f), ec);
+        std::this_thread::sleep_for(std::chrono::milliseconds(200));
+      }  // closed: the server died
+      // The client may not come back (reconnection off): wait 5 s at most.
+      tcp::socket s(io_);
+      bool accepted = false;
+      acceptor_.async_accept(s, [&](const boost::system::error_code& e) {
+        ec = e;
+        accepted = true;
+      });
+      io_.run_for(std::chrono::seconds(5));
+      if (!accepted || ec) return;
+      FrameDecoder decoder;
+      std::array<uint8_t, 4096> buf;
+      bool sent = false;
+      while (!ec) {
+        const size_t n = s.read_some(asio::buffer(buf), ec);
+        decoder.feed({buf.data(), n});
+        while (auto frame = decoder.next()) {
+          std::lock_guard lock(mutex_);
+          received_.push_back(*frame);
+        }
+        if (!sent) {
+          for (const auto& f : second) asio::write(s, asio::buffer(f), ec);
+          sent = true;
+        }
+      }
+    });
+  }
+  ~DyingServer() { thread_.join(); }
+  uint16_t port() const { return port_; }
+  std::vector<std::vector<uint8_t>> received() const {
+    std::lock_guard lock(mutex_);
+    return received_;
+  }
+
+ private:
+  asio::io_context io_;
+  tcp::acceptor acceptor_;
+  uint16_t port_ = 0;
+  std::thread thread_;
+  mutable std::mutex mutex_;
+  std::vector<std::vector<uint8_t>> received_;
+};
+
+std::vector<uint8_t> welcomeOf(const std::string& scene, uint32_t faceCount) {
+  WelcomeT w;
+  w.protocol_version = kProtocolVersion;
+  w.scene_id = scene;
+  w.face_count = faceCount;
+  w.local_origin = std::make_unique<Vec3d>(0.0, 0.0, 0.0);
+  w.grid = std::make_unique<CellGridT>();
+  w.grid->origin = std::make_unique<Vec3f>(0.0f, 0.0f, 0.0f);
+  w.grid->cell_size = std::make_unique<Vec3f>(4.0f, 4.0f, 4.0f);
+  w.grid->dims = std::make_unique<CellIndex>(10, 2, 10);
+  w.near_field_radius_m = 100.0f;
+  w.quant_origin = std::make_unique<Vec3d>(0.0, 0.0, 0.0);
+  w.quant_step = QuantizationGrid{}.step;
+  return encodeMessage(std::move(w));
+}
+
+std::vector<uint8_t> geometryOf(uint32_t from, uint32_t to) {
+  std::vector<FaceTriangles> faces;
+  for (uint32_t f = from; f < to; ++f)
+    faces.push_back({f, 0, {{float(f), 0, 0}, {float(f) + 1, 0, 0}, {float(f), 1, 0}}, {}, {}});
+  return encodeMessage(encodeGeometry(faces, QuantizationGrid{}));
+}
+
+bool waitUntil(const std::function<bool()>& condition) {
+  for (int i = 0; i < 500 && !condition(); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  return condition();
+}
+
+TEST(StreamClient, ComesBackAfterTheServerDiesNamingTheFacesItHoldsAndResendingItsPose) {
+  DyingServer server({welcomeOf("city", 100), geometryOf(0, 5), geometryOf(10, 13)},
+                     {welcomeOf("city", 100), geometryOf(20, 22)});
+  StreamClientOptions o;
+  o.port = server.port();
+  o.timeoutS = 5.0;
+  StreamClient client(o);
+  ASSERT_TRUE(waitUntil([&] { return client.facesHeld() == 8; }));
+  client.sendPose({1.0f, 1.7f, 2.0f}, 90.0f, 0.0f);
+  // The server dies; the client comes back and gets the rest.
+  EXPECT_TRUE(waitUntil([&] { return client.facesHeld() == 10; })) << client.error();
+  EXPECT_TRUE(client.error().empty()) << client.error();
+  EXPECT_EQ(client.reconnects(), 1u);
+  EXPECT_FALSE(client.reconnecting());
+  // What the second server heard: a Hello naming faces 0..4 and 10..12 of
+  // the scene, then the last pose again.
+  ASSERT_TRUE(waitUntil([&] { return server.received().size() >= 2; }));
+  const auto heard = server.received();
+  const Hello* hello = envelopeOf(heard[0])->payload_as_Hello();
+  ASSERT_NE(hello, nullptr);
+  EXPECT_EQ(hello->held_scene_id()->str(), "city");
+  EXPECT_EQ(hello->held_face_count(), 100u);
+  PayloadReader reader({hello->held_faces()->data(), hello->held_faces()->size()});
+  std::vector<uint32_t> held;
+  ASSERT_TRUE(readIdRanges(reader, 100, 100, "held", held)) << reader.error();
+  EXPECT_EQ(held, (std::vector<uint32_t>{0, 1, 2, 3, 4, 10, 11, 12}));
+  const Pose* pose = envelopeOf(heard[1])->payload_as_Pose();
+  ASSERT_NE(pose, nullptr) << "the pose was not sent again after the Welcome";
+  EXPECT_EQ(pose->yaw_deg(), 90.0f);
+}
+
+TEST(StreamClient, ComingBackToAnotherSceneEndsTheSessionSayingSo) {
+  DyingServer server({welcomeOf("city", 100), geometryOf(0, 5)},
+                     {welcomeOf("village", 40), geometryOf(0, 2)});
+  StreamClientOptions o;
+  o.port = server.port();
+  o.timeoutS = 5.0;
+  StreamClient client(o);
+  EXPECT_TRUE(waitUntil([&] { return !client.error().empty(); }));
+  EXPECT_NE(client.error().find("reconnected to scene 'village'"), std::string::npos)
+      << client.error();
+}
+
+TEST(StreamClient, WithoutReconnectALostServerEndsTheSession) {
+  DyingServer server({welcomeOf("city", 100), geometryOf(0, 5)}, {});
+  StreamClientOptions o;
+  o.port = server.port();
+  o.timeoutS = 5.0;
+  o.reconnect = false;
+  StreamClient client(o);
+  EXPECT_TRUE(waitUntil([&] { return !client.error().empty(); }));
+  EXPECT_NE(client.error().find("connection closed"), std::string::npos) << client.error();
+  EXPECT_EQ(client.reconnects(), 0u);
+  EXPECT_EQ(client.facesHeld(), 5u);  // what arrived stays
 }
 
 }  // namespace
