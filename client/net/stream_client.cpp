@@ -66,7 +66,8 @@ struct StreamClient::Impl : PeerHandler {
   std::chrono::steady_clock::time_point lostAt;
   std::chrono::milliseconds backoff{100};
   asio::steady_timer retryTimer{strand};
-  std::vector<uint8_t> lastPose;  // sent again after reconnecting
+  std::shared_ptr<Peer> connecting;  // a reconnection's socket until it connects
+  std::vector<uint8_t> lastPose;     // sent again after reconnecting
 
   mutable std::mutex mutex;
   std::condition_variable changed;
@@ -163,6 +164,7 @@ struct StreamClient::Impl : PeerHandler {
       ended = true;
       endReason = why;
       p = peer;
+      if (connecting) connecting->close();  // its connect ends at once
     }
     changed.notify_all();
     p->close();
@@ -256,6 +258,10 @@ struct StreamClient::Impl : PeerHandler {
       if (ended) return;
     }
     auto next = Peer::create(strand, kPeerOptions);
+    {
+      std::lock_guard lock(mutex);
+      connecting = next;
+    }
     asio::async_connect(
         next->socket(), endpoints,
         [weak = self, next, why](const boost::system::error_code& ec, const tcp::endpoint&) {
@@ -263,6 +269,7 @@ struct StreamClient::Impl : PeerHandler {
           if (!s) return;
           {
             std::lock_guard lock(s->mutex);
+            s->connecting.reset();
             if (s->ended) return next->close();
           }
           if (ec) return s->retryLater(why);
