@@ -28,6 +28,24 @@ SLIPS = [
     ("pvs-merge-job.yaml", "--out /data/pvs.db", "--out /data/shards/pvs.db", "among the shards"),
     ("bake-volume.yaml", "- ReadWriteMany", "- ReadWriteOnce", "ReadWriteMany"),
     ("pvs-bake-job.yaml", "runAsNonRoot: true", "runAsNonRoot: false", "non-root"),
+    # The impostor pair runs the same checks, and reads the PVS merge's output.
+    ("impostor-bake-job.yaml", "completions: 4", "completions: 2", "completions 2 != SHARDS 4"),
+    ("impostor-bake-job.yaml", '--shard "${JOB_COMPLETION_INDEX}/${SHARDS}"',
+     '--shard "1/${SHARDS}"', "--shard"),
+    ("impostor-bake-job.yaml", "exec vistream-pvs impostors", "exec vistream-pvs bake",
+     "does not run vistream-pvs impostors"),
+    ("impostor-bake-job.yaml", "--db /data/pvs.db", "--db /data/shards/pvs-0-of-4.db",
+     "not the PVS merge's output"),
+    ("impostor-bake-job.yaml", "value: bigcity", "value: city1", "SCENE city1 != the PVS bake's"),
+    ("impostor-bake-job.yaml", "/data/shards/impostors-${JOB_COMPLETION_INDEX}",
+     "/data/shards/pvs-${JOB_COMPLETION_INDEX}", "also takes impostor shards"),
+    ("impostor-merge-job.yaml", "/data/shards/impostors-*-of-", "/data/shards/imp-*-of-",
+     "does not read the bake's shards"),
+    ("impostor-merge-job.yaml", 'value: "4"', 'value: "2"', "SHARDS 2 != the bake's 4"),
+    ("impostor-merge-job.yaml", "-o /data/impostors.db", "-o /data/shards/impostors.db",
+     "among the shards"),
+    ("impostor-merge-job.yaml", "image: vistream:latest", "image: vistream:old", "different images"),
+    ("impostor-merge-job.yaml", "mountPath: /data", "mountPath: /mnt", "different paths"),
 ]
 
 
