@@ -166,16 +166,9 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
     for (size_t w = 0; w < held_.size(); ++w)
       for (uint64_t bits = held_[w]; bits; bits &= bits - 1)
         faces.push_back(uint32_t(w * 64 + size_t(std::countr_zero(bits))));
-    size_t n = faces.size();
-    std::vector<uint8_t> bytes;
-    do {
-      bytes.clear();
-      putIdRanges(bytes, std::span<const uint32_t>(faces.data(), n));
-      n /= 2;
-    } while (bytes.size() > kMaxHeldFacesBytes && n > 0);
     hello.held_scene_id = sceneId_;
     hello.held_face_count = grid_.faceCount;
-    hello.held_faces = std::move(bytes);
+    hello.held_faces = idRangesWithin(faces, kMaxHeldFacesBytes);
   }
 
   // The server went away while walking: reconnect (with backoff) through
@@ -192,8 +185,7 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
     lostAt_ = Clock::now();
     awaitingReload_ = true;
     backoff_ = std::chrono::milliseconds(100);
-    peer_->close();
-    retryLater();
+    retryLater();  // closes the connection
   }
   void endedByServer(const std::string& why) { finish(why, walkEnded_ ? "" : "closed_by_server"); }
   void retryLater() {
@@ -255,7 +247,6 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
   uint32_t firstSession = 0, lastSession = 0;
 
  private:
-  static constexpr size_t kMaxHeldFacesBytes = 48u << 10;
   static constexpr PeerOptions kPeerOptions{.maxFrameBytes = 64u << 20};
 
   std::shared_ptr<Peer> newPeer() {

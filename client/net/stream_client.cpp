@@ -46,9 +46,6 @@ struct HeldFace {
 // drains the handlers left (drain()), so none outlives the io_context.
 struct StreamClient::Impl : PeerHandler {
   static constexpr PeerOptions kPeerOptions{.maxFrameBytes = 64u << 20};
-  // Faces named in a reconnecting Hello fit well within a server's inbound
-  // frame limit (64 KiB by default); beyond this the rest are sent again.
-  static constexpr size_t kMaxHeldFacesBytes = 48u << 10;
 
   asio::io_context io;
   Peer::Strand strand = asio::make_strand(io);
@@ -208,12 +205,7 @@ struct StreamClient::Impl : PeerHandler {
       std::vector<uint32_t> ids;
       ids.reserve(faces.size());
       for (const auto& [id, f] : faces) ids.push_back(id);  // ascending: a map
-      size_t n = ids.size();
-      do {
-        hello.held_faces.clear();
-        putIdRanges(hello.held_faces, std::span<const uint32_t>(ids.data(), n));
-        n /= 2;
-      } while (hello.held_faces.size() > kMaxHeldFacesBytes && n > 0);
+      hello.held_faces = idRangesWithin(ids, kMaxHeldFacesBytes);
       hello.held_scene_id = sceneId;
       hello.held_face_count = grid.faceCount;
     }

@@ -74,6 +74,21 @@ inline void putIdRanges(std::vector<uint8_t>& out, std::span<const uint32_t> ids
   }
 }
 
+// The bytes a reconnecting client's Hello.held_faces may take: well within
+// a server's default inbound frame limit (64 KiB).
+inline constexpr size_t kMaxHeldFacesBytes = 48u << 10;
+
+// putIdRanges of the longest prefix of `ids` (halving) that fits `maxBytes`:
+// a client names what fits and is sent the rest again.
+inline std::vector<uint8_t> idRangesWithin(std::span<const uint32_t> ids, size_t maxBytes) {
+  std::vector<uint8_t> out;
+  for (size_t n = ids.size();; n /= 2) {
+    out.clear();
+    putIdRanges(out, ids.first(n));
+    if (out.size() <= maxBytes || n == 0) return out;
+  }
+}
+
 // Reads varints and bytes from a payload; every read is bounds-checked and the
 // first failure names the field.
 class PayloadReader {

@@ -234,10 +234,6 @@ TEST(StreamClient, DeltasCarryEvictionsAndFacesSentAgain) {
 namespace vistream {
 namespace {
 
-namespace asio = boost::asio;
-using asio::ip::tcp;
-using namespace vistream::wire;
-
 // A server that dies once: the first connection gets `first` and is then
 // closed; the second (the client coming back to the same address) has its
 // frames recorded, gets `second` after its first frame and stays open until
@@ -299,18 +295,9 @@ class DyingServer {
 };
 
 std::vector<uint8_t> welcomeOf(const std::string& scene, uint32_t faceCount) {
-  WelcomeT w;
-  w.protocol_version = kProtocolVersion;
+  WelcomeT w = goodWelcome();
   w.scene_id = scene;
   w.face_count = faceCount;
-  w.local_origin = std::make_unique<Vec3d>(0.0, 0.0, 0.0);
-  w.grid = std::make_unique<CellGridT>();
-  w.grid->origin = std::make_unique<Vec3f>(0.0f, 0.0f, 0.0f);
-  w.grid->cell_size = std::make_unique<Vec3f>(4.0f, 4.0f, 4.0f);
-  w.grid->dims = std::make_unique<CellIndex>(10, 2, 10);
-  w.near_field_radius_m = 100.0f;
-  w.quant_origin = std::make_unique<Vec3d>(0.0, 0.0, 0.0);
-  w.quant_step = QuantizationGrid{}.step;
   return encodeMessage(std::move(w));
 }
 
