@@ -6,7 +6,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <vector>
 
+#include "common/core/atomic_file.h"
 #include "common/core/check.h"
 #include "common/core/error.h"
 
@@ -39,13 +41,16 @@ void ImageRgb8::set(int x, int y, glm::u8vec3 c) {
 void writePng(const ImageRgb8& image, const std::filesystem::path& path) {
   if (image.width <= 0 || image.height <= 0)
     throwInputError("{}: cannot write an empty image", path.string());
-  const std::filesystem::path tmp = path.string() + ".tmp";
-  if (!stbi_write_png(tmp.string().c_str(), image.width, image.height, 3, image.pixels.data(),
-                      image.width * 3))
-    throwInputError("{}: cannot write PNG", tmp.string());
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) throwInputError("{}: cannot rename into place: {}", path.string(), ec.message());
+  std::vector<uint8_t> png;
+  auto append = [](void* context, void* data, int size) {
+    auto* out = static_cast<std::vector<uint8_t>*>(context);
+    const auto* bytes = static_cast<const uint8_t*>(data);
+    out->insert(out->end(), bytes, bytes + size);
+  };
+  if (!stbi_write_png_to_func(append, &png, image.width, image.height, 3, image.pixels.data(),
+                              image.width * 3))
+    throwInputError("{}: cannot encode PNG", path.string());
+  writeFileAtomically(path, png);
 }
 
 ImageRgb8 readPng(const std::filesystem::path& path) {

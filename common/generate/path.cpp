@@ -11,6 +11,7 @@
 #include <random>
 #include <sstream>
 
+#include "common/core/atomic_file.h"
 #include "common/core/error.h"
 #include "common/raycast/ray_query.h"
 #include "common/world/static_world.h"
@@ -220,16 +221,7 @@ void writePath(const std::vector<PathSample>& samples, const std::filesystem::pa
   for (const PathSample& s : samples)
     fmt::format_to(std::back_inserter(buf), "{:.6f},{:.6f},{:.6f},{:.6f},{:.4f},{:.4f}\n", s.t,
                    s.position.x, s.position.y, s.position.z, s.yawDeg, s.pitchDeg);
-  const std::filesystem::path tmp = path.string() + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) throwInputError("{}: cannot open for writing", tmp.string());
-    out.write(buf.data(), std::streamsize(buf.size()));
-    if (!out) throwInputError("{}: write failed", tmp.string());
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) throwInputError("{}: cannot rename into place: {}", path.string(), ec.message());
+  writeFileAtomically(path, std::string_view(buf.data(), buf.size()));
 }
 
 std::vector<PathSample> generatePath(const Scene& scene, const PathOptions& options) {

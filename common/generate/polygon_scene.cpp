@@ -9,6 +9,7 @@
 #include <system_error>
 #include <utility>
 
+#include "common/core/atomic_file.h"
 #include "common/core/error.h"
 #include "common/generate/generate.h"
 #include "common/scene/triangulate.h"
@@ -105,24 +106,12 @@ Scene toScene(const PolygonScene& polygons) {
 
 namespace {
 
-// Buffered writer to `path + ".tmp"`, renamed over `path` on commit(): a crash
-// or an error leaves the old file (or none), never a torn one.
+// A text file built in a buffer and handed to an AtomicFile a few megabytes
+// at a time: a crash or an error leaves the old file (or none), never a torn
+// one.
 class AtomicTextFile {
  public:
-  explicit AtomicTextFile(std::filesystem::path path)
-      : path_(std::move(path)), temporary_(path_.string() + ".tmp") {
-    file_ = std::fopen(temporary_.c_str(), "wb");
-    if (!file_) throwInputError("cannot write '{}': {}", temporary_.string(), std::strerror(errno));
-  }
-  AtomicTextFile(const AtomicTextFile&) = delete;
-  AtomicTextFile& operator=(const AtomicTextFile&) = delete;
-  ~AtomicTextFile() {
-    if (file_) {
-      std::fclose(file_);
-      std::error_code ignored;
-      std::filesystem::remove(temporary_, ignored);
-    }
-  }
+  explicit AtomicTextFile(std::filesystem::path path) : file_(std::move(path)) {}
 
   fmt::memory_buffer& buffer() { return buffer_; }
 
@@ -133,30 +122,18 @@ class AtomicTextFile {
 
   void commit() {
     flush();
-    const bool closed = std::fclose(file_) == 0;
-    file_ = nullptr;
-    if (!closed)
-      throwInputError("cannot write '{}': {}", temporary_.string(), std::strerror(errno));
-    std::error_code error;
-    std::filesystem::rename(temporary_, path_, error);
-    if (error)
-      throwInputError("cannot rename '{}' to '{}': {}", temporary_.string(), path_.string(),
-                      error.message());
+    file_.commit();
   }
 
  private:
   static constexpr size_t kFlushBytes = size_t(4) << 20;
 
   void flush() {
-    if (buffer_.size() > 0 &&
-        std::fwrite(buffer_.data(), 1, buffer_.size(), file_) != buffer_.size())
-      throwInputError("cannot write '{}': {}", temporary_.string(), std::strerror(errno));
+    file_.write(std::string_view(buffer_.data(), buffer_.size()));
     buffer_.clear();
   }
 
-  std::filesystem::path path_;
-  std::filesystem::path temporary_;
-  std::FILE* file_ = nullptr;
+  AtomicFile file_;
   fmt::memory_buffer buffer_;
 };
 

@@ -2,12 +2,14 @@
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
-#include <unistd.h>
 
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <span>
 
+#include "common/core/atomic_file.h"
+#include "common/core/error.h"
 #include "common/light/texture.h"
 
 namespace vistream {
@@ -86,30 +88,29 @@ std::optional<LightingGrid> readCache(const std::filesystem::path& file, uint64_
 bool writeCache(const std::filesystem::path& file, uint64_t key, const LightingGrid& g) {
   std::error_code ec;
   std::filesystem::create_directories(file.parent_path(), ec);
-  const auto tmp = file.string() + fmt::format(".tmp{}", ::getpid());
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) return false;
-    const uint64_t head[3] = {key, g.level.size(), g.colours.size()};
-    Fnv f;
-    f.bytes(kMagic, 8);
-    f.bytes(head, sizeof(head));
-    f.bytes(g.level.data(), g.level.size());
-    f.bytes(g.colours.data(), 3 * g.colours.size());
-    out.write(kMagic, 8);
-    out.write(reinterpret_cast<const char*>(head), sizeof(head));
-    out.write(reinterpret_cast<const char*>(g.level.data()), std::streamsize(g.level.size()));
-    out.write(reinterpret_cast<const char*>(g.colours.data()),
-              std::streamsize(3 * g.colours.size()));
-    out.write(reinterpret_cast<const char*>(&f.h), 8);
-    if (!out.flush()) {
-      std::filesystem::remove(tmp, ec);
-      return false;
-    }
+  const uint64_t head[3] = {key, g.level.size(), g.colours.size()};
+  Fnv f;
+  f.bytes(kMagic, 8);
+  f.bytes(head, sizeof(head));
+  f.bytes(g.level.data(), g.level.size());
+  f.bytes(g.colours.data(), 3 * g.colours.size());
+  auto bytesOf = [](const void* p, size_t n) {
+    return std::span<const uint8_t>(static_cast<const uint8_t*>(p), n);
+  };
+  // Several processes (pods on one volume) may write the same cache at once:
+  // each writes its own temporary, and the last rename wins with a whole file.
+  try {
+    AtomicFile out(file);
+    out.write(bytesOf(kMagic, 8));
+    out.write(bytesOf(head, sizeof(head)));
+    out.write(bytesOf(g.level.data(), g.level.size()));
+    out.write(bytesOf(g.colours.data(), 3 * g.colours.size()));
+    out.write(bytesOf(&f.h, 8));
+    out.commit();
+  } catch (const InputError&) {
+    return false;
   }
-  std::filesystem::rename(tmp, file, ec);
-  if (ec) std::filesystem::remove(tmp, ec);
-  return !ec;
+  return true;
 }
 
 }  // namespace

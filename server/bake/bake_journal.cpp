@@ -8,6 +8,7 @@
 #include <cerrno>
 #include <cstring>
 
+#include "common/core/atomic_file.h"
 #include "common/core/error.h"
 #include "common/core/mapped_file.h"
 #include "server/visibility/pvs_database.h"  // fnv1a64
@@ -104,16 +105,7 @@ void BakeJournal::remove() {
 }
 
 void BakeJournal::writeAll(const void* data, size_t n) {
-  const auto* p = static_cast<const uint8_t*>(data);
-  while (n > 0) {
-    const ssize_t w = ::write(fd_, p, n);
-    if (w < 0) {
-      if (errno == EINTR) continue;
-      throwInputError("{}: journal write failed: {}", path_.string(), std::strerror(errno));
-    }
-    p += w;
-    n -= size_t(w);
-  }
+  writeAllTo(fd_, {static_cast<const uint8_t*>(data), n}, path_);
 }
 
 void BakeJournal::readExisting(const std::array<char, 8>& magic, uint64_t fingerprint,

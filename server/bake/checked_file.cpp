@@ -1,11 +1,8 @@
 #include "server/bake/checked_file.h"
 
-#include <fcntl.h>
-#include <unistd.h>
-
-#include <cerrno>
 #include <cstring>
 
+#include "common/core/atomic_file.h"
 #include "common/core/error.h"
 #include "server/visibility/pvs_database.h"  // fnv1a64
 
@@ -39,30 +36,10 @@ void writeCheckedFile(const std::filesystem::path& path, const std::array<char, 
   putU64(header + 16, payload.size());
   putU64(header + 24, fnv1a64(payload.data(), payload.size()));
 
-  const std::filesystem::path tmp = path.string() + ".tmp";
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  if (fd < 0)
-    throwInputError("{}: cannot open for writing: {}", tmp.string(), std::strerror(errno));
-  auto writeAll = [&](const uint8_t* p, size_t n) {
-    while (n > 0) {
-      const ssize_t w = ::write(fd, p, n);
-      if (w < 0) {
-        if (errno == EINTR) continue;
-        const std::string err = std::strerror(errno);
-        ::close(fd);
-        throwInputError("{}: write failed: {}", tmp.string(), err);
-      }
-      p += w;
-      n -= size_t(w);
-    }
-  };
-  writeAll(header, kCheckedFileHeaderBytes);
-  writeAll(payload.data(), payload.size());
-  if (::fsync(fd) != 0 || ::close(fd) != 0)
-    throwInputError("{}: cannot flush to disk: {}", tmp.string(), std::strerror(errno));
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) throwInputError("{}: cannot rename into place: {}", path.string(), ec.message());
+  AtomicFile file(path);
+  file.write(header);
+  file.write(payload);
+  file.commit(Durability::Synced);
 }
 
 bool CheckedFile::checksumOk() const {

@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "common/cmd/cli.h"
+#include "common/core/atomic_file.h"
 #include "common/core/error.h"
 #include "common/generate/scene_spec.h"
 #include "server/stream/avatar_catalogue.h"
@@ -215,9 +216,7 @@ int runServerTool(int argc, char** argv) {
     StreamServer server(world, cfg);
     server.start();
     auto writePort = [](const std::string& file, uint16_t port) {
-      const std::filesystem::path tmp = file + ".tmp";
-      std::ofstream(tmp) << port << "\n";
-      std::filesystem::rename(tmp, file);
+      writeFileAtomically(file, fmt::format("{}\n", port));
     };
     if (!portFile.empty()) writePort(portFile, server.port());
     if (!httpPortFile.empty()) writePort(httpPortFile, server.httpPort());

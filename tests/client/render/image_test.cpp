@@ -6,6 +6,7 @@
 #include <fstream>
 
 #include "common/core/error.h"
+#include "tests/common/support/temp_dir.h"
 
 namespace vistream {
 namespace {
@@ -15,14 +16,14 @@ TEST(PngImage, RoundTripsEveryPixelExactly) {
   for (int y = 0; y < img.height; ++y)
     for (int x = 0; x < img.width; ++x)
       img.set(x, y, {uint8_t(x * 15), uint8_t(y * 28), uint8_t(x ^ y)});
-  const auto path = std::filesystem::temp_directory_path() / "vistream_image_test.png";
+  const testing::TempDir dir;
+  const auto path = dir / "image.png";
   writePng(img, path);
-  EXPECT_FALSE(std::filesystem::exists(path.string() + ".tmp"));
+  EXPECT_EQ(dir.filenames(), std::vector<std::string>{"image.png"});
   const ImageRgb8 back = readPng(path);
   EXPECT_EQ(back.width, img.width);
   EXPECT_EQ(back.height, img.height);
   EXPECT_EQ(back.pixels, img.pixels);
-  std::filesystem::remove(path);
 }
 
 TEST(PngImage, ReadingAFileThatIsNotAnImageNamesTheFile) {
