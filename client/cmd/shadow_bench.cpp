@@ -279,8 +279,8 @@ int runShadowBench(const ShadowBenchArgs& a) {
   };
   ProgressBar bar("knobs", a.quick ? 6 : 12);
   add("defaults",
-      defaultRing ? "mask 32, table 128, 25 terms, 4x4, ring 2"
-                  : "mask 32, table 128, 25 terms, 4x4",
+      defaultRing ? "mask 32, table 128, 25 terms, per pixel, ring 2"
+                  : "mask 32, table 128, 25 terms, per pixel",
       {}, defaultRing);
   bar.advance();
   // The per-vertex PVS (section 3.2), from poses of the clip between the
@@ -332,8 +332,8 @@ int runShadowBench(const ShadowBenchArgs& a) {
   }
   {
     SelfShadowOptions o;
-    o.transfer.downsample = false;
-    add("downsampling", "off", o, defaultRing);
+    o.transfer.downsample = true;
+    add("downsampling", "on (the paper's 4x4)", o, defaultRing);
     bar.advance();
   }
   if (defaultRing) {

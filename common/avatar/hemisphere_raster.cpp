@@ -85,8 +85,9 @@ PlaneMaskTable::PlaneMaskTable(int maskSide, int cubeSide)
       words_(int((size_t(maskSide) * size_t(maskSide) + 63) / 64)) {
   VS_CHECK(maskSide >= 8 && maskSide <= 256 && maskSide % 8 == 0);
   VS_CHECK(cubeSide >= 1 && cubeSide <= 1024);
-  const size_t cells = 6 * size_t(cubeSide) * size_t(cubeSide);
+  const size_t cells = 3 * size_t(cubeSide) * size_t(cubeSide);  // faces +x, +y, +z
   bits_.assign(cells * size_t(words_), 0);
+  disk_.assign(size_t(words_), 0);
   // The disk pixels and their hemisphere points, once.
   std::vector<glm::vec3> points;
   std::vector<uint32_t> index;
@@ -95,10 +96,11 @@ PlaneMaskTable::PlaneMaskTable(int maskSide, int cubeSide)
       if (maskPixelInDisk(maskSide, x, y)) {
         points.push_back(maskDirection(maskSide, x, y));
         index.push_back(uint32_t(y * maskSide + x));
+        disk_[index.back() >> 6] |= uint64_t(1) << (index.back() & 63);
       }
   tbb::parallel_for(tbb::blocked_range<size_t>(0, cells, 256), [&](const auto& range) {
     for (size_t cell = range.begin(); cell != range.end(); ++cell) {
-      const int face = int(cell / (size_t(cubeSide) * size_t(cubeSide)));
+      const int face = 2 * int(cell / (size_t(cubeSide) * size_t(cubeSide)));
       const int rest = int(cell % (size_t(cubeSide) * size_t(cubeSide)));
       const glm::vec3 n = cellDirection(face, rest % cubeSide, rest / cubeSide, cubeSide);
       uint64_t* out = bits_.data() + cell * size_t(words_);
@@ -108,7 +110,7 @@ PlaneMaskTable::PlaneMaskTable(int maskSide, int cubeSide)
   });
 }
 
-size_t PlaneMaskTable::cellOf(const glm::vec3& n) const {
+PlaneMaskTable::Cell PlaneMaskTable::cellOf(const glm::vec3& n) const {
   const glm::vec3 a = glm::abs(n);
   int face;
   float u, v, m;
@@ -122,55 +124,97 @@ size_t PlaneMaskTable::cellOf(const glm::vec3& n) const {
     face = n.z >= 0.0f ? 4 : 5;
     u = n.x, v = n.y, m = a.z;
   }
-  if (!(m > 0.0f)) return 0;
+  if (!(m > 0.0f)) return {0, 0, 0};
   const float s = float(cubeSide_);
+  const float scale = 0.5f * s / m;
   // Clamped as floats (NaN, from an infinite normal, gives 0) before the
   // conversion to int.
   auto cell = [&](float c) {
-    return int(std::min(std::max(0.0f, (c / m + 1.0f) * 0.5f * s), s - 1.0f));
+    return int(std::min(std::max(0.0f, c * scale + 0.5f * s), s - 1.0f));
   };
-  const int i = cell(u), j = cell(v);
-  return (size_t(face) * size_t(cubeSide_) + size_t(j)) * size_t(cubeSide_) + size_t(i);
+  return {face, cell(u), cell(v)};
 }
 
-const uint64_t* PlaneMaskTable::above(const glm::vec3& n) const {
-  return bits_.data() + cellOf(n) * size_t(words_);
+PlaneMaskTable::Mask PlaneMaskTable::above(const glm::vec3& n) const {
+  // Cell (i, j) of a negative face holds the negated direction of cell
+  // (side-1-i, side-1-j) of its positive face.
+  const Cell c = cellOf(n);
+  const size_t side = size_t(cubeSide_);
+  const bool negative = c.face & 1;
+  const size_t i = negative ? side - 1 - size_t(c.i) : size_t(c.i);
+  const size_t j = negative ? side - 1 - size_t(c.j) : size_t(c.j);
+  const size_t stored = (size_t(c.face >> 1) * side + j) * side + i;
+  return {bits_.data() + stored * size_t(words_), negative ? ~uint64_t(0) : uint64_t(0)};
 }
 
 glm::vec3 PlaneMaskTable::quantized(const glm::vec3& n) const {
-  const size_t cell = cellOf(n);
-  const size_t perFace = size_t(cubeSide_) * size_t(cubeSide_);
-  const int face = int(cell / perFace), rest = int(cell % perFace);
-  return cellDirection(face, rest % cubeSide_, rest / cubeSide_, cubeSide_);
+  const Cell c = cellOf(n);
+  return cellDirection(c.face, c.i, c.j, cubeSide_);
+}
+
+namespace {
+
+// The edge planes of blocker (a, b, c) clipped to the upper half-space,
+// oriented so the cone's inside is on their positive side: 3 or 4 of them, or
+// 0 where the blocker draws nothing (edge-on to the vertex, or not above the
+// tangent plane).
+int edgePlanes(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c, glm::vec3 planes[4]) {
+  // Edge-on to the vertex: the triangle's plane passes through the origin.
+  const float triple = glm::dot(a, glm::cross(b, c));
+  const float scale = glm::length(a) * glm::length(b) * glm::length(c);
+  if (!(std::abs(triple) > 1e-6f * scale)) return 0;
+  if (!(std::max({a.z, b.z, c.z}) > 0.0f)) return 0;
+  const glm::vec3 in[3] = {a, b, c};
+  glm::vec3 poly[4];
+  const int n = clipToUpperHalf(in, poly);
+  if (n < 3) return 0;
+  const float sign = triple > 0.0f ? 1.0f : -1.0f;
+  for (int k = 0; k < n; ++k) planes[k] = sign * glm::cross(poly[k], poly[(k + 1) % n]);
+  return n;
+}
+
+}  // namespace
+
+bool lookUpBlocker(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
+                   const PlaneMaskTable& table, TableBlocker& out) {
+  glm::vec3 planes[4];
+  out.count = edgePlanes(a, b, c, planes);
+  const size_t bytes = size_t(table.words()) * sizeof(uint64_t);
+  for (int k = 0; k < out.count; ++k) {
+    out.planes[k] = table.above(planes[k]);
+    const char* row = reinterpret_cast<const char*>(out.planes[k].bits);
+    for (size_t line = 0; line < bytes; line += 64) __builtin_prefetch(row + line);
+  }
+  return out.count > 0;
+}
+
+void drawBlocker(const TableBlocker& blocker, const PlaneMaskTable& table, VisibilityMask& mask) {
+  VS_CHECK_EQ(table.maskSide(), mask.side());
+  const int words = mask.words();
+  const PlaneMaskTable::Mask* m = blocker.planes;
+  const uint64_t* disk = table.disk();
+  uint64_t* out = mask.data();
+  if (blocker.count == 3)
+    for (int w = 0; w < words; ++w)
+      out[w] |= (m[0].bits[w] ^ m[0].flip) & (m[1].bits[w] ^ m[1].flip) &
+                (m[2].bits[w] ^ m[2].flip) & disk[w];
+  else if (blocker.count == 4)
+    for (int w = 0; w < words; ++w)
+      out[w] |= (m[0].bits[w] ^ m[0].flip) & (m[1].bits[w] ^ m[1].flip) &
+                (m[2].bits[w] ^ m[2].flip) & (m[3].bits[w] ^ m[3].flip) & disk[w];
 }
 
 bool rasterizeBlocker(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
                       const PlaneMaskTable* table, VisibilityMask& mask) {
-  // Edge-on to the vertex: the triangle's plane passes through the origin.
-  const float triple = glm::dot(a, glm::cross(b, c));
-  const float scale = glm::length(a) * glm::length(b) * glm::length(c);
-  if (!(std::abs(triple) > 1e-6f * scale)) return false;
-  if (!(std::max({a.z, b.z, c.z}) > 0.0f)) return false;
-  const glm::vec3 in[3] = {a, b, c};
-  glm::vec3 poly[4];
-  const int n = clipToUpperHalf(in, poly);
-  if (n < 3) return false;
-  // Edge planes, oriented so the cone's inside is on their positive side.
-  const float sign = triple > 0.0f ? 1.0f : -1.0f;
-  glm::vec3 planes[4];
-  for (int k = 0; k < n; ++k) planes[k] = sign * glm::cross(poly[k], poly[(k + 1) % n]);
   if (table) {
-    VS_CHECK_EQ(table->maskSide(), mask.side());
-    const int words = mask.words();
-    const uint64_t* m[4];
-    for (int k = 0; k < n; ++k) m[k] = table->above(planes[k]);
-    uint64_t* out = mask.data();
-    if (n == 3)
-      for (int w = 0; w < words; ++w) out[w] |= m[0][w] & m[1][w] & m[2][w];
-    else
-      for (int w = 0; w < words; ++w) out[w] |= m[0][w] & m[1][w] & m[2][w] & m[3][w];
+    TableBlocker blocker;
+    if (!lookUpBlocker(a, b, c, *table, blocker)) return false;
+    drawBlocker(blocker, *table, mask);
     return true;
   }
+  glm::vec3 planes[4];
+  const int n = edgePlanes(a, b, c, planes);
+  if (n == 0) return false;
   const int side = mask.side();
   for (int y = 0; y < side; ++y)
     for (int x = 0; x < side; ++x) {

@@ -17,7 +17,12 @@
 // plane), so a triangle costs three or four lookups and a bitwise AND of
 // side * side / 64 words; blockers are ORed together (occluder fusion). A
 // null table tests the exact planes instead (the reference, and the knob
-// "plane table off").
+// "plane table off"). Only the three positive faces of the cube map are
+// stored: the pixels above the plane of -n are the disk's pixels not above
+// the plane of n (the two differ only on the plane itself, a set of measure
+// zero), so a normal on a negative face reads its mirror cell complemented.
+// Half the table is half the cache misses, and those are most of what a
+// triangle costs.
 //
 // Hard cases: a triangle whose plane passes through the vertex (it contains
 // the vertex, or the vertex lies on one of its edges or their lines) covers
@@ -67,25 +72,38 @@ glm::vec3 maskDirection(int side, int x, int y);
 class PlaneMaskTable {
  public:
   // Masks of `maskSide` for the 6 * cubeSide^2 plane normals at the centres
-  // of a cube map's cells (cubeSide >= 1). 32 and 128 (the paper's) take
-  // 12 MiB and about 0.1 s to build on two cores.
+  // of a cube map's cells (cubeSide >= 1), of which the 3 * cubeSide^2 on
+  // positive faces are stored. 32 and 128 (the paper's) take 6 MiB and about
+  // 0.05 s to build on two cores.
   PlaneMaskTable(int maskSide, int cubeSide);
 
   int maskSide() const { return maskSide_; }
   int cubeSide() const { return cubeSide_; }
   int words() const { return words_; }
   size_t bytes() const { return bits_.size() * sizeof(uint64_t); }
-  // The mask of the disk pixels whose hemisphere point s has s . n >= 0, for
-  // the table's normal nearest `n` (any length; zero gives the +x face's).
-  const uint64_t* above(const glm::vec3& n) const;
-  // The unit normal the table stores for the cell `n` falls in.
+  // The disk pixels whose hemisphere point s has s . n >= 0, for the table's
+  // normal nearest `n` (any length; zero gives the +x face's): word w is
+  // (bits[w] ^ flip) & disk()[w].
+  struct Mask {
+    const uint64_t* bits;
+    uint64_t flip;  // 0, or all ones for a normal on a negative face
+  };
+  Mask above(const glm::vec3& n) const;
+  // The pixels inside the disk.
+  const uint64_t* disk() const { return disk_.data(); }
+  // The unit normal of the cell `n` falls in (on a negative face, the
+  // mirror of the stored cell's).
   glm::vec3 quantized(const glm::vec3& n) const;
 
  private:
-  size_t cellOf(const glm::vec3& n) const;
+  struct Cell {
+    int face, i, j;  // face 0..5: +x, -x, +y, -y, +z, -z
+  };
+  Cell cellOf(const glm::vec3& n) const;
 
   int maskSide_, cubeSide_, words_;
-  std::vector<uint64_t> bits_;  // words_ per cell
+  std::vector<uint64_t> bits_;  // words_ per cell of the positive faces
+  std::vector<uint64_t> disk_;  // words_
 };
 
 // ORs blocker triangle (a, b, c) into `mask`: positions relative to the
@@ -94,5 +112,18 @@ class PlaneMaskTable {
 // the rasterizer (above the tangent plane, not edge-on to the vertex).
 bool rasterizeBlocker(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
                       const PlaneMaskTable* table, VisibilityMask& mask);
+
+// rasterizeBlocker with a table, in two steps, so that a caller can look up
+// all of a vertex's blockers first and draw them after: each lookup
+// prefetches its table rows, and the cache misses of many blockers overlap
+// instead of stalling one by one. lookUpBlocker returns false (and `out` is
+// not drawn) where rasterizeBlocker would return false.
+struct TableBlocker {
+  PlaneMaskTable::Mask planes[4];
+  int count = 0;  // 3 or 4 edge planes
+};
+bool lookUpBlocker(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
+                   const PlaneMaskTable& table, TableBlocker& out);
+void drawBlocker(const TableBlocker& blocker, const PlaneMaskTable& table, VisibilityMask& mask);
 
 }  // namespace vistream

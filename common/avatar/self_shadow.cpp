@@ -50,9 +50,10 @@ void SelfShadowing::run(const std::vector<glm::vec3>& positions,
   struct Local {
     VisibilityMask mask;
     SelfShadowStats stats;
+    std::vector<TableBlocker> looked;  // a vertex's blockers, looked up, to draw
   };
   tbb::enumerable_thread_specific<Local> locals([&] {
-    return Local{VisibilityMask(options_.maskSide), {}};
+    return Local{VisibilityMask(options_.maskSide), {}, {}};
   });
   tbb::parallel_for(tbb::blocked_range<size_t>(0, positions.size(), 16), [&](const auto& range) {
     Local& local = locals.local();
@@ -61,14 +62,25 @@ void SelfShadowing::run(const std::vector<glm::vec3>& positions,
       const glm::vec3 p = positions[v];
       const TangentFrame frame = TangentFrame::around(normals[v]);
       local.mask.clear();
+      local.looked.clear();
       forEachBlocker(v, [&](const glm::uvec3& t) {
         const glm::vec3 a = frame.toLocal(positions[t.x] - p),
                         b = frame.toLocal(positions[t.y] - p),
                         c = frame.toLocal(positions[t.z] - p);
         ++local.stats.blockerTests;
         if (!(std::max({a.z, b.z, c.z}) > 0.0f)) return;
-        local.stats.rasterized += rasterizeBlocker(a, b, c, table_.get(), local.mask);
+        if (!table_) {
+          local.stats.rasterized += rasterizeBlocker(a, b, c, nullptr, local.mask);
+          return;
+        }
+        // Look up every blocker first, draw them after (lookUpBlocker).
+        local.looked.emplace_back();
+        if (lookUpBlocker(a, b, c, *table_, local.looked.back()))
+          ++local.stats.rasterized;
+        else
+          local.looked.pop_back();
       });
+      for (const TableBlocker& blocker : local.looked) drawBlocker(blocker, *table_, local.mask);
       const auto integrated = std::chrono::steady_clock::now();
       local.stats.rasterSeconds += std::chrono::duration<double>(integrated - start).count();
       integrator_.diffuse(local.mask, frame, out.data() + v * size_t(terms));

@@ -50,6 +50,20 @@ TransferIntegrator::TransferIntegrator(int maskSide, const TransferOptions& opti
   // Each pixel's share of the projected solid angle pi.
   const float area = kPi / float(disk);
   for (float& b : basis_) b *= area;
+  if (block == 1) {
+    pixelSample_.assign(size_t(maskSide) * size_t(maskSide), -1);
+    diskBits_.assign((size_t(maskSide) * size_t(maskSide) + 63) / 64, 0);
+    unblocked_.assign(size_t(terms_), 0.0f);
+    std::vector<double> sum(size_t(terms_), 0.0);
+    for (size_t k = 0; k < samples_.size(); ++k) {
+      const uint32_t w = wordIndex_[samples_[k].firstWord];
+      pixelSample_[size_t(w) * 64 + size_t(std::countr_zero(wordBits_[samples_[k].firstWord]))] =
+          int32_t(k);
+      diskBits_[w] |= wordBits_[samples_[k].firstWord];
+      for (int i = 0; i < terms_; ++i) sum[size_t(i)] += basis_[k * size_t(terms_) + size_t(i)];
+    }
+    for (int i = 0; i < terms_; ++i) unblocked_[size_t(i)] = float(sum[size_t(i)]);
+  }
 }
 
 template <class Lobe>
@@ -76,6 +90,35 @@ void TransferIntegrator::integrate(const VisibilityMask& mask, const TangentFram
 
 void TransferIntegrator::diffuse(const VisibilityMask& mask, const TangentFrame& frame,
                                  float* out) const {
+  if (!pixelSample_.empty()) {
+    // Per pixel, visiting the fewer of the blocked and the open pixels: the
+    // open sky minus what is blocked, or the open pixels' sum (exactly 0
+    // when all are blocked).
+    VS_CHECK_EQ(mask.side(), side_);
+    const uint64_t* bits = mask.data();
+    const int words = mask.words();
+    size_t blocked = 0;
+    for (int w = 0; w < words; ++w)
+      blocked += size_t(std::popcount(bits[w] & diskBits_[size_t(w)]));
+    const bool mostlyBlocked = 2 * blocked > samples_.size();
+    float local[25];
+    if (mostlyBlocked)
+      std::fill_n(local, terms_, 0.0f);
+    else
+      std::copy_n(unblocked_.data(), terms_, local);
+    const float sign = mostlyBlocked ? 1.0f : -1.0f;
+    for (int w = 0; w < words; ++w) {
+      const uint64_t visit = (mostlyBlocked ? ~bits[w] : bits[w]) & diskBits_[size_t(w)];
+      for (uint64_t set = visit; set != 0; set &= set - 1) {
+        const int32_t k = pixelSample_[size_t(w) * 64 + size_t(std::countr_zero(set))];
+        const float* b = basis_.data() + size_t(k) * size_t(terms_);
+        for (int i = 0; i < terms_; ++i) local[i] += sign * b[i];
+      }
+    }
+    const ShRotation toWorld(glm::mat3(frame.t, frame.b, frame.n), orders_);
+    toWorld.apply(local, out);
+    return;
+  }
   integrate(
       mask, frame, [](const glm::vec3&) { return 1.0f; }, out);
 }

@@ -116,7 +116,39 @@ TEST(HemisphereRaster, TheTableAnswersEveryNormalEvenInfiniteOrNaN) {
   for (const glm::vec3& n :
        {glm::vec3(INFINITY, 1, 0), glm::vec3(NAN, 0, 1), glm::vec3(0.0f),
         glm::vec3(-INFINITY, -INFINITY, INFINITY), glm::vec3(1e38f, -1e38f, 3)})
-    EXPECT_NE(table.above(n), nullptr);
+    EXPECT_NE(table.above(n).bits, nullptr);
+}
+
+// The table stores the positive faces only and complements their mirror
+// cells for the negative ones: every normal, on any face, still reads exactly
+// the disk pixels on the positive side of its quantized plane.
+TEST(HemisphereRaster, EveryNormalReadsThePixelsAboveItsQuantizedPlaneOnAnyFace) {
+  const PlaneMaskTable table(32, 16);
+  std::mt19937 rng(11);
+  std::normal_distribution<float> g;
+  int negativeFaces = 0;
+  for (int i = 0; i < 3000; ++i) {
+    const glm::vec3 n = glm::normalize(glm::vec3(g(rng), g(rng), g(rng)));
+    const glm::vec3 a = glm::abs(n);
+    const float dominant = a.x >= a.y && a.x >= a.z ? n.x : a.y >= a.z ? n.y : n.z;
+    negativeFaces += dominant < 0.0f;
+    const PlaneMaskTable::Mask m = table.above(n);
+    const glm::vec3 q = table.quantized(n);
+    for (int y = 0; y < 32; ++y)
+      for (int x = 0; x < 32; ++x) {
+        const size_t bit = size_t(y) * 32 + size_t(x);
+        const bool set = ((m.bits[bit >> 6] ^ m.flip) & table.disk()[bit >> 6]) >> (bit & 63) & 1;
+        if (!maskPixelInDisk(32, x, y)) {
+          ASSERT_FALSE(set) << "outside the disk at " << x << "," << y;
+          continue;
+        }
+        const float side = glm::dot(maskDirection(32, x, y), q);
+        if (std::abs(side) < 1e-5f) continue;  // on the plane: either answer
+        ASSERT_EQ(set, side > 0.0f)
+            << "normal " << n.x << "," << n.y << "," << n.z << " pixel " << x << "," << y;
+      }
+  }
+  EXPECT_GT(negativeFaces, 1000);  // half the normals read complemented cells
 }
 
 TEST(HemisphereRaster, TheTablesQuantizedNormalIsWithinHalfACellDiagonal) {
