@@ -33,6 +33,7 @@ struct Model {
   Scene scene;
   SkinnedMesh mesh;
   std::vector<glm::uvec3> coarse;  // the welded model before subdivision
+  TriangleGroups groups;           // of mesh.triangles, for culling
   int levels = 0;
   const Animation* clip = nullptr;
   std::vector<float> times;  // of the benchmark's frames
@@ -76,7 +77,7 @@ Run runOnce(const Model& m, const SelfShadowOptions& options, int ring, const Re
       shadows.diffuse(pose.positions, pose.normals, *pvs, out, &stats);
     else
       shadows.diffuse(pose.positions, pose.normals, m.mesh.triangles, out, &stats,
-                      ring > 0 ? &hierarchy : nullptr);
+                      ring > 0 ? &hierarchy : nullptr, &m.groups);
     const double frameMs = clock.ms();
     total.push_back(frameMs);
     transform.push_back(transformMs);
@@ -207,6 +208,7 @@ int runShadowBench(const ShadowBenchArgs& a) {
   m.coarse = m.mesh.subdivided(0).triangles;
   m.mesh = m.mesh.subdivided(a.subdivide);
   m.levels = a.subdivide;
+  m.groups = TriangleGroups::build(m.mesh.triangles, m.mesh.positions);
   const int frames = std::max(2, a.frames);
   for (int f = 0; f < frames; ++f) m.times.push_back(m.clip->duration * float(f) / float(frames));
 
@@ -277,7 +279,7 @@ int runShadowBench(const ShadowBenchArgs& a) {
     r.value = std::move(value);
     runs.push_back(std::move(r));
   };
-  ProgressBar bar("knobs", a.quick ? 6 : 12);
+  ProgressBar bar("knobs", a.quick ? 7 : 13);
   add("defaults",
       defaultRing ? "mask 32, table 128, 25 terms, per pixel, ring 2"
                   : "mask 32, table 128, 25 terms, per pixel",
@@ -291,11 +293,12 @@ int runShadowBench(const ShadowBenchArgs& a) {
   for (size_t k = 0; k < pvsPoses.size(); ++k)
     poseAt(m.scene, m.mesh, m.clip, m.clip->duration * (float(k) + 0.25f) / float(pvsPoses.size()),
            pvsPoses[k]);
-  const VertexBlockers candidates =
+  VertexBlockers candidates =
       defaultRing ? VertexBlockers::of(ShadowHierarchy::build(m.mesh.triangles, m.coarse, m.levels,
                                                               defaultRing, m.mesh.positions.size()),
                                        m.mesh.triangles)
                   : VertexBlockers::everyTriangle(m.mesh.triangles, m.mesh.positions.size());
+  candidates.groupTriangles(m.mesh.positions);
   const VertexBlockers pvs = potentiallyVisibleBlockers(candidates, pvsPoses);
   const double pvsBuildS = pvsClock.ms() / 1000.0;
   {
@@ -336,6 +339,13 @@ int runShadowBench(const ShadowBenchArgs& a) {
     add("downsampling", "on (the paper's 4x4)", o, defaultRing);
     bar.advance();
   }
+  {
+    SelfShadowOptions o;
+    o.cullGroups = false;
+    add("group culling", defaultRing ? "off (no effect with the hierarchy)" : "off", o,
+        defaultRing);
+    bar.advance();
+  }
   if (defaultRing) {
     add("mesh hierarchy", "ring 1", {}, 1);
     add("mesh hierarchy", "off (every fine triangle)", {}, 0);
@@ -353,6 +363,7 @@ int runShadowBench(const ShadowBenchArgs& a) {
               {"vertices", m.mesh.positions.size()},
               {"triangles", m.mesh.triangles.size()},
               {"lowres_triangles", a.subdivide > 0 ? m.coarse.size() : 0},
+              {"triangle_groups", m.groups.size()},
               {"ms_per_frame", d.msPerFrame},
               {"fps", d.msPerFrame > 0 ? 1000.0 / d.msPerFrame : 0.0},
               {"l2_error", d.l2},

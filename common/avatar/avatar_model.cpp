@@ -175,6 +175,7 @@ AvatarShader::AvatarShader(std::shared_ptr<const AvatarModel> model,
                            const AvatarShaderOptions& options)
     : model_(std::move(model)), options_(options), shadowing_(options.shadows) {
   VS_CHECK(model_ != nullptr);
+  groups_ = TriangleGroups::build(model_->triangles(), model_->restPositions());
   VS_CHECK_EQ(shadowing_.terms(), kTerms);
 }
 
@@ -189,9 +190,10 @@ const VertexBlockers* AvatarShader::blockers(Gait g) {
   std::vector<PosedMesh> poses(duration > 0.0f ? size_t(options_.pvsPoses) : 1);
   for (size_t k = 0; k < poses.size(); ++k)
     model_->pose(g, duration * float(k) / float(poses.size()), poses[k]);
-  pvs_[i] = std::make_unique<VertexBlockers>(potentiallyVisibleBlockers(
-      VertexBlockers::everyTriangle(model_->triangles(), model_->vertexCount()), poses,
-      options_.shadows));
+  VertexBlockers every = VertexBlockers::everyTriangle(model_->triangles(), model_->vertexCount());
+  every.groups = groups_;
+  pvs_[i] =
+      std::make_unique<VertexBlockers>(potentiallyVisibleBlockers(every, poses, options_.shadows));
   stats_.pvsMs += clock.ms();
   return pvs_[i].get();
 }
@@ -214,7 +216,11 @@ const AvatarShader::Sampled& AvatarShader::sampled(Gait g, float t) {
   }
   const auto start = std::chrono::steady_clock::now();
   model_->pose(g, clipTime, slot->pose);
-  shadowing_.diffuse(slot->pose.positions, slot->pose.normals, model_->triangles(), slot->transfer);
+  if (const VertexBlockers* pvs = blockers(g))
+    shadowing_.diffuse(slot->pose.positions, slot->pose.normals, *pvs, slot->transfer);
+  else
+    shadowing_.diffuse(slot->pose.positions, slot->pose.normals, model_->triangles(),
+                       slot->transfer, nullptr, nullptr, &groups_);
   stats_.shadowMs +=
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   ++stats_.posesShaded;

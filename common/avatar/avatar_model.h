@@ -73,6 +73,8 @@ class AvatarModel {
   size_t vertexCount() const { return welded_.positions.size(); }
   size_t triangleCount() const { return welded_.triangles.size(); }
   const std::vector<glm::uvec3>& triangles() const { return welded_.triangles; }
+  // The welded vertices in the bind pose.
+  const std::vector<glm::vec3>& restPositions() const { return welded_.positions; }
   // Per triangle corner (3t + k): linear albedo.
   const std::vector<glm::vec3>& cornerAlbedo() const { return cornerAlbedo_; }
   // Face IDs of the model's source file, per triangle.
@@ -164,6 +166,7 @@ class AvatarShader {
   const VertexBlockers* blockers(Gait g);  // null: every triangle
   std::shared_ptr<const AvatarModel> model_;
   std::array<std::unique_ptr<VertexBlockers>, 3> pvs_;  // per gait, once built
+  TriangleGroups groups_;                               // of the model's triangles, for culling
   std::array<bool, 3> pvsTried_{};
   AvatarShaderOptions options_;
   SelfShadowing shadowing_;

@@ -1,11 +1,14 @@
 #include "common/avatar/self_shadow.h"
 
+#include <meshoptimizer.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
+#include <map>
 
 #include "common/core/check.h"
 #include "common/core/random.h"
@@ -31,7 +34,115 @@ double seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
 
+// culled[g] = whether group g's sphere lies wholly below the tangent plane
+// of the vertex at p with normal n. The margin keeps every triangle a
+// per-triangle test would draw: a culled group's vertices are all below the
+// plane by more than rounding, in any frame.
+void cullGroups(const glm::vec3& p, const glm::vec3& normal, const std::vector<glm::vec4>& spheres,
+                std::vector<uint8_t>& culled, uint64_t& count) {
+  const glm::vec3 n = glm::normalize(normal);
+  culled.resize(spheres.size());
+  for (size_t g = 0; g < spheres.size(); ++g) {
+    const glm::vec3 d = glm::vec3(spheres[g]) - p;
+    const float r = spheres[g].w;
+    const float height = glm::dot(d, n);
+    const float margin = 1e-4f * (glm::length(d) + r);
+    culled[g] = height + r < -margin;  // false for an infinite radius or NaN
+    count += culled[g];
+  }
+}
+
 }  // namespace
+
+TriangleGroups TriangleGroups::build(const std::vector<glm::uvec3>& triangles,
+                                     const std::vector<glm::vec3>& restPositions) {
+  TriangleGroups g;
+  g.groupOf.assign(triangles.size(), 0);
+  if (triangles.empty()) return g;
+  constexpr size_t kMaxVertices = 64;
+  std::vector<uint32_t> indices;
+  indices.reserve(3 * triangles.size());
+  for (const glm::uvec3& t : triangles) {
+    for (int k = 0; k < 3; ++k) VS_CHECK_LT(t[k], restPositions.size());
+    indices.insert(indices.end(), {t.x, t.y, t.z});
+  }
+  const size_t bound = meshopt_buildMeshletsBound(indices.size(), kMaxVertices, kMaxTriangles);
+  std::vector<meshopt_Meshlet> meshlets(bound);
+  std::vector<unsigned int> meshletVertices(bound * kMaxVertices);
+  std::vector<unsigned char> meshletTriangles(bound * kMaxTriangles * 3);
+  meshlets.resize(meshopt_buildMeshlets(meshlets.data(), meshletVertices.data(),
+                                        meshletTriangles.data(), indices.data(), indices.size(),
+                                        &restPositions[0].x, restPositions.size(),
+                                        sizeof(glm::vec3), kMaxVertices, kMaxTriangles, 0.0f));
+  // Meshlets name their triangles by corners: find each one's index by its
+  // sorted corners (repeated triangles take their indices in turn).
+  std::map<std::array<uint32_t, 3>, std::vector<uint32_t>> byCorners;
+  auto key = [](uint32_t a, uint32_t b, uint32_t c) {
+    std::array<uint32_t, 3> k{a, b, c};
+    std::sort(k.begin(), k.end());
+    return k;
+  };
+  for (uint32_t t = uint32_t(triangles.size()); t-- > 0;)
+    byCorners[key(triangles[t].x, triangles[t].y, triangles[t].z)].push_back(t);
+  std::vector<uint8_t> placed(triangles.size(), 0);
+  for (const meshopt_Meshlet& m : meshlets) {
+    const uint32_t group = uint32_t(g.size());
+    for (size_t k = 0; k < m.triangle_count; ++k) {
+      const unsigned char* c = &meshletTriangles[m.triangle_offset + 3 * k];
+      const unsigned int* v = &meshletVertices[m.vertex_offset];
+      auto it = byCorners.find(key(v[c[0]], v[c[1]], v[c[2]]));
+      if (it == byCorners.end() || it->second.empty()) continue;
+      const uint32_t t = it->second.back();
+      it->second.pop_back();
+      placed[t] = 1;
+      g.groupOf[t] = group;
+      g.members.push_back(t);
+    }
+    g.vertices.insert(g.vertices.end(), meshletVertices.begin() + m.vertex_offset,
+                      meshletVertices.begin() + m.vertex_offset + m.vertex_count);
+    g.vertexStart.push_back(uint32_t(g.vertices.size()));
+    g.triangleStart.push_back(uint32_t(g.members.size()));
+    g.neverCulled.push_back(0);
+  }
+  // What the meshlets left out: one group that is never culled.
+  const uint32_t rest = uint32_t(g.size());
+  bool any = false;
+  for (uint32_t t = 0; t < triangles.size(); ++t)
+    if (!placed[t]) {
+      any = true;
+      g.groupOf[t] = rest;
+      g.members.push_back(t);
+    }
+  if (any) {
+    g.vertexStart.push_back(uint32_t(g.vertices.size()));
+    g.triangleStart.push_back(uint32_t(g.members.size()));
+    g.neverCulled.push_back(1);
+  }
+  return g;
+}
+
+void TriangleGroups::spheres(const std::vector<glm::vec3>& positions,
+                             std::vector<glm::vec4>& out) const {
+  out.resize(size());
+  for (size_t g = 0; g < size(); ++g) {
+    if (neverCulled[g] || vertexStart[g] == vertexStart[g + 1]) {
+      out[g] = glm::vec4(0.0f, 0.0f, 0.0f, INFINITY);
+      continue;
+    }
+    glm::vec3 lo(INFINITY), hi(-INFINITY);
+    for (uint32_t k = vertexStart[g]; k < vertexStart[g + 1]; ++k) {
+      lo = glm::min(lo, positions[vertices[k]]);
+      hi = glm::max(hi, positions[vertices[k]]);
+    }
+    const glm::vec3 centre = 0.5f * (lo + hi);
+    float r2 = 0.0f;
+    for (uint32_t k = vertexStart[g]; k < vertexStart[g + 1]; ++k) {
+      const glm::vec3 d = positions[vertices[k]] - centre;
+      r2 = std::max(r2, glm::dot(d, d));
+    }
+    out[g] = glm::vec4(centre, std::sqrt(r2) * (1.0f + 1e-6f));
+  }
+}
 
 SelfShadowing::SelfShadowing(const SelfShadowOptions& options)
     : options_(options),
@@ -63,7 +174,7 @@ void SelfShadowing::run(const std::vector<glm::vec3>& positions,
       const TangentFrame frame = TangentFrame::around(normals[v]);
       local.mask.clear();
       local.looked.clear();
-      forEachBlocker(v, [&](const glm::uvec3& t) {
+      forEachBlocker(v, local.stats, [&](const glm::uvec3& t) {
         const glm::vec3 a = frame.toLocal(positions[t.x] - p),
                         b = frame.toLocal(positions[t.y] - p),
                         c = frame.toLocal(positions[t.z] - p);
@@ -92,6 +203,7 @@ void SelfShadowing::run(const std::vector<glm::vec3>& positions,
     stats->vertices = positions.size();
     for (const Local& l : locals) {
       stats->blockerTests += l.stats.blockerTests;
+      stats->groupsCulled += l.stats.groupsCulled;
       stats->rasterized += l.stats.rasterized;
       stats->rasterSeconds += l.stats.rasterSeconds;
       stats->integrateSeconds += l.stats.integrateSeconds;
@@ -102,8 +214,24 @@ void SelfShadowing::run(const std::vector<glm::vec3>& positions,
 void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
                             const std::vector<glm::vec3>& normals,
                             const std::vector<glm::uvec3>& triangles, std::vector<float>& out,
-                            SelfShadowStats* stats, const ShadowHierarchy* hierarchy) const {
-  run(positions, normals, out, stats, [&](size_t v, auto&& block) {
+                            SelfShadowStats* stats, const ShadowHierarchy* hierarchy,
+                            const TriangleGroups* groups) const {
+  std::vector<glm::vec4> spheres;
+  const bool cull = options_.cullGroups && !hierarchy && groups && !groups->empty();
+  if (cull) {
+    VS_CHECK_EQ(groups->groupOf.size(), triangles.size());
+    groups->spheres(positions, spheres);
+  }
+  run(positions, normals, out, stats, [&](size_t v, SelfShadowStats& s, auto&& block) {
+    if (cull) {
+      thread_local std::vector<uint8_t> culled;
+      cullGroups(positions[v], normals[v], spheres, culled, s.groupsCulled);
+      for (size_t g = 0; g < groups->size(); ++g)
+        if (!culled[g])
+          for (uint32_t k = groups->triangleStart[g]; k < groups->triangleStart[g + 1]; ++k)
+            block(triangles[groups->members[k]]);
+      return;
+    }
     if (!hierarchy) {
       for (const glm::uvec3& t : triangles) block(t);
       return;
@@ -127,9 +255,25 @@ void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
                             const std::vector<glm::vec3>& normals, const VertexBlockers& blockers,
                             std::vector<float>& out, SelfShadowStats* stats) const {
   VS_CHECK_EQ(blockers.vertices(), positions.size());
-  run(positions, normals, out, stats, [&](size_t v, auto&& block) {
-    for (uint32_t k = blockers.start[v]; k < blockers.start[v + 1]; ++k)
-      block(blockers.triangles[blockers.list[k]]);
+  std::vector<glm::vec4> spheres;
+  const TriangleGroups& groups = blockers.groups;
+  const bool cull = options_.cullGroups && !groups.empty();
+  if (cull) {
+    VS_CHECK_EQ(groups.groupOf.size(), blockers.triangles.size());
+    groups.spheres(positions, spheres);
+  }
+  run(positions, normals, out, stats, [&](size_t v, SelfShadowStats& s, auto&& block) {
+    if (!cull) {
+      for (uint32_t k = blockers.start[v]; k < blockers.start[v + 1]; ++k)
+        block(blockers.triangles[blockers.list[k]]);
+      return;
+    }
+    thread_local std::vector<uint8_t> culled;
+    cullGroups(positions[v], normals[v], spheres, culled, s.groupsCulled);
+    for (uint32_t k = blockers.start[v]; k < blockers.start[v + 1]; ++k) {
+      const uint32_t t = blockers.list[k];
+      if (!culled[groups.groupOf[t]]) block(blockers.triangles[t]);
+    }
   });
 }
 
@@ -223,6 +367,7 @@ VertexBlockers potentiallyVisibleBlockers(const VertexBlockers& candidates,
   });
   VertexBlockers out;
   out.triangles = candidates.triangles;
+  out.groups = candidates.groups;
   for (const auto& k : kept) {
     out.list.insert(out.list.end(), k.begin(), k.end());
     out.start.push_back(uint32_t(out.list.size()));

@@ -27,10 +27,38 @@ struct SelfShadowOptions {
   int maskSide = 32;     // 16, 32 or 64
   int planeTable = 128;  // cube-map cells a side; 0: exact planes per pixel
   TransferOptions transfer;
+  // Hierarchical culling (section 3.2): where blockers come with triangle
+  // groups, a vertex skips every group whose bounding sphere lies wholly
+  // below its tangent plane. The result is the same either way.
+  bool cullGroups = true;
+};
+
+// Static triangle groups for hierarchical culling against the tangent plane
+// (Kautz et al. 2004, section 3.2): clusters of up to kMaxTriangles nearby
+// triangles, fixed once from a rest pose (meshoptimizer's meshlets), whose
+// bounding spheres follow the animation (spheres(), once a frame). A vertex
+// then rejects a whole group below its tangent plane with one test instead
+// of transforming each of its triangles. Triangles meshoptimizer leaves out
+// (degenerate ones) form a last group that is never culled.
+struct TriangleGroups {
+  static constexpr size_t kMaxTriangles = 16;
+  std::vector<uint32_t> groupOf;                    // per triangle
+  std::vector<uint32_t> vertexStart{0}, vertices;   // per group (CSR)
+  std::vector<uint32_t> triangleStart{0}, members;  // per group (CSR): its triangles
+  std::vector<uint8_t> neverCulled;                 // per group
+
+  size_t size() const { return vertexStart.size() - 1; }
+  bool empty() const { return size() == 0; }
+  static TriangleGroups build(const std::vector<glm::uvec3>& triangles,
+                              const std::vector<glm::vec3>& restPositions);
+  // Per group, a bounding sphere (centre, radius) of its vertices at
+  // `positions`; a never-culled group gets an infinite radius.
+  void spheres(const std::vector<glm::vec3>& positions, std::vector<glm::vec4>& out) const;
 };
 
 struct SelfShadowStats {
   uint64_t vertices = 0;
+  uint64_t groupsCulled = 0;   // (vertex, group) pairs culled whole
   uint64_t blockerTests = 0;   // (vertex, triangle) pairs looked at
   uint64_t rasterized = 0;     // of those, drawn into a mask
   double rasterSeconds = 0.0;  // summed over threads
@@ -63,6 +91,12 @@ struct ShadowHierarchy {
 struct VertexBlockers {
   std::vector<glm::uvec3> triangles;
   std::vector<uint32_t> start{0}, list;
+  TriangleGroups groups;  // of `triangles`; empty: no culling
+
+  // Groups `triangles` for culling, from the mesh at rest.
+  void groupTriangles(const std::vector<glm::vec3>& restPositions) {
+    groups = TriangleGroups::build(triangles, restPositions);
+  }
 
   size_t vertices() const { return start.size() - 1; }
   double meanPerVertex() const;
@@ -95,18 +129,20 @@ class SelfShadowing {
   // Diffuse transfer vectors, terms() floats per vertex, of the mesh
   // (positions, unit normals per vertex) shadowing itself.
   // With a hierarchy, its blockers replace `triangles` (which must be the
-  // fine mesh it was built for).
+  // fine mesh it was built for). Without one, `groups` (of `triangles`, may
+  // be null) lets whole groups be culled.
   void diffuse(const std::vector<glm::vec3>& positions, const std::vector<glm::vec3>& normals,
                const std::vector<glm::uvec3>& triangles, std::vector<float>& out,
-               SelfShadowStats* stats = nullptr, const ShadowHierarchy* hierarchy = nullptr) const;
+               SelfShadowStats* stats = nullptr, const ShadowHierarchy* hierarchy = nullptr,
+               const TriangleGroups* groups = nullptr) const;
   // The same with each vertex's blockers from lists (a PVS).
   void diffuse(const std::vector<glm::vec3>& positions, const std::vector<glm::vec3>& normals,
                const VertexBlockers& blockers, std::vector<float>& out,
                SelfShadowStats* stats = nullptr) const;
 
  private:
-  // The shadow loop: forEachBlocker(v, block) calls block(triangle) for
-  // vertex v's blockers.
+  // The shadow loop: forEachBlocker(v, stats, block) calls block(triangle)
+  // for vertex v's blockers (and counts culled groups in stats).
   template <class ForEachBlocker>
   void run(const std::vector<glm::vec3>& positions, const std::vector<glm::vec3>& normals,
            std::vector<float>& out, SelfShadowStats* stats, ForEachBlocker&& forEachBlocker) const;

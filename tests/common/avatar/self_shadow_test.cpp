@@ -256,5 +256,74 @@ TEST(VertexPvs, IsExactAtItsPosesWithAFractionOfTheBlockersAndCloseBetweenThem) 
   EXPECT_LT(meanRelativeL2(cut, full, shadows.terms()), 0.02);
 }
 
+// Static groups (meshoptimizer's meshlets): every triangle in exactly one
+// group, none over the size limit, and each group's sphere holds its
+// triangles' corners in any pose. A degenerate triangle still has a group.
+TEST(TriangleGroups, HoldEveryTriangleOnceInSpheresThatFollowThePose) {
+  const Scene fox = loadScene(std::filesystem::path(VISTREAM_SHARED_DIR) / "data" / "Fox.glb");
+  SkinnedMesh mesh = SkinnedMesh::firstOf(fox).subdivided(0);
+  std::vector<glm::uvec3> triangles = mesh.triangles;
+  triangles.push_back({0, 0, 1});          // degenerate
+  triangles.push_back(triangles.front());  // repeated
+  const TriangleGroups groups = TriangleGroups::build(triangles, mesh.positions);
+  ASSERT_GT(groups.size(), 1u);
+  std::vector<int> seen(triangles.size(), 0);
+  for (size_t g = 0; g < groups.size(); ++g) {
+    const uint32_t count = groups.triangleStart[g + 1] - groups.triangleStart[g];
+    if (!groups.neverCulled[g]) {
+      EXPECT_LE(count, TriangleGroups::kMaxTriangles);
+    }
+    for (uint32_t k = groups.triangleStart[g]; k < groups.triangleStart[g + 1]; ++k) {
+      ++seen[groups.members[k]];
+      EXPECT_EQ(groups.groupOf[groups.members[k]], g);
+    }
+  }
+  for (size_t t = 0; t < seen.size(); ++t) EXPECT_EQ(seen[t], 1) << "triangle " << t;
+  PosedMesh pose;
+  poseAt(fox, mesh, findAnimation(fox, "Run"), 0.2f, pose);
+  std::vector<glm::vec4> spheres;
+  groups.spheres(pose.positions, spheres);
+  for (size_t t = 0; t < triangles.size(); ++t) {
+    const glm::vec4 s = spheres[groups.groupOf[t]];
+    for (int k = 0; k < 3; ++k)
+      EXPECT_LE(glm::distance(glm::vec3(s), pose.positions[triangles[t][k]]), s.w)
+          << "triangle " << t;
+  }
+}
+
+// Culling whole groups below a vertex's tangent plane is only a shortcut:
+// the transfer is bit for bit the same as testing every triangle, with every
+// triangle and with a PVS, while far fewer triangles are looked at.
+TEST(TriangleGroups, CullingThemChangesNoBitOfTheTransferAndSkipsTriangles) {
+  const Scene fox = loadScene(std::filesystem::path(VISTREAM_SHARED_DIR) / "data" / "Fox.glb");
+  const SkinnedMesh mesh = SkinnedMesh::firstOf(fox).subdivided(0);
+  const Animation* walk = findAnimation(fox, "Walk");
+  const TriangleGroups groups = TriangleGroups::build(mesh.triangles, mesh.positions);
+  SelfShadowOptions off;
+  off.cullGroups = false;
+  const SelfShadowing culling, plain(off);
+  std::vector<PosedMesh> poses(4);
+  for (size_t k = 0; k < poses.size(); ++k)
+    poseAt(fox, mesh, walk, walk->duration * float(k) / 4.0f, poses[k]);
+  VertexBlockers every = VertexBlockers::everyTriangle(mesh.triangles, mesh.positions.size());
+  every.groupTriangles(mesh.positions);
+  const VertexBlockers pvs = potentiallyVisibleBlockers(every, poses);
+  ASSERT_EQ(pvs.groups.size(), every.groups.size());
+  for (const PosedMesh& pose : poses) {
+    std::vector<float> a, b;
+    SelfShadowStats sa, sb;
+    culling.diffuse(pose.positions, pose.normals, mesh.triangles, a, &sa, nullptr, &groups);
+    plain.diffuse(pose.positions, pose.normals, mesh.triangles, b, &sb, nullptr, &groups);
+    EXPECT_EQ(a, b);
+    EXPECT_EQ(sa.rasterized, sb.rasterized);
+    EXPECT_GT(sa.groupsCulled, 0u);
+    EXPECT_LT(double(sa.blockerTests), 0.8 * double(sb.blockerTests));
+    culling.diffuse(pose.positions, pose.normals, pvs, a, &sa);
+    plain.diffuse(pose.positions, pose.normals, pvs, b, &sb);
+    EXPECT_EQ(a, b);
+    EXPECT_EQ(sa.rasterized, sb.rasterized);
+  }
+}
+
 }  // namespace
 }  // namespace vistream
