@@ -34,7 +34,7 @@ struct Model {
   SkinnedMesh mesh;
   std::vector<glm::uvec3> coarse;  // the welded model before subdivision
   TriangleGroups groups;           // of mesh.triangles, for culling
-  int levels = 0;
+  int levels = 0, split = 4;
   const Animation* clip = nullptr;
   std::vector<float> times;  // of the benchmark's frames
 };
@@ -62,7 +62,7 @@ Run runOnce(const Model& m, const SelfShadowOptions& options, int ring, const Re
   const SelfShadowing shadows(options);
   const ShadowHierarchy hierarchy =
       ring > 0 && !pvs ? ShadowHierarchy::build(m.mesh.triangles, m.coarse, m.levels, ring,
-                                                m.mesh.positions.size())
+                                                m.mesh.positions.size(), m.split)
                        : ShadowHierarchy{};
   std::vector<double> total, transform, raster, integrate;
   double l2 = 0, blockers = 0;
@@ -206,8 +206,9 @@ int runShadowBench(const ShadowBenchArgs& a) {
   // Welded (shared corners get one smooth normal), then subdivided; the
   // welded model is the hierarchy's coarse level.
   m.coarse = m.mesh.subdivided(0).triangles;
-  m.mesh = m.mesh.subdivided(a.subdivide);
+  m.mesh = m.mesh.subdivided(a.subdivide, SkinnedMesh::Split(a.subdivideBy));
   m.levels = a.subdivide;
+  m.split = a.subdivideBy;
   m.groups = TriangleGroups::build(m.mesh.triangles, m.mesh.positions);
   const int frames = std::max(2, a.frames);
   for (int f = 0; f < frames; ++f) m.times.push_back(m.clip->duration * float(f) / float(frames));
@@ -294,9 +295,10 @@ int runShadowBench(const ShadowBenchArgs& a) {
     poseAt(m.scene, m.mesh, m.clip, m.clip->duration * (float(k) + 0.25f) / float(pvsPoses.size()),
            pvsPoses[k]);
   VertexBlockers candidates =
-      defaultRing ? VertexBlockers::of(ShadowHierarchy::build(m.mesh.triangles, m.coarse, m.levels,
-                                                              defaultRing, m.mesh.positions.size()),
-                                       m.mesh.triangles)
+      defaultRing ? VertexBlockers::of(
+                        ShadowHierarchy::build(m.mesh.triangles, m.coarse, m.levels, defaultRing,
+                                               m.mesh.positions.size(), m.split),
+                        m.mesh.triangles)
                   : VertexBlockers::everyTriangle(m.mesh.triangles, m.mesh.positions.size());
   candidates.groupTriangles(m.mesh.positions);
   const VertexBlockers pvs = potentiallyVisibleBlockers(candidates, pvsPoses);
@@ -358,6 +360,7 @@ int runShadowBench(const ShadowBenchArgs& a) {
   const double other = std::max(0.0, d.msPerFrame - d.transformMs - d.rasterMs - d.integrateMs);
   json out = {{"model", a.model},
               {"subdivide", a.subdivide},
+              {"subdivide_by", a.subdivideBy},
               {"clip", m.clip->name},
               {"frames", frames},
               {"vertices", m.mesh.positions.size()},

@@ -24,6 +24,7 @@ namespace vistream {
 struct ShadowBenchArgs {
   std::string model;
   int subdivide = 0;
+  int subdivideBy = 4;  // 4: at edge midpoints; 3: around centroids
   int frames = 8;
   int referenceFrames = 2;
   bool quick = false;  // fewer knob values and Monte Carlo rays (tests)

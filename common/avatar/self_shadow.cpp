@@ -34,23 +34,52 @@ double seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
 
-// culled[g] = whether group g's sphere lies wholly below the tangent plane
-// of the vertex at p with normal n. The margin keeps every triangle a
-// per-triangle test would draw: a culled group's vertices are all below the
-// plane by more than rounding, in any frame.
+// Whether a group's sphere lies wholly below the tangent plane of the vertex
+// at p with unit normal n. The margin keeps every triangle a per-triangle
+// test would draw: a culled group's vertices are all below the plane by more
+// than rounding, in any frame.
+bool sphereBelow(const glm::vec4& sphere, const glm::vec3& p, const glm::vec3& n) {
+  const glm::vec3 d = glm::vec3(sphere) - p;
+  const float margin = 1e-4f * (glm::length(d) + sphere.w);
+  return glm::dot(d, n) + sphere.w < -margin;  // false for an infinite radius or NaN
+}
+
+// culled[g] for every group, for a vertex whose blockers are every triangle.
 void cullGroups(const glm::vec3& p, const glm::vec3& normal, const std::vector<glm::vec4>& spheres,
                 std::vector<uint8_t>& culled, uint64_t& count) {
   const glm::vec3 n = glm::normalize(normal);
   culled.resize(spheres.size());
   for (size_t g = 0; g < spheres.size(); ++g) {
-    const glm::vec3 d = glm::vec3(spheres[g]) - p;
-    const float r = spheres[g].w;
-    const float height = glm::dot(d, n);
-    const float margin = 1e-4f * (glm::length(d) + r);
-    culled[g] = height + r < -margin;  // false for an infinite radius or NaN
+    culled[g] = sphereBelow(spheres[g], p, n);
     count += culled[g];
   }
 }
+
+// The same, tested lazily for the groups a vertex's blocker list meets (a
+// PVS lists a few triangles of a few groups): stamp[g] == generation marks
+// group g as tested for the current vertex, with its answer in culled[g].
+struct LazyCulling {
+  std::vector<uint32_t> stamp;
+  std::vector<uint8_t> culled;
+  uint32_t generation = 0;
+
+  void startVertex(size_t groups) {
+    if (stamp.size() != groups || ++generation == 0) {
+      stamp.assign(groups, 0);
+      culled.assign(groups, 0);
+      generation = 1;
+    }
+  }
+  bool isCulled(uint32_t g, const std::vector<glm::vec4>& spheres, const glm::vec3& p,
+                const glm::vec3& n, uint64_t& count) {
+    if (stamp[g] != generation) {
+      stamp[g] = generation;
+      culled[g] = sphereBelow(spheres[g], p, n);
+      count += culled[g];
+    }
+    return culled[g];
+  }
+};
 
 }  // namespace
 
@@ -268,11 +297,13 @@ void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
         block(blockers.triangles[blockers.list[k]]);
       return;
     }
-    thread_local std::vector<uint8_t> culled;
-    cullGroups(positions[v], normals[v], spheres, culled, s.groupsCulled);
+    thread_local LazyCulling lazy;
+    lazy.startVertex(groups.size());
+    const glm::vec3 p = positions[v], n = glm::normalize(normals[v]);
     for (uint32_t k = blockers.start[v]; k < blockers.start[v + 1]; ++k) {
       const uint32_t t = blockers.list[k];
-      if (!culled[groups.groupOf[t]]) block(blockers.triangles[t]);
+      if (!lazy.isCulled(groups.groupOf[t], spheres, p, n, s.groupsCulled))
+        block(blockers.triangles[t]);
     }
   });
 }
@@ -377,9 +408,12 @@ VertexBlockers potentiallyVisibleBlockers(const VertexBlockers& candidates,
 
 ShadowHierarchy ShadowHierarchy::build(const std::vector<glm::uvec3>& fine,
                                        const std::vector<glm::uvec3>& coarse, int levels, int ring,
-                                       size_t vertices) {
+                                       size_t vertices, int split) {
   VS_CHECK(ring >= 1 && ring <= 2 && levels >= 0 && levels <= 6);
-  VS_CHECK_EQ(fine.size(), coarse.size() << (2 * levels));
+  VS_CHECK(split == 3 || split == 4);
+  uint32_t children = 1;
+  for (int l = 0; l < levels; ++l) children *= uint32_t(split);
+  VS_CHECK_EQ(fine.size(), coarse.size() * children);
   ShadowHierarchy h;
   h.coarse = coarse;
   // Fine triangles around each vertex.
@@ -398,7 +432,7 @@ ShadowHierarchy ShadowHierarchy::build(const std::vector<glm::uvec3>& fine,
     std::sort(ringOf.begin(), ringOf.end());
     ringOf.erase(std::unique(ringOf.begin(), ringOf.end()), ringOf.end());
     parents.clear();
-    for (const uint32_t t : ringOf) parents.push_back(t >> (2 * levels));
+    for (const uint32_t t : ringOf) parents.push_back(t / children);
     std::sort(parents.begin(), parents.end());
     parents.erase(std::unique(parents.begin(), parents.end()), parents.end());
     h.ringTriangles.insert(h.ringTriangles.end(), ringOf.begin(), ringOf.end());

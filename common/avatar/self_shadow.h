@@ -76,11 +76,12 @@ struct ShadowHierarchy {
   std::vector<uint32_t> ringStart, ringTriangles;  // per vertex (CSR): fine triangles
   std::vector<uint32_t> skipStart, skipTriangles;  // per vertex (CSR): coarse ones left out
 
-  // For a mesh subdivided `levels` times from `coarse` (fine triangle t
-  // descends from coarse triangle t >> 2 levels). ring: 1 or 2.
+  // For a mesh subdivided `levels` times from `coarse` into `split` children
+  // a triangle (fine triangle t descends from coarse triangle
+  // t / split^levels). ring: 1 or 2.
   static ShadowHierarchy build(const std::vector<glm::uvec3>& fine,
                                const std::vector<glm::uvec3>& coarse, int levels, int ring,
-                               size_t vertices);
+                               size_t vertices, int split = 4);
   double meanBlockers() const;  // ring plus coarse, a vertex
 };
 

@@ -174,18 +174,20 @@ struct SkinWeights {
   glm::vec4 weights{0.0f};
 };
 
-// Half of a's weights and half of b's, merged by joint, the four largest kept.
-SkinWeights blend(const SkinWeights& a, const SkinWeights& b) {
+// Equal shares of each skin's weights, merged by joint, the four largest
+// kept.
+SkinWeights blend(std::initializer_list<SkinWeights> skins) {
+  const float share = 1.0f / float(skins.size());
   std::vector<std::pair<uint16_t, float>> w;
-  for (const SkinWeights* s : {&a, &b})
+  for (const SkinWeights& s : skins)
     for (int k = 0; k < 4; ++k) {
-      if (!(s->weights[k] > 0.0f)) continue;
+      if (!(s.weights[k] > 0.0f)) continue;
       auto it =
-          std::find_if(w.begin(), w.end(), [&](const auto& e) { return e.first == s->joints[k]; });
+          std::find_if(w.begin(), w.end(), [&](const auto& e) { return e.first == s.joints[k]; });
       if (it == w.end())
-        w.emplace_back(s->joints[k], 0.5f * s->weights[k]);
+        w.emplace_back(s.joints[k], share * s.weights[k]);
       else
-        it->second += 0.5f * s->weights[k];
+        it->second += share * s.weights[k];
     }
   std::sort(w.begin(), w.end(), [](const auto& x, const auto& y) {
     return x.second != y.second ? x.second > y.second : x.first < y.first;
@@ -203,7 +205,7 @@ SkinWeights blend(const SkinWeights& a, const SkinWeights& b) {
 
 }  // namespace
 
-SkinnedMesh SkinnedMesh::subdivided(int times) const {
+SkinnedMesh SkinnedMesh::subdivided(int times, Split split) const {
   VS_CHECK(times >= 0 && times <= 6);
   SkinnedMesh out;
   out.name = name;
@@ -237,7 +239,7 @@ SkinnedMesh SkinnedMesh::subdivided(int times) const {
       if (added) {
         out.positions.push_back(0.5f * (out.positions[a] + out.positions[b]));
         const SkinWeights s =
-            blend({out.joints[a], out.weights[a]}, {out.joints[b], out.weights[b]});
+            blend({{out.joints[a], out.weights[a]}, {out.joints[b], out.weights[b]}});
         out.joints.push_back(s.joints);
         out.weights.push_back(s.weights);
       }
@@ -245,6 +247,24 @@ SkinnedMesh SkinnedMesh::subdivided(int times) const {
     };
     std::vector<glm::uvec3> finer;
     std::vector<uint32_t> finerMaterials;
+    if (split == Split::AtCentroids) {
+      for (size_t t = 0; t < out.triangles.size(); ++t) {
+        const glm::uvec3 c = out.triangles[t];
+        const uint32_t m = uint32_t(out.positions.size());
+        out.positions.push_back((out.positions[c.x] + out.positions[c.y] + out.positions[c.z]) /
+                                3.0f);
+        const SkinWeights s = blend({{out.joints[c.x], out.weights[c.x]},
+                                     {out.joints[c.y], out.weights[c.y]},
+                                     {out.joints[c.z], out.weights[c.z]}});
+        out.joints.push_back(s.joints);
+        out.weights.push_back(s.weights);
+        finer.insert(finer.end(), {{c.x, c.y, m}, {c.y, c.z, m}, {c.z, c.x, m}});
+        finerMaterials.insert(finerMaterials.end(), 3, out.materials[t]);
+      }
+      out.triangles = std::move(finer);
+      out.materials = std::move(finerMaterials);
+      continue;
+    }
     for (size_t t = 0; t < out.triangles.size(); ++t) {
       const glm::uvec3 c = out.triangles[t];
       const uint32_t ab = midpoint(c.x, c.y), bc = midpoint(c.y, c.z), ca = midpoint(c.z, c.x);

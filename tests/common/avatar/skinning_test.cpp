@@ -223,5 +223,46 @@ TEST(SkinnedMesh, SubdivisionAddsAVertexPerEdgeAndMidpointsStayHalfway) {
   EXPECT_LT(glm::distance(p.positions[fine.y], mid), 0.02f * glm::length(bounds.hi - bounds.lo));
 }
 
+// Splitting around centroids: each pass adds one vertex a triangle and
+// triples the triangles; triangle t's children are 3t..3t+2 and share its
+// corners; a centroid's skin sums to one and it stays near its parent's
+// posed centroid. Three passes take the Fox near the paper's Hand.
+TEST(SkinnedMesh, CentroidSplitsTripleTheTrianglesAndKeepTheirParentsCorners) {
+  const Scene fox = loadScene(std::filesystem::path(VISTREAM_SHARED_DIR) / "data" / "Fox.glb");
+  const SkinnedMesh mesh = SkinnedMesh::firstOf(fox);
+  const SkinnedMesh welded = mesh.subdivided(0);
+  const SkinnedMesh once = mesh.subdivided(1, SkinnedMesh::Split::AtCentroids);
+  EXPECT_EQ(once.triangles.size(), 3 * welded.triangles.size());
+  EXPECT_EQ(once.positions.size(), welded.positions.size() + welded.triangles.size());
+  for (size_t t = 0; t < welded.triangles.size(); ++t) {
+    const glm::uvec3 parent = welded.triangles[t];
+    const uint32_t centroid = uint32_t(welded.positions.size() + t);
+    for (size_t k = 0; k < 3; ++k) {
+      const glm::uvec3 child = once.triangles[3 * t + k];
+      EXPECT_EQ(child.z, centroid);
+      EXPECT_EQ(child.x, parent[int(k)]);
+      EXPECT_EQ(child.y, parent[int((k + 1) % 3)]);
+    }
+  }
+  for (const glm::vec4& w : once.weights) EXPECT_NEAR(w.x + w.y + w.z + w.w, 1.0f, 1e-5f);
+  PosedMesh p;
+  poseAt(fox, once, findAnimation(fox, "Walk"), 0.4f, p);
+  // As with midpoints: skinning a blended skin is not the centroid of the
+  // skinned corners in general, but stays close to it.
+  Box3f bounds;
+  for (const glm::vec3& q : p.positions) bounds.extend(q);
+  for (size_t t = 0; t < welded.triangles.size(); ++t) {
+    glm::vec3 mean(0.0f);
+    for (int k = 0; k < 3; ++k) mean += p.positions[welded.triangles[t][k]] / 3.0f;
+    EXPECT_LT(glm::distance(p.positions[welded.positions.size() + t], mean),
+              0.02f * glm::length(bounds.hi - bounds.lo))
+        << "triangle " << t;
+  }
+  const SkinnedMesh hand = mesh.subdivided(3, SkinnedMesh::Split::AtCentroids);
+  EXPECT_EQ(hand.triangles.size(), 27 * welded.triangles.size());
+  EXPECT_GT(hand.positions.size(), 7000u);
+  EXPECT_LT(hand.positions.size(), 9000u);
+}
+
 }  // namespace
 }  // namespace vistream
