@@ -183,8 +183,10 @@ SelfShadowing::SelfShadowing(const SelfShadowOptions& options)
 template <class ForEachBlocker>
 void SelfShadowing::run(const std::vector<glm::vec3>& positions,
                         const std::vector<glm::vec3>& normals, std::vector<float>& out,
-                        SelfShadowStats* stats, ForEachBlocker&& forEachBlocker) const {
+                        SelfShadowStats* stats, const std::vector<uint8_t>* only,
+                        ForEachBlocker&& forEachBlocker) const {
   VS_CHECK_EQ(positions.size(), normals.size());
+  if (only) VS_CHECK_EQ(only->size(), positions.size());
   const int terms = integrator_.terms();
   out.assign(positions.size() * size_t(terms), 0.0f);
   struct Local {
@@ -198,6 +200,8 @@ void SelfShadowing::run(const std::vector<glm::vec3>& positions,
   tbb::parallel_for(tbb::blocked_range<size_t>(0, positions.size(), 16), [&](const auto& range) {
     Local& local = locals.local();
     for (size_t v = range.begin(); v != range.end(); ++v) {
+      if (only && !(*only)[v]) continue;  // left at zero
+      ++local.stats.vertices;
       const auto start = std::chrono::steady_clock::now();
       const glm::vec3 p = positions[v];
       const TangentFrame frame = TangentFrame::around(normals[v]);
@@ -229,8 +233,8 @@ void SelfShadowing::run(const std::vector<glm::vec3>& positions,
   });
   if (stats) {
     *stats = SelfShadowStats{};
-    stats->vertices = positions.size();
     for (const Local& l : locals) {
+      stats->vertices += l.stats.vertices;
       stats->blockerTests += l.stats.blockerTests;
       stats->groupsCulled += l.stats.groupsCulled;
       stats->rasterized += l.stats.rasterized;
@@ -244,14 +248,14 @@ void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
                             const std::vector<glm::vec3>& normals,
                             const std::vector<glm::uvec3>& triangles, std::vector<float>& out,
                             SelfShadowStats* stats, const ShadowHierarchy* hierarchy,
-                            const TriangleGroups* groups) const {
+                            const TriangleGroups* groups, const std::vector<uint8_t>* only) const {
   std::vector<glm::vec4> spheres;
   const bool cull = options_.cullGroups && !hierarchy && groups && !groups->empty();
   if (cull) {
     VS_CHECK_EQ(groups->groupOf.size(), triangles.size());
     groups->spheres(positions, spheres);
   }
-  run(positions, normals, out, stats, [&](size_t v, SelfShadowStats& s, auto&& block) {
+  run(positions, normals, out, stats, only, [&](size_t v, SelfShadowStats& s, auto&& block) {
     if (cull) {
       thread_local std::vector<uint8_t> culled;
       cullGroups(positions[v], normals[v], spheres, culled, s.groupsCulled);
@@ -282,7 +286,8 @@ void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
 
 void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
                             const std::vector<glm::vec3>& normals, const VertexBlockers& blockers,
-                            std::vector<float>& out, SelfShadowStats* stats) const {
+                            std::vector<float>& out, SelfShadowStats* stats,
+                            const std::vector<uint8_t>* only) const {
   VS_CHECK_EQ(blockers.vertices(), positions.size());
   std::vector<glm::vec4> spheres;
   const TriangleGroups& groups = blockers.groups;
@@ -291,7 +296,7 @@ void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
     VS_CHECK_EQ(groups.groupOf.size(), blockers.triangles.size());
     groups.spheres(positions, spheres);
   }
-  run(positions, normals, out, stats, [&](size_t v, SelfShadowStats& s, auto&& block) {
+  run(positions, normals, out, stats, only, [&](size_t v, SelfShadowStats& s, auto&& block) {
     if (!cull) {
       for (uint32_t k = blockers.start[v]; k < blockers.start[v + 1]; ++k)
         block(blockers.triangles[blockers.list[k]]);
@@ -448,6 +453,18 @@ double ShadowHierarchy::meanBlockers() const {
   if (vertices == 0) return 0.0;
   return double(ringTriangles.size() + vertices * coarse.size() - skipTriangles.size()) /
          double(vertices);
+}
+
+std::vector<uint8_t> frontFacingVertices(const std::vector<glm::vec3>& positions,
+                                         const std::vector<glm::uvec3>& triangles,
+                                         const glm::vec3& view) {
+  std::vector<uint8_t> front(positions.size(), 0);
+  for (const glm::uvec3& t : triangles) {
+    const glm::vec3 n =
+        glm::cross(positions[t.y] - positions[t.x], positions[t.z] - positions[t.x]);
+    if (glm::dot(n, view) < 0.0f) front[t.x] = front[t.y] = front[t.z] = 1;
+  }
+  return front;
 }
 
 void monteCarloTransfer(const std::vector<glm::vec3>& positions,

@@ -57,7 +57,7 @@ struct TriangleGroups {
 };
 
 struct SelfShadowStats {
-  uint64_t vertices = 0;
+  uint64_t vertices = 0;       // shaded
   uint64_t groupsCulled = 0;   // (vertex, group) pairs culled whole
   uint64_t blockerTests = 0;   // (vertex, triangle) pairs looked at
   uint64_t rasterized = 0;     // of those, drawn into a mask
@@ -131,26 +131,38 @@ class SelfShadowing {
   // (positions, unit normals per vertex) shadowing itself.
   // With a hierarchy, its blockers replace `triangles` (which must be the
   // fine mesh it was built for). Without one, `groups` (of `triangles`, may
-  // be null) lets whole groups be culled.
+  // be null) lets whole groups be culled. With `only`, just the vertices v
+  // with (*only)[v] != 0 are shaded and the rest get zeros (the paper shades
+  // only the vertices of front-facing triangles: frontFacingVertices).
   void diffuse(const std::vector<glm::vec3>& positions, const std::vector<glm::vec3>& normals,
                const std::vector<glm::uvec3>& triangles, std::vector<float>& out,
                SelfShadowStats* stats = nullptr, const ShadowHierarchy* hierarchy = nullptr,
-               const TriangleGroups* groups = nullptr) const;
+               const TriangleGroups* groups = nullptr,
+               const std::vector<uint8_t>* only = nullptr) const;
   // The same with each vertex's blockers from lists (a PVS).
   void diffuse(const std::vector<glm::vec3>& positions, const std::vector<glm::vec3>& normals,
                const VertexBlockers& blockers, std::vector<float>& out,
-               SelfShadowStats* stats = nullptr) const;
+               SelfShadowStats* stats = nullptr, const std::vector<uint8_t>* only = nullptr) const;
 
  private:
   // The shadow loop: forEachBlocker(v, stats, block) calls block(triangle)
   // for vertex v's blockers (and counts culled groups in stats).
   template <class ForEachBlocker>
   void run(const std::vector<glm::vec3>& positions, const std::vector<glm::vec3>& normals,
-           std::vector<float>& out, SelfShadowStats* stats, ForEachBlocker&& forEachBlocker) const;
+           std::vector<float>& out, SelfShadowStats* stats, const std::vector<uint8_t>* only,
+           ForEachBlocker&& forEachBlocker) const;
   SelfShadowOptions options_;
   std::unique_ptr<PlaneMaskTable> table_;
   TransferIntegrator integrator_;
 };
+
+// The vertices of the triangles that face a viewer looking along `view`
+// (any length): a triangle faces it when its geometric normal points against
+// `view`. The paper shades only these; the others are hidden from that
+// viewer on a closed, outward-wound model.
+std::vector<uint8_t> frontFacingVertices(const std::vector<glm::vec3>& positions,
+                                         const std::vector<glm::uvec3>& triangles,
+                                         const glm::vec3& view);
 
 // Monte Carlo diffuse transfer of the same mesh: `rays` cosine-weighted rays
 // a vertex (a stratified grid, rotated per vertex by a hash of its index),

@@ -325,5 +325,46 @@ TEST(TriangleGroups, CullingThemChangesNoBitOfTheTransferAndSkipsTriangles) {
   }
 }
 
+// Shading only front-facing vertices (the paper's saving): the Fox seen from
+// one side selects some but not all of its vertices; those get exactly the
+// transfer full shading gives them, the others zeros, and the stats count
+// only the shaded ones.
+TEST(SelfShadow, ShadingOnlyFrontFacingVerticesLeavesTheirTransferExact) {
+  const Scene fox = loadScene(std::filesystem::path(VISTREAM_SHARED_DIR) / "data" / "Fox.glb");
+  const SkinnedMesh mesh = SkinnedMesh::firstOf(fox).subdivided(0);
+  PosedMesh pose;
+  poseAt(fox, mesh, findAnimation(fox, "Survey"), 0.5f, pose);
+  const std::vector<uint8_t> front =
+      frontFacingVertices(pose.positions, mesh.triangles, glm::vec3(1, -0.2f, 0.3f));
+  size_t shaded = 0;
+  for (const uint8_t f : front) shaded += f;
+  EXPECT_GT(shaded, pose.positions.size() / 4);
+  EXPECT_LT(shaded, pose.positions.size());
+  const SelfShadowing shadows;
+  std::vector<float> all, some;
+  SelfShadowStats stats;
+  shadows.diffuse(pose.positions, pose.normals, mesh.triangles, all);
+  shadows.diffuse(pose.positions, pose.normals, mesh.triangles, some, &stats, nullptr, nullptr,
+                  &front);
+  EXPECT_EQ(stats.vertices, shaded);
+  const size_t terms = size_t(shadows.terms());
+  for (size_t v = 0; v < front.size(); ++v)
+    for (size_t i = 0; i < terms; ++i)
+      ASSERT_EQ(some[v * terms + i], front[v] ? all[v * terms + i] : 0.0f) << "vertex " << v;
+}
+
+// A closed box seen along -z: the vertices of its +z face (and only they,
+// with the faces seen edge-on left out) face the viewer.
+TEST(SelfShadow, FrontFacingVerticesOfABoxAreItsNearFacesCorners) {
+  std::vector<glm::vec3> p;
+  for (int i = 0; i < 8; ++i) p.emplace_back(i & 1, (i >> 1) & 1, (i >> 2) & 1);
+  // Outward-wound faces of the unit cube (two triangles each).
+  const std::vector<glm::uvec3> t = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6},   // z = 0, z = 1
+                                     {0, 1, 4}, {1, 5, 4}, {2, 6, 3}, {3, 6, 7},   // y = 0, y = 1
+                                     {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};  // x = 0, x = 1
+  const std::vector<uint8_t> front = frontFacingVertices(p, t, glm::vec3(0, 0, -1));
+  for (int i = 0; i < 8; ++i) EXPECT_EQ(front[size_t(i)], (i >> 2) & 1) << "corner " << i;
+}
+
 }  // namespace
 }  // namespace vistream
