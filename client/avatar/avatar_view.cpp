@@ -106,8 +106,13 @@ AvatarFrame AvatarView::build(const Camera& camera, float nearDistance,
                        ? 0.0f
                        : 1.0f;
     const AvatarShader::Stats before = shader.stats();
+    // The viewer in the model's frame (appendAvatar's placement undone), for
+    // the glossy term.
+    const glm::mat3 turn = glm::mat3(
+        glm::rotate(glm::mat4(1.0f), glm::radians(modelTurnDeg(s.yawDeg)), glm::vec3(0, 1, 0)));
+    const glm::vec3 eye = glm::transpose(turn) * (camera.eye - feet);
     shader.shade(gaitForSpeed(s.speed), s.phase, light_.turned(modelTurnDeg(s.yawDeg)), sunVisible,
-                 scratch_);
+                 scratch_, &eye);
     f.posesShaded += shader.stats().posesShaded - before.posesShaded;
     f.posesReused += shader.stats().posesReused - before.posesReused;
     appendAvatar(model, scratch_, feet, s.yawDeg, uint32_t(i), out);
@@ -116,6 +121,8 @@ AvatarFrame AvatarView::build(const Camera& camera, float nearDistance,
     f.why = "no dynamic objects";
   } else {
     f.why = fmt::format("{} avatar{} in view", f.inView, f.inView == 1 ? "" : "s");
+    if (f.inView && options_.glossExponent > 0.0f)
+      f.why += fmt::format(" (glossy, Phong {:g})", options_.glossExponent);
     if (f.beyond) f.why += fmt::format(", {} beyond d", f.beyond);
     if (f.outside) f.why += fmt::format(", {} outside the view", f.outside);
     if (f.waiting) f.why += fmt::format(", {} waiting for their model", f.waiting);

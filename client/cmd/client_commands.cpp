@@ -67,6 +67,7 @@ struct Args {
   bool realtime = false;      // headless: frames at the path's clock, not as fast as possible
   std::string avatarModel;    // skinned glTF; empty: the default
   float avatarHeight = 1.2f;  // metres
+  float avatarGloss = 0.0f;   // Phong exponent of the avatars' glossy term; 0: diffuse only
 };
 
 RenderMode parseMode(const std::string& m) {
@@ -325,6 +326,12 @@ std::filesystem::path avatarModelPath(const Args& a) {
   return VISTREAM_DEFAULT_AVATAR;
 }
 
+AvatarShaderOptions avatarShading(const Args& a) {
+  AvatarShaderOptions o;
+  o.glossExponent = a.avatarGloss;
+  return o;
+}
+
 Avatars localAvatars(const Args& a, const Scene& scene, const std::vector<PathSample>& path,
                      const RenderGeometry& geometry) {
   Avatars out;
@@ -336,20 +343,20 @@ Avatars localAvatars(const Args& a, const Scene& scene, const std::vector<PathSa
   for (const std::string& w : model->warnings()) spdlog::warn("{}", w);
   const AvatarLight light =
       AvatarLight::of(EnvironmentLight::of(scene.environment), scene.environment);
-  out.view = std::make_unique<AvatarView>(model, light, geometry.haze, nullptr);
+  out.view = std::make_unique<AvatarView>(model, light, geometry.haze, nullptr, avatarShading(a));
   out.crowd = std::make_unique<LocalCrowd>(path, scene.origin, a.avatars);
   spdlog::info("{} simulated users shown as {} ({} vertices, {} triangles)", a.avatars,
                model->name(), model->vertexCount(), model->triangleCount());
   return out;
 }
 
-Avatars remoteAvatars(StreamClient& net, const RenderGeometry& geometry) {
+Avatars remoteAvatars(const Args& a, StreamClient& net, const RenderGeometry& geometry) {
   Avatars out;
   out.net = &net;
   // Without the server's light: the default sky's.
   const AvatarLight light = net.avatarLight().value_or(
       AvatarLight::of(EnvironmentLight::sky(Environment{}.skyColor), Environment{}));
-  out.view = std::make_unique<AvatarView>(nullptr, light, geometry.haze, nullptr);
+  out.view = std::make_unique<AvatarView>(nullptr, light, geometry.haze, nullptr, avatarShading(a));
   return out;
 }
 
@@ -619,7 +626,7 @@ int run(const Args& a) {
   }
   Avatars avatars;
   if (a.avatars > 0) avatars = localAvatars(a, *scene, path, live.geometry());
-  if (net && !a.noAvatars) avatars = remoteAvatars(*net, live.geometry());
+  if (net && !a.noAvatars) avatars = remoteAvatars(a, *net, live.geometry());
   std::vector<double> times;
   for (const PathSample& s : path) times.push_back(s.t);
   if (a.headless) return runHeadless(a, live, cameras, times, size, net.get(), connection, avatars);
@@ -727,6 +734,10 @@ int runClientTool(int argc, char** argv) {
                     " beside the clone (../shared/data)");
   app.add_option("--avatar-height", a.avatarHeight, "the avatars' height, metres")
       ->check(between(0.1, 10.0));
+  app.add_option("--avatar-gloss", a.avatarGloss,
+                 "a glossy term on the avatars: the Phong exponent of a self-shadowed lobe about "
+                 "the viewer's reflection (e.g. 16; 0: diffuse only)")
+      ->check(between(0.0, 1000.0));
   app.add_option("--log-level", a.logLevel, "trace, debug, info, warn, error, critical, off");
   return runFlatToolApp("vistream-client", app, argc, argv, a.logLevel, [&] { return run(a); });
 }

@@ -104,10 +104,13 @@ Run runOnce(const Model& m, const SelfShadowOptions& options, int ring, const Re
     const double transformMs = clock.ms();
     SelfShadowStats stats;
     if (pvs)
-      shadows.diffuse(pose.positions, pose.normals, *pvs, out, &stats, only);
+      shadows.diffuse(pose.positions, pose.normals, *pvs, out, {.stats = &stats, .only = only});
     else
-      shadows.diffuse(pose.positions, pose.normals, m.mesh.triangles, out, &stats,
-                      ring > 0 ? &hierarchy : nullptr, &m.groups, only);
+      shadows.diffuse(pose.positions, pose.normals, m.mesh.triangles, out,
+                      {.stats = &stats,
+                       .hierarchy = ring > 0 ? &hierarchy : nullptr,
+                       .groups = &m.groups,
+                       .only = only});
     const double frameMs = clock.ms();
     total.push_back(frameMs);
     transform.push_back(transformMs);

@@ -1,6 +1,7 @@
 #include "common/avatar/avatar_model.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <glm/gtc/matrix_transform.hpp>
 
@@ -173,7 +174,10 @@ glm::vec3 AvatarLight::apply(const float* transfer, float sunVisible) const {
 
 AvatarShader::AvatarShader(std::shared_ptr<const AvatarModel> model,
                            const AvatarShaderOptions& options)
-    : model_(std::move(model)), options_(options), shadowing_(options.shadows) {
+    : model_(std::move(model)),
+      options_(options),
+      shadowing_(options.shadows),
+      glossy_(options.shadows.maskSide, {kOrders, true}) {
   VS_CHECK(model_ != nullptr);
   groups_ = TriangleGroups::build(model_->triangles(), model_->restPositions());
   VS_CHECK_EQ(shadowing_.terms(), kTerms);
@@ -216,11 +220,13 @@ const AvatarShader::Sampled& AvatarShader::sampled(Gait g, float t) {
   }
   const auto start = std::chrono::steady_clock::now();
   model_->pose(g, clipTime, slot->pose);
+  std::vector<uint64_t>* masks = options_.glossExponent > 0.0f ? &slot->masks : nullptr;
   if (const VertexBlockers* pvs = blockers(g))
-    shadowing_.diffuse(slot->pose.positions, slot->pose.normals, *pvs, slot->transfer);
+    shadowing_.diffuse(slot->pose.positions, slot->pose.normals, *pvs, slot->transfer,
+                       {.masks = masks});
   else
     shadowing_.diffuse(slot->pose.positions, slot->pose.normals, model_->triangles(),
-                       slot->transfer, nullptr, nullptr, &groups_);
+                       slot->transfer, {.groups = &groups_, .masks = masks});
   stats_.shadowMs +=
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   ++stats_.posesShaded;
@@ -228,19 +234,47 @@ const AvatarShader::Sampled& AvatarShader::sampled(Gait g, float t) {
 }
 
 void AvatarShader::shade(Gait g, float t, const AvatarLight& light, float sunVisible,
-                         ShadedAvatar& out) {
+                         ShadedAvatar& out, const glm::vec3* eye) {
   const Sampled& s = sampled(g, t);
   out.positions = s.pose.positions;
   const size_t vertices = s.pose.positions.size();
   std::vector<glm::vec3> radiance(vertices);
   for (size_t v = 0; v < vertices; ++v)
     radiance[v] = light.apply(s.transfer.data() + v * size_t(kTerms), sunVisible);
+  std::vector<glm::vec3> highlight;  // untinted (a dielectric's highlight is white)
+  if (eye && options_.glossExponent > 0.0f && !s.masks.empty()) {
+    // Glossy: the lobe about the eye's reflection in each vertex's normal,
+    // through the vertex's own mask. The diffuse radiance is in the units
+    // the albedo multiplies (pi times a Lambertian BRDF's), so pi ks brings
+    // the lobe's radiance to the same scale.
+    highlight.assign(vertices, glm::vec3(0.0f));
+    const auto start = std::chrono::steady_clock::now();
+    constexpr float kPi = 3.14159265358979f;
+    const size_t words = size_t(shadowing_.maskWords());
+    VisibilityMask mask(options_.shadows.maskSide);
+    float glossy[kTerms];
+    for (size_t v = 0; v < vertices; ++v) {
+      const glm::vec3 n = s.pose.normals[v];
+      const glm::vec3 toEye = glm::normalize(*eye - s.pose.positions[v]);
+      const float facing = glm::dot(n, toEye);
+      if (!(facing > 0.0f)) continue;
+      std::copy_n(s.masks.data() + v * words, words, mask.data());
+      glossy_.glossy(mask, TangentFrame::around(n), 2.0f * facing * n - toEye,
+                     options_.glossExponent, glossy);
+      highlight[v] = kPi * options_.specular * light.apply(glossy, sunVisible);
+    }
+    stats_.glossyMs +=
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  }
   const auto& triangles = model_->triangles();
   out.corners.resize(3 * triangles.size());
   for (size_t t3 = 0; t3 < triangles.size(); ++t3)
     for (int k = 0; k < 3; ++k) {
       const size_t c = 3 * t3 + size_t(k);
-      out.corners[c] = encodeColour(model_->cornerAlbedo()[c] * radiance[triangles[t3][k]]);
+      const uint32_t v = triangles[t3][k];
+      glm::vec3 colour = model_->cornerAlbedo()[c] * radiance[v];
+      if (!highlight.empty()) colour += highlight[v];
+      out.corners[c] = encodeColour(colour);
     }
 }
 

@@ -131,6 +131,14 @@ struct AvatarShaderOptions {
   // every triangle blocks every vertex.
   int pvsPoses = 16;
   static constexpr size_t kMaxPvsEntries = 16u << 20;
+  // Glossy reflection (the paper's glossy BRDF): a normalized Phong lobe of
+  // this exponent about the viewer's reflected direction, self-shadowed
+  // through the same visibility masks, added with weight `specular`. It is
+  // view-dependent, so it is integrated per frame and viewer from the masks
+  // kept with each sampled pose (4 x 4 blocks: the lobe is smooth). 0: off
+  // (diffuse only, nothing kept).
+  float glossExponent = 0.0f;
+  float specular = 0.25f;
 };
 
 struct ShadedAvatar {
@@ -146,14 +154,17 @@ class AvatarShader {
 
   // The model in gait g at clip time t, lit by `light` (already turned to
   // the model's frame), its sun dimmed by `sunVisible` in [0, 1] (the static
-  // scene's shadow).
-  void shade(Gait g, float t, const AvatarLight& light, float sunVisible, ShadedAvatar& out);
+  // scene's shadow). With glossExponent > 0 and `eye` (the viewer in the
+  // model's frame, metres), the glossy term for that viewer is added.
+  void shade(Gait g, float t, const AvatarLight& light, float sunVisible, ShadedAvatar& out,
+             const glm::vec3* eye = nullptr);
 
   struct Stats {
     uint64_t posesShaded = 0;  // self-shadow loops run
     uint64_t posesReused = 0;  // served from the cache
     double shadowMs = 0.0;     // in the self-shadow loops
     double pvsMs = 0.0;        // building per-clip PVSs
+    double glossyMs = 0.0;     // integrating the glossy term
   };
   const Stats& stats() const { return stats_; }
 
@@ -161,6 +172,7 @@ class AvatarShader {
   struct Sampled {
     PosedMesh pose;
     std::vector<float> transfer;
+    std::vector<uint64_t> masks;  // with gloss: maskWords() per vertex
   };
   const Sampled& sampled(Gait g, float t);
   const VertexBlockers* blockers(Gait g);  // null: every triangle
@@ -170,6 +182,7 @@ class AvatarShader {
   std::array<bool, 3> pvsTried_{};
   AvatarShaderOptions options_;
   SelfShadowing shadowing_;
+  TransferIntegrator glossy_;  // 4 x 4 blocks
   std::map<std::pair<int, int64_t>, Sampled> cache_;
   Sampled exact_;
   Stats stats_;

@@ -183,10 +183,12 @@ SelfShadowing::SelfShadowing(const SelfShadowOptions& options)
 template <class ForEachBlocker>
 void SelfShadowing::run(const std::vector<glm::vec3>& positions,
                         const std::vector<glm::vec3>& normals, std::vector<float>& out,
-                        SelfShadowStats* stats, const std::vector<uint8_t>* only,
-                        ForEachBlocker&& forEachBlocker) const {
+                        const ShadeExtras& extras, ForEachBlocker&& forEachBlocker) const {
   VS_CHECK_EQ(positions.size(), normals.size());
+  const std::vector<uint8_t>* only = extras.only;
   if (only) VS_CHECK_EQ(only->size(), positions.size());
+  const size_t words = size_t(maskWords());
+  if (extras.masks) extras.masks->assign(positions.size() * words, 0);
   const int terms = integrator_.terms();
   out.assign(positions.size() * size_t(terms), 0.0f);
   struct Local {
@@ -228,10 +230,11 @@ void SelfShadowing::run(const std::vector<glm::vec3>& positions,
       const auto integrated = std::chrono::steady_clock::now();
       local.stats.rasterSeconds += std::chrono::duration<double>(integrated - start).count();
       integrator_.diffuse(local.mask, frame, out.data() + v * size_t(terms));
+      if (extras.masks) std::copy_n(local.mask.data(), words, extras.masks->data() + v * words);
       local.stats.integrateSeconds += seconds(integrated);
     }
   });
-  if (stats) {
+  if (SelfShadowStats* stats = extras.stats) {
     *stats = SelfShadowStats{};
     for (const Local& l : locals) {
       stats->vertices += l.stats.vertices;
@@ -247,15 +250,16 @@ void SelfShadowing::run(const std::vector<glm::vec3>& positions,
 void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
                             const std::vector<glm::vec3>& normals,
                             const std::vector<glm::uvec3>& triangles, std::vector<float>& out,
-                            SelfShadowStats* stats, const ShadowHierarchy* hierarchy,
-                            const TriangleGroups* groups, const std::vector<uint8_t>* only) const {
+                            const ShadeExtras& extras) const {
+  const ShadowHierarchy* hierarchy = extras.hierarchy;
+  const TriangleGroups* groups = extras.groups;
   std::vector<glm::vec4> spheres;
   const bool cull = options_.cullGroups && !hierarchy && groups && !groups->empty();
   if (cull) {
     VS_CHECK_EQ(groups->groupOf.size(), triangles.size());
     groups->spheres(positions, spheres);
   }
-  run(positions, normals, out, stats, only, [&](size_t v, SelfShadowStats& s, auto&& block) {
+  run(positions, normals, out, extras, [&](size_t v, SelfShadowStats& s, auto&& block) {
     if (cull) {
       thread_local std::vector<uint8_t> culled;
       cullGroups(positions[v], normals[v], spheres, culled, s.groupsCulled);
@@ -286,8 +290,7 @@ void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
 
 void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
                             const std::vector<glm::vec3>& normals, const VertexBlockers& blockers,
-                            std::vector<float>& out, SelfShadowStats* stats,
-                            const std::vector<uint8_t>* only) const {
+                            std::vector<float>& out, const ShadeExtras& extras) const {
   VS_CHECK_EQ(blockers.vertices(), positions.size());
   std::vector<glm::vec4> spheres;
   const TriangleGroups& groups = blockers.groups;
@@ -296,7 +299,7 @@ void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
     VS_CHECK_EQ(groups.groupOf.size(), blockers.triangles.size());
     groups.spheres(positions, spheres);
   }
-  run(positions, normals, out, stats, only, [&](size_t v, SelfShadowStats& s, auto&& block) {
+  run(positions, normals, out, extras, [&](size_t v, SelfShadowStats& s, auto&& block) {
     if (!cull) {
       for (uint32_t k = blockers.start[v]; k < blockers.start[v + 1]; ++k)
         block(blockers.triangles[blockers.list[k]]);

@@ -121,6 +121,24 @@ VertexBlockers potentiallyVisibleBlockers(const VertexBlockers& candidates,
                                           const std::vector<PosedMesh>& poses,
                                           const SelfShadowOptions& options = {});
 
+// What a shading run may take and give beyond the transfer vectors.
+struct ShadeExtras {
+  SelfShadowStats* stats = nullptr;  // out
+  // Triangles form only: the hierarchy's blockers replace `triangles`
+  // (which must be the fine mesh it was built for); without one, `groups`
+  // (of `triangles`) lets whole groups be culled. The lists form takes
+  // its groups from the lists.
+  const ShadowHierarchy* hierarchy = nullptr;
+  const TriangleGroups* groups = nullptr;
+  // Shade only the vertices v with (*only)[v] != 0; the rest get zeros
+  // (the paper shades only the vertices of front-facing triangles:
+  // frontFacingVertices).
+  const std::vector<uint8_t>* only = nullptr;
+  // Out: every vertex's visibility mask, SelfShadowing::maskWords() words each (zeros for
+  // vertices not shaded), for view-dependent (glossy) transfer later.
+  std::vector<uint64_t>* masks = nullptr;
+};
+
 class SelfShadowing {
  public:
   explicit SelfShadowing(const SelfShadowOptions& options = {});
@@ -129,27 +147,21 @@ class SelfShadowing {
 
   // Diffuse transfer vectors, terms() floats per vertex, of the mesh
   // (positions, unit normals per vertex) shadowing itself.
-  // With a hierarchy, its blockers replace `triangles` (which must be the
-  // fine mesh it was built for). Without one, `groups` (of `triangles`, may
-  // be null) lets whole groups be culled. With `only`, just the vertices v
-  // with (*only)[v] != 0 are shaded and the rest get zeros (the paper shades
-  // only the vertices of front-facing triangles: frontFacingVertices).
   void diffuse(const std::vector<glm::vec3>& positions, const std::vector<glm::vec3>& normals,
                const std::vector<glm::uvec3>& triangles, std::vector<float>& out,
-               SelfShadowStats* stats = nullptr, const ShadowHierarchy* hierarchy = nullptr,
-               const TriangleGroups* groups = nullptr,
-               const std::vector<uint8_t>* only = nullptr) const;
+               const ShadeExtras& extras = {}) const;
   // The same with each vertex's blockers from lists (a PVS).
   void diffuse(const std::vector<glm::vec3>& positions, const std::vector<glm::vec3>& normals,
                const VertexBlockers& blockers, std::vector<float>& out,
-               SelfShadowStats* stats = nullptr, const std::vector<uint8_t>* only = nullptr) const;
+               const ShadeExtras& extras = {}) const;
+  int maskWords() const { return (options_.maskSide * options_.maskSide + 63) / 64; }
 
  private:
   // The shadow loop: forEachBlocker(v, stats, block) calls block(triangle)
   // for vertex v's blockers (and counts culled groups in stats).
   template <class ForEachBlocker>
   void run(const std::vector<glm::vec3>& positions, const std::vector<glm::vec3>& normals,
-           std::vector<float>& out, SelfShadowStats* stats, const std::vector<uint8_t>* only,
+           std::vector<float>& out, const ShadeExtras& extras,
            ForEachBlocker&& forEachBlocker) const;
   SelfShadowOptions options_;
   std::unique_ptr<PlaneMaskTable> table_;

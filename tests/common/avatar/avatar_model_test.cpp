@@ -141,10 +141,17 @@ TEST(AvatarShader, ReusesASampledPoseAndColoursByAlbedoTimesLight) {
 // The shader builds a per-clip PVS the first time a clip plays and shades
 // with it: the colours stay within a level or two of shading with every
 // triangle (the PVS is exact at its poses and within 2% between them).
+// A metre-tall Fox and a bluish sky for the shader's tests.
+std::shared_ptr<const AvatarModel> metreFox() {
+  return std::make_shared<const AvatarModel>(AvatarModel::load(foxFile(), 1.0f));
+}
+AvatarLight bluishSky() {
+  return AvatarLight::of(EnvironmentLight::sky(glm::vec3(0.55f, 0.7f, 0.9f)), Environment{});
+}
+
 TEST(AvatarShader, ShadesWithTheClipsPvsAndMatchesEveryTriangleClosely) {
-  auto fox = std::make_shared<const AvatarModel>(AvatarModel::load(foxFile(), 1.0f));
-  const AvatarLight light =
-      AvatarLight::of(EnvironmentLight::sky(glm::vec3(0.55f, 0.7f, 0.9f)), Environment{});
+  const auto fox = metreFox();
+  const AvatarLight light = bluishSky();
   AvatarShaderOptions withPvs, without;
   without.pvsPoses = 0;
   AvatarShader a(fox, withPvs), b(fox, without);
@@ -164,6 +171,34 @@ TEST(AvatarShader, ShadesWithTheClipsPvsAndMatchesEveryTriangleClosely) {
     }
   EXPECT_LT(sum / double(3 * sa.corners.size()), 0.5);
   EXPECT_LE(worst, 8);
+}
+
+// The glossy term (Phong lobe about the viewer's reflection, through each
+// vertex's mask): off without a viewer; with one it only adds light, and
+// where depends on where the viewer stands.
+TEST(AvatarShader, AGlossyTermAddsAViewDependentHighlight) {
+  const auto fox = metreFox();
+  const AvatarLight light = bluishSky();
+  AvatarShaderOptions diffuseOnly, glossy;
+  glossy.glossExponent = 16.0f;
+  glossy.specular = 0.5f;
+  AvatarShader plain(fox, diffuseOnly), shiny(fox, glossy);
+  ShadedAvatar base, noViewer, front, side;
+  plain.shade(Gait::Stand, 0.5f, light, 1.0f, base);
+  shiny.shade(Gait::Stand, 0.5f, light, 1.0f, noViewer);
+  EXPECT_EQ(noViewer.corners, base.corners);
+  const glm::vec3 eyeFront(0.0f, 0.8f, 3.0f), eyeSide(3.0f, 0.2f, 0.0f);
+  shiny.shade(Gait::Stand, 0.5f, light, 1.0f, front, &eyeFront);
+  shiny.shade(Gait::Stand, 0.5f, light, 1.0f, side, &eyeSide);
+  EXPECT_GT(shiny.stats().glossyMs, 0.0);
+  size_t brighter = 0, differ = 0;
+  for (size_t c = 0; c < base.corners.size(); ++c) {
+    for (int k = 0; k < 3; ++k) ASSERT_GE(front.corners[c][k], base.corners[c][k]) << c;
+    brighter += front.corners[c] != base.corners[c];
+    differ += front.corners[c] != side.corners[c];
+  }
+  EXPECT_GT(brighter, base.corners.size() / 10);
+  EXPECT_GT(differ, base.corners.size() / 10);
 }
 
 // The built-in walker: a closed, outward-wound figure 1.75 m tall whose

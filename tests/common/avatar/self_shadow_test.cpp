@@ -131,7 +131,7 @@ TEST(SelfShadow, TheWalkingFoxMatchesConvergedMonteCarlo) {
   const SelfShadowing shadows;
   std::vector<float> ours, reference;
   SelfShadowStats stats;
-  shadows.diffuse(pose.positions, pose.normals, mesh.triangles, ours, &stats);
+  shadows.diffuse(pose.positions, pose.normals, mesh.triangles, ours, {.stats = &stats});
   monteCarloTransfer(pose.positions, pose.normals, mesh.triangles, 16384, 5, reference);
   const double e = meanRelativeL2(ours, reference, shadows.terms());
   EXPECT_LT(e, 0.08);
@@ -185,7 +185,7 @@ TEST(ShadowHierarchy, OnAnUnsubdividedMeshItIsEveryTriangleOnce) {
     EXPECT_DOUBLE_EQ(h.meanBlockers(), double(m.triangles.size()));
     std::vector<float> all, split;
     shadows.diffuse(m.positions, m.normals, m.triangles, all);
-    shadows.diffuse(m.positions, m.normals, m.triangles, split, nullptr, &h);
+    shadows.diffuse(m.positions, m.normals, m.triangles, split, {.hierarchy = &h});
     EXPECT_EQ(all, split) << "ring " << ring;
   }
 }
@@ -204,7 +204,7 @@ TEST(ShadowHierarchy, TheSubdividedFoxStaysWithinThePapersErrorWithAFractionOfTh
   poseAt(fox, fine, findAnimation(fox, "Walk"), 0.5f, pose);
   const SelfShadowing shadows;
   std::vector<float> ours, reference;
-  shadows.diffuse(pose.positions, pose.normals, fine.triangles, ours, nullptr, &h);
+  shadows.diffuse(pose.positions, pose.normals, fine.triangles, ours, {.hierarchy = &h});
   monteCarloTransfer(pose.positions, pose.normals, fine.triangles, 4096, 5, reference);
   EXPECT_LT(meanRelativeL2(ours, reference, shadows.terms()), 0.08);
 }
@@ -222,7 +222,7 @@ TEST(VertexBlockers, TheHierarchysListsGiveTheHierarchysTransfer) {
   poseAt(fox, fine, findAnimation(fox, "Run"), 0.2f, pose);
   const SelfShadowing shadows;
   std::vector<float> a, b;
-  shadows.diffuse(pose.positions, pose.normals, fine.triangles, a, nullptr, &h);
+  shadows.diffuse(pose.positions, pose.normals, fine.triangles, a, {.hierarchy = &h});
   shadows.diffuse(pose.positions, pose.normals, lists, b);
   EXPECT_EQ(a, b);
 }
@@ -312,14 +312,16 @@ TEST(TriangleGroups, CullingThemChangesNoBitOfTheTransferAndSkipsTriangles) {
   for (const PosedMesh& pose : poses) {
     std::vector<float> a, b;
     SelfShadowStats sa, sb;
-    culling.diffuse(pose.positions, pose.normals, mesh.triangles, a, &sa, nullptr, &groups);
-    plain.diffuse(pose.positions, pose.normals, mesh.triangles, b, &sb, nullptr, &groups);
+    culling.diffuse(pose.positions, pose.normals, mesh.triangles, a,
+                    {.stats = &sa, .groups = &groups});
+    plain.diffuse(pose.positions, pose.normals, mesh.triangles, b,
+                  {.stats = &sb, .groups = &groups});
     EXPECT_EQ(a, b);
     EXPECT_EQ(sa.rasterized, sb.rasterized);
     EXPECT_GT(sa.groupsCulled, 0u);
     EXPECT_LT(double(sa.blockerTests), 0.8 * double(sb.blockerTests));
-    culling.diffuse(pose.positions, pose.normals, pvs, a, &sa);
-    plain.diffuse(pose.positions, pose.normals, pvs, b, &sb);
+    culling.diffuse(pose.positions, pose.normals, pvs, a, {.stats = &sa});
+    plain.diffuse(pose.positions, pose.normals, pvs, b, {.stats = &sb});
     EXPECT_EQ(a, b);
     EXPECT_EQ(sa.rasterized, sb.rasterized);
   }
@@ -344,8 +346,8 @@ TEST(SelfShadow, ShadingOnlyFrontFacingVerticesLeavesTheirTransferExact) {
   std::vector<float> all, some;
   SelfShadowStats stats;
   shadows.diffuse(pose.positions, pose.normals, mesh.triangles, all);
-  shadows.diffuse(pose.positions, pose.normals, mesh.triangles, some, &stats, nullptr, nullptr,
-                  &front);
+  shadows.diffuse(pose.positions, pose.normals, mesh.triangles, some,
+                  {.stats = &stats, .only = &front});
   EXPECT_EQ(stats.vertices, shaded);
   const size_t terms = size_t(shadows.terms());
   for (size_t v = 0; v < front.size(); ++v)
