@@ -17,6 +17,12 @@ float modelTurnDeg(float yawDeg) {
   return yawDeg + 180.0f;
 }
 
+// That turn as a rotation about +Y (model frame to world frame).
+glm::mat3 modelTurn(float yawDeg) {
+  return glm::mat3(
+      glm::rotate(glm::mat4(1.0f), glm::radians(modelTurnDeg(yawDeg)), glm::vec3(0, 1, 0)));
+}
+
 // Whether a sphere reaches into the camera's view frustum (its side planes
 // and the half-space in front of the eye).
 bool sphereInFrustum(const Camera& camera, const glm::vec3& centre, float radius) {
@@ -34,8 +40,7 @@ bool sphereInFrustum(const Camera& camera, const glm::vec3& centre, float radius
 
 void appendAvatar(const AvatarModel& model, const ShadedAvatar& shaded, const glm::vec3& feet,
                   float yawDeg, uint32_t object, RenderGeometry& out) {
-  const glm::mat3 turn = glm::mat3(
-      glm::rotate(glm::mat4(1.0f), glm::radians(modelTurnDeg(yawDeg)), glm::vec3(0, 1, 0)));
+  const glm::mat3 turn = modelTurn(yawDeg);
   const auto& triangles = model.triangles();
   VS_CHECK_EQ(shaded.corners.size(), 3 * triangles.size());
   for (size_t t = 0; t < triangles.size(); ++t) {
@@ -108,9 +113,7 @@ AvatarFrame AvatarView::build(const Camera& camera, float nearDistance,
     const AvatarShader::Stats before = shader.stats();
     // The viewer in the model's frame (appendAvatar's placement undone), for
     // the glossy term.
-    const glm::mat3 turn = glm::mat3(
-        glm::rotate(glm::mat4(1.0f), glm::radians(modelTurnDeg(s.yawDeg)), glm::vec3(0, 1, 0)));
-    const glm::vec3 eye = glm::transpose(turn) * (camera.eye - feet);
+    const glm::vec3 eye = glm::transpose(modelTurn(s.yawDeg)) * (camera.eye - feet);
     shader.shade(gaitForSpeed(s.speed), s.phase, light_.turned(modelTurnDeg(s.yawDeg)), sunVisible,
                  scratch_, &eye);
     f.posesShaded += shader.stats().posesShaded - before.posesShaded;

@@ -8,8 +8,8 @@
 //   bytes 16..23  payload size in bytes
 //   bytes 24..31  FNV-1a 64 checksum of the payload (fnv1a64)
 //   bytes 32..    payload (8-byte aligned in the mapping)
-// All little-endian. Files are written to NAME.tmp, flushed and renamed: a
-// crash never leaves a torn database.
+// All little-endian. Files are written through AtomicFile (a unique
+// temporary, fsynced and renamed): a crash never leaves a torn database.
 //
 // Thread safety: free functions; a CheckedFile is immutable once opened.
 #pragma once

@@ -10,8 +10,8 @@
 //   bytes 32..    payload: a FlatBuffer with root pvsdb::Database
 //                 (server/visibility/pvs_database.fbs)
 // The payload starts 8-byte aligned, so the file can be memory-mapped and
-// read in place. Files are written to NAME.tmp and renamed: a crash never
-// leaves a torn database.
+// read in place. Files are written through AtomicFile (a unique temporary,
+// renamed whole): a crash never leaves a torn database.
 //
 // Versions: 1 had a checksum and scene fingerprint seeded with a wrong FNV
 // offset basis (1469598103934665603, one digit short); 2 uses FNV-1a 64 as
