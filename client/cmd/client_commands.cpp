@@ -736,8 +736,9 @@ int runClientTool(int argc, char** argv) {
       ->check(between(0.1, 10.0));
   app.add_option("--avatar-gloss", a.avatarGloss,
                  "a glossy term on the avatars: the Phong exponent of a self-shadowed lobe about "
-                 "the viewer's reflection (e.g. 16; 0: diffuse only)")
-      ->check(between(0.0, 1000.0));
+                 "the viewer's reflection (e.g. 16; 0: diffuse only; at most 256, where the "
+                 "lobe becomes narrower than a mask pixel)")
+      ->check(between(0.0, 256.0));
   app.add_option("--log-level", a.logLevel, "trace, debug, info, warn, error, critical, off");
   return runFlatToolApp("vistream-client", app, argc, argv, a.logLevel, [&] { return run(a); });
 }

@@ -5,10 +5,12 @@
 // For each frame of the clip (evenly spaced), the model is posed (linear
 // blend skinning and normals: "transform") and every vertex's transfer
 // vector computed (rasterization and integration); frame times are medians
-// over the frames. The reference is Monte Carlo transfer with 4 times the
-// sweep's largest count of Embree rays a vertex (65,536 up to 2,000
-// vertices, else 16,384) on a subset of the frames; the error is the mean
-// relative L2 distance of the transfer vectors to it. Monte Carlo itself is
+// over the frames. The reference is Monte Carlo transfer with 65,536 Embree
+// rays a vertex (two independent halves, whose difference estimates its own
+// error: JSON `reference_error`) on a subset of the frames, for every vertex
+// up to 2,000 vertices and for an even sample of 1,000 above; the error is
+// the mean relative L2 distance of the transfer vectors to it over those
+// vertices. Monte Carlo itself is
 // swept (64 to 16,384 rays, or to 4,096 on larger models; another seed)
 // and its time at our error interpolated on a log-log line (error falling
 // as rays^-1/2 beyond the sweep). The per-vertex PVS (section 3.2) is built

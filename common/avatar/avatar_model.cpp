@@ -177,7 +177,8 @@ AvatarShader::AvatarShader(std::shared_ptr<const AvatarModel> model,
     : model_(std::move(model)),
       options_(options),
       shadowing_(options.shadows),
-      glossy_(options.shadows.maskSide, {kOrders, true}) {
+      glossy_(options.shadows.maskSide,
+              {kOrders, options.glossExponent <= AvatarShaderOptions::kBlockGlossUpTo}) {
   VS_CHECK(model_ != nullptr);
   groups_ = TriangleGroups::build(model_->triangles(), model_->restPositions());
   VS_CHECK_EQ(shadowing_.terms(), kTerms);
@@ -202,6 +203,13 @@ const VertexBlockers* AvatarShader::blockers(Gait g) {
   return pvs_[i].get();
 }
 
+size_t AvatarShader::poseBytes() const {
+  const size_t perVertex =
+      2 * sizeof(glm::vec3) + kTerms * sizeof(float) +
+      (options_.glossExponent > 0.0f ? size_t(shadowing_.maskWords()) * sizeof(uint64_t) : 0);
+  return model_->vertexCount() * perVertex;
+}
+
 const AvatarShader::Sampled& AvatarShader::sampled(Gait g, float t) {
   const float duration = model_->clipDuration(g);
   float clipTime = duration > 0.0f ? std::fmod(t, duration) : 0.0f;
@@ -215,8 +223,13 @@ const AvatarShader::Sampled& AvatarShader::sampled(Gait g, float t) {
       ++stats_.posesReused;
       return it->second;
     }
-    if (cache_.size() >= options_.maxCachedPoses) cache_.clear();
+    if (cache_.size() >= options_.maxCachedPoses ||
+        cacheBytes_ + poseBytes() > options_.maxCacheBytes) {
+      cache_.clear();
+      cacheBytes_ = 0;
+    }
     slot = &cache_[key];
+    cacheBytes_ += poseBytes();
   }
   const auto start = std::chrono::steady_clock::now();
   model_->pose(g, clipTime, slot->pose);

@@ -124,7 +124,10 @@ struct AvatarLight {
 struct AvatarShaderOptions {
   SelfShadowOptions shadows;
   float poseRate = 30.0f;  // sampled poses a second of clip time; 0: every pose exactly
+  // The cache of sampled poses is emptied when it would pass either bound
+  // (with gloss each pose keeps its masks: 128 bytes a vertex at 32 x 32).
   size_t maxCachedPoses = 1024;
+  size_t maxCacheBytes = size_t(256) << 20;
   // Per clip, a per-vertex PVS (self_shadow.h: potentiallyVisibleBlockers)
   // from this many poses of the clip, built when the clip is first played;
   // 0 (or a model with more than kMaxPvsEntries vertex-triangle pairs):
@@ -135,9 +138,12 @@ struct AvatarShaderOptions {
   // this exponent about the viewer's reflected direction, self-shadowed
   // through the same visibility masks, added with weight `specular`. It is
   // view-dependent, so it is integrated per frame and viewer from the masks
-  // kept with each sampled pose (4 x 4 blocks: the lobe is smooth). 0: off
-  // (diffuse only, nothing kept).
+  // kept with each sampled pose: in 4 x 4 blocks up to kBlockGlossUpTo (a
+  // broad lobe; 16 times fewer samples), per pixel above (blocks miss a
+  // narrow lobe: 16% off at exponent 128, 34% at 256, against 1% per pixel).
+  // 0: off (diffuse only, nothing kept).
   float glossExponent = 0.0f;
+  static constexpr float kBlockGlossUpTo = 16.0f;
   float specular = 0.25f;
 };
 
@@ -175,6 +181,7 @@ class AvatarShader {
     std::vector<uint64_t> masks;  // with gloss: maskWords() per vertex
   };
   const Sampled& sampled(Gait g, float t);
+  size_t poseBytes() const;                // what one sampled pose holds
   const VertexBlockers* blockers(Gait g);  // null: every triangle
   std::shared_ptr<const AvatarModel> model_;
   std::array<std::unique_ptr<VertexBlockers>, 3> pvs_;  // per gait, once built
@@ -182,8 +189,9 @@ class AvatarShader {
   std::array<bool, 3> pvsTried_{};
   AvatarShaderOptions options_;
   SelfShadowing shadowing_;
-  TransferIntegrator glossy_;  // 4 x 4 blocks
+  TransferIntegrator glossy_;  // 4 x 4 blocks up to kBlockGlossUpTo, else per pixel
   std::map<std::pair<int, int64_t>, Sampled> cache_;
+  size_t cacheBytes_ = 0;  // of cache_'s poses, as poseBytes() counts them
   Sampled exact_;
   Stats stats_;
 };

@@ -5,6 +5,9 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "common/core/check.h"
 
@@ -147,6 +150,93 @@ PlaneMaskTable::Mask PlaneMaskTable::above(const glm::vec3& n) const {
   return {bits_.data() + stored * size_t(words_), negative ? ~uint64_t(0) : uint64_t(0)};
 }
 
+#if defined(__SSE2__)
+namespace {
+
+// cellOf and above() for the four normals in the lanes of (nx, ny, nz), with
+// the same float operations in the same order (so the same cells), as
+// selects instead of branches: plane normals come in no order, so the
+// scalar face choice mispredicts about half the time. Writes out[0..count).
+void above4(const PlaneMaskTable& table, __m128 nx, __m128 ny, __m128 nz, int count,
+            PlaneMaskTable::Mask* out) {
+  const __m128 signBit = _mm_set1_ps(-0.0f), zero = _mm_setzero_ps();
+  const __m128 ax = _mm_andnot_ps(signBit, nx), ay = _mm_andnot_ps(signBit, ny),
+               az = _mm_andnot_ps(signBit, nz);
+  auto select = [](__m128 mask, __m128 a, __m128 b) {
+    return _mm_or_ps(_mm_and_ps(mask, a), _mm_andnot_ps(mask, b));
+  };
+  const __m128 xMajor = _mm_and_ps(_mm_cmpge_ps(ax, ay), _mm_cmpge_ps(ax, az));
+  const __m128 yMajor = _mm_andnot_ps(xMajor, _mm_cmpge_ps(ay, az));
+  const __m128 xyMajor = _mm_or_ps(xMajor, yMajor);
+  const __m128 m = select(xMajor, ax, select(yMajor, ay, az));
+  const __m128 major = select(xMajor, nx, select(yMajor, ny, nz));
+  const __m128 u = select(xMajor, ny, nx), v = select(xyMajor, nz, ny);
+  const __m128 positive = _mm_cmpge_ps(major, zero);
+  const __m128 valid = _mm_cmpgt_ps(m, zero);
+  const float s = float(table.cubeSide());
+  const __m128 half = _mm_set1_ps(0.5f * s), last = _mm_set1_ps(s - 1.0f);
+  const __m128 scale = _mm_div_ps(half, m);
+  // max(t, 0) gives 0 for NaN, as std::max(0.0f, t) does.
+  auto cell = [&](__m128 c) {
+    const __m128 t = _mm_add_ps(_mm_mul_ps(c, scale), half);
+    return _mm_cvttps_epi32(_mm_and_ps(valid, _mm_min_ps(_mm_max_ps(t, zero), last)));
+  };
+  alignas(16) int32_t ci[4], cj[4], flags[4];
+  _mm_store_si128(reinterpret_cast<__m128i*>(ci), cell(u));
+  _mm_store_si128(reinterpret_cast<__m128i*>(cj), cell(v));
+  // Bit 0: a negative face; bits 1-2: the axis (both 0 for an invalid normal).
+  const __m128i one = _mm_set1_epi32(1), two = _mm_set1_epi32(2), four = _mm_set1_epi32(4);
+  const __m128i axis = _mm_or_si128(_mm_and_si128(_mm_castps_si128(yMajor), two),
+                                    _mm_andnot_si128(_mm_castps_si128(xyMajor), four));
+  const __m128i negative = _mm_andnot_si128(_mm_castps_si128(positive), one);
+  _mm_store_si128(reinterpret_cast<__m128i*>(flags),
+                  _mm_and_si128(_mm_castps_si128(valid), _mm_or_si128(axis, negative)));
+  const size_t side = size_t(table.cubeSide()), words = size_t(table.words());
+  for (int k = 0; k < count; ++k) {
+    const bool neg = flags[k] & 1;
+    const size_t i = neg ? side - 1 - size_t(ci[k]) : size_t(ci[k]);
+    const size_t j = neg ? side - 1 - size_t(cj[k]) : size_t(cj[k]);
+    const size_t stored = (size_t(flags[k] >> 1) * side + j) * side + i;
+    out[k] = {table.rows() + stored * words, neg ? ~uint64_t(0) : uint64_t(0)};
+    const char* row = reinterpret_cast<const char*>(out[k].bits);
+    for (size_t line = 0; line < words * sizeof(uint64_t); line += 64)
+      __builtin_prefetch(row + line);
+  }
+}
+
+}  // namespace
+#endif
+
+void PlaneMaskTable::aboveAll(const glm::vec3 normals[4], int count, Mask out[4]) const {
+  VS_DCHECK(count >= 0 && count <= 4);
+  if (count == 0) return;
+#if defined(__SSE2__)
+  glm::vec3 n[4] = {};
+  for (int k = 0; k < count; ++k) n[k] = normals[k];
+  above4(*this, _mm_set_ps(n[3].x, n[2].x, n[1].x, n[0].x),
+         _mm_set_ps(n[3].y, n[2].y, n[1].y, n[0].y), _mm_set_ps(n[3].z, n[2].z, n[1].z, n[0].z),
+         count, out);
+#else
+  for (int k = 0; k < count; ++k) out[k] = above(normals[k]);
+#endif
+}
+
+void PlaneMaskTable::aboveMany(const float* x, const float* y, const float* z, size_t n,
+                               Mask* out) const {
+#if defined(__SSE2__)
+  size_t k = 0;
+  for (; k + 4 <= n; k += 4)
+    above4(*this, _mm_loadu_ps(x + k), _mm_loadu_ps(y + k), _mm_loadu_ps(z + k), 4, out + k);
+  if (k < n) {
+    float tx[4] = {}, ty[4] = {}, tz[4] = {};
+    for (size_t r = k; r < n; ++r) tx[r - k] = x[r], ty[r - k] = y[r], tz[r - k] = z[r];
+    above4(*this, _mm_loadu_ps(tx), _mm_loadu_ps(ty), _mm_loadu_ps(tz), int(n - k), out + k);
+  }
+#else
+  for (size_t k = 0; k < n; ++k) out[k] = above({x[k], y[k], z[k]});
+#endif
+}
+
 glm::vec3 PlaneMaskTable::quantized(const glm::vec3& n) const {
   const Cell c = cellOf(n);
   return cellDirection(c.face, c.i, c.j, cubeSide_);
@@ -160,61 +250,89 @@ namespace {
 // tangent plane).
 int edgePlanes(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c, glm::vec3 planes[4]) {
   // Edge-on to the vertex: the triangle's plane passes through the origin.
+  // |triple| > 1e-6 |a| |b| |c|, squared (in double: the product of six
+  // squared lengths leaves float's range for huge triangles).
   const float triple = glm::dot(a, glm::cross(b, c));
-  const float scale = glm::length(a) * glm::length(b) * glm::length(c);
-  if (!(std::abs(triple) > 1e-6f * scale)) return 0;
+  const double scale2 = double(glm::dot(a, a)) * double(glm::dot(b, b)) * double(glm::dot(c, c));
+  if (!(double(triple) * double(triple) > 1e-12 * scale2)) return 0;
   if (!(std::max({a.z, b.z, c.z}) > 0.0f)) return 0;
+  const float sign = triple > 0.0f ? 1.0f : -1.0f;
+  if (std::min({a.z, b.z, c.z}) >= 0.0f) {  // wholly above: no clipping (most blockers)
+    planes[0] = sign * glm::cross(a, b);
+    planes[1] = sign * glm::cross(b, c);
+    planes[2] = sign * glm::cross(c, a);
+    return 3;
+  }
   const glm::vec3 in[3] = {a, b, c};
   glm::vec3 poly[4];
   const int n = clipToUpperHalf(in, poly);
   if (n < 3) return 0;
-  const float sign = triple > 0.0f ? 1.0f : -1.0f;
   for (int k = 0; k < n; ++k) planes[k] = sign * glm::cross(poly[k], poly[(k + 1) % n]);
   return n;
 }
 
 }  // namespace
 
-bool lookUpBlocker(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
-                   const PlaneMaskTable& table, TableBlocker& out) {
-  glm::vec3 planes[4];
-  out.count = edgePlanes(a, b, c, planes);
-  const size_t bytes = size_t(table.words()) * sizeof(uint64_t);
-  for (int k = 0; k < out.count; ++k) {
-    out.planes[k] = table.above(planes[k]);
-    const char* row = reinterpret_cast<const char*>(out.planes[k].bits);
-    for (size_t line = 0; line < bytes; line += 64) __builtin_prefetch(row + line);
-  }
-  return out.count > 0;
-}
+namespace {
 
-void drawBlocker(const TableBlocker& blocker, const PlaneMaskTable& table, VisibilityMask& mask) {
-  VS_CHECK_EQ(table.maskSide(), mask.side());
-  const int words = mask.words();
-  const PlaneMaskTable::Mask* m = blocker.planes;
-  const uint64_t* disk = table.disk();
-  uint64_t* out = mask.data();
-  if (blocker.count == 3)
+// ORs the blocker of edge-plane masks m[0..count) into out.
+void drawPlanes(const PlaneMaskTable::Mask* m, int count, const uint64_t* disk, int words,
+                uint64_t* out) {
+  if (count == 3)
     for (int w = 0; w < words; ++w)
       out[w] |= (m[0].bits[w] ^ m[0].flip) & (m[1].bits[w] ^ m[1].flip) &
                 (m[2].bits[w] ^ m[2].flip) & disk[w];
-  else if (blocker.count == 4)
+  else if (count == 4)
     for (int w = 0; w < words; ++w)
       out[w] |= (m[0].bits[w] ^ m[0].flip) & (m[1].bits[w] ^ m[1].flip) &
                 (m[2].bits[w] ^ m[2].flip) & (m[3].bits[w] ^ m[3].flip) & disk[w];
 }
 
+}  // namespace
+
+void BlockerBatch::clear() {
+  x_.clear();
+  y_.clear();
+  z_.clear();
+  counts_.clear();
+}
+
+bool BlockerBatch::add(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c) {
+  glm::vec3 planes[4];
+  const int count = edgePlanes(a, b, c, planes);
+  if (count == 0) return false;
+  for (int k = 0; k < count; ++k) {
+    x_.push_back(planes[k].x);
+    y_.push_back(planes[k].y);
+    z_.push_back(planes[k].z);
+  }
+  counts_.push_back(uint8_t(count));
+  return true;
+}
+
+void BlockerBatch::draw(const PlaneMaskTable& table, VisibilityMask& mask) {
+  VS_CHECK_EQ(table.maskSide(), mask.side());
+  masks_.resize(x_.size());
+  table.aboveMany(x_.data(), y_.data(), z_.data(), x_.size(), masks_.data());
+  const PlaneMaskTable::Mask* m = masks_.data();
+  for (const uint8_t count : counts_) {
+    drawPlanes(m, count, table.disk(), mask.words(), mask.data());
+    m += count;
+  }
+}
+
 bool rasterizeBlocker(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
                       const PlaneMaskTable* table, VisibilityMask& mask) {
-  if (table) {
-    TableBlocker blocker;
-    if (!lookUpBlocker(a, b, c, *table, blocker)) return false;
-    drawBlocker(blocker, *table, mask);
-    return true;
-  }
   glm::vec3 planes[4];
   const int n = edgePlanes(a, b, c, planes);
   if (n == 0) return false;
+  if (table) {
+    VS_CHECK_EQ(table->maskSide(), mask.side());
+    PlaneMaskTable::Mask masks[4];
+    table->aboveAll(planes, n, masks);
+    drawPlanes(masks, n, table->disk(), mask.words(), mask.data());
+    return true;
+  }
   const int side = mask.side();
   for (int y = 0; y < side; ++y)
     for (int x = 0; x < side; ++x) {

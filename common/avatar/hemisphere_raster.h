@@ -89,8 +89,18 @@ class PlaneMaskTable {
     uint64_t flip;  // 0, or all ones for a normal on a negative face
   };
   Mask above(const glm::vec3& n) const;
+  // above() of normals[0..count), count <= 4, at once: the same masks, found
+  // with four-wide selects instead of branches (a blocker's three or four
+  // edge planes come in no order, so the branches of the scalar face choice
+  // mispredict about half the time).
+  void aboveAll(const glm::vec3 normals[4], int count, Mask out[4]) const;
+  // above() of the n normals (x[k], y[k], z[k]), four at a time; each found
+  // row is prefetched.
+  void aboveMany(const float* x, const float* y, const float* z, size_t n, Mask* out) const;
   // The pixels inside the disk.
   const uint64_t* disk() const { return disk_.data(); }
+  // The stored rows: words() words for each cell of the +x, +y, +z faces.
+  const uint64_t* rows() const { return bits_.data(); }
   // The unit normal of the cell `n` falls in (on a negative face, the
   // mirror of the stored cell's).
   glm::vec3 quantized(const glm::vec3& n) const;
@@ -113,17 +123,24 @@ class PlaneMaskTable {
 bool rasterizeBlocker(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
                       const PlaneMaskTable* table, VisibilityMask& mask);
 
-// rasterizeBlocker with a table, in two steps, so that a caller can look up
-// all of a vertex's blockers first and draw them after: each lookup
-// prefetches its table rows, and the cache misses of many blockers overlap
-// instead of stalling one by one. lookUpBlocker returns false (and `out` is
-// not drawn) where rasterizeBlocker would return false.
-struct TableBlocker {
-  PlaneMaskTable::Mask planes[4];
-  int count = 0;  // 3 or 4 edge planes
+// rasterizeBlocker with a table for many blockers of one vertex: add() each
+// (it finds the edge planes), then draw() looks all the planes up, four at a
+// time, prefetching each table row as soon as it is known, and ORs the
+// blockers into the mask after, so that the cache misses of many blockers
+// overlap instead of stalling one by one. The mask is bit for bit the one
+// rasterizeBlocker would draw. Reusable: clear() keeps the storage.
+class BlockerBatch {
+ public:
+  void clear();
+  // False (and nothing added) where rasterizeBlocker would return false.
+  bool add(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c);
+  size_t size() const { return counts_.size(); }
+  void draw(const PlaneMaskTable& table, VisibilityMask& mask);
+
+ private:
+  std::vector<float> x_, y_, z_;  // edge-plane normals, 3 or 4 a blocker
+  std::vector<uint8_t> counts_;   // per blocker
+  std::vector<PlaneMaskTable::Mask> masks_;
 };
-bool lookUpBlocker(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
-                   const PlaneMaskTable& table, TableBlocker& out);
-void drawBlocker(const TableBlocker& blocker, const PlaneMaskTable& table, VisibilityMask& mask);
 
 }  // namespace vistream

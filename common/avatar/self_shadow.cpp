@@ -183,7 +183,8 @@ SelfShadowing::SelfShadowing(const SelfShadowOptions& options)
 template <class ForEachBlocker>
 void SelfShadowing::run(const std::vector<glm::vec3>& positions,
                         const std::vector<glm::vec3>& normals, std::vector<float>& out,
-                        const ShadeExtras& extras, ForEachBlocker&& forEachBlocker) const {
+                        const ShadeExtras& extras, size_t eager,
+                        ForEachBlocker&& forEachBlocker) const {
   VS_CHECK_EQ(positions.size(), normals.size());
   const std::vector<uint8_t>* only = extras.only;
   if (only) VS_CHECK_EQ(only->size(), positions.size());
@@ -194,11 +195,13 @@ void SelfShadowing::run(const std::vector<glm::vec3>& positions,
   struct Local {
     VisibilityMask mask;
     SelfShadowStats stats;
-    std::vector<TableBlocker> looked;  // a vertex's blockers, looked up, to draw
+    BlockerBatch batch;            // a vertex's blockers, to look up and draw
+    std::vector<glm::vec3> eager;  // vertices [0, eager) in the vertex's frame
   };
   tbb::enumerable_thread_specific<Local> locals([&] {
-    return Local{VisibilityMask(options_.maskSide), {}, {}};
+    return Local{VisibilityMask(options_.maskSide), {}, {}, {}};
   });
+  VS_CHECK_LE(eager, positions.size());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, positions.size(), 16), [&](const auto& range) {
     Local& local = locals.local();
     for (size_t v = range.begin(); v != range.end(); ++v) {
@@ -208,25 +211,29 @@ void SelfShadowing::run(const std::vector<glm::vec3>& positions,
       const glm::vec3 p = positions[v];
       const TangentFrame frame = TangentFrame::around(normals[v]);
       local.mask.clear();
-      local.looked.clear();
-      forEachBlocker(v, local.stats, [&](const glm::uvec3& t) {
-        const glm::vec3 a = frame.toLocal(positions[t.x] - p),
-                        b = frame.toLocal(positions[t.y] - p),
-                        c = frame.toLocal(positions[t.z] - p);
+      local.batch.clear();
+      // Vertices [0, eager) in the tangent frame, once: their triangles
+      // then cost three loads instead of three transforms.
+      local.eager.resize(eager);
+      for (size_t k = 0; k < eager; ++k) local.eager[k] = frame.toLocal(positions[k] - p);
+      auto draw = [&](const glm::vec3& a, const glm::vec3& b, const glm::vec3& c) {
         ++local.stats.blockerTests;
         if (!(std::max({a.z, b.z, c.z}) > 0.0f)) return;
         if (!table_) {
           local.stats.rasterized += rasterizeBlocker(a, b, c, nullptr, local.mask);
           return;
         }
-        // Look up every blocker first, draw them after (lookUpBlocker).
-        local.looked.emplace_back();
-        if (lookUpBlocker(a, b, c, *table_, local.looked.back()))
-          ++local.stats.rasterized;
-        else
-          local.looked.pop_back();
-      });
-      for (const TableBlocker& blocker : local.looked) drawBlocker(blocker, *table_, local.mask);
+        local.stats.rasterized += local.batch.add(a, b, c);  // drawn together below
+      };
+      auto block = [&](const glm::uvec3& t) {
+        draw(frame.toLocal(positions[t.x] - p), frame.toLocal(positions[t.y] - p),
+             frame.toLocal(positions[t.z] - p));
+      };
+      auto blockEager = [&](const glm::uvec3& t) {
+        draw(local.eager[t.x], local.eager[t.y], local.eager[t.z]);
+      };
+      forEachBlocker(v, local.stats, block, blockEager);
+      if (table_) local.batch.draw(*table_, local.mask);
       const auto integrated = std::chrono::steady_clock::now();
       local.stats.rasterSeconds += std::chrono::duration<double>(integrated - start).count();
       integrator_.diffuse(local.mask, frame, out.data() + v * size_t(terms));
@@ -259,33 +266,46 @@ void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
     VS_CHECK_EQ(groups->groupOf.size(), triangles.size());
     groups->spheres(positions, spheres);
   }
-  run(positions, normals, out, extras, [&](size_t v, SelfShadowStats& s, auto&& block) {
-    if (cull) {
-      thread_local std::vector<uint8_t> culled;
-      cullGroups(positions[v], normals[v], spheres, culled, s.groupsCulled);
-      for (size_t g = 0; g < groups->size(); ++g)
-        if (!culled[g])
-          for (uint32_t k = groups->triangleStart[g]; k < groups->triangleStart[g + 1]; ++k)
-            block(triangles[groups->members[k]]);
-      return;
-    }
-    if (!hierarchy) {
-      for (const glm::uvec3& t : triangles) block(t);
-      return;
-    }
-    const ShadowHierarchy& h = *hierarchy;
-    for (uint32_t k = h.ringStart[v]; k < h.ringStart[v + 1]; ++k)
-      block(triangles[h.ringTriangles[k]]);
-    const uint32_t* skip = h.skipTriangles.data() + h.skipStart[v];
-    const uint32_t* skipEnd = h.skipTriangles.data() + h.skipStart[v + 1];
-    for (uint32_t c = 0; c < h.coarse.size(); ++c) {
-      if (skip != skipEnd && *skip == c) {  // sorted: one pass
-        ++skip;
-        continue;
-      }
-      block(h.coarse[c]);
-    }
-  });
+  // Transform every vertex once per receiving vertex where triangles outnumber
+  // vertices (a closed mesh has about twice as many); with a hierarchy, the
+  // coarse mesh's vertices (the first ones).
+  size_t eager = 0;
+  if (hierarchy) {
+    for (const glm::uvec3& t : hierarchy->coarse)
+      eager = std::max<size_t>(eager, size_t(std::max({t.x, t.y, t.z})) + 1);
+  } else if (positions.size() <= triangles.size()) {
+    eager = positions.size();
+  }
+  run(positions, normals, out, extras, eager,
+      [&](size_t v, SelfShadowStats& s, auto&& block, auto&& blockEager) {
+        if (cull) {
+          thread_local std::vector<uint8_t> culled;
+          cullGroups(positions[v], normals[v], spheres, culled, s.groupsCulled);
+          for (size_t g = 0; g < groups->size(); ++g)
+            if (!culled[g])
+              for (uint32_t k = groups->triangleStart[g]; k < groups->triangleStart[g + 1]; ++k) {
+                const glm::uvec3& t = triangles[groups->members[k]];
+                eager ? blockEager(t) : block(t);
+              }
+          return;
+        }
+        if (!hierarchy) {
+          for (const glm::uvec3& t : triangles) eager ? blockEager(t) : block(t);
+          return;
+        }
+        const ShadowHierarchy& h = *hierarchy;
+        for (uint32_t k = h.ringStart[v]; k < h.ringStart[v + 1]; ++k)
+          block(triangles[h.ringTriangles[k]]);
+        const uint32_t* skip = h.skipTriangles.data() + h.skipStart[v];
+        const uint32_t* skipEnd = h.skipTriangles.data() + h.skipStart[v + 1];
+        for (uint32_t c = 0; c < h.coarse.size(); ++c) {
+          if (skip != skipEnd && *skip == c) {  // sorted: one pass
+            ++skip;
+            continue;
+          }
+          blockEager(h.coarse[c]);
+        }
+      });
 }
 
 void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
@@ -299,21 +319,22 @@ void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
     VS_CHECK_EQ(groups.groupOf.size(), blockers.triangles.size());
     groups.spheres(positions, spheres);
   }
-  run(positions, normals, out, extras, [&](size_t v, SelfShadowStats& s, auto&& block) {
-    if (!cull) {
-      for (uint32_t k = blockers.start[v]; k < blockers.start[v + 1]; ++k)
-        block(blockers.triangles[blockers.list[k]]);
-      return;
-    }
-    thread_local LazyCulling lazy;
-    lazy.startVertex(groups.size());
-    const glm::vec3 p = positions[v], n = glm::normalize(normals[v]);
-    for (uint32_t k = blockers.start[v]; k < blockers.start[v + 1]; ++k) {
-      const uint32_t t = blockers.list[k];
-      if (!lazy.isCulled(groups.groupOf[t], spheres, p, n, s.groupsCulled))
-        block(blockers.triangles[t]);
-    }
-  });
+  run(positions, normals, out, extras, 0,
+      [&](size_t v, SelfShadowStats& s, auto&& block, auto&& /*blockEager: unused*/) {
+        if (!cull) {
+          for (uint32_t k = blockers.start[v]; k < blockers.start[v + 1]; ++k)
+            block(blockers.triangles[blockers.list[k]]);
+          return;
+        }
+        thread_local LazyCulling lazy;
+        lazy.startVertex(groups.size());
+        const glm::vec3 p = positions[v], n = glm::normalize(normals[v]);
+        for (uint32_t k = blockers.start[v]; k < blockers.start[v + 1]; ++k) {
+          const uint32_t t = blockers.list[k];
+          if (!lazy.isCulled(groups.groupOf[t], spheres, p, n, s.groupsCulled))
+            block(blockers.triangles[t]);
+        }
+      });
 }
 
 double VertexBlockers::meanPerVertex() const {
@@ -473,8 +494,9 @@ std::vector<uint8_t> frontFacingVertices(const std::vector<glm::vec3>& positions
 void monteCarloTransfer(const std::vector<glm::vec3>& positions,
                         const std::vector<glm::vec3>& normals,
                         const std::vector<glm::uvec3>& triangles, uint32_t rays, int orders,
-                        std::vector<float>& out, uint64_t seed) {
+                        std::vector<float>& out, uint64_t seed, const std::vector<uint8_t>* only) {
   VS_CHECK(rays >= 1 && orders >= 1 && orders <= kMaxShOrder + 1);
+  if (only) VS_CHECK_EQ(only->size(), positions.size());
   const int terms = shTerms(orders);
   FlatTriangles flat;
   for (size_t t = 0; t < triangles.size(); ++t) {
@@ -492,6 +514,7 @@ void monteCarloTransfer(const std::vector<glm::vec3>& positions,
     std::vector<uint8_t> hit(rays);
     float y[25];
     for (size_t v = range.begin(); v != range.end(); ++v) {
+      if (only && !(*only)[v]) continue;
       const TangentFrame frame = TangentFrame::around(normals[v]);
       const glm::vec3 org = positions[v] + normals[v] * offset;
       const uint64_t vertexSeed = mixBits(v ^ mixBits(seed));

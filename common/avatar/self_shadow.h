@@ -157,11 +157,13 @@ class SelfShadowing {
   int maskWords() const { return (options_.maskSide * options_.maskSide + 63) / 64; }
 
  private:
-  // The shadow loop: forEachBlocker(v, stats, block) calls block(triangle)
-  // for vertex v's blockers (and counts culled groups in stats).
+  // The shadow loop: forEachBlocker(v, stats, block, blockEager) calls
+  // block(triangle) for vertex v's blockers, or blockEager(triangle) for one
+  // whose corners are all below `eager` (those vertices are put into v's
+  // tangent frame once, not per triangle), and counts culled groups in stats.
   template <class ForEachBlocker>
   void run(const std::vector<glm::vec3>& positions, const std::vector<glm::vec3>& normals,
-           std::vector<float>& out, const ShadeExtras& extras,
+           std::vector<float>& out, const ShadeExtras& extras, size_t eager,
            ForEachBlocker&& forEachBlocker) const;
   SelfShadowOptions options_;
   std::unique_ptr<PlaneMaskTable> table_;
@@ -180,11 +182,14 @@ std::vector<uint8_t> frontFacingVertices(const std::vector<glm::vec3>& positions
 // a vertex (a stratified grid, rotated per vertex by a hash of its index),
 // leaving the vertex a hair above its tangent plane.
 // `seed` varies the rotation (two runs with different seeds are
-// independent estimates).
+// independent estimates). With `only`, just the vertices v with
+// (*only)[v] != 0 are traced; the rest get zeros (a converged reference on
+// a sample of a large model's vertices).
 void monteCarloTransfer(const std::vector<glm::vec3>& positions,
                         const std::vector<glm::vec3>& normals,
                         const std::vector<glm::uvec3>& triangles, uint32_t rays, int orders,
-                        std::vector<float>& out, uint64_t seed = 0);
+                        std::vector<float>& out, uint64_t seed = 0,
+                        const std::vector<uint8_t>* only = nullptr);
 
 // Mean over vertices of |a - b| / |b| for transfer vectors of `terms`
 // coefficients (vertices where b is zero are left out).

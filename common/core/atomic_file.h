@@ -1,14 +1,18 @@
 // A file that appears whole or not at all.
 //
 // Bytes go to a temporary file beside the target, named uniquely for this
-// host, process and object (hostname, pid, a per-process counter and a random
-// word), so writers on several machines sharing one volume, or several
-// containers that all run as pid 1, never write into each other's temporary.
-// commit() flushes (and with Durability::Synced, fsyncs) the temporary and
-// renames it over the target, which POSIX makes atomic within a file system:
-// readers see the old file or the new one, never a torn one. An object
+// host, process and object (NAME.tmp.HOST.PID.COUNTER.WORD: hostname, pid, a
+// per-process counter and a random word; NAME is cut so the whole stays
+// within NAME_MAX), so writers on several machines sharing one volume, or
+// several containers that all run as pid 1, never write into each other's
+// temporary. commit() flushes (and with Durability::Synced, fsyncs) the
+// temporary and renames it over the target, which POSIX makes atomic within a
+// file system: readers see the old file or the new one, never a torn one;
+// Synced also fsyncs the directory, so the rename survives a crash. An object
 // destroyed without commit() removes its temporary and leaves the target as it
-// was.
+// was. A process killed mid-write cannot: its temporary stays until the next
+// writer of the same target removes it as stale (removeStaleTemporaries).
+// The file gets mode 0666 less the umask.
 //
 // Errors: every failure (open, write, flush, rename) throws InputError naming
 // the file and the system's reason. Not thread-safe; one writer per object.
@@ -56,6 +60,12 @@ void writeAllTo(int fd, std::span<const uint8_t> bytes, const std::filesystem::p
 
 // The temporary name AtomicFile uses for `target`: unique per call.
 std::filesystem::path uniqueTemporaryBeside(const std::filesystem::path& target);
+
+// Removes the stale temporaries of `target`'s writers: those a process of
+// this host left that no longer runs, and those of any host untouched for 24
+// hours (a writer that long silent is taken as gone). Never this process's
+// own. AtomicFile calls it before it writes; returns how many it removed.
+size_t removeStaleTemporaries(const std::filesystem::path& target);
 
 // One-shot forms.
 void writeFileAtomically(const std::filesystem::path& target, std::span<const uint8_t> bytes,

@@ -55,3 +55,4 @@ for d in rows:
     print("%-14s %12.1f%% %10.1f%% %8.1f%% %5.1f%%" % (name(d), 100 * b["rasterization"],
           100 * b["integration"], 100 * b["transform"], 100 * b["other"]))
 PY
+echo "shadow_tables: ${#jsons[@]} models, done" >&2

@@ -201,6 +201,29 @@ TEST(AvatarShader, AGlossyTermAddsAViewDependentHighlight) {
   EXPECT_GT(differ, base.corners.size() / 10);
 }
 
+// The pose cache is bounded by bytes as well as poses: glossy poses keep
+// 128 bytes of masks a vertex, so a cache room for two glossy Fox poses
+// forgets the first of three, while a diffuse cache of the same bytes keeps
+// all three.
+TEST(AvatarShader, ThePoseCacheForgetsWhatPassesItsByteBound) {
+  const auto fox = metreFox();
+  const AvatarLight light = bluishSky();
+  const size_t vertices = fox->vertexCount();
+  const size_t glossyPose = vertices * (2 * 12 + 25 * 4 + 128);
+  AvatarShaderOptions glossy, diffuse;
+  glossy.glossExponent = 16.0f;
+  glossy.maxCacheBytes = diffuse.maxCacheBytes = 2 * glossyPose + glossyPose / 2;
+  glossy.poseRate = diffuse.poseRate = 10.0f;
+  for (const bool shiny : {true, false}) {
+    AvatarShader shader(fox, shiny ? glossy : diffuse);
+    ShadedAvatar out;
+    for (const float t : {0.05f, 0.15f, 0.25f, 0.05f})
+      shader.shade(Gait::Walk, t, light, 1.0f, out);
+    EXPECT_EQ(shader.stats().posesShaded, shiny ? 4u : 3u) << "glossy " << shiny;
+    EXPECT_EQ(shader.stats().posesReused, shiny ? 0u : 1u) << "glossy " << shiny;
+  }
+}
+
 // The built-in walker: a closed, outward-wound figure 1.75 m tall whose
 // legs swing when it walks: the top of its head sees the whole sky (its
 // transfer vector is the open cosine's), and a foot moves between two

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <random>
 
@@ -149,6 +150,74 @@ TEST(HemisphereRaster, EveryNormalReadsThePixelsAboveItsQuantizedPlaneOnAnyFace)
       }
   }
   EXPECT_GT(negativeFaces, 1000);  // half the normals read complemented cells
+}
+
+// The four-wide lookups choose exactly the scalar lookup's cell, for every
+// kind of normal: random, on cube edges and corners (ties between axes),
+// zero, infinite and NaN, in batches of every length (the last partial).
+TEST(HemisphereRaster, BatchedLookupsReadTheSameRowsAsOneAtATime) {
+  const PlaneMaskTable table(32, 128);
+  std::mt19937 rng(5);
+  std::normal_distribution<float> g;
+  std::vector<glm::vec3> normals;
+  for (int i = 0; i < 4000; ++i) normals.emplace_back(g(rng), g(rng), g(rng));
+  for (const float a : {1.0f, -1.0f})
+    for (const float b : {1.0f, -1.0f, 0.0f})
+      for (const float c : {1.0f, -1.0f, 0.0f}) {
+        normals.emplace_back(a, b, c);
+        normals.emplace_back(b, a, c);
+        normals.emplace_back(c, b, a);
+      }
+  for (const glm::vec3& n :
+       {glm::vec3(0.0f), glm::vec3(-0.0f), glm::vec3(INFINITY, 1, 0), glm::vec3(NAN, 0, 1),
+        glm::vec3(0, NAN, -1), glm::vec3(-INFINITY, -INFINITY, INFINITY),
+        glm::vec3(1e38f, -1e38f, 3), glm::vec3(1e-40f, 0, 0)})
+    normals.push_back(n);
+  for (const size_t length : {normals.size(), size_t(1), size_t(2), size_t(3), size_t(7)}) {
+    std::vector<float> x, y, z;
+    for (size_t k = 0; k < length; ++k) {
+      x.push_back(normals[k].x);
+      y.push_back(normals[k].y);
+      z.push_back(normals[k].z);
+    }
+    std::vector<PlaneMaskTable::Mask> many(length);
+    table.aboveMany(x.data(), y.data(), z.data(), length, many.data());
+    for (size_t k = 0; k < length; ++k) {
+      const PlaneMaskTable::Mask one = table.above(normals[k]);
+      ASSERT_EQ(many[k].bits, one.bits) << "normal " << k;
+      ASSERT_EQ(many[k].flip, one.flip) << "normal " << k;
+    }
+  }
+  for (size_t k = 0; k + 4 <= normals.size(); k += 4) {
+    PlaneMaskTable::Mask four[4];
+    table.aboveAll(&normals[k], 4, four);
+    for (int i = 0; i < 4; ++i) ASSERT_EQ(four[i].bits, table.above(normals[k + size_t(i)]).bits);
+  }
+}
+
+// A batch draws, bit for bit, what the blockers draw one at a time, and
+// takes or refuses the same blockers.
+TEST(HemisphereRaster, ABatchOfBlockersDrawsExactlyWhatTheyDrawOneByOne) {
+  const PlaneMaskTable table(32, 128);
+  std::vector<std::array<glm::vec3, 3>> blockers = randomBlockers();
+  blockers.push_back({glm::vec3(1, 0, 1), glm::vec3(0, 1, 1), glm::vec3(-1, -1, -2)});  // edge-on
+  blockers.push_back({glm::vec3(1, 0, -1), glm::vec3(0, 1, -1), glm::vec3(1, 1, -2)});  // below
+  BlockerBatch batch;
+  for (size_t first = 0; first < blockers.size(); first += 37) {
+    VisibilityMask one(32), many(32);
+    batch.clear();
+    size_t refused = 0;
+    for (size_t k = first; k < std::min(blockers.size(), first + 37); ++k) {
+      const auto& t = blockers[k];
+      const bool drawn = rasterizeBlocker(t[0], t[1], t[2], &table, one);
+      ASSERT_EQ(batch.add(t[0], t[1], t[2]), drawn) << "blocker " << k;
+      refused += !drawn;
+    }
+    batch.draw(table, many);
+    EXPECT_EQ(batch.size() + refused, std::min(blockers.size(), first + 37) - first);
+    ASSERT_GT(one.count(), 0u);
+    for (int w = 0; w < one.words(); ++w) ASSERT_EQ(many.data()[w], one.data()[w]) << "word " << w;
+  }
 }
 
 TEST(HemisphereRaster, TheTablesQuantizedNormalIsWithinHalfACellDiagonal) {

@@ -324,6 +324,9 @@ TEST(TriangleGroups, CullingThemChangesNoBitOfTheTransferAndSkipsTriangles) {
     plain.diffuse(pose.positions, pose.normals, pvs, b, {.stats = &sb});
     EXPECT_EQ(a, b);
     EXPECT_EQ(sa.rasterized, sb.rasterized);
+    EXPECT_GT(sa.groupsCulled, 0u);
+    EXPECT_EQ(sb.groupsCulled, 0u);
+    EXPECT_LT(sa.blockerTests, sb.blockerTests);
   }
 }
 

@@ -1,10 +1,14 @@
 #include "common/core/atomic_file.h"
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
+#include <cctype>
+#include <chrono>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -72,9 +76,70 @@ TEST(AtomicFile, TemporaryNamesAreUniquePerCallAndNameHostAndProcess) {
   EXPECT_EQ(names.size(), 1000u);
   char host[256] = {};
   ASSERT_EQ(::gethostname(host, sizeof(host) - 1), 0);
+  std::string safeHost;
+  for (const char* c = host; *c; ++c)
+    safeHost += std::isalnum(static_cast<unsigned char>(*c)) || *c == '-' ? *c : '_';
+  safeHost.resize(std::min<size_t>(safeHost.size(), 40));
   const std::string one = *names.begin();
-  EXPECT_EQ(one.rfind("/x/cache.light.tmp.", 0), 0u) << one;
-  EXPECT_NE(one.find("." + std::to_string(::getpid()) + "."), std::string::npos) << one;
+  EXPECT_EQ(one.rfind("/x/cache.light.tmp." + safeHost + "." + std::to_string(::getpid()) + ".", 0),
+            0u)
+      << one;
+}
+
+TEST(AtomicFile, ATemporaryOfALongNameStaysWithinNameMax) {
+  const TempDir dir;
+  const std::string longName(250, 'n');
+  EXPECT_LE(uniqueTemporaryBeside(dir / longName).filename().string().size(), 255u);
+  writeFileAtomically(dir / longName, "whole");
+  EXPECT_EQ(contentsOf(dir / longName), "whole");
+}
+
+TEST(AtomicFile, TheFileModeIsTheUsersUmaskAppliedTo0666) {
+  const TempDir dir;
+  const mode_t saved = ::umask(0);
+  writeFileAtomically(dir / "open.txt", "x");
+  ::umask(0077);
+  writeFileAtomically(dir / "private.txt", "x");
+  ::umask(saved);
+  EXPECT_EQ(std::filesystem::status(dir / "open.txt").permissions(), std::filesystem::perms(0666));
+  EXPECT_EQ(std::filesystem::status(dir / "private.txt").permissions(),
+            std::filesystem::perms(0600));
+}
+
+// A writer killed mid-write leaves its temporary; the next writer of the same
+// target removes it when its process is gone (same host) or it has not been
+// touched for a day (any host), and keeps every other.
+TEST(AtomicFile, StaleTemporariesOfKilledWritersAreRemovedByTheNextWriter) {
+  const TempDir dir;
+  const auto target = dir / "pvs.db";
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    AtomicFile file(target);
+    file.write("half a database");
+    ::_exit(0);  // killed: no destructor, no commit
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  ASSERT_EQ(dir.filenames().size(), 1u) << "the child's temporary";
+  EXPECT_NE(dir.filenames()[0].find("." + std::to_string(child) + "."), std::string::npos);
+  // Another host's, written now and two days ago; ours, of a running process
+  // (pid 1 always runs).
+  const auto otherHostFresh = dir / "pvs.db.tmp.elsewhere.7.0.0000abcd";
+  const auto otherHostOld = dir / "pvs.db.tmp.elsewhere.8.0.0000abcd";
+  const std::string ownHost =
+      uniqueTemporaryBeside(target).filename().string().substr(std::string("pvs.db.tmp.").size());
+  const auto running =
+      dir / ("pvs.db.tmp." + ownHost.substr(0, ownHost.find('.')) + ".1.0.0000abcd");
+  for (const auto& p : {otherHostFresh, otherHostOld, running}) std::ofstream(p) << "x";
+  std::filesystem::last_write_time(
+      otherHostOld, std::filesystem::file_time_type::clock::now() - std::chrono::hours(48));
+  writeFileAtomically(target, "whole");
+  std::vector<std::string> kept = {"pvs.db", running.filename().string(),
+                                   otherHostFresh.filename().string()};
+  std::sort(kept.begin(), kept.end());
+  EXPECT_EQ(dir.filenames(), kept);
+  EXPECT_EQ(contentsOf(target), "whole");
 }
 
 TEST(AtomicFile, AnUnwritableDirectoryIsAnInputErrorNamingTheFile) {
@@ -115,9 +180,9 @@ TEST(AtomicFile, ConcurrentWritersOfOneFileNeverTearIt) {
   EXPECT_EQ(dir.filenames(), std::vector<std::string>{"shared.light"});
 }
 
-// Processes with one pid each (as every container's pid 1 would be, were they
-// on one host) still get distinct temporaries: the counter and random word
-// differ. Here: forked children, each writing many times.
+// Several processes writing one file, each many times: their temporaries
+// differ by pid (forked children inherit the counter and the random
+// generator, which reseeds itself in a new process).
 TEST(AtomicFile, ConcurrentProcessesWritingOneFileLeaveOneWholeFile) {
   const TempDir dir;
   const auto target = dir / "shared.bin";
