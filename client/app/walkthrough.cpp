@@ -137,10 +137,15 @@ nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames, const Pip
     }
     if (f.avatars) {
       const AvatarFrame& a = *f.avatars;
-      j["avatars"] = {{"in_view", a.inView},           {"beyond_d", a.beyond},
-                      {"outside_view", a.outside},     {"poses_shaded", a.posesShaded},
-                      {"poses_reused", a.posesReused}, {"ms", a.ms},
-                      {"pixels", f.avatarPixels},      {"why", a.why}};
+      j["avatars"] = {{"in_view", a.inView},
+                      {"beyond_d", a.beyond},
+                      {"outside_view", a.outside},
+                      {"poses_shaded", a.posesShaded},
+                      {"poses_reused", a.posesReused},
+                      {"vertices_shaded", a.verticesShaded},
+                      {"ms", a.ms},
+                      {"pixels", f.avatarPixels},
+                      {"why", a.why}};
       ++why["avatars"][a.why];
       avatarsRan += a.inView > 0;
     }

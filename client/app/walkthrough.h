@@ -63,7 +63,7 @@ struct FrameRecord {
 // geometry_intake_ms_total, geometry_intake_ms_per_frame, wall_ms_per_frame;
 // per frame geometry_intake_ms and wall_ms; with avatars, per frame
 // `avatars` {in_view, beyond_d, outside_view, poses_shaded, poses_reused,
-// ms, pixels, why} and stages.avatars as for the pipeline's stages).
+// vertices_shaded, ms, pixels, why} and stages.avatars as for the pipeline's stages).
 nlohmann::json walkthroughJson(const std::vector<FrameRecord>& frames,
                                const PipelineOptions& options, int width, int height);
 // The same for people: an aligned table of pixel classes and stage times.

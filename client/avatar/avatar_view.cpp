@@ -112,12 +112,13 @@ AvatarFrame AvatarView::build(const Camera& camera, float nearDistance,
                        : 1.0f;
     const AvatarShader::Stats before = shader.stats();
     // The viewer in the model's frame (appendAvatar's placement undone), for
-    // the glossy term.
+    // the glossy term and front-facing shading.
     const glm::vec3 eye = glm::transpose(modelTurn(s.yawDeg)) * (camera.eye - feet);
     shader.shade(gaitForSpeed(s.speed), s.phase, light_.turned(modelTurnDeg(s.yawDeg)), sunVisible,
                  scratch_, &eye);
     f.posesShaded += shader.stats().posesShaded - before.posesShaded;
     f.posesReused += shader.stats().posesReused - before.posesReused;
+    f.verticesShaded += shader.stats().verticesShaded - before.verticesShaded;
     appendAvatar(model, scratch_, feet, s.yawDeg, uint32_t(i), out);
   }
   if (states.empty()) {

@@ -50,6 +50,7 @@ struct AvatarFrame {
   size_t inView = 0, beyond = 0, outside = 0;
   size_t waiting = 0;                       // users whose model has not arrived (connected clients)
   size_t posesShaded = 0, posesReused = 0;  // this frame
+  size_t verticesShaded = 0;                // this frame (front-facing ones, on closed models)
   double ms = 0.0;                          // selecting, posing, shading and building
   std::string why;
 };

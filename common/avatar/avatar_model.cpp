@@ -11,6 +11,7 @@
 #include "common/light/spherical_harmonics.h"
 #include "common/light/texture.h"
 #include "common/scene/scene_loader.h"
+#include "common/world/solids.h"
 
 namespace vistream {
 namespace {
@@ -172,6 +173,30 @@ glm::vec3 AvatarLight::apply(const float* transfer, float sunVisible) const {
   return glm::max(c + glm::vec3(std::max(0.0f, sunVisible * s)), glm::vec3(0.0f));
 }
 
+namespace {
+
+// Whether every component of the mesh at rest is closed, manifold and wound
+// outward (Solids' reading, common/world/solids.h).
+bool closedOutward(const std::vector<glm::vec3>& positions,
+                   const std::vector<glm::uvec3>& triangles) {
+  FlatTriangles flat;
+  for (uint32_t t = 0; t < triangles.size(); ++t) {
+    const glm::vec3 a = positions[triangles[t].x], b = positions[triangles[t].y],
+                    c = positions[triangles[t].z];
+    flat.positions.insert(flat.positions.end(), {a, b, c});
+    flat.faceIds.push_back(t);
+    flat.objectIds.push_back(0);
+    flat.degenerate.push_back(glm::length(glm::cross(b - a, c - a)) > 0.0f ? 0 : 1);
+  }
+  const Solids solids = Solids::build(flat, SolidsOptions{.weldTolerance = 0.0});
+  if (solids.components().empty()) return false;
+  for (const SolidComponent& c : solids.components())
+    if (c.kind != SolidClass::ClosedOutward) return false;
+  return true;
+}
+
+}  // namespace
+
 AvatarShader::AvatarShader(std::shared_ptr<const AvatarModel> model,
                            const AvatarShaderOptions& options)
     : model_(std::move(model)),
@@ -181,6 +206,8 @@ AvatarShader::AvatarShader(std::shared_ptr<const AvatarModel> model,
               {kOrders, options.glossExponent <= AvatarShaderOptions::kBlockGlossUpTo}) {
   VS_CHECK(model_ != nullptr);
   groups_ = TriangleGroups::build(model_->triangles(), model_->restPositions());
+  frontFacingOnly_ =
+      options_.frontFacingOnly && closedOutward(model_->restPositions(), model_->triangles());
   VS_CHECK_EQ(shadowing_.terms(), kTerms);
 }
 
@@ -210,45 +237,84 @@ size_t AvatarShader::poseBytes() const {
   return model_->vertexCount() * perVertex;
 }
 
-const AvatarShader::Sampled& AvatarShader::sampled(Gait g, float t) {
+const AvatarShader::Sampled& AvatarShader::sampled(Gait g, float t, const glm::vec3* eye) {
   const float duration = model_->clipDuration(g);
   float clipTime = duration > 0.0f ? std::fmod(t, duration) : 0.0f;
   if (clipTime < 0.0f) clipTime += duration;
   Sampled* slot = &exact_;
+  bool fresh = true;
   if (options_.poseRate > 0.0f) {
     const int64_t k = int64_t(std::floor(clipTime * options_.poseRate));
     clipTime = float(k) / options_.poseRate;
     const auto key = std::make_pair(int(g), k);
     if (auto it = cache_.find(key); it != cache_.end()) {
-      ++stats_.posesReused;
-      return it->second;
+      slot = &it->second;
+      fresh = false;
+    } else {
+      if (cache_.size() >= options_.maxCachedPoses ||
+          cacheBytes_ + poseBytes() > options_.maxCacheBytes) {
+        cache_.clear();
+        cacheBytes_ = 0;
+      }
+      slot = &cache_[key];
+      cacheBytes_ += poseBytes();
     }
-    if (cache_.size() >= options_.maxCachedPoses ||
-        cacheBytes_ + poseBytes() > options_.maxCacheBytes) {
-      cache_.clear();
-      cacheBytes_ = 0;
-    }
-    slot = &cache_[key];
-    cacheBytes_ += poseBytes();
   }
+  if (fresh) {
+    model_->pose(g, clipTime, slot->pose);
+    const size_t vertices = slot->pose.positions.size();
+    slot->transfer.assign(vertices * size_t(kTerms), 0.0f);
+    slot->shaded.assign(vertices, 0);
+    slot->masks.assign(
+        options_.glossExponent > 0.0f ? vertices * size_t(shadowing_.maskWords()) : 0, 0);
+  }
+  if (!shadeMissing(g, *slot, eye) && !fresh) ++stats_.posesReused;
+  return *slot;
+}
+
+bool AvatarShader::shadeMissing(Gait g, Sampled& s, const glm::vec3* eye) {
+  const size_t vertices = s.pose.positions.size();
+  std::vector<uint8_t> needed = eye && frontFacingOnly_
+                                    ? verticesFacing(s.pose.positions, model_->triangles(), *eye)
+                                    : std::vector<uint8_t>(vertices, 1);
+  size_t count = 0;
+  for (size_t v = 0; v < vertices; ++v) {
+    needed[v] = needed[v] && !s.shaded[v];
+    count += needed[v];
+  }
+  if (count == 0) return false;
   const auto start = std::chrono::steady_clock::now();
-  model_->pose(g, clipTime, slot->pose);
-  std::vector<uint64_t>* masks = options_.glossExponent > 0.0f ? &slot->masks : nullptr;
-  if (const VertexBlockers* pvs = blockers(g))
-    shadowing_.diffuse(slot->pose.positions, slot->pose.normals, *pvs, slot->transfer,
-                       {.masks = masks});
-  else
-    shadowing_.diffuse(slot->pose.positions, slot->pose.normals, model_->triangles(),
-                       slot->transfer, {.groups = &groups_, .masks = masks});
+  const bool gloss = options_.glossExponent > 0.0f;
+  std::vector<float> transfer;
+  std::vector<uint64_t> masks;
+  const ShadeExtras extras{.only = &needed, .masks = gloss ? &masks : nullptr};
+  if (const VertexBlockers* pvs = blockers(g)) {
+    shadowing_.diffuse(s.pose.positions, s.pose.normals, *pvs, transfer, extras);
+  } else {
+    ShadeExtras withGroups = extras;
+    withGroups.groups = &groups_;
+    shadowing_.diffuse(s.pose.positions, s.pose.normals, model_->triangles(), transfer, withGroups);
+  }
+  const size_t words = size_t(shadowing_.maskWords());
+  for (size_t v = 0; v < vertices; ++v) {
+    if (!needed[v]) continue;
+    std::copy_n(transfer.begin() + std::ptrdiff_t(v * kTerms), kTerms,
+                s.transfer.begin() + std::ptrdiff_t(v * kTerms));
+    if (gloss)
+      std::copy_n(masks.begin() + std::ptrdiff_t(v * words), words,
+                  s.masks.begin() + std::ptrdiff_t(v * words));
+    s.shaded[v] = 1;
+  }
   stats_.shadowMs +=
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   ++stats_.posesShaded;
-  return *slot;
+  stats_.verticesShaded += count;
+  return true;
 }
 
 void AvatarShader::shade(Gait g, float t, const AvatarLight& light, float sunVisible,
                          ShadedAvatar& out, const glm::vec3* eye) {
-  const Sampled& s = sampled(g, t);
+  const Sampled& s = sampled(g, t, eye);
   out.positions = s.pose.positions;
   const size_t vertices = s.pose.positions.size();
   std::vector<glm::vec3> radiance(vertices);
@@ -270,7 +336,7 @@ void AvatarShader::shade(Gait g, float t, const AvatarLight& light, float sunVis
       const glm::vec3 n = s.pose.normals[v];
       const glm::vec3 toEye = glm::normalize(*eye - s.pose.positions[v]);
       const float facing = glm::dot(n, toEye);
-      if (!(facing > 0.0f)) continue;
+      if (!(facing > 0.0f) || !s.shaded[v]) continue;
       std::copy_n(s.masks.data() + v * words, words, mask.data());
       glossy_.glossy(mask, TangentFrame::around(n), 2.0f * facing * n - toEye,
                      options_.glossExponent, glossy);

@@ -145,6 +145,13 @@ struct AvatarShaderOptions {
   float glossExponent = 0.0f;
   static constexpr float kBlockGlossUpTo = 16.0f;
   float specular = 0.25f;
+  // The paper's saving: given a viewer, shade only the vertices of the
+  // triangles that face it, and the rest of a sampled pose when another
+  // viewer needs them (each vertex is shaded once per pose whoever asks).
+  // Used only on models whose every part is closed, manifold and wound
+  // outward at rest (Solids' reading), where a triangle facing away is
+  // hidden by the model itself; other models are shaded whole.
+  bool frontFacingOnly = true;
 };
 
 struct ShadedAvatar {
@@ -160,27 +167,36 @@ class AvatarShader {
 
   // The model in gait g at clip time t, lit by `light` (already turned to
   // the model's frame), its sun dimmed by `sunVisible` in [0, 1] (the static
-  // scene's shadow). With glossExponent > 0 and `eye` (the viewer in the
-  // model's frame, metres), the glossy term for that viewer is added.
+  // scene's shadow). `eye` is the viewer in the model's frame (metres): with
+  // it, glossExponent > 0 adds the glossy term for that viewer, and with
+  // frontFacingOnly only what the viewer can see need be shaded (the corners
+  // of triangles facing away from it may then be black).
   void shade(Gait g, float t, const AvatarLight& light, float sunVisible, ShadedAvatar& out,
              const glm::vec3* eye = nullptr);
+  // Whether front-facing shading applies to this model (closed outward).
+  bool shadesFrontFacingOnly() const { return frontFacingOnly_; }
 
   struct Stats {
-    uint64_t posesShaded = 0;  // self-shadow loops run
-    uint64_t posesReused = 0;  // served from the cache
-    double shadowMs = 0.0;     // in the self-shadow loops
-    double pvsMs = 0.0;        // building per-clip PVSs
-    double glossyMs = 0.0;     // integrating the glossy term
+    uint64_t posesShaded = 0;     // self-shadow loops run
+    uint64_t posesReused = 0;     // served from the cache with nothing left to shade
+    uint64_t verticesShaded = 0;  // by those loops
+    double shadowMs = 0.0;        // in the self-shadow loops
+    double pvsMs = 0.0;           // building per-clip PVSs
+    double glossyMs = 0.0;        // integrating the glossy term
   };
   const Stats& stats() const { return stats_; }
 
  private:
   struct Sampled {
     PosedMesh pose;
-    std::vector<float> transfer;
+    std::vector<float> transfer;  // zeros where not shaded yet
     std::vector<uint64_t> masks;  // with gloss: maskWords() per vertex
+    std::vector<uint8_t> shaded;  // per vertex
   };
-  const Sampled& sampled(Gait g, float t);
+  const Sampled& sampled(Gait g, float t, const glm::vec3* eye);
+  // Shades the vertices of `s` that the viewer at `eye` (null: any viewer)
+  // needs and that are not shaded yet; false if there were none.
+  bool shadeMissing(Gait g, Sampled& s, const glm::vec3* eye);
   size_t poseBytes() const;                // what one sampled pose holds
   const VertexBlockers* blockers(Gait g);  // null: every triangle
   std::shared_ptr<const AvatarModel> model_;
@@ -188,6 +204,7 @@ class AvatarShader {
   TriangleGroups groups_;                               // of the model's triangles, for culling
   std::array<bool, 3> pvsTried_{};
   AvatarShaderOptions options_;
+  bool frontFacingOnly_ = false;  // options_.frontFacingOnly on a closed outward model
   SelfShadowing shadowing_;
   TransferIntegrator glossy_;  // 4 x 4 blocks up to kBlockGlossUpTo, else per pixel
   std::map<std::pair<int, int64_t>, Sampled> cache_;

@@ -479,16 +479,36 @@ double ShadowHierarchy::meanBlockers() const {
          double(vertices);
 }
 
+namespace {
+
+// The vertices of the triangles t with dot(normal(t), toViewer(a)) > 0,
+// where a is t's first corner.
+template <class ToViewer>
+std::vector<uint8_t> verticesOfTrianglesFacing(const std::vector<glm::vec3>& positions,
+                                               const std::vector<glm::uvec3>& triangles,
+                                               ToViewer&& toViewer) {
+  std::vector<uint8_t> front(positions.size(), 0);
+  for (const glm::uvec3& t : triangles) {
+    const glm::vec3 a = positions[t.x];
+    const glm::vec3 n = glm::cross(positions[t.y] - a, positions[t.z] - a);
+    if (glm::dot(n, toViewer(a)) > 0.0f) front[t.x] = front[t.y] = front[t.z] = 1;
+  }
+  return front;
+}
+
+}  // namespace
+
 std::vector<uint8_t> frontFacingVertices(const std::vector<glm::vec3>& positions,
                                          const std::vector<glm::uvec3>& triangles,
                                          const glm::vec3& view) {
-  std::vector<uint8_t> front(positions.size(), 0);
-  for (const glm::uvec3& t : triangles) {
-    const glm::vec3 n =
-        glm::cross(positions[t.y] - positions[t.x], positions[t.z] - positions[t.x]);
-    if (glm::dot(n, view) < 0.0f) front[t.x] = front[t.y] = front[t.z] = 1;
-  }
-  return front;
+  return verticesOfTrianglesFacing(positions, triangles, [&](const glm::vec3&) { return -view; });
+}
+
+std::vector<uint8_t> verticesFacing(const std::vector<glm::vec3>& positions,
+                                    const std::vector<glm::uvec3>& triangles,
+                                    const glm::vec3& eye) {
+  return verticesOfTrianglesFacing(positions, triangles,
+                                   [&](const glm::vec3& a) { return eye - a; });
 }
 
 void monteCarloTransfer(const std::vector<glm::vec3>& positions,

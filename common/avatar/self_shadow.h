@@ -177,6 +177,10 @@ class SelfShadowing {
 std::vector<uint8_t> frontFacingVertices(const std::vector<glm::vec3>& positions,
                                          const std::vector<glm::uvec3>& triangles,
                                          const glm::vec3& view);
+// The same for a viewer at the point `eye` (perspective): a triangle faces it
+// when `eye` lies strictly in front of its plane.
+std::vector<uint8_t> verticesFacing(const std::vector<glm::vec3>& positions,
+                                    const std::vector<glm::uvec3>& triangles, const glm::vec3& eye);
 
 // Monte Carlo diffuse transfer of the same mesh: `rays` cosine-weighted rays
 // a vertex (a stratified grid, rotated per vertex by a hash of its index),

@@ -224,6 +224,84 @@ TEST(AvatarShader, ThePoseCacheForgetsWhatPassesItsByteBound) {
   }
 }
 
+// The triangles of a shaded avatar whose plane has `eye` strictly in front.
+std::vector<size_t> trianglesFacing(const AvatarModel& model, const ShadedAvatar& shaded,
+                                    const glm::vec3& eye) {
+  std::vector<size_t> out;
+  for (size_t t = 0; t < model.triangleCount(); ++t) {
+    const glm::uvec3 i = model.triangles()[t];
+    const glm::vec3 a = shaded.positions[i.x], b = shaded.positions[i.y], c = shaded.positions[i.z];
+    if (glm::dot(glm::cross(b - a, c - a), eye - a) > 0.0f) out.push_back(t);
+  }
+  return out;
+}
+
+// The paper's front-facing saving, shared between viewers: a viewer gets
+// exactly the colours whole shading gives every triangle facing it, for
+// only part of the work; a second viewer on the other side shades just what
+// the first left, after which both are served from the cache.
+TEST(AvatarShader, ShadesWhatAViewerFacesAndTheRestWhenAnotherViewerNeedsIt) {
+  const auto walker = std::make_shared<const AvatarModel>(
+      AvatarModel::fromScene(generateWalker(), "walker", 1.75f));
+  const AvatarLight light = bluishSky();
+  AvatarShaderOptions wholeOptions;
+  wholeOptions.frontFacingOnly = false;
+  AvatarShader front(walker), whole(walker, wholeOptions);
+  ASSERT_TRUE(front.shadesFrontFacingOnly());
+  ASSERT_FALSE(whole.shadesFrontFacingOnly());
+  const glm::vec3 eyeA(0.4f, 1.2f, 4.0f), eyeB(-0.3f, 1.0f, -4.0f);
+  ShadedAvatar a, b, again, all;
+  front.shade(Gait::Walk, 0.3f, light, 1.0f, a, &eyeA);
+  whole.shade(Gait::Walk, 0.3f, light, 1.0f, all, &eyeA);
+  const size_t vertices = walker->vertexCount();
+  EXPECT_EQ(whole.stats().verticesShaded, vertices);
+  const uint64_t firstViewer = front.stats().verticesShaded;
+  EXPECT_GT(firstViewer, 0u);
+  EXPECT_LT(firstViewer, vertices);
+  const std::vector<size_t> facingA = trianglesFacing(*walker, a, eyeA);
+  ASSERT_FALSE(facingA.empty());
+  for (const size_t t : facingA)
+    for (int k = 0; k < 3; ++k)
+      ASSERT_EQ(a.corners[3 * t + size_t(k)], all.corners[3 * t + size_t(k)]);
+
+  front.shade(Gait::Walk, 0.3f, light, 1.0f, b, &eyeB);
+  EXPECT_EQ(front.stats().posesShaded, 2u);
+  EXPECT_GT(front.stats().verticesShaded, firstViewer);
+  EXPECT_LE(front.stats().verticesShaded, vertices);
+  for (const size_t t : trianglesFacing(*walker, b, eyeB))
+    for (int k = 0; k < 3; ++k)
+      ASSERT_EQ(b.corners[3 * t + size_t(k)], all.corners[3 * t + size_t(k)]);
+
+  front.shade(Gait::Walk, 0.3f, light, 1.0f, again, &eyeA);
+  EXPECT_EQ(front.stats().posesShaded, 2u);
+  EXPECT_EQ(front.stats().posesReused, 1u);
+  for (const size_t t : facingA)
+    for (int k = 0; k < 3; ++k)
+      ASSERT_EQ(again.corners[3 * t + size_t(k)], all.corners[3 * t + size_t(k)]);
+}
+
+// A model with a hole is not shaded by facing (its inside may show).
+TEST(AvatarShader, AnOpenModelIsShadedWholeForEveryViewer) {
+  Scene scene = generateWalker();
+  bool cut = false;
+  for (Object& o : scene.objects)
+    if (o.skin >= 0 && !cut) {
+      o.mesh.triangles.pop_back();
+      if (!o.mesh.faceIds.empty()) o.mesh.faceIds.pop_back();
+      if (!o.mesh.materials.empty()) o.mesh.materials.pop_back();
+      cut = true;
+    }
+  ASSERT_TRUE(cut);
+  const auto open =
+      std::make_shared<const AvatarModel>(AvatarModel::fromScene(scene, "open", 1.75f));
+  AvatarShader shader(open);
+  EXPECT_FALSE(shader.shadesFrontFacingOnly());
+  ShadedAvatar out;
+  const glm::vec3 eye(0.0f, 1.0f, 4.0f);
+  shader.shade(Gait::Walk, 0.3f, bluishSky(), 1.0f, out, &eye);
+  EXPECT_EQ(shader.stats().verticesShaded, open->vertexCount());
+}
+
 // The built-in walker: a closed, outward-wound figure 1.75 m tall whose
 // legs swing when it walks: the top of its head sees the whole sky (its
 // transfer vector is the open cosine's), and a foot moves between two
