@@ -389,6 +389,10 @@ int runClientBenchTool(int argc, char** argv) {
                  "the Fox to 7,778 vertices, near the paper's Hand)")
       ->check(CLI::IsMember({3, 4}))
       ->default_val(4);
+  app.add_option("--gloss", a.shadow.glossExponent,
+                 "--shadows: the Phong exponent of the glossy rows (the paper's glossy BRDF, "
+                 "against its own Monte Carlo reference; 0: no glossy rows)")
+      ->check(CLI::Range(0.0f, 256.0f));
   app.add_option("--shadow-frames", a.shadow.frames, "--shadows: frames of the clip to time")
       ->check(atLeast(2));
   app.add_option("--shadow-png", a.shadow.png,

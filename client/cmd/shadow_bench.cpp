@@ -1,6 +1,7 @@
 #include "client/cmd/shadow_bench.h"
 
 #include <fmt/format.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
@@ -12,6 +13,7 @@
 #include "client/farfield/pipeline.h"
 #include "client/render/image.h"
 #include "client/render/render_geometry.h"
+#include "common/avatar/avatar_model.h"
 #include "common/avatar/self_shadow.h"
 #include "common/avatar/skinning.h"
 #include "common/core/error.h"
@@ -237,6 +239,154 @@ void writeShadowPng(const std::string& file, const std::string& environment, con
   writePng(contactSheet(tiles, 3), file);
 }
 
+// Monte Carlo's time at error e from its sweep `curve` of (ms, error),
+// rays increasing: log-log interpolation, or the nearest end extended with
+// error ~ rays^-1/2 (time ~ e^-2).
+double msAtError(const std::vector<std::pair<double, double>>& curve, double e) {
+  if (e <= 0.0 || curve.empty()) return double(INFINITY);
+  for (size_t s = 0; s + 1 < curve.size(); ++s) {
+    const auto [t0, e0] = curve[s];
+    const auto [t1, e1] = curve[s + 1];
+    if (e <= e0 && e >= e1 && e0 > e1) {
+      const double x = std::log(e0 / e) / std::log(e0 / e1);
+      return std::exp(std::log(t0) + x * std::log(t1 / t0));
+    }
+  }
+  if (e > curve.front().second)
+    return curve.front().first * std::pow(curve.front().second / e, 2.0);
+  return curve.back().first * std::pow(curve.back().second / e, 2.0);
+}
+
+// |a - b| / |b| over all the vertices' coefficients together. The glossy
+// rows use it instead of the per-vertex mean: a vertex whose lobe is almost
+// wholly blocked has a reference near zero, and its relative error would
+// outweigh every other vertex's.
+double fieldRelativeL2(const std::vector<float>& a, const std::vector<float>& b, int /*terms*/) {
+  double num = 0.0, den = 0.0;
+  for (size_t i = 0; i < std::min(a.size(), b.size()); ++i) {
+    num += (double(a[i]) - b[i]) * (double(a[i]) - b[i]);
+    den += double(b[i]) * b[i];
+  }
+  return den > 0.0 ? std::sqrt(num / den) : 0.0;
+}
+
+// The glossy rows: a normalized Phong lobe about each front-facing vertex's
+// reflection of a viewer at the figure's camera (3 model radii away),
+// integrated from the visibility masks the diffuse pass makes, against a
+// Monte Carlo reference of its own (`referenceRays`, two halves) and a Monte
+// Carlo sweep, on the reference frames and over the reference's sample of
+// the vertices that face the viewer. Errors are fieldRelativeL2.
+struct GlossyRows {
+  float exponent = 0.0f;
+  double masksMs = 0.0;      // the diffuse pass of the facing vertices, keeping their masks
+  double integrateMs = 0.0;  // the glossy integration of the facing vertices, per pixel
+  double l2 = 0.0;           // against the reference
+  double blocksMs = 0.0, blocksL2 = 0.0;  // the same in the paper's 4 x 4 blocks
+  double referenceError = 0.0;
+  size_t facing = 0;  // vertices facing the viewer (first reference frame)
+  std::vector<uint32_t> sweep;
+  std::vector<std::pair<double, double>> mc;  // (ms, error) per sweep count
+  double mcEqualMs() const { return msAtError(mc, l2); }
+  double ms() const { return masksMs + integrateMs; }
+};
+
+GlossyRows glossyRows(const Model& m, const Reference& reference, int ring, float exponent,
+                      uint32_t referenceRays, const std::vector<uint32_t>& sweep) {
+  GlossyRows g;
+  g.exponent = exponent;
+  g.sweep = sweep;
+  const SelfShadowing shadows;
+  const int orders = TransferOptions{}.orders, terms = shTerms(orders);
+  const TransferIntegrator perPixel(shadows.options().maskSide, {orders, false}),
+      blocks(shadows.options().maskSide, {orders, true});
+  const ShadowHierarchy hierarchy =
+      ring > 0 ? ShadowHierarchy::build(m.mesh.triangles, m.coarse, m.levels, ring,
+                                        m.mesh.positions.size(), m.split)
+               : ShadowHierarchy{};
+  std::vector<double> masksMs, integrateMs, l2, blocksMs, blocksL2, own;
+  std::vector<std::vector<double>> ms(sweep.size()), err(sweep.size());
+  ProgressBar bar("glossy", uint64_t(reference.frames.size()) * (3 + sweep.size()));
+  for (const size_t f : reference.frames) {
+    PosedMesh pose;
+    poseAt(m.scene, m.mesh, m.clip, m.times[f], pose);
+    const size_t vertices = pose.positions.size();
+    Box3f bounds;
+    for (const glm::vec3& p : pose.positions) bounds.extend(p);
+    const glm::vec3 eye =
+        bounds.center() - figureCamera().forward() * 1.5f * glm::length(bounds.hi - bounds.lo);
+    std::vector<glm::vec3> reflected(vertices);
+    std::vector<uint8_t> facing(vertices, 0);
+    for (size_t v = 0; v < vertices; ++v) {
+      const glm::vec3 n = pose.normals[v], toEye = glm::normalize(eye - pose.positions[v]);
+      const float c = glm::dot(n, toEye);
+      facing[v] = c > 0.0f;
+      reflected[v] = 2.0f * c * n - toEye;
+    }
+    if (g.facing == 0) g.facing = size_t(std::count(facing.begin(), facing.end(), 1));
+    const std::vector<uint8_t> measured = both(reference.sample, &facing);
+    // The reference, as two independent halves.
+    std::vector<float> half[2];
+    for (int h = 0; h < 2; ++h) {
+      monteCarloGlossyTransfer(pose.positions, pose.normals, m.mesh.triangles, reflected, exponent,
+                               referenceRays / 2, orders, half[h], uint64_t(2 * h + 5), &measured);
+      bar.advance();
+    }
+    own.push_back(0.5 * fieldRelativeL2(selected(half[0], terms, &measured),
+                                        selected(half[1], terms, &measured), terms));
+    std::vector<float> ref(half[0].size());
+    for (size_t i = 0; i < ref.size(); ++i) ref[i] = 0.5f * (half[0][i] + half[1][i]);
+    // Ours: the masks of the facing vertices (as the diffuse pass makes
+    // them), then the lobe.
+    Stopwatch clock;
+    std::vector<float> diffuse;
+    std::vector<uint64_t> masks;
+    shadows.diffuse(pose.positions, pose.normals, m.mesh.triangles, diffuse,
+                    {.hierarchy = ring > 0 ? &hierarchy : nullptr,
+                     .groups = &m.groups,
+                     .only = &facing,
+                     .masks = &masks});
+    masksMs.push_back(clock.ms());
+    const size_t words = size_t(shadows.maskWords());
+    for (const TransferIntegrator* integrator : {&perPixel, &blocks}) {
+      Stopwatch integrateClock;
+      std::vector<float> ours(vertices * size_t(terms), 0.0f);
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, vertices, 64), [&](const auto& range) {
+        VisibilityMask mask(shadows.options().maskSide);
+        for (size_t v = range.begin(); v != range.end(); ++v) {
+          if (!facing[v]) continue;
+          std::copy_n(masks.data() + v * words, words, mask.data());
+          integrator->glossy(mask, TangentFrame::around(pose.normals[v]), reflected[v], exponent,
+                             ours.data() + v * size_t(terms));
+        }
+      });
+      (integrator == &perPixel ? integrateMs : blocksMs).push_back(integrateClock.ms());
+      (integrator == &perPixel ? l2 : blocksL2)
+          .push_back(fieldRelativeL2(selected(ours, terms, &measured),
+                                     selected(ref, terms, &measured), terms));
+    }
+    bar.advance();
+    for (size_t s = 0; s < sweep.size(); ++s) {
+      std::vector<float> estimate;
+      Stopwatch mcClock;
+      monteCarloGlossyTransfer(pose.positions, pose.normals, m.mesh.triangles, reflected, exponent,
+                               sweep[s], orders, estimate, 2, &facing);
+      ms[s].push_back(mcClock.ms());
+      err[s].push_back(fieldRelativeL2(selected(estimate, terms, &measured),
+                                       selected(ref, terms, &measured), terms));
+      bar.advance();
+    }
+  }
+  bar.finish();
+  g.masksMs = median(masksMs);
+  g.integrateMs = median(integrateMs);
+  g.l2 = median(l2);
+  g.blocksMs = median(blocksMs);
+  g.blocksL2 = median(blocksL2);
+  g.referenceError = median(own);
+  for (size_t s = 0; s < sweep.size(); ++s) g.mc.emplace_back(median(ms[s]), median(err[s]));
+  return g;
+}
+
 }  // namespace
 
 int runShadowBench(const ShadowBenchArgs& a) {
@@ -330,21 +480,7 @@ int runShadowBench(const ShadowBenchArgs& a) {
     }
     writeShadowPng(a.png, a.environment, m, reference.frames.front(), whole, orders);
   }
-  // Monte Carlo's time at error e: log-log interpolation, or the last point
-  // extended with error ~ rays^-1/2 (time ~ e^-2).
-  auto mcMsAt = [&](double e) -> double {
-    if (e <= 0.0) return double(INFINITY);
-    for (size_t s = 0; s + 1 < mc.size(); ++s) {
-      const auto [t0, e0] = mc[s];
-      const auto [t1, e1] = mc[s + 1];
-      if (e <= e0 && e >= e1 && e0 > e1) {
-        const double x = std::log(e0 / e) / std::log(e0 / e1);
-        return std::exp(std::log(t0) + x * std::log(t1 / t0));
-      }
-    }
-    if (e > mc.front().second) return mc.front().first * std::pow(mc.front().second / e, 2.0);
-    return mc.back().first * std::pow(mc.back().second / e, 2.0);
-  };
+  auto mcMsAt = [&](double e) { return msAtError(mc, e); };
 
   // Defaults, then each knob alone.
   std::vector<Run> runs;
@@ -436,6 +572,10 @@ int runShadowBench(const ShadowBenchArgs& a) {
     add("mesh hierarchy", "off (every fine triangle)", {}, 0);
   }
   bar.finish();
+  const bool glossy = a.glossExponent > 0.0f && !reference.frames.empty();
+  const GlossyRows gloss =
+      glossy ? glossyRows(m, reference, defaultRing, a.glossExponent, referenceRays, sweep)
+             : GlossyRows{};
 
   const Run& d = runs.front();
   const Run& withPvs = runs[1];
@@ -481,6 +621,28 @@ int runShadowBench(const ShadowBenchArgs& a) {
   json knobRows = json::array();
   for (const Run& r : runs) knobRows.push_back(runJson(r));
   out["knobs"] = knobRows;
+  if (glossy) {
+    json glossyMc = json::array();
+    for (size_t s = 0; s < gloss.sweep.size(); ++s)
+      glossyMc.push_back({{"rays", gloss.sweep[s]},
+                          {"ms_per_frame", gloss.mc[s].first},
+                          {"l2_error", gloss.mc[s].second}});
+    out["glossy"] = {{"exponent", gloss.exponent},
+                     {"facing_vertices", gloss.facing},
+                     {"masks_ms_per_frame", gloss.masksMs},
+                     {"integrate_ms_per_frame", gloss.integrateMs},
+                     {"ms_per_frame", gloss.ms()},
+                     {"l2_error", gloss.l2},
+                     {"reference_error", gloss.referenceError},
+                     {"mc_ms_equal_error", gloss.mcEqualMs()},
+                     {"speedup_vs_mc", gloss.mcEqualMs() / gloss.ms()},
+                     {"speedup_vs_mc_integration_only", gloss.mcEqualMs() / gloss.integrateMs},
+                     {"blocks",
+                      {{"integrate_ms_per_frame", gloss.blocksMs},
+                       {"l2_error", gloss.blocksL2},
+                       {"mc_ms_equal_error", msAtError(gloss.mc, gloss.blocksL2)}}},
+                     {"monte_carlo", glossyMc}};
+  }
 
   if (a.json) {
     std::printf("%s\n", out.dump(2).c_str());
@@ -521,6 +683,22 @@ int runShadowBench(const ShadowBenchArgs& a) {
   for (const Run& r : runs)
     std::printf("%-16s %-46s %10.2f %8.1f %10.4f %9.1f\n", r.knob.c_str(), r.value.c_str(),
                 r.msPerFrame, 1000.0 / r.msPerFrame, r.l2, r.blockersPerVertex);
+  if (glossy) {
+    std::printf(
+        "\nGlossy (Phong %g about the figure's viewer, %zu facing vertices; against %u rays a "
+        "vertex, own error %.2f%%):\n",
+        gloss.exponent, gloss.facing, referenceRays, 100.0 * gloss.referenceError);
+    std::printf("%-28s %10.2f\n%-28s %10.2f\n%-28s %9.2f%%\n%-28s %10.1f\n%-28s %9.1fx\n",
+                "masks ms a frame", gloss.masksMs, "glossy integration ms", gloss.integrateMs,
+                "L2 error", 100.0 * gloss.l2, "Monte Carlo ms, same error", gloss.mcEqualMs(),
+                "faster than Monte Carlo", gloss.mcEqualMs() / gloss.ms());
+    std::printf("%-28s %9.1fx\n%-28s %10.2f\n%-28s %9.2f%%\n", "  integration alone",
+                gloss.mcEqualMs() / gloss.integrateMs, "4x4 blocks: integration ms", gloss.blocksMs,
+                "4x4 blocks: L2 error", 100.0 * gloss.blocksL2);
+    std::printf("%-10s %12s %12s\n", "rays", "ms a frame", "L2 error");
+    for (size_t s = 0; s < gloss.sweep.size(); ++s)
+      std::printf("%-10u %12.1f %12.4f\n", gloss.sweep[s], gloss.mc[s].first, gloss.mc[s].second);
+  }
   return 0;
 }
 

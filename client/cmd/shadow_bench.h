@@ -37,6 +37,13 @@ struct ShadowBenchArgs {
   // model's scene environment (the analytic sky for a bare glTF).
   std::string environment;
   bool json = false;
+  // The glossy rows (JSON `glossy`): a normalized Phong lobe of this
+  // exponent about each front-facing vertex's reflection of a viewer at the
+  // figure's camera, from the same masks (per pixel, and in 4 x 4 blocks),
+  // against a Monte Carlo reference and sweep of its own; the error is the
+  // relative L2 distance of all the facing vertices' coefficients together
+  // (a per-vertex mean is dominated by lobes almost wholly blocked). 0: none.
+  float glossExponent = 16.0f;
 };
 
 // Returns 0 on success; throws InputError for a model it cannot use.

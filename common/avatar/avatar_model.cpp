@@ -202,8 +202,7 @@ AvatarShader::AvatarShader(std::shared_ptr<const AvatarModel> model,
     : model_(std::move(model)),
       options_(options),
       shadowing_(options.shadows),
-      glossy_(options.shadows.maskSide,
-              {kOrders, options.glossExponent <= AvatarShaderOptions::kBlockGlossUpTo}) {
+      glossy_(options.shadows.maskSide, {kOrders, options.glossInBlocks}) {
   VS_CHECK(model_ != nullptr);
   groups_ = TriangleGroups::build(model_->triangles(), model_->restPositions());
   frontFacingOnly_ =

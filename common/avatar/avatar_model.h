@@ -138,12 +138,13 @@ struct AvatarShaderOptions {
   // this exponent about the viewer's reflected direction, self-shadowed
   // through the same visibility masks, added with weight `specular`. It is
   // view-dependent, so it is integrated per frame and viewer from the masks
-  // kept with each sampled pose: in 4 x 4 blocks up to kBlockGlossUpTo (a
-  // broad lobe; 16 times fewer samples), per pixel above (blocks miss a
-  // narrow lobe: 16% off at exponent 128, 34% at 256, against 1% per pixel).
+  // kept with each sampled pose, per mask pixel: with glossInBlocks, in the
+  // paper's 4 x 4 blocks instead, 5 times faster but 4 times the error on the
+  // Fox (10.5% against 2.6% at exponent 16, `vistream-client-bench
+  // --shadows`), and blocks lose a narrow lobe altogether (34% off at 256).
   // 0: off (diffuse only, nothing kept).
   float glossExponent = 0.0f;
-  static constexpr float kBlockGlossUpTo = 16.0f;
+  bool glossInBlocks = false;
   float specular = 0.25f;
   // The paper's saving: given a viewer, shade only the vertices of the
   // triangles that face it, and the rest of a sampled pose when another
@@ -206,7 +207,7 @@ class AvatarShader {
   AvatarShaderOptions options_;
   bool frontFacingOnly_ = false;  // options_.frontFacingOnly on a closed outward model
   SelfShadowing shadowing_;
-  TransferIntegrator glossy_;  // 4 x 4 blocks up to kBlockGlossUpTo, else per pixel
+  TransferIntegrator glossy_;  // per pixel, or 4 x 4 blocks with glossInBlocks
   std::map<std::pair<int, int64_t>, Sampled> cache_;
   size_t cacheBytes_ = 0;  // of cache_'s poses, as poseBytes() counts them
   Sampled exact_;

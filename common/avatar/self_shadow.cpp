@@ -511,10 +511,15 @@ std::vector<uint8_t> verticesFacing(const std::vector<glm::vec3>& positions,
                                    [&](const glm::vec3& a) { return eye - a; });
 }
 
-void monteCarloTransfer(const std::vector<glm::vec3>& positions,
-                        const std::vector<glm::vec3>& normals,
-                        const std::vector<glm::uvec3>& triangles, uint32_t rays, int orders,
-                        std::vector<float>& out, uint64_t seed, const std::vector<uint8_t>* only) {
+namespace {
+
+// Monte Carlo transfer with each unblocked ray's basis values weighted by
+// weight(v, direction) (1: diffuse).
+template <class Weight>
+void traceTransfer(const std::vector<glm::vec3>& positions, const std::vector<glm::vec3>& normals,
+                   const std::vector<glm::uvec3>& triangles, uint32_t rays, int orders,
+                   std::vector<float>& out, uint64_t seed, const std::vector<uint8_t>* only,
+                   Weight&& weight) {
   VS_CHECK(rays >= 1 && orders >= 1 && orders <= kMaxShOrder + 1);
   if (only) VS_CHECK_EQ(only->size(), positions.size());
   const int terms = shTerms(orders);
@@ -558,14 +563,39 @@ void monteCarloTransfer(const std::vector<glm::vec3>& positions,
       }
       query->occludedMany(batch, hit);
       float* t = out.data() + v * size_t(terms);
-      const float weight = float(kPi / rays);
+      const float scale = float(kPi / rays);
       for (uint32_t k = 0; k < rays; ++k) {
         if (hit[k]) continue;
+        const float w = scale * weight(v, batch[k].dir);
         shEvaluate(batch[k].dir, orders, y);
-        for (int i = 0; i < terms; ++i) t[i] += weight * y[i];
+        for (int i = 0; i < terms; ++i) t[i] += w * y[i];
       }
     }
   });
+}
+
+}  // namespace
+
+void monteCarloTransfer(const std::vector<glm::vec3>& positions,
+                        const std::vector<glm::vec3>& normals,
+                        const std::vector<glm::uvec3>& triangles, uint32_t rays, int orders,
+                        std::vector<float>& out, uint64_t seed, const std::vector<uint8_t>* only) {
+  traceTransfer(positions, normals, triangles, rays, orders, out, seed, only,
+                [](size_t, const glm::vec3&) { return 1.0f; });
+}
+
+void monteCarloGlossyTransfer(const std::vector<glm::vec3>& positions,
+                              const std::vector<glm::vec3>& normals,
+                              const std::vector<glm::uvec3>& triangles,
+                              const std::vector<glm::vec3>& reflected, float exponent,
+                              uint32_t rays, int orders, std::vector<float>& out, uint64_t seed,
+                              const std::vector<uint8_t>* only) {
+  VS_CHECK_EQ(reflected.size(), positions.size());
+  const float norm = float((exponent + 1.0) / (2.0 * kPi));
+  traceTransfer(positions, normals, triangles, rays, orders, out, seed, only,
+                [&](size_t v, const glm::vec3& d) {
+                  return norm * std::pow(std::max(0.0f, glm::dot(d, reflected[v])), exponent);
+                });
 }
 
 double meanRelativeL2(const std::vector<float>& a, const std::vector<float>& b, int terms) {

@@ -195,6 +195,16 @@ void monteCarloTransfer(const std::vector<glm::vec3>& positions,
                         std::vector<float>& out, uint64_t seed = 0,
                         const std::vector<uint8_t>* only = nullptr);
 
+// The same for glossy transfer (TransferIntegrator::glossy): each ray
+// weighted by the normalized Phong lobe (e + 1) / (2 pi) (r . s)^e about
+// vertex v's reflected direction reflected[v] (unit, world).
+void monteCarloGlossyTransfer(const std::vector<glm::vec3>& positions,
+                              const std::vector<glm::vec3>& normals,
+                              const std::vector<glm::uvec3>& triangles,
+                              const std::vector<glm::vec3>& reflected, float exponent,
+                              uint32_t rays, int orders, std::vector<float>& out, uint64_t seed = 0,
+                              const std::vector<uint8_t>* only = nullptr);
+
 // Mean over vertices of |a - b| / |b| for transfer vectors of `terms`
 // coefficients (vertices where b is zero are left out).
 double meanRelativeL2(const std::vector<float>& a, const std::vector<float>& b, int terms);

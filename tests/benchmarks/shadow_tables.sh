@@ -5,7 +5,9 @@
 # with it, mean relative L2 error against converged Monte Carlo, and how many
 # times faster than Embree Monte Carlo at the same error) and Table 2 (share
 # of a frame in rasterization, integration, transform, other), one row per
-# model, from `vistream-client-bench --shadows --json`. Usage:
+# model, from `vistream-client-bench --shadows --json`, then the glossy
+# transfer's row per model (error and speed against its own Monte Carlo
+# reference). Usage:
 #   tests/benchmarks/shadow_tables.sh [MODEL:SUBDIVIDE[:BY] ...]
 # The default models are the Fox, the Fox split at centroids three times
 # (7,778 vertices, near the paper's 8,636-vertex Hand), the Fox subdivided
@@ -54,5 +56,15 @@ for d in rows:
     b = d["breakdown"]
     print("%-14s %12.1f%% %10.1f%% %8.1f%% %5.1f%%" % (name(d), 100 * b["rasterization"],
           100 * b["integration"], 100 * b["transform"], 100 * b["other"]))
+glossy = [d for d in rows if "glossy" in d]
+if glossy:
+    print("\nGlossy transfer (Phong lobe about the figure's viewer, front-facing vertices)")
+    print("%-14s %8s %7s %10s %13s %9s %15s %17s" % ("model", "exponent", "facing", "masks ms",
+          "integrate ms", "L2 error", "faster than MC", "integration only"))
+    for d in glossy:
+        g = d["glossy"]
+        print("%-14s %8g %7d %10.2f %13.2f %8.2f%% %14.1fx %16.1fx" % (name(d), g["exponent"],
+              g["facing_vertices"], g["masks_ms_per_frame"], g["integrate_ms_per_frame"],
+              100 * g["l2_error"], g["speedup_vs_mc"], g["speedup_vs_mc_integration_only"]))
 PY
 echo "shadow_tables: ${#jsons[@]} models, done" >&2

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <random>
 
+#include "common/avatar/self_shadow.h"
 #include "common/light/spherical_harmonics.h"
 #include "tests/common/support/random_directions.h"
 
@@ -179,7 +180,36 @@ TEST(Transfer, GlossyTransferOfAnOpenHemisphereMatchesADirectQuadrature) {
   }
 }
 
-// Why avatars integrate sharp lobes per pixel (AvatarShaderOptions): on the
+// The glossy Monte Carlo reference (self_shadow.h) against the same
+// quadrature: a vertex with nothing above it (one triangle far below its
+// tangent plane), and under a roof that hides its whole hemisphere.
+TEST(Transfer, GlossyMonteCarloOfAnOpenVertexMatchesTheQuadratureAndARoofBlocksIt) {
+  const glm::vec3 n = glm::normalize(glm::vec3(0.3f, 1.0f, -0.2f));
+  const TangentFrame frame = TangentFrame::around(n);
+  const glm::vec3 rLocal = glm::normalize(glm::vec3(0.4f, -0.2f, 0.9f));
+  const std::vector<double> want = glossyByQuadrature(frame, rLocal, 8.0);
+  const std::vector<glm::vec3> positions = {glm::vec3(0.0f), -10.0f * n + glm::vec3(1, 0, 0),
+                                            -10.0f * n + glm::vec3(0, 0, 1),
+                                            -10.0f * n + glm::vec3(-1, 0, -1)};
+  const std::vector<glm::vec3> normals(4, n), reflected(4, frame.toWorld(rLocal));
+  const std::vector<uint8_t> first = {1, 0, 0, 0};
+  std::vector<float> got;
+  monteCarloGlossyTransfer(positions, normals, {glm::uvec3(1, 2, 3)}, reflected, 8.0f, 65536, 5,
+                           got, 0, &first);
+  EXPECT_LT(relativeL2(got.data(), want, 25), 0.02);
+  for (size_t i = 25; i < got.size(); ++i) EXPECT_EQ(got[i], 0.0f);  // not traced
+  // A roof 1 m above, 1 km wide, both windings.
+  const glm::vec3 up = n, t = frame.t, b = frame.b;
+  const std::vector<glm::vec3> roofed = {glm::vec3(0.0f), up + 1000.0f * (t + b),
+                                         up + 1000.0f * (b - t), up - 1000.0f * b * 2.0f};
+  monteCarloGlossyTransfer(roofed, normals, {glm::uvec3(1, 2, 3)}, reflected, 8.0f, 4096, 5, got, 0,
+                           &first);
+  double sum = 0.0;
+  for (int i = 0; i < 25; ++i) sum += std::abs(got[size_t(i)]);
+  EXPECT_LT(sum, 1e-3);
+}
+
+// Why avatars integrate glossy lobes per pixel (AvatarShaderOptions): on the
 // shader's 32 x 32 masks, per-pixel sums stay within 2% of the quadrature for
 // every exponent up to the client's limit of 256 (beyond it the lobe is
 // narrower than a pixel), while 4x4 blocks (about 50 samples) lose it.
