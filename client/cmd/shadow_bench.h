@@ -11,7 +11,7 @@
 // up to 2,000 vertices and for an even sample of 1,000 above; the error is
 // the mean relative L2 distance of the transfer vectors to it over those
 // vertices. Monte Carlo itself is
-// swept (64 to 16,384 rays, or to 4,096 on larger models; another seed)
+// swept (64 to 16,384 rays a vertex, every vertex; another seed)
 // and its time at our error interpolated on a log-log line (error falling
 // as rays^-1/2 beyond the sweep). The per-vertex PVS (section 3.2) is built
 // from poses between the benchmark's frames and run as Table 1's "with PVS"
