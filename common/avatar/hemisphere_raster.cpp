@@ -113,7 +113,83 @@ PlaneMaskTable::PlaneMaskTable(int maskSide, int cubeSide)
   });
 }
 
+#if defined(__SSE2__)
+namespace {
+
+// The cube-map cells of the four normals in the lanes of (nx, ny, nz): per
+// lane, cell (i, j) and flags (bit 0: a negative face; bits 1-2: the axis;
+// all 0 for a normal with no major component, as cellOf's {0, 0, 0}). Every
+// lookup goes through here (cellOf too), so scalar and batched lookups
+// cannot disagree, whatever the compiler fuses. Selects, not branches:
+// plane normals come in no order, so branching on the major axis
+// mispredicts about half the time.
+struct Cells4 {
+  alignas(16) int32_t i[4], j[4], flags[4];
+};
+Cells4 cells4(int cubeSide, __m128 nx, __m128 ny, __m128 nz) {
+  const __m128 signBit = _mm_set1_ps(-0.0f), zero = _mm_setzero_ps();
+  const __m128 ax = _mm_andnot_ps(signBit, nx), ay = _mm_andnot_ps(signBit, ny),
+               az = _mm_andnot_ps(signBit, nz);
+  auto select = [](__m128 mask, __m128 a, __m128 b) {
+    return _mm_or_ps(_mm_and_ps(mask, a), _mm_andnot_ps(mask, b));
+  };
+  const __m128 xMajor = _mm_and_ps(_mm_cmpge_ps(ax, ay), _mm_cmpge_ps(ax, az));
+  const __m128 yMajor = _mm_andnot_ps(xMajor, _mm_cmpge_ps(ay, az));
+  const __m128 xyMajor = _mm_or_ps(xMajor, yMajor);
+  const __m128 m = select(xMajor, ax, select(yMajor, ay, az));
+  const __m128 major = select(xMajor, nx, select(yMajor, ny, nz));
+  const __m128 u = select(xMajor, ny, nx), v = select(xyMajor, nz, ny);
+  const __m128 positive = _mm_cmpge_ps(major, zero);
+  const __m128 valid = _mm_cmpgt_ps(m, zero);
+  const float s = float(cubeSide);
+  const __m128 half = _mm_set1_ps(0.5f * s), last = _mm_set1_ps(s - 1.0f);
+  const __m128 scale = _mm_div_ps(half, m);
+  // Clamped as floats before the conversion to int: max(t, 0) gives 0 for
+  // NaN (from an infinite normal).
+  auto cell = [&](__m128 c) {
+    const __m128 t = _mm_add_ps(_mm_mul_ps(c, scale), half);
+    return _mm_cvttps_epi32(_mm_and_ps(valid, _mm_min_ps(_mm_max_ps(t, zero), last)));
+  };
+  Cells4 out;
+  _mm_store_si128(reinterpret_cast<__m128i*>(out.i), cell(u));
+  _mm_store_si128(reinterpret_cast<__m128i*>(out.j), cell(v));
+  const __m128i one = _mm_set1_epi32(1), two = _mm_set1_epi32(2), four = _mm_set1_epi32(4);
+  const __m128i axis = _mm_or_si128(_mm_and_si128(_mm_castps_si128(yMajor), two),
+                                    _mm_andnot_si128(_mm_castps_si128(xyMajor), four));
+  const __m128i negative = _mm_andnot_si128(_mm_castps_si128(positive), one);
+  _mm_store_si128(reinterpret_cast<__m128i*>(out.flags),
+                  _mm_and_si128(_mm_castps_si128(valid), _mm_or_si128(axis, negative)));
+  return out;
+}
+
+// above() for the four normals in the lanes; writes out[0..count) and
+// prefetches each row.
+void above4(const PlaneMaskTable& table, __m128 nx, __m128 ny, __m128 nz, int count,
+            PlaneMaskTable::Mask* out) {
+  const Cells4 c = cells4(table.cubeSide(), nx, ny, nz);
+  const size_t side = size_t(table.cubeSide()), words = size_t(table.words());
+  for (int k = 0; k < count; ++k) {
+    // Cell (i, j) of a negative face holds the negated direction of cell
+    // (side-1-i, side-1-j) of its positive face.
+    const bool neg = c.flags[k] & 1;
+    const size_t i = neg ? side - 1 - size_t(c.i[k]) : size_t(c.i[k]);
+    const size_t j = neg ? side - 1 - size_t(c.j[k]) : size_t(c.j[k]);
+    const size_t stored = (size_t(c.flags[k] >> 1) * side + j) * side + i;
+    out[k] = {table.rows() + stored * words, neg ? ~uint64_t(0) : uint64_t(0)};
+    const char* row = reinterpret_cast<const char*>(out[k].bits);
+    for (size_t line = 0; line < words * sizeof(uint64_t); line += 64)
+      __builtin_prefetch(row + line);
+  }
+}
+
+}  // namespace
+#endif
+
 PlaneMaskTable::Cell PlaneMaskTable::cellOf(const glm::vec3& n) const {
+#if defined(__SSE2__)
+  const Cells4 c = cells4(cubeSide_, _mm_set1_ps(n.x), _mm_set1_ps(n.y), _mm_set1_ps(n.z));
+  return {2 * (c.flags[0] >> 1) + (c.flags[0] & 1), c.i[0], c.j[0]};
+#else
   const glm::vec3 a = glm::abs(n);
   int face;
   float u, v, m;
@@ -136,6 +212,7 @@ PlaneMaskTable::Cell PlaneMaskTable::cellOf(const glm::vec3& n) const {
     return int(std::min(std::max(0.0f, c * scale + 0.5f * s), s - 1.0f));
   };
   return {face, cell(u), cell(v)};
+#endif
 }
 
 PlaneMaskTable::Mask PlaneMaskTable::above(const glm::vec3& n) const {
@@ -149,63 +226,6 @@ PlaneMaskTable::Mask PlaneMaskTable::above(const glm::vec3& n) const {
   const size_t stored = (size_t(c.face >> 1) * side + j) * side + i;
   return {bits_.data() + stored * size_t(words_), negative ? ~uint64_t(0) : uint64_t(0)};
 }
-
-#if defined(__SSE2__)
-namespace {
-
-// cellOf and above() for the four normals in the lanes of (nx, ny, nz), with
-// the same float operations in the same order (so the same cells), as
-// selects instead of branches: plane normals come in no order, so the
-// scalar face choice mispredicts about half the time. Writes out[0..count).
-void above4(const PlaneMaskTable& table, __m128 nx, __m128 ny, __m128 nz, int count,
-            PlaneMaskTable::Mask* out) {
-  const __m128 signBit = _mm_set1_ps(-0.0f), zero = _mm_setzero_ps();
-  const __m128 ax = _mm_andnot_ps(signBit, nx), ay = _mm_andnot_ps(signBit, ny),
-               az = _mm_andnot_ps(signBit, nz);
-  auto select = [](__m128 mask, __m128 a, __m128 b) {
-    return _mm_or_ps(_mm_and_ps(mask, a), _mm_andnot_ps(mask, b));
-  };
-  const __m128 xMajor = _mm_and_ps(_mm_cmpge_ps(ax, ay), _mm_cmpge_ps(ax, az));
-  const __m128 yMajor = _mm_andnot_ps(xMajor, _mm_cmpge_ps(ay, az));
-  const __m128 xyMajor = _mm_or_ps(xMajor, yMajor);
-  const __m128 m = select(xMajor, ax, select(yMajor, ay, az));
-  const __m128 major = select(xMajor, nx, select(yMajor, ny, nz));
-  const __m128 u = select(xMajor, ny, nx), v = select(xyMajor, nz, ny);
-  const __m128 positive = _mm_cmpge_ps(major, zero);
-  const __m128 valid = _mm_cmpgt_ps(m, zero);
-  const float s = float(table.cubeSide());
-  const __m128 half = _mm_set1_ps(0.5f * s), last = _mm_set1_ps(s - 1.0f);
-  const __m128 scale = _mm_div_ps(half, m);
-  // max(t, 0) gives 0 for NaN, as std::max(0.0f, t) does.
-  auto cell = [&](__m128 c) {
-    const __m128 t = _mm_add_ps(_mm_mul_ps(c, scale), half);
-    return _mm_cvttps_epi32(_mm_and_ps(valid, _mm_min_ps(_mm_max_ps(t, zero), last)));
-  };
-  alignas(16) int32_t ci[4], cj[4], flags[4];
-  _mm_store_si128(reinterpret_cast<__m128i*>(ci), cell(u));
-  _mm_store_si128(reinterpret_cast<__m128i*>(cj), cell(v));
-  // Bit 0: a negative face; bits 1-2: the axis (both 0 for an invalid normal).
-  const __m128i one = _mm_set1_epi32(1), two = _mm_set1_epi32(2), four = _mm_set1_epi32(4);
-  const __m128i axis = _mm_or_si128(_mm_and_si128(_mm_castps_si128(yMajor), two),
-                                    _mm_andnot_si128(_mm_castps_si128(xyMajor), four));
-  const __m128i negative = _mm_andnot_si128(_mm_castps_si128(positive), one);
-  _mm_store_si128(reinterpret_cast<__m128i*>(flags),
-                  _mm_and_si128(_mm_castps_si128(valid), _mm_or_si128(axis, negative)));
-  const size_t side = size_t(table.cubeSide()), words = size_t(table.words());
-  for (int k = 0; k < count; ++k) {
-    const bool neg = flags[k] & 1;
-    const size_t i = neg ? side - 1 - size_t(ci[k]) : size_t(ci[k]);
-    const size_t j = neg ? side - 1 - size_t(cj[k]) : size_t(cj[k]);
-    const size_t stored = (size_t(flags[k] >> 1) * side + j) * side + i;
-    out[k] = {table.rows() + stored * words, neg ? ~uint64_t(0) : uint64_t(0)};
-    const char* row = reinterpret_cast<const char*>(out[k].bits);
-    for (size_t line = 0; line < words * sizeof(uint64_t); line += 64)
-      __builtin_prefetch(row + line);
-  }
-}
-
-}  // namespace
-#endif
 
 void PlaneMaskTable::aboveAll(const glm::vec3 normals[4], int count, Mask out[4]) const {
   VS_DCHECK(count >= 0 && count <= 4);

@@ -268,7 +268,9 @@ void SelfShadowing::diffuse(const std::vector<glm::vec3>& positions,
   }
   // Transform every vertex once per receiving vertex where triangles outnumber
   // vertices (a closed mesh has about twice as many); with a hierarchy, the
-  // coarse mesh's vertices (the first ones).
+  // coarse mesh's vertices (the first ones). With group culling this may
+  // transform vertices only culled groups use (measured on the Fox: no
+  // slower than transforming the corners of the surviving triangles).
   size_t eager = 0;
   if (hierarchy) {
     for (const glm::uvec3& t : hierarchy->coarse)

@@ -5,13 +5,16 @@
 #include <signal.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cctype>
 #include <cerrno>
 #include <chrono>
 #include <cstdlib>
 #include <cstring>
+#include <mutex>
 #include <random>
+#include <set>
 #include <string>
 
 #include "common/core/check.h"
@@ -34,7 +37,9 @@ std::string hostName() {
 // so that the whole temporary name stays within NAME_MAX (255 bytes), then
 // ".tmp.".
 std::string temporaryPrefix(const std::filesystem::path& target) {
-  constexpr size_t kSuffix = 64;  // ".tmp." + host (at most 40 here) + pid + counter + word
+  // ".tmp." + host (at most 40) "." pid (at most 10) "." counter (at most 20)
+  // "." word (8).
+  constexpr size_t kSuffix = 5 + 40 + 1 + 10 + 1 + 20 + 1 + 8;
   std::string name = target.filename().string();
   if (name.size() > 255 - kSuffix) name.resize(255 - kSuffix);
   return name + ".tmp.";
@@ -49,24 +54,47 @@ std::string shortHostName() {
   return host;
 }
 
+bool allOf(const std::string& s, int (*is)(int)) {
+  return !s.empty() &&
+         std::all_of(s.begin(), s.end(), [&](char c) { return is(static_cast<unsigned char>(c)); });
+}
+
+// The parts of a temporary's name after its prefix, HOST.PID.COUNTER.WORD;
+// false for a name of any other form (a user's file that merely starts with
+// the prefix).
+bool parseTemporary(const std::string& rest, std::string& host, long& pid) {
+  const size_t word = rest.rfind('.');
+  if (word == std::string::npos || word == 0) return false;
+  const size_t counter = rest.rfind('.', word - 1);
+  if (counter == std::string::npos || counter == 0) return false;
+  const size_t pidAt = rest.rfind('.', counter - 1);
+  if (pidAt == std::string::npos || pidAt == 0) return false;
+  const std::string w = rest.substr(word + 1), c = rest.substr(counter + 1, word - counter - 1),
+                    p = rest.substr(pidAt + 1, counter - pidAt - 1);
+  if (w.size() != 8 || !allOf(w, ::isxdigit) || !allOf(c, ::isdigit) || !allOf(p, ::isdigit) ||
+      p.size() > 10)
+    return false;
+  host = rest.substr(0, pidAt);
+  pid = std::strtol(p.c_str(), nullptr, 10);
+  return true;
+}
+
 // Whether `name`, a temporary of some writer, is stale: left by a process of
-// this host that no longer runs, or (any host) untouched for a day.
+// this host that no longer runs and untouched for an hour (the hour guards
+// against a live writer in another PID namespace under the same host name),
+// or (any host) untouched for a day.
 bool staleTemporary(const std::filesystem::path& path, const std::string& name,
                     const std::string& prefix) {
-  // name = prefix + host "." pid "." counter "." word
-  const std::string rest = name.substr(prefix.size());
-  const std::string host = shortHostName();
-  if (rest.rfind(host + ".", 0) == 0) {
-    const std::string afterHost = rest.substr(host.size() + 1);
-    char* end = nullptr;
-    const long pid = std::strtol(afterHost.c_str(), &end, 10);
-    if (end != afterHost.c_str() && *end == '.' && pid > 0 && pid != long(::getpid()) &&
-        ::kill(pid_t(pid), 0) != 0 && errno == ESRCH)
-      return true;
-  }
+  std::string host;
+  long pid = 0;
+  if (!parseTemporary(name.substr(prefix.size()), host, pid)) return false;
   std::error_code ec;
   const auto written = std::filesystem::last_write_time(path, ec);
-  return !ec && std::filesystem::file_time_type::clock::now() - written > std::chrono::hours(24);
+  if (ec) return false;
+  const auto age = std::filesystem::file_time_type::clock::now() - written;
+  if (age > std::chrono::hours(24)) return true;
+  return host == shortHostName() && age > std::chrono::hours(1) && pid > 0 &&
+         pid != long(::getpid()) && ::kill(pid_t(pid), 0) != 0 && errno == ESRCH;
 }
 
 }  // namespace
@@ -87,14 +115,25 @@ std::filesystem::path uniqueTemporaryBeside(const std::filesystem::path& target)
 }
 
 size_t removeStaleTemporaries(const std::filesystem::path& target) {
-  const std::string prefix = temporaryPrefix(target);
   const std::filesystem::path dir =
       target.parent_path().empty() ? std::filesystem::path(".") : target.parent_path();
+  {
+    // Once per directory and process: writing many files into one directory
+    // (a walk's frames) would otherwise scan it once per file.
+    static std::mutex mutex;
+    static std::set<std::string> swept;
+    const std::lock_guard<std::mutex> lock(mutex);
+    std::error_code ec;
+    const std::filesystem::path key = std::filesystem::weakly_canonical(dir, ec);
+    if (!swept.insert((ec ? dir : key).string()).second) return 0;
+  }
   size_t removed = 0;
   std::error_code ec;
   for (std::filesystem::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
     const std::string name = it->path().filename().string();
-    if (name.rfind(prefix, 0) != 0 || !staleTemporary(it->path(), name, prefix)) continue;
+    const size_t at = name.rfind(".tmp.");
+    if (at == std::string::npos || !staleTemporary(it->path(), name, name.substr(0, at + 5)))
+      continue;
     std::error_code ignored;
     removed += std::filesystem::remove(it->path(), ignored);
   }
@@ -159,8 +198,9 @@ void AtomicFile::commit(Durability durability) {
     // The rename itself survives a crash only once the directory is synced.
     const std::filesystem::path dir =
         target_.parent_path().empty() ? std::filesystem::path(".") : target_.parent_path();
+    // Some file systems cannot sync a directory (EINVAL): nothing more to do there.
     const int dirFd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    const bool synced = dirFd >= 0 && ::fsync(dirFd) == 0;
+    const bool synced = dirFd >= 0 && (::fsync(dirFd) == 0 || errno == EINVAL);
     const std::string reason = synced ? "" : std::strerror(errno);
     if (dirFd >= 0) ::close(dirFd);
     if (!synced) throwInputError("{}: cannot sync the directory: {}", dir.string(), reason);

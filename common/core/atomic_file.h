@@ -8,10 +8,13 @@
 // temporary. commit() flushes (and with Durability::Synced, fsyncs) the
 // temporary and renames it over the target, which POSIX makes atomic within a
 // file system: readers see the old file or the new one, never a torn one;
-// Synced also fsyncs the directory, so the rename survives a crash. An object
+// Synced also fsyncs the directory (where the file system can), so the
+// rename survives a crash; if that fails, commit() throws with the target
+// already replaced. An object
 // destroyed without commit() removes its temporary and leaves the target as it
-// was. A process killed mid-write cannot: its temporary stays until the next
-// writer of the same target removes it as stale (removeStaleTemporaries).
+// was. A process killed mid-write cannot: its temporary stays until a later
+// process writing into the same directory removes it as stale
+// (removeStaleTemporaries).
 // The file gets mode 0666 less the umask.
 //
 // Errors: every failure (open, write, flush, rename) throws InputError naming
@@ -61,10 +64,13 @@ void writeAllTo(int fd, std::span<const uint8_t> bytes, const std::filesystem::p
 // The temporary name AtomicFile uses for `target`: unique per call.
 std::filesystem::path uniqueTemporaryBeside(const std::filesystem::path& target);
 
-// Removes the stale temporaries of `target`'s writers: those a process of
-// this host left that no longer runs, and those of any host untouched for 24
-// hours (a writer that long silent is taken as gone). Never this process's
-// own. AtomicFile calls it before it writes; returns how many it removed.
+// Removes the stale temporaries in `target`'s directory (of any target;
+// names of exactly the temporary's form, NAME.tmp.HOST.PID.COUNTER.WORD):
+// those a process of this host left that no longer runs, untouched for an
+// hour, and those of any host untouched for 24 hours (a writer that long
+// silent is taken as gone). Never this process's own. AtomicFile calls it
+// before it writes, once per directory and process (later calls return 0);
+// returns how many it removed.
 size_t removeStaleTemporaries(const std::filesystem::path& target);
 
 // One-shot forms.

@@ -248,6 +248,7 @@ TEST(AvatarShader, ShadesWhatAViewerFacesAndTheRestWhenAnotherViewerNeedsIt) {
   wholeOptions.frontFacingOnly = false;
   AvatarShader front(walker), whole(walker, wholeOptions);
   ASSERT_TRUE(front.shadesFrontFacingOnly());
+  EXPECT_TRUE(AvatarShader(metreFox()).shadesFrontFacingOnly()) << "the Fox is closed too";
   ASSERT_FALSE(whole.shadesFrontFacingOnly());
   const glm::vec3 eyeA(0.4f, 1.2f, 4.0f), eyeB(-0.3f, 1.0f, -4.0f);
   ShadedAvatar a, b, again, all;

@@ -188,11 +188,16 @@ TEST(HemisphereRaster, BatchedLookupsReadTheSameRowsAsOneAtATime) {
       ASSERT_EQ(many[k].flip, one.flip) << "normal " << k;
     }
   }
-  for (size_t k = 0; k + 4 <= normals.size(); k += 4) {
-    PlaneMaskTable::Mask four[4];
-    table.aboveAll(&normals[k], 4, four);
-    for (int i = 0; i < 4; ++i) ASSERT_EQ(four[i].bits, table.above(normals[k + size_t(i)]).bits);
-  }
+  for (const int count : {1, 2, 3, 4})
+    for (size_t k = 0; k + 4 <= normals.size(); k += 4) {
+      PlaneMaskTable::Mask some[4];
+      table.aboveAll(&normals[k], count, some);
+      for (int i = 0; i < count; ++i) {
+        const PlaneMaskTable::Mask one = table.above(normals[k + size_t(i)]);
+        ASSERT_EQ(some[i].bits, one.bits);
+        ASSERT_EQ(some[i].flip, one.flip);
+      }
+    }
 }
 
 // A batch draws, bit for bit, what the blockers draw one at a time, and

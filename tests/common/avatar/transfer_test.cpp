@@ -198,7 +198,7 @@ TEST(Transfer, GlossyMonteCarloOfAnOpenVertexMatchesTheQuadratureAndARoofBlocksI
                            got, 0, &first);
   EXPECT_LT(relativeL2(got.data(), want, 25), 0.02);
   for (size_t i = 25; i < got.size(); ++i) EXPECT_EQ(got[i], 0.0f);  // not traced
-  // A roof 1 m above, 1 km wide, both windings.
+  // A roof 1 m above, 1 km wide.
   const glm::vec3 up = n, t = frame.t, b = frame.b;
   const std::vector<glm::vec3> roofed = {glm::vec3(0.0f), up + 1000.0f * (t + b),
                                          up + 1000.0f * (b - t), up - 1000.0f * b * 2.0f};
