@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "common/core/cpu_dispatch.h"
 #include "common/light/lighting_cache.h"
 
 namespace vistream {
@@ -60,8 +61,9 @@ glm::u8vec3 RenderGeometry::colourAlong(size_t t, const EyeTriangle& seen,
   return colourAt(t, u, v, std::abs(seen.along * inv) * glm::length(dir));
 }
 
-void RenderGeometry::shadeSpan(size_t t, const EyeTriangle& seen, const glm::vec3& first,
-                               const glm::vec3& step, int count, uint8_t* out) const {
+VISTREAM_AVX2_CLONES void RenderGeometry::shadeSpan(size_t t, const EyeTriangle& seen,
+                                                    const glm::vec3& first, const glm::vec3& step,
+                                                    int count, uint8_t* out) const {
   const glm::u8vec3* grid = lighting.colours.data() + lighting.first[t];
   const uint32_t level = lighting.level[t];
   const float inverseScale = haze.scale > 0.0f ? 1.0f / haze.scale : 0.0f;

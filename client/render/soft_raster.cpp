@@ -6,6 +6,9 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
+#include <limits>
+#include <numeric>
 
 namespace vistream {
 namespace {
@@ -205,66 +208,153 @@ void scanTriangle(const int64_t* X, const int64_t* Y, int minX, int maxX, int y0
   }
 }
 
-template <class PerTriangle>
-void forBands(int height, const std::vector<std::vector<uint32_t>>& bins, PerTriangle&& fn) {
-  tbb::parallel_for(size_t(0), bins.size(), [&](size_t b) {
-    const int y0 = int(b) * kBandRows, y1 = std::min(height - 1, y0 + kBandRows - 1);
-    for (uint32_t s : bins[b]) fn(s, y0, y1);
-  });
-}
+// Hierarchical depth for one band of rows: per tile of kTileColumns
+// columns, the farthest depth (smallest 1/w) drawn in it so far, 0 while a
+// pixel is empty. A triangle whose nearest point is nearer than no tile's
+// farthest cannot win a pixel there and is skipped. Tiles written since
+// their depth was taken are recomputed when next asked.
+constexpr int kTileColumns = 32;
+
+class BandDepth {
+ public:
+  BandDepth(const IdBuffer& out, int y0, int y1)
+      : out_(out),
+        y0_(y0),
+        y1_(y1),
+        far_(size_t((out.width + kTileColumns - 1) / kTileColumns), 0.0f),
+        stale_(far_.size(), 0) {}
+  // Whether every pixel of columns [x0, x1] in the band is nearer than `q`.
+  bool hides(int x0, int x1, float q) {
+    for (int t = x0 / kTileColumns; t <= x1 / kTileColumns; ++t) {
+      if (stale_[size_t(t)]) refresh(t);
+      if (!(far_[size_t(t)] > q)) return false;
+    }
+    return true;
+  }
+  void written(int x0, int x1) {
+    for (int t = x0 / kTileColumns; t <= x1 / kTileColumns; ++t) stale_[size_t(t)] = 1;
+  }
+
+ private:
+  void refresh(int t) {
+    const int x0 = t * kTileColumns, x1 = std::min(out_.width, x0 + kTileColumns);
+    float m = std::numeric_limits<float>::infinity();
+    for (int y = y0_; y <= y1_; ++y) {
+      const float* d = out_.inverseDepth.data() + size_t(y) * size_t(out_.width);
+      for (int x = x0; x < x1; ++x) m = std::min(m, d[x]);
+    }
+    far_[size_t(t)] = m;
+    stale_[size_t(t)] = 0;
+  }
+  const IdBuffer& out_;
+  int y0_, y1_;
+  std::vector<float> far_;
+  std::vector<uint8_t> stale_;
+};
 
 }  // namespace
 
-void SoftwareRasterizer::fill(const Camera& camera, float insetPx, IdBuffer& out) {
+size_t SoftwareRasterizer::fill(const Camera& camera, float insetPx, IdBuffer& out) {
   out.reset(camera.width, camera.height);
+  const int W = camera.width;
   const size_t bands = size_t((camera.height + kBandRows - 1) / kBandRows);
   std::vector<std::vector<uint32_t>> bins(bands);
   // An outset reaches past the triangle's bounds: at most 8 outsets (the
   // mitre of a 15 degree corner; sharper corners are cut there).
   const int margin = insetPx < 0.0f ? int(std::ceil(-8.0f * insetPx)) + 1 : 0;
-  for (uint32_t i = 0; i < screen_.size(); ++i)
+  // Without an outset every fragment lies inside its triangle, so its 1/w is
+  // at most the largest of the vertices': triangles are drawn nearest first
+  // (a counting sort on that bound's float bits, which order positive
+  // floats) and those behind what a band already holds are skipped.
+  // Equal depths go to the triangle earlier in `which`, as in any order.
+  const bool hierarchical = margin == 0;
+  order_.resize(screen_.size());
+  if (hierarchical) {
+    constexpr int kBuckets = 2048;
+    auto bucketOf = [](const ScreenTriangle& t) {
+      const float q = std::max({t.invW[0], t.invW[1], t.invW[2]});
+      uint32_t bits;
+      std::memcpy(&bits, &q, sizeof bits);
+      return kBuckets - 1 - int(std::min<uint32_t>(bits >> 20, kBuckets - 1) - 0);
+    };
+    std::vector<uint32_t> start(kBuckets + 1, 0);
+    for (const ScreenTriangle& t : screen_) ++start[size_t(bucketOf(t)) + 1];
+    for (int k = 0; k < kBuckets; ++k) start[size_t(k) + 1] += start[size_t(k)];
+    for (uint32_t i = 0; i < screen_.size(); ++i) order_[start[size_t(bucketOf(screen_[i]))]++] = i;
+    owner_.assign(out.ids.size(), std::numeric_limits<uint32_t>::max());
+  } else {
+    for (uint32_t i = 0; i < screen_.size(); ++i) order_[i] = i;
+  }
+  for (uint32_t i : order_)
     for (int b = std::max(0, screen_[i].minY - margin) / kBandRows;
          b <= std::min(camera.height - 1, screen_[i].maxY + margin) / kBandRows; ++b)
       bins[size_t(b)].push_back(i);
-  const int W = camera.width;
-  forBands(camera.height, bins, [&](uint32_t i, int y0, int y1) {
-    const ScreenTriangle& s = screen_[i];
-    const double area =
-        double((s.x[1] - s.x[0]) * (s.y[2] - s.y[0]) - (s.x[2] - s.x[0]) * (s.y[1] - s.y[0]));
-    std::array<int64_t, 3> extra{};
-    if (insetPx != 0.0f)
-      for (int k = 0; k < 3; ++k) {
-        const int j = (k + 1) % 3;
-        const double len = std::hypot(double(s.x[j] - s.x[k]), double(s.y[j] - s.y[k]));
-        // Rounded away from the triangle's own edge: an inset never grows, an outset never shrinks.
-        const double e = double(insetPx) * double(kSub) * len;
-        extra[size_t(k)] = int64_t(insetPx > 0.0f ? std::ceil(e) : std::floor(e));
+  std::vector<size_t> skipped(bins.size(), 0);
+  tbb::parallel_for(size_t(0), bins.size(), [&](size_t band) {
+    const int y0 = int(band) * kBandRows, y1 = std::min(camera.height - 1, y0 + kBandRows - 1);
+    BandDepth bandDepth(out, y0, y1);
+    for (uint32_t i : bins[band]) {
+      const ScreenTriangle& s = screen_[i];
+      const int minX = std::max(0, s.minX - margin),
+                maxX = std::min(camera.width - 1, s.maxX + margin);
+      const int ya2 = std::max(y0, s.minY - margin), yb2 = std::min(y1, s.maxY + margin);
+      // A margin for the rounding of the interpolated 1/w.
+      const float nearest = std::max({s.invW[0], s.invW[1], s.invW[2]}) * (1.0f + 1e-5f);
+      if (hierarchical && bandDepth.hides(minX, maxX, nearest)) {
+        ++skipped[band];
+        continue;
       }
-    const Edges g = edgesOf(s.x, s.y, extra);
-    const int minX = std::max(0, s.minX - margin),
-              maxX = std::min(camera.width - 1, s.maxX + margin);
-    const int ya2 = std::max(y0, s.minY - margin), yb2 = std::min(y1, s.maxY + margin);
-    // 1/w is linear in the edge functions: (E1 q0 + E2 q1 + E0 q2) / area
-    // (E0 is the edge 0->1, opposite vertex 2, and so on).
-    const double dqdx =
-        -(double(g.dy[1]) * s.invW[0] + double(g.dy[2]) * s.invW[1] + double(g.dy[0]) * s.invW[2]) *
-        kSub / area;
-    scanTriangle(s.x, s.y, minX, maxX, ya2, yb2, g, [&](int y, int xa, int xb, const int64_t* e) {
-      double q =
-          (double(e[1]) * s.invW[0] + double(e[2]) * s.invW[1] + double(e[0]) * s.invW[2]) / area;
-      const size_t row = size_t(y) * size_t(W);
-      float* depth = out.inverseDepth.data() + row;
-      uint32_t* ids = out.ids.data() + row;
-      // Nearer is a larger 1/w: no division per pixel.
-      for (int x = xa; x <= xb; ++x, q += dqdx) {
-        const float qf = float(q);
-        if (qf > depth[x]) {
-          depth[x] = qf;
-          ids[x] = s.id;
+      const double area =
+          double((s.x[1] - s.x[0]) * (s.y[2] - s.y[0]) - (s.x[2] - s.x[0]) * (s.y[1] - s.y[0]));
+      std::array<int64_t, 3> extra{};
+      if (insetPx != 0.0f)
+        for (int k = 0; k < 3; ++k) {
+          const int j = (k + 1) % 3;
+          const double len = std::hypot(double(s.x[j] - s.x[k]), double(s.y[j] - s.y[k]));
+          // Rounded away from the triangle's own edge: an inset never grows, an outset never
+          // shrinks.
+          const double e = double(insetPx) * double(kSub) * len;
+          extra[size_t(k)] = int64_t(insetPx > 0.0f ? std::ceil(e) : std::floor(e));
         }
-      }
-    });
+      const Edges g = edgesOf(s.x, s.y, extra);
+      // 1/w is linear in the edge functions: (E1 q0 + E2 q1 + E0 q2) / area
+      // (E0 is the edge 0->1, opposite vertex 2, and so on).
+      const double dqdx = -(double(g.dy[1]) * s.invW[0] + double(g.dy[2]) * s.invW[1] +
+                            double(g.dy[0]) * s.invW[2]) *
+                          kSub / area;
+      scanTriangle(s.x, s.y, minX, maxX, ya2, yb2, g, [&](int y, int xa, int xb, const int64_t* e) {
+        double q =
+            (double(e[1]) * s.invW[0] + double(e[2]) * s.invW[1] + double(e[0]) * s.invW[2]) / area;
+        const size_t row = size_t(y) * size_t(W);
+        float* depth = out.inverseDepth.data() + row;
+        uint32_t* ids = out.ids.data() + row;
+        // Nearer is a larger 1/w: no division per pixel.
+        bool wrote = false;
+        if (hierarchical) {
+          uint32_t* owner = owner_.data() + row;
+          for (int x = xa; x <= xb; ++x, q += dqdx) {
+            const float qf = float(q);
+            if (qf > depth[x] || (qf == depth[x] && i < owner[x])) {
+              depth[x] = qf;
+              ids[x] = s.id;
+              owner[x] = i;
+              wrote = true;
+            }
+          }
+          if (wrote) bandDepth.written(xa, xb);
+        } else {
+          for (int x = xa; x <= xb; ++x, q += dqdx) {
+            const float qf = float(q);
+            if (qf > depth[x]) {
+              depth[x] = qf;
+              ids[x] = s.id;
+            }
+          }
+        }
+      });
+    }
   });
+  return std::accumulate(skipped.begin(), skipped.end(), size_t(0));
 }
 
 void SoftwareRasterizer::dropBeyond(const Camera& camera, float maxDistance, IdBuffer& out) {
@@ -288,9 +378,9 @@ RasterStats SoftwareRasterizer::draw(const Camera& camera, const FlatTriangles& 
                                      std::span<const uint32_t> which, IdBuffer& out,
                                      float maxDistance) {
   setUp(camera, triangles, which);
-  fill(camera, 0.0f, out);
+  const size_t skipped = fill(camera, 0.0f, out);
   dropBeyond(camera, maxDistance, out);
-  return {which.size(), screen_.size()};
+  return {which.size(), screen_.size(), skipped};
 }
 
 RasterStats SoftwareRasterizer::coverage(const Camera& camera, const FlatTriangles& triangles,
@@ -310,7 +400,7 @@ RasterStats SoftwareRasterizer::coverage(const Camera& camera, const FlatTriangl
     for (size_t p = 0; p < covered.size(); ++p)
       if (covered[p] == kUncovered && scratch_.ids[p] != kNoTriangle) covered[p] = kBeyond;
   }
-  return {which.size(), screen_.size()};
+  return {which.size(), screen_.size(), 0};
 }
 
 }  // namespace vistream

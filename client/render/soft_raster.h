@@ -12,7 +12,13 @@
 //  - triangles are clipped against the near plane and a guard band in
 //    homogeneous clip space; both windings are drawn (two-sided);
 //  - depth is 1/w, the inverse view depth, interpolated linearly in screen
-//    space (it orders fragments exactly as OpenGL's NDC z); the larger wins;
+//    space (it orders fragments exactly as OpenGL's NDC z); the larger wins,
+//    and of equal depths the triangle earlier in `which` (as OpenGL's LESS
+//    test keeps the first drawn);
+//  - draw() visits triangles nearest first and skips a triangle in a band of
+//    rows where every pixel it could reach already holds something nearer
+//    than its nearest vertex: the result is the same as drawing all of them
+//    in `which` order, for less work when the scene hides much of itself;
 //  - vertices are transformed relative to the eye (Camera::rotationProjection);
 //  - a maximum distance along the view ray (the near-field distance d) drops
 //    fragments beyond it, as the OpenGL near field's fragment shader does.
@@ -59,6 +65,9 @@ struct IdBuffer {
 struct RasterStats {
   size_t trianglesIn = 0;     // triangles handed in
   size_t trianglesSetUp = 0;  // after clipping and culling (a clipped triangle may count twice)
+  // Set-up triangles skipped in a band of rows because everything the band
+  // already held there was nearer (hierarchical depth; draw() only).
+  size_t bandsSkipped = 0;
 };
 
 class SoftwareRasterizer {
@@ -90,10 +99,14 @@ class SoftwareRasterizer {
     int minX, maxX, minY, maxY;  // pixel bounds, clamped to the image
   };
   void setUp(const Camera& camera, const FlatTriangles& triangles, std::span<const uint32_t> which);
-  void fill(const Camera& camera, float insetPx, IdBuffer& out);
+  // Fills `out` with the set-up triangles; returns the number of (triangle,
+  // band) pairs skipped as hidden.
+  size_t fill(const Camera& camera, float insetPx, IdBuffer& out);
   // Clears pixels whose fragment lies beyond maxDistance along the pixel ray.
   static void dropBeyond(const Camera& camera, float maxDistance, IdBuffer& out);
   std::vector<ScreenTriangle> screen_;
+  std::vector<uint32_t> order_;  // the order fill() draws screen_ in
+  std::vector<uint32_t> owner_;  // per pixel: the screen_ index drawn there (ties go to the lower)
   IdBuffer scratch_;
 };
 

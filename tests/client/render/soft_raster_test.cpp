@@ -497,5 +497,73 @@ TEST(SoftwareRasterizer, DrawsThePixelsARayCastSeesOfATriangleCrossingTheNearPla
   }
 }
 
+// The oracle for the hierarchical depth and the nearest-first order: each
+// triangle drawn alone (nothing can hide it then), and per pixel the one
+// with the largest 1/w, ties going to the earlier in the order given.
+IdBuffer nearestOfEachAlone(SoftwareRasterizer& raster, const Camera& cam,
+                            const FlatTriangles& soup, const std::vector<uint32_t>& which) {
+  IdBuffer best;
+  best.reset(cam.width, cam.height);
+  IdBuffer alone;
+  for (uint32_t t : which) {
+    const uint32_t one[] = {t};
+    raster.draw(cam, soup, one, alone);
+    for (size_t p = 0; p < alone.ids.size(); ++p)
+      if (alone.ids[p] != kNoTriangle && alone.inverseDepth[p] > best.inverseDepth[p]) {
+        best.inverseDepth[p] = alone.inverseDepth[p];
+        best.ids[p] = alone.ids[p];
+      }
+  }
+  return best;
+}
+
+TEST(SoftwareRasterizer, DrawsEachPixelAsTheNearestOfItsTrianglesDrawnAloneInAnyOrder) {
+  SoftwareRasterizer raster;
+  for (uint32_t seed = 1; seed <= 4; ++seed) {
+    SCOPED_TRACE("seed " + std::to_string(seed));
+    const Camera cam = randomCamera(seed);
+    FlatTriangles soup = randomSoup(cam, seed, 300);
+    // Hard cases for the order: exact duplicates (equal depths everywhere),
+    // and a near wall over the whole image with copies of the soup behind it
+    // (wholly hidden, so whole bands are skipped).
+    const size_t n = soup.size();
+    for (size_t t = 0; t < n; t += 7)
+      addTriangle(soup, soup.vertex(t, 0), soup.vertex(t, 1), soup.vertex(t, 2));
+    FlatTriangles walled = soup;
+    const std::array<glm::dvec2, 4> corners = {glm::dvec2{-10, -10}, glm::dvec2{170, -10},
+                                               glm::dvec2{170, 130}, glm::dvec2{-10, 130}};
+    addTriangle(walled, onPixelRay(cam, corners[0], 0.5f), onPixelRay(cam, corners[1], 0.5f),
+                onPixelRay(cam, corners[2], 0.5f));
+    addTriangle(walled, onPixelRay(cam, corners[0], 0.5f), onPixelRay(cam, corners[2], 0.5f),
+                onPixelRay(cam, corners[3], 0.5f));
+    for (const FlatTriangles* f : {&soup, &walled}) {
+      std::vector<uint32_t> forward = allOf(*f), backward(forward.rbegin(), forward.rend());
+      for (const std::vector<uint32_t>* which : {&forward, &backward}) {
+        IdBuffer together;
+        const RasterStats stats = raster.draw(cam, *f, *which, together);
+        const IdBuffer want = nearestOfEachAlone(raster, cam, *f, *which);
+        size_t wrongIds = 0, wrongDepths = 0, ties = 0, wall = 0;
+        for (size_t p = 0; p < want.ids.size(); ++p) {
+          wrongIds += together.ids[p] != want.ids[p];
+          wrongDepths += together.inverseDepth[p] != want.inverseDepth[p];
+          const uint32_t id = want.ids[p];
+          ties += id != kNoTriangle && id < soup.size() && (id >= n || id % 7 == 0);
+          wall += id != kNoTriangle && id >= soup.size();
+        }
+        EXPECT_EQ(wrongIds, 0u);
+        EXPECT_EQ(wrongDepths, 0u);
+        if (f == &walled) {
+          // The wall hides most of the image (triangles crossing the near
+          // plane may come before it), and most of the soup's bands are skipped.
+          EXPECT_GT(wall, want.ids.size() / 2);
+          EXPECT_GT(stats.bandsSkipped, stats.trianglesSetUp / 2);
+        } else {
+          EXPECT_GT(ties, 0u) << "duplicates that win pixels should be part of the test";
+        }
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace vistream
