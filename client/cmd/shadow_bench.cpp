@@ -122,6 +122,7 @@ Run runOnce(const Model& m, const SelfShadowOptions& options, int ring, const Re
     const std::vector<uint8_t>* only = frontOnly ? &front : nullptr;
     const double transformMs = clock.ms();
     SelfShadowStats stats;
+    out.clear();  // `only` would keep the last frame's other vertices
     if (pvs)
       shadows.diffuse(pose.positions, pose.normals, *pvs, out, {.stats = &stats, .only = only});
     else
@@ -181,19 +182,16 @@ ImageRgb8 renderTransfer(const PosedMesh& pose, const std::vector<glm::uvec3>& t
   RenderGeometry g;
   g.sky = {40, 40, 48};
   g.haze = Haze{};
+  g.triangles = flattenMesh(pose.positions, triangles);
+  for (const glm::vec3& p : g.triangles.positions) g.bounds.extend(p);
   for (size_t t = 0; t < triangles.size(); ++t) {
     glm::u8vec3 corners[3];
     for (int k = 0; k < 3; ++k) {
       const uint32_t v = triangles[t][k];
-      g.triangles.positions.push_back(pose.positions[v]);
-      g.bounds.extend(pose.positions[v]);
       const glm::vec3 radiance =
           light.transferred(transfer.data() + size_t(v) * size_t(terms), orders);
       corners[k] = encodeColour(albedo / kPi * radiance * exposure);
     }
-    g.triangles.faceIds.push_back(uint32_t(t));
-    g.triangles.objectIds.push_back(0);
-    g.triangles.degenerate.push_back(0);
     g.lighting.append(1, corners, 3);
   }
   Camera camera = figureCamera();
@@ -257,11 +255,26 @@ double msAtError(const std::vector<std::pair<double, double>>& curve, double e) 
   return curve.back().first * std::pow(curve.back().second / e, 2.0);
 }
 
+// A converged reference traced as two independent halves:
+// traceHalf(h, out) traces half h (0 or 1) with its own seed. Returns their
+// mean and appends its own error, error(half 0, half 1) / 2, to ownErrors
+// (each half has sqrt 2 times the mean's error, their difference twice it).
+template <class TraceHalf, class Error>
+std::vector<float> referenceOfHalves(TraceHalf&& traceHalf, Error&& error,
+                                     std::vector<double>& ownErrors) {
+  std::vector<float> half[2];
+  for (int h = 0; h < 2; ++h) traceHalf(h, half[h]);
+  ownErrors.push_back(0.5 * error(half[0], half[1]));
+  std::vector<float> mean(half[0].size());
+  for (size_t i = 0; i < mean.size(); ++i) mean[i] = 0.5f * (half[0][i] + half[1][i]);
+  return mean;
+}
+
 // |a - b| / |b| over all the vertices' coefficients together. The glossy
 // rows use it instead of the per-vertex mean: a vertex whose lobe is almost
 // wholly blocked has a reference near zero, and its relative error would
 // outweigh every other vertex's.
-double fieldRelativeL2(const std::vector<float>& a, const std::vector<float>& b, int /*terms*/) {
+double fieldRelativeL2(const std::vector<float>& a, const std::vector<float>& b) {
   double num = 0.0, den = 0.0;
   for (size_t i = 0; i < std::min(a.size(), b.size()); ++i) {
     num += (double(a[i]) - b[i]) * (double(a[i]) - b[i]);
@@ -325,16 +338,17 @@ GlossyRows glossyRows(const Model& m, const Reference& reference, int ring, floa
     if (g.facing == 0) g.facing = size_t(std::count(facing.begin(), facing.end(), 1));
     const std::vector<uint8_t> measured = both(reference.sample, &facing);
     // The reference, as two independent halves.
-    std::vector<float> half[2];
-    for (int h = 0; h < 2; ++h) {
-      monteCarloGlossyTransfer(pose.positions, pose.normals, m.mesh.triangles, reflected, exponent,
-                               referenceRays / 2, orders, half[h], uint64_t(2 * h + 5), &measured);
-      bar.advance();
-    }
-    own.push_back(0.5 * fieldRelativeL2(selected(half[0], terms, &measured),
-                                        selected(half[1], terms, &measured), terms));
-    std::vector<float> ref(half[0].size());
-    for (size_t i = 0; i < ref.size(); ++i) ref[i] = 0.5f * (half[0][i] + half[1][i]);
+    const std::vector<float> ref = referenceOfHalves(
+        [&](int h, std::vector<float>& half) {
+          monteCarloGlossyTransfer(pose.positions, pose.normals, m.mesh.triangles, reflected,
+                                   exponent, referenceRays / 2, orders, half, uint64_t(2 * h + 5),
+                                   &measured);
+          bar.advance();
+        },
+        [&](const std::vector<float>& a, const std::vector<float>& b) {
+          return fieldRelativeL2(selected(a, terms, &measured), selected(b, terms, &measured));
+        },
+        own);
     // Ours: the masks of the facing vertices (as the diffuse pass makes
     // them), then the lobe.
     Stopwatch clock;
@@ -361,8 +375,8 @@ GlossyRows glossyRows(const Model& m, const Reference& reference, int ring, floa
       });
       (integrator == &perPixel ? integrateMs : blocksMs).push_back(integrateClock.ms());
       (integrator == &perPixel ? l2 : blocksL2)
-          .push_back(fieldRelativeL2(selected(ours, terms, &measured),
-                                     selected(ref, terms, &measured), terms));
+          .push_back(
+              fieldRelativeL2(selected(ours, terms, &measured), selected(ref, terms, &measured)));
     }
     bar.advance();
     for (size_t s = 0; s < sweep.size(); ++s) {
@@ -371,8 +385,8 @@ GlossyRows glossyRows(const Model& m, const Reference& reference, int ring, floa
       monteCarloGlossyTransfer(pose.positions, pose.normals, m.mesh.triangles, reflected, exponent,
                                sweep[s], orders, estimate, 2, &facing);
       ms[s].push_back(mcClock.ms());
-      err[s].push_back(fieldRelativeL2(selected(estimate, terms, &measured),
-                                       selected(ref, terms, &measured), terms));
+      err[s].push_back(
+          fieldRelativeL2(selected(estimate, terms, &measured), selected(ref, terms, &measured)));
       bar.advance();
     }
   }
@@ -440,16 +454,17 @@ int runShadowBench(const ShadowBenchArgs& a) {
       const size_t f = size_t(k) * size_t(frames) / size_t(std::max(1, a.referenceFrames));
       PosedMesh pose;
       poseAt(m.scene, m.mesh, m.clip, m.times[f], pose);
-      std::vector<float> half[2];
-      for (int h = 0; h < 2; ++h) {
-        monteCarloTransfer(pose.positions, pose.normals, m.mesh.triangles, referenceRays / 2,
-                           orders, half[h], uint64_t(2 * h + 1), &reference.sample);
-        bar.advance();
-      }
-      ownErrors.push_back(0.5 * meanRelativeL2(selected(half[0], terms, &reference.sample),
-                                               selected(half[1], terms, &reference.sample), terms));
-      std::vector<float> ref(half[0].size());
-      for (size_t i = 0; i < ref.size(); ++i) ref[i] = 0.5f * (half[0][i] + half[1][i]);
+      const std::vector<float> ref = referenceOfHalves(
+          [&](int h, std::vector<float>& half) {
+            monteCarloTransfer(pose.positions, pose.normals, m.mesh.triangles, referenceRays / 2,
+                               orders, half, uint64_t(2 * h + 1), &reference.sample);
+            bar.advance();
+          },
+          [&](const std::vector<float>& first, const std::vector<float>& second) {
+            return meanRelativeL2(selected(first, terms, &reference.sample),
+                                  selected(second, terms, &reference.sample), terms);
+          },
+          ownErrors);
       for (size_t s = 0; s < sweep.size(); ++s) {
         std::vector<float> estimate;
         Stopwatch clock;

@@ -275,7 +275,7 @@ size_t SoftwareRasterizer::fill(const Camera& camera, float insetPx, IdBuffer& o
       const float q = std::max({t.invW[0], t.invW[1], t.invW[2]});
       uint32_t bits;
       std::memcpy(&bits, &q, sizeof bits);
-      return kBuckets - 1 - int(std::min<uint32_t>(bits >> 20, kBuckets - 1) - 0);
+      return kBuckets - 1 - int(std::min<uint32_t>(bits >> 20, kBuckets - 1));  // exponent, 3 bits
     };
     std::vector<uint32_t> start(kBuckets + 1, 0);
     for (const ScreenTriangle& t : screen_) ++start[size_t(bucketOf(t)) + 1];

@@ -179,16 +179,8 @@ namespace {
 // outward (Solids' reading, common/world/solids.h).
 bool closedOutward(const std::vector<glm::vec3>& positions,
                    const std::vector<glm::uvec3>& triangles) {
-  FlatTriangles flat;
-  for (uint32_t t = 0; t < triangles.size(); ++t) {
-    const glm::vec3 a = positions[triangles[t].x], b = positions[triangles[t].y],
-                    c = positions[triangles[t].z];
-    flat.positions.insert(flat.positions.end(), {a, b, c});
-    flat.faceIds.push_back(t);
-    flat.objectIds.push_back(0);
-    flat.degenerate.push_back(glm::length(glm::cross(b - a, c - a)) > 0.0f ? 0 : 1);
-  }
-  const Solids solids = Solids::build(flat, SolidsOptions{.weldTolerance = 0.0});
+  const Solids solids =
+      Solids::build(flattenMesh(positions, triangles), SolidsOptions{.weldTolerance = 0.0});
   if (solids.components().empty()) return false;
   for (const SolidComponent& c : solids.components())
     if (c.kind != SolidClass::ClosedOutward) return false;
@@ -284,26 +276,17 @@ bool AvatarShader::shadeMissing(Gait g, Sampled& s, const glm::vec3* eye) {
   if (count == 0) return false;
   const auto start = std::chrono::steady_clock::now();
   const bool gloss = options_.glossExponent > 0.0f;
-  std::vector<float> transfer;
-  std::vector<uint64_t> masks;
-  const ShadeExtras extras{.only = &needed, .masks = gloss ? &masks : nullptr};
+  // Straight into the pose: `only` leaves the vertices shaded before as they are.
+  const ShadeExtras extras{.only = &needed, .masks = gloss ? &s.masks : nullptr};
   if (const VertexBlockers* pvs = blockers(g)) {
-    shadowing_.diffuse(s.pose.positions, s.pose.normals, *pvs, transfer, extras);
+    shadowing_.diffuse(s.pose.positions, s.pose.normals, *pvs, s.transfer, extras);
   } else {
     ShadeExtras withGroups = extras;
     withGroups.groups = &groups_;
-    shadowing_.diffuse(s.pose.positions, s.pose.normals, model_->triangles(), transfer, withGroups);
+    shadowing_.diffuse(s.pose.positions, s.pose.normals, model_->triangles(), s.transfer,
+                       withGroups);
   }
-  const size_t words = size_t(shadowing_.maskWords());
-  for (size_t v = 0; v < vertices; ++v) {
-    if (!needed[v]) continue;
-    std::copy_n(transfer.begin() + std::ptrdiff_t(v * kTerms), kTerms,
-                s.transfer.begin() + std::ptrdiff_t(v * kTerms));
-    if (gloss)
-      std::copy_n(masks.begin() + std::ptrdiff_t(v * words), words,
-                  s.masks.begin() + std::ptrdiff_t(v * words));
-    s.shaded[v] = 1;
-  }
+  for (size_t v = 0; v < vertices; ++v) s.shaded[v] |= needed[v];
   stats_.shadowMs +=
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   ++stats_.posesShaded;

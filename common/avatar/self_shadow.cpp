@@ -187,11 +187,17 @@ void SelfShadowing::run(const std::vector<glm::vec3>& positions,
                         ForEachBlocker&& forEachBlocker) const {
   VS_CHECK_EQ(positions.size(), normals.size());
   const std::vector<uint8_t>* only = extras.only;
-  if (only) VS_CHECK_EQ(only->size(), positions.size());
   const size_t words = size_t(maskWords());
-  if (extras.masks) extras.masks->assign(positions.size() * words, 0);
   const int terms = integrator_.terms();
-  out.assign(positions.size() * size_t(terms), 0.0f);
+  if (only) {
+    // The other vertices keep what they hold (zeros where the vectors grow).
+    VS_CHECK_EQ(only->size(), positions.size());
+    out.resize(positions.size() * size_t(terms), 0.0f);
+    if (extras.masks) extras.masks->resize(positions.size() * words, 0);
+  } else {
+    out.assign(positions.size() * size_t(terms), 0.0f);
+    if (extras.masks) extras.masks->assign(positions.size() * words, 0);
+  }
   struct Local {
     VisibilityMask mask;
     SelfShadowStats stats;
@@ -205,7 +211,7 @@ void SelfShadowing::run(const std::vector<glm::vec3>& positions,
   tbb::parallel_for(tbb::blocked_range<size_t>(0, positions.size(), 16), [&](const auto& range) {
     Local& local = locals.local();
     for (size_t v = range.begin(); v != range.end(); ++v) {
-      if (only && !(*only)[v]) continue;  // left at zero
+      if (only && !(*only)[v]) continue;  // left as it was
       ++local.stats.vertices;
       const auto start = std::chrono::steady_clock::now();
       const glm::vec3 p = positions[v];
@@ -525,14 +531,7 @@ void traceTransfer(const std::vector<glm::vec3>& positions, const std::vector<gl
   VS_CHECK(rays >= 1 && orders >= 1 && orders <= kMaxShOrder + 1);
   if (only) VS_CHECK_EQ(only->size(), positions.size());
   const int terms = shTerms(orders);
-  FlatTriangles flat;
-  for (size_t t = 0; t < triangles.size(); ++t) {
-    for (int k = 0; k < 3; ++k) flat.positions.push_back(positions[triangles[t][k]]);
-    flat.faceIds.push_back(uint32_t(t));
-    flat.objectIds.push_back(0);
-    flat.degenerate.push_back(0);
-  }
-  const auto query = makeEmbreeRayQuery(flat);
+  const auto query = makeEmbreeRayQuery(flattenMesh(positions, triangles));
   const float offset = 1e-4f * meshSize(positions);
   out.assign(positions.size() * size_t(terms), 0.0f);
   const uint32_t side = std::max<uint32_t>(1, uint32_t(std::sqrt(double(rays))));

@@ -130,12 +130,14 @@ struct ShadeExtras {
   // its groups from the lists.
   const ShadowHierarchy* hierarchy = nullptr;
   const TriangleGroups* groups = nullptr;
-  // Shade only the vertices v with (*only)[v] != 0; the rest get zeros
-  // (the paper shades only the vertices of front-facing triangles:
-  // frontFacingVertices).
+  // Shade only the vertices v with (*only)[v] != 0 (the paper shades only
+  // the vertices of front-facing triangles: frontFacingVertices). The other
+  // vertices' transfer vectors and masks are left as they are, so a pose
+  // shaded in parts is completed in place; vectors shorter than the mesh
+  // grow with zeros.
   const std::vector<uint8_t>* only = nullptr;
   // Out: every vertex's visibility mask, SelfShadowing::maskWords() words each (zeros for
-  // vertices not shaded), for view-dependent (glossy) transfer later.
+  // vertices not shaded, unless `only` leaves them), for view-dependent (glossy) transfer later.
   std::vector<uint64_t>* masks = nullptr;
 };
 

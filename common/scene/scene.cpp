@@ -47,6 +47,23 @@ bool isDegenerateTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec
   return area2 <= 1e-12 * longest2;
 }
 
+FlatTriangles flattenMesh(const std::vector<glm::vec3>& positions,
+                          const std::vector<glm::uvec3>& triangles) {
+  FlatTriangles flat;
+  flat.positions.reserve(3 * triangles.size());
+  flat.faceIds.reserve(triangles.size());
+  flat.objectIds.assign(triangles.size(), 0);
+  flat.degenerate.reserve(triangles.size());
+  for (size_t t = 0; t < triangles.size(); ++t) {
+    const glm::vec3 a = positions[triangles[t].x], b = positions[triangles[t].y],
+                    c = positions[triangles[t].z];
+    flat.positions.insert(flat.positions.end(), {a, b, c});
+    flat.faceIds.push_back(uint32_t(t));
+    flat.degenerate.push_back(isDegenerateTriangle(a, b, c) ? 1 : 0);
+  }
+  return flat;
+}
+
 FlatTriangles flattenScene(const Scene& scene, bool staticOnly) {
   FlatTriangles flat;
   const size_t n = scene.triangleCount();

@@ -180,6 +180,10 @@ struct FlatTriangles {
 
 // Flattens the scene. With staticOnly, dynamic objects are left out.
 FlatTriangles flattenScene(const Scene& scene, bool staticOnly = false);
+// Flattens one indexed mesh (a posed avatar, say): triangle t becomes face t
+// of object 0, degenerate as isDegenerateTriangle says.
+FlatTriangles flattenMesh(const std::vector<glm::vec3>& positions,
+                          const std::vector<glm::uvec3>& triangles);
 
 // True if the triangle has zero area (relative to its size) or repeats a vertex.
 bool isDegenerateTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c);

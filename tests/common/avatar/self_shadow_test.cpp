@@ -334,7 +334,7 @@ TEST(TriangleGroups, CullingThemChangesNoBitOfTheTransferAndSkipsTriangles) {
 // one side selects some but not all of its vertices; those get exactly the
 // transfer full shading gives them, the others zeros, and the stats count
 // only the shaded ones.
-TEST(SelfShadow, ShadingOnlyFrontFacingVerticesLeavesTheirTransferExact) {
+TEST(SelfShadow, ShadingOnlyFrontFacingVerticesGivesTheirExactTransferAndLeavesTheOthers) {
   const Scene fox = loadScene(std::filesystem::path(VISTREAM_SHARED_DIR) / "data" / "Fox.glb");
   const SkinnedMesh mesh = SkinnedMesh::firstOf(fox).subdivided(0);
   PosedMesh pose;
@@ -346,16 +346,30 @@ TEST(SelfShadow, ShadingOnlyFrontFacingVerticesLeavesTheirTransferExact) {
   EXPECT_GT(shaded, pose.positions.size() / 4);
   EXPECT_LT(shaded, pose.positions.size());
   const SelfShadowing shadows;
-  std::vector<float> all, some;
+  std::vector<float> all, some, kept;
+  std::vector<uint64_t> allMasks, keptMasks;
   SelfShadowStats stats;
-  shadows.diffuse(pose.positions, pose.normals, mesh.triangles, all);
+  shadows.diffuse(pose.positions, pose.normals, mesh.triangles, all, {.masks = &allMasks});
   shadows.diffuse(pose.positions, pose.normals, mesh.triangles, some,
                   {.stats = &stats, .only = &front});
   EXPECT_EQ(stats.vertices, shaded);
-  const size_t terms = size_t(shadows.terms());
+  const size_t terms = size_t(shadows.terms()), words = size_t(shadows.maskWords());
   for (size_t v = 0; v < front.size(); ++v)
     for (size_t i = 0; i < terms; ++i)
       ASSERT_EQ(some[v * terms + i], front[v] ? all[v * terms + i] : 0.0f) << "vertex " << v;
+  // Vectors that already hold a whole mesh keep the other vertices' entries.
+  kept.assign(all.size(), -7.0f);
+  keptMasks.assign(allMasks.size(), 0x5a5a5a5a5a5a5a5aull);
+  shadows.diffuse(pose.positions, pose.normals, mesh.triangles, kept,
+                  {.only = &front, .masks = &keptMasks});
+  for (size_t v = 0; v < front.size(); ++v) {
+    for (size_t i = 0; i < terms; ++i)
+      ASSERT_EQ(kept[v * terms + i], front[v] ? all[v * terms + i] : -7.0f) << "vertex " << v;
+    for (size_t w = 0; w < words; ++w)
+      ASSERT_EQ(keptMasks[v * words + w],
+                front[v] ? allMasks[v * words + w] : 0x5a5a5a5a5a5a5a5aull)
+          << "vertex " << v;
+  }
 }
 
 // A closed box seen along -z: the vertices of its +z face (and only they,
