@@ -186,21 +186,16 @@ int cmdInfo(const std::string& spec, const SceneLimits& limits, const GroundChoi
 }
 
 int cmdPath(const std::string& spec, const SceneLimits& limits, const GroundChoice& ground,
-            double speed, size_t frames, uint64_t seed, double fps, const std::string& out) {
-  // --speed, --frames and --fps are range-checked at parse time.
+            const PathOptions& options, const std::string& out) {
+  // The options are range-checked at parse time.
   const Scene scene = openScene(spec, limits);
   StaticWorldOptions worldOptions;
   worldOptions.ground = ground;
   const StaticWorld world = buildStaticWorld(scene, worldOptions);
-  PathOptions options;
-  options.speed = speed;
-  options.frames = frames;
-  options.seed = seed;
-  options.fps = fps;
   const auto samples = generatePath(scene, world.freeSpace, options);
   writePath(samples, out);
   spdlog::info("wrote {} frames ({:.1f} s at {:.2f} m/s) to {}", samples.size(), samples.back().t,
-               kWalkingSpeed * speed, out);
+               kWalkingSpeed * options.speed, out);
   return 0;
 }
 
@@ -372,13 +367,29 @@ int runSceneTool(int argc, char** argv) {
   addGroundOption(*info, ground);
 
   auto* path = app.add_subcommand("path", "generate a walkthrough path through the free space");
-  double speed = 1.0, fps = 30.0;
-  size_t frames = 300;
+  PathOptions pathOptions;
   path->add_option("--scene", scene, "SCENE")->required();
-  path->add_option("--speed", speed, "relative speed, 1.0 = walking (1.4 m/s)")->check(positive());
-  path->add_option("--frames", frames, "number of frames")->check(atLeast<size_t>(1));
-  path->add_option("--fps", fps, "frames per second")->check(positive());
-  path->add_option("--seed", seed, "random seed")->check(atLeast<uint64_t>(0));
+  path->add_option("--speed", pathOptions.speed, "relative speed, 1.0 = walking (1.4 m/s)")
+      ->check(positive())
+      ->capture_default_str();
+  path->add_option("--frames", pathOptions.frames, "number of frames")
+      ->check(atLeast<size_t>(1))
+      ->capture_default_str();
+  path->add_option("--fps", pathOptions.fps, "frames per second")
+      ->check(positive())
+      ->capture_default_str();
+  path->add_option("--seed", pathOptions.seed, "random seed")
+      ->check(atLeast<uint64_t>(0))
+      ->capture_default_str();
+  path->add_option("--goal-radius", pathOptions.goalRadius,
+                   "metres round a column in which obstacles are counted: the walk's goals lie "
+                   "in the denser half (streets, not the open ground around a city; 0: anywhere)")
+      ->check(nonNegative())
+      ->capture_default_str();
+  path->add_option("--goal-clearance", pathOptions.goalClearance,
+                   "metres a goal keeps from every obstacle")
+      ->check(nonNegative())
+      ->capture_default_str();
   path->add_option("--out,-o", out, "output CSV (t,x,y,z,yaw_deg,pitch_deg)")->required();
   addSceneLimits(path);
   addGroundOption(*path, ground);
@@ -433,7 +444,7 @@ int runSceneTool(int argc, char** argv) {
     if (*light) return cmdLight(scene, limits, lighting, benchRays, asJson);
     if (*gen) return cmdGenerate(genType, preset, seed, out, asJson);
     if (*info) return cmdInfo(scene, limits, ground, asJson);
-    if (*path) return cmdPath(scene, limits, ground, speed, frames, seed, fps, out);
+    if (*path) return cmdPath(scene, limits, ground, pathOptions, out);
     if (*visible) return cmdVisible(scene, limits, cell, points, res, seed, asJson);
     return 2;
   });

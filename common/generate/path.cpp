@@ -71,7 +71,62 @@ bool lineOfSight(const FreeSpace& fs, glm::vec2 a, glm::vec2 b) {
   return true;
 }
 
+// Per column of one line of `n`, whether a set entry of `set` lies within
+// r entries (a running count over the window [i - r, i + r]).
+void dilateLine(const uint8_t* set, size_t stride, int n, int r, uint8_t* out, size_t outStride) {
+  int count = 0;
+  for (int i = 0; i < std::min(n, r); ++i) count += set[size_t(i) * stride];
+  for (int i = 0; i < n; ++i) {
+    if (i + r < n) count += set[size_t(i + r) * stride];
+    out[size_t(i) * outStride] = count > 0 ? 1 : 0;
+    if (i - r >= 0) count -= set[size_t(i - r) * stride];
+  }
+}
+
 }  // namespace
+
+std::vector<glm::ivec2> columnsNearObstacles(const FreeSpace& fs, double reach) {
+  const int nx = fs.columnsX(), nz = fs.columnsZ();
+  const int r = int(std::ceil(std::max(0.0, reach) / double(fs.cellSize())));
+  std::vector<uint8_t> blocked(size_t(nx) * size_t(nz)), alongX(blocked.size()),
+      near(blocked.size());
+  for (int k = 0; k < nz; ++k)
+    for (int i = 0; i < nx; ++i) blocked[size_t(k) * size_t(nx) + size_t(i)] = !fs.walkable(i, k);
+  for (int k = 0; k < nz; ++k) {
+    const size_t row = size_t(k) * size_t(nx);
+    dilateLine(blocked.data() + row, 1, nx, r, alongX.data() + row, 1);
+  }
+  for (int i = 0; i < nx; ++i)
+    dilateLine(alongX.data() + i, size_t(nx), nz, r, near.data() + i, size_t(nx));
+  std::vector<glm::ivec2> out;
+  for (const glm::ivec2& c : fs.walkableColumns())
+    if (near[size_t(c.y) * size_t(nx) + size_t(c.x)]) out.push_back(c);
+  return out;
+}
+
+std::vector<float> obstacleDensity(const FreeSpace& fs, double radius) {
+  const int nx = fs.columnsX(), nz = fs.columnsZ();
+  const int r = int(std::ceil(std::max(0.0, radius) / double(fs.cellSize())));
+  // Summed-area table of the unwalkable columns.
+  const size_t stride = size_t(nx) + 1;
+  std::vector<uint32_t> sum(stride * (size_t(nz) + 1), 0);
+  for (int k = 0; k < nz; ++k)
+    for (int i = 0; i < nx; ++i)
+      sum[size_t(k + 1) * stride + size_t(i + 1)] =
+          (fs.walkable(i, k) ? 0u : 1u) + sum[size_t(k) * stride + size_t(i + 1)] +
+          sum[size_t(k + 1) * stride + size_t(i)] - sum[size_t(k) * stride + size_t(i)];
+  std::vector<float> out;
+  out.reserve(fs.walkableCount());
+  for (const glm::ivec2& c : fs.walkableColumns()) {
+    const int i0 = std::max(0, c.x - r), i1 = std::min(nx, c.x + r + 1);
+    const int k0 = std::max(0, c.y - r), k1 = std::min(nz, c.y + r + 1);
+    const uint32_t blocked =
+        sum[size_t(k1) * stride + size_t(i1)] - sum[size_t(k0) * stride + size_t(i1)] -
+        sum[size_t(k1) * stride + size_t(i0)] + sum[size_t(k0) * stride + size_t(i0)];
+    out.push_back(float(blocked) / float((i1 - i0) * (k1 - k0)));
+  }
+  return out;
+}
 
 std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& fs,
                                      const PathOptions& options) {
@@ -80,7 +135,24 @@ std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& fs,
                     fs.emptyReason());
   if (!(options.speed > 0.0) || !std::isfinite(options.speed))
     throwInputError("speed must be a positive number, got {}", options.speed);
-  const std::vector<glm::ivec2> columns = fs.walkableColumns();
+  std::vector<glm::ivec2> columns;
+  if (options.goalRadius > 0.0) {
+    // The denser half by obstacles around, less the columns against one.
+    const std::vector<glm::ivec2> all = fs.walkableColumns(),
+                                  tooNear = columnsNearObstacles(fs, options.goalClearance);
+    const std::vector<float> density = obstacleDensity(fs, options.goalRadius);
+    std::vector<float> sorted = density;
+    std::nth_element(sorted.begin(), sorted.begin() + std::ptrdiff_t(sorted.size() / 2),
+                     sorted.end());
+    const float median = sorted[sorted.size() / 2];
+    size_t near = 0;  // walks tooNear, which is in the same order as all
+    for (size_t c = 0; c < all.size(); ++c) {
+      const bool against = near < tooNear.size() && tooNear[near] == all[c];
+      near += against;
+      if (!against && density[c] >= median && density[c] > 0.0f) columns.push_back(all[c]);
+    }
+  }
+  if (columns.empty()) columns = fs.walkableColumns();
   std::mt19937_64 rng(options.seed);
   auto randomColumn = [&] {
     return columns[size_t(uniform01(rng) * double(columns.size())) % columns.size()];
@@ -91,7 +163,7 @@ std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& fs,
   out.reserve(options.frames);
   glm::ivec2 at = randomColumn();
   glm::dvec2 pos = glm::dvec2(fs.columnCentre(at.x, at.y));
-  double yaw = uniform01(rng) * 360.0;
+  double yaw = 0.0;  // set towards the first waypoint
   std::vector<glm::dvec2> waypoints;
   size_t nextWaypoint = 0;
   int failures = 0;
@@ -121,6 +193,10 @@ std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& fs,
       }
       nextWaypoint = 1;
       at = goal;
+      if (out.empty()) {  // the walk starts looking where it goes
+        const glm::dvec2 d = waypoints[1] - pos;
+        if (glm::length(d) > 1e-9) yaw = std::atan2(-d.x, -d.y) / kDeg;
+      }
     }
     // Advance one frame along the polyline.
     double remaining = step;

@@ -34,6 +34,15 @@ struct PathOptions {
   double eyeHeight = 1.7;         // metres above the floor under the viewer
   double maxTurnDegPerS = 120.0;  // how fast the gaze follows the walking direction
   uint64_t seed = 1;
+  // Where the walk's start and goals are drawn: the walkable columns whose
+  // surroundings (the square of half-side goalRadius metres) hold the most
+  // obstacles, the denser half of them (the streets among a city's
+  // buildings, not the open ground around it), leaving out those within
+  // goalClearance metres of an obstacle (a walk does not start with its nose
+  // at a wall). When that leaves none, or with goalRadius 0: any walkable
+  // column.
+  double goalRadius = 20.0;
+  double goalClearance = 2.0;
   // The ground decision when generatePath builds the free space itself
   // (the overload without a FreeSpace); see static_world.h.
   GroundChoice ground;
@@ -41,15 +50,23 @@ struct PathOptions {
 
 inline constexpr double kWalkingSpeed = 1.4;  // m/s at relative speed 1.0
 
-// Generates an upright path through the free space: random goals reached by
-// shortest grid paths, smoothed by line-of-sight shortcuts, walked at the
-// given speed. Throws InputError if the scene has no free space, saying why
-// (FreeSpace::emptyReason).
+// Generates an upright path through the free space: random goals (among
+// obstacles: PathOptions::goalRadius) reached by shortest grid paths,
+// smoothed by line-of-sight shortcuts, walked at the given speed. Throws InputError if the scene
+// has no free space, saying why (FreeSpace::emptyReason).
 std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& freeSpace,
                                      const PathOptions& options);
 // The same, building the scene's static world first (buildStaticWorld with
 // options.ground; for callers that need one path and no free space of their own).
 std::vector<PathSample> generatePath(const Scene& scene, const PathOptions& options);
+
+// The walkable columns within `reach` metres (along each axis) of a column
+// inside the grid that is not walkable: a building, a wall, a step.
+std::vector<glm::ivec2> columnsNearObstacles(const FreeSpace& freeSpace, double reach);
+// Per walkable column (walkableColumns() order), the share of the columns
+// within `radius` metres along each axis (the square around it, cut at the
+// grid's edge) that are not walkable.
+std::vector<float> obstacleDensity(const FreeSpace& freeSpace, double radius);
 
 // Reads a path file; throws InputError naming the file and line on a bad
 // header, a non-numeric or non-finite field, a missing column or t going backwards.

@@ -91,6 +91,91 @@ int crossings(const Object& o, const glm::dvec3& org, const glm::dvec3& dir) {
   return n;
 }
 
+// The oracle for columnsNearObstacles: every column of the square of side
+// 2r + 1 around a walkable column, looked at one by one.
+bool nearObstacleByScan(const FreeSpace& fs, glm::ivec2 c, double reach) {
+  const int r = int(std::ceil(reach / double(fs.cellSize())));
+  for (int k = std::max(0, c.y - r); k <= std::min(fs.columnsZ() - 1, c.y + r); ++k)
+    for (int i = std::max(0, c.x - r); i <= std::min(fs.columnsX() - 1, c.x + r); ++i)
+      if (!fs.walkable(i, k)) return true;
+  return false;
+}
+
+TEST(WalkthroughPath, ColumnsNearObstaclesAreTheWalkableOnesWithABlockedColumnInReach) {
+  const FreeSpace& fs = town().freeSpace;
+  // Beyond the town's size every walkable column is near one of its buildings.
+  EXPECT_EQ(columnsNearObstacles(fs, 200.0).size(), fs.walkableCount());
+  for (const double reach : {0.0, 0.5, 3.0, 12.0}) {
+    SCOPED_TRACE("reach " + std::to_string(reach));
+    const std::vector<glm::ivec2> near = columnsNearObstacles(fs, reach);
+    std::vector<glm::ivec2> want;
+    for (const glm::ivec2& c : fs.walkableColumns())
+      if (nearObstacleByScan(fs, c, reach)) want.push_back(c);
+    ASSERT_EQ(near.size(), want.size());
+    for (size_t i = 0; i < near.size(); ++i) ASSERT_EQ(near[i], want[i]) << "column " << i;
+    if (reach == 0.0) {
+      EXPECT_TRUE(near.empty());
+    }
+    if (reach == 3.0) {
+      EXPECT_GT(near.size(), 0u);
+      EXPECT_LT(near.size(), fs.walkableCount()) << "the middle of the 8 m streets is farther";
+    }
+  }
+}
+
+// The oracle for obstacleDensity: the columns of the square around c
+// counted one by one.
+float densityByScan(const FreeSpace& fs, glm::ivec2 c, double radius) {
+  const int r = int(std::ceil(radius / double(fs.cellSize())));
+  int blocked = 0, all = 0;
+  for (int k = std::max(0, c.y - r); k <= std::min(fs.columnsZ() - 1, c.y + r); ++k)
+    for (int i = std::max(0, c.x - r); i <= std::min(fs.columnsX() - 1, c.x + r); ++i) {
+      blocked += !fs.walkable(i, k);
+      ++all;
+    }
+  return float(blocked) / float(all);
+}
+
+TEST(WalkthroughPath, ObstacleDensityIsTheShareOfUnwalkableColumnsAround) {
+  const FreeSpace& fs = town().freeSpace;
+  const std::vector<glm::ivec2> columns = fs.walkableColumns();
+  for (const double radius : {0.0, 1.0, 10.0}) {
+    const std::vector<float> density = obstacleDensity(fs, radius);
+    ASSERT_EQ(density.size(), columns.size());
+    for (size_t c = 0; c < columns.size(); c += 97)
+      ASSERT_FLOAT_EQ(density[c], densityByScan(fs, columns[c], radius))
+          << "radius " << radius << " column " << columns[c].x << "," << columns[c].y;
+    if (radius == 0.0) {
+      EXPECT_EQ(*std::max_element(density.begin(), density.end()), 0.0f);
+    }
+  }
+}
+
+TEST(WalkthroughPath, StartsAmongDelfshavensBuildingsButNotAgainstAWall) {
+  const Scene scene = openScene(std::string(VISTREAM_SHARED_DIR) + "/data/delfshaven.obj");
+  const StaticWorld world = buildStaticWorld(scene);
+  const FreeSpace& fs = world.freeSpace;
+  PathOptions o;
+  o.frames = 1;
+  // The density of an even sample of the walkable columns: much of the
+  // assumed ground around the city has no building near at all.
+  const std::vector<glm::ivec2> columns = fs.walkableColumns();
+  std::vector<float> sample;
+  for (size_t c = 0; c < columns.size(); c += columns.size() / 400 + 1)
+    sample.push_back(densityByScan(fs, columns[c], o.goalRadius));
+  std::sort(sample.begin(), sample.end());
+  EXPECT_EQ(sample[sample.size() / 10], 0.0f) << "a tenth of the ground has no obstacle around";
+  const float quartile = sample[sample.size() / 4];
+  for (uint64_t seed = 1; seed <= 8; ++seed) {
+    o.seed = seed;
+    const glm::vec3 start = scene.toLocal(generatePath(scene, fs, o).front().position);
+    const glm::ivec2 column = fs.columnOf({start.x, start.z});
+    EXPECT_GT(densityByScan(fs, column, o.goalRadius), quartile) << "seed " << seed;
+    EXPECT_FALSE(nearObstacleByScan(fs, column, o.goalClearance))
+        << "seed " << seed << ": a walk should not start with its nose at a wall";
+  }
+}
+
 TEST(WalkthroughPath, WalksDelfshavensStreetsOnTheAssumedGroundOutsideEveryBuilding) {
   // Buildings only, no terrain (../shared/data/README.md: ground at y = 0).
   const Scene scene = openScene(std::string(VISTREAM_SHARED_DIR) + "/data/delfshaven.obj");
@@ -102,20 +187,28 @@ TEST(WalkthroughPath, WalksDelfshavensStreetsOnTheAssumedGroundOutsideEveryBuild
   o.speed = 2.0;
   const auto path = generatePath(scene, world.freeSpace, o);
   const auto upRays = makeBruteForceRayQuery(*world.triangles);
-  // Two directions, neither along a wall of the city grid nor vertical.
-  const glm::dvec3 dirs[2] = {glm::normalize(glm::dvec3(0.8137, 0.0731, 0.5765)),
-                              glm::normalize(glm::dvec3(-0.3319, 0.1123, 0.9366))};
+  // Seven directions, none along a wall of the city grid nor vertical.
+  const glm::dvec3 dirs[7] = {glm::normalize(glm::dvec3(0.8137, 0.0731, 0.5765)),
+                              glm::normalize(glm::dvec3(-0.3319, 0.1123, 0.9366)),
+                              glm::normalize(glm::dvec3(-0.7712, 0.2514, -0.3306)),
+                              glm::normalize(glm::dvec3(0.2203, 0.4871, -0.8453)),
+                              glm::normalize(glm::dvec3(0.9412, 0.1637, -0.2957)),
+                              glm::normalize(glm::dvec3(-0.5138, 0.6022, 0.6111)),
+                              glm::normalize(glm::dvec3(-0.9650, 0.0412, 0.2590))};
   for (size_t i = 0; i < path.size(); i += 3) {
     const glm::dvec3 file = path[i].position;
     EXPECT_NEAR(file.y, 1.7, 1e-3) << "frame " << i << ": eye height above the ground";
     const glm::vec3 local = scene.toLocal(file);
     // In the street: nothing overhead (no roof, no upper floor).
     EXPECT_FALSE(upRays->occluded(Ray{local, {0, 1, 0}, 0.0f, 1000.0f})) << "frame " << i;
-    // Outside every building: even crossings of each building's own mesh.
+    // Outside every building: most rays cross each building's own mesh an
+    // even number of times (most, not all: 808 of the 853 meshes are open,
+    // and one ray can slip through a crack and count one crossing short).
     for (const Object& b : scene.objects) {
       if (!b.bounds.contains(local)) continue;
-      for (const glm::dvec3& d : dirs)
-        EXPECT_EQ(crossings(b, glm::dvec3(local), d) % 2, 0) << "frame " << i << " in " << b.name;
+      int odd = 0;
+      for (const glm::dvec3& d : dirs) odd += crossings(b, glm::dvec3(local), d) % 2;
+      EXPECT_LE(odd, 2) << "frame " << i << " in " << b.name;
     }
   }
 }
