@@ -322,17 +322,19 @@ struct FrameRun {
     // their triangle's grid, one span per triangle; every other pixel takes
     // the background's (the far field overwrites its own in compose()).
     Stopwatch clock;
-    std::vector<EyeTriangle>& seen = r.seen_;
-    if (!glNear) {
-      if (seen.size() < r.geometry_.size()) seen.resize(r.geometry_.size());
-      tbb::parallel_for(tbb::blocked_range<size_t>(0, r.near_.size(), 1024),
-                        [&](const tbb::blocked_range<size_t>& range) {
-                          for (size_t i = range.begin(); i != range.end(); ++i)
-                            seen[r.near_[i]] =
-                                EyeTriangle::of(r.geometry_.triangles, r.near_[i], camera.eye);
-                        });
-    }
     tbb::parallel_for(tbb::blocked_range<int>(0, H, 8), [&](const tbb::blocked_range<int>& rows) {
+      // Triangles are set up for the eye as their spans come: only those
+      // seen (a fraction of the near field), once for neighbouring rows.
+      struct Seen {
+        uint32_t t = kNoTriangle;
+        EyeTriangle eye;
+      };
+      std::array<Seen, 64> seen;
+      auto setUp = [&](uint32_t t) -> const EyeTriangle& {
+        Seen& s = seen[t % seen.size()];
+        if (s.t != t) s = Seen{t, EyeTriangle::of(r.geometry_.triangles, t, camera.eye)};
+        return s.eye;
+      };
       for (int y = rows.begin(); y != rows.end(); ++y) {
         const size_t row = size_t(y) * size_t(W);
         // With OpenGL drawing the near field there are no triangle ids.
@@ -350,7 +352,7 @@ struct FrameRun {
           if (!polygon)
             r.geometry_.shadeBackground(camera.eye, first, pixelRays.perX, end - x, o);
           else if (!glNear)
-            r.geometry_.shadeSpan(t, seen[t], first, pixelRays.perX, end - x, o);
+            r.geometry_.shadeSpan(t, setUp(t), first, pixelRays.perX, end - x, o);
           x = end;
         }
       }

@@ -268,7 +268,6 @@ class FrameRenderer {
   SoftwareRasterizer dynamicRaster_;
   IdBuffer dynamicIds_;
   std::vector<uint32_t> dynamicWhich_;
-  std::vector<EyeTriangle> seen_;  // per triangle, set up for the frame's eye (near field only)
   std::vector<uint8_t> covered_;
   std::vector<uint32_t> near_, stamp_;
   uint32_t stampValue_ = 0;

@@ -20,20 +20,34 @@ glm::u8vec3 RenderGeometry::background(const glm::vec3& eye, const glm::vec3& di
   return Backdrop{sky, ground, haze}.along(eye, dir, groundY);
 }
 
-void RenderGeometry::shadeBackground(const glm::vec3& eye, const glm::vec3& first,
-                                     const glm::vec3& step, int count, uint8_t* out) const {
+VISTREAM_AVX2_CLONES void RenderGeometry::shadeBackground(const glm::vec3& eye,
+                                                          const glm::vec3& first,
+                                                          const glm::vec3& step, int count,
+                                                          uint8_t* out) const {
   const bool hasGround = groundY && eye.y > *groundY;
   const float height = hasGround ? eye.y - *groundY : 0.0f;
   const float inverseScale = haze.scale > 0.0f ? 1.0f / haze.scale : 0.0f;
   const glm::vec3 skyColour(sky), groundColour(ground), hazeColour = haze.colour;
-  for (int k = 0; k < count; ++k, out += 3) {
-    const glm::vec3 dir = first + float(k) * step;
-    const bool below = hasGround && dir.y < 0.0f;
-    const float distance = height / (below ? -dir.y : 1.0f) * std::sqrt(glm::dot(dir, dir));
-    const float fade = oneMinusExpNeg(std::max(0.0f, distance) * inverseScale);
+  // Chunks in passes the compiler vectorizes: each pixel's ground fade
+  // (sky pixels take 0 and are overwritten), then the bytes. Each pass
+  // computes what background() does.
+  constexpr int kChunk = 64;
+  float fade[kChunk];
+  uint8_t below[kChunk];
+  for (int k0 = 0; k0 < count; k0 += kChunk) {
+    const int m = std::min(kChunk, count - k0);
+    for (int k = 0; k < m; ++k) {
+      const glm::vec3 dir = first + float(k0 + k) * step;
+      const bool down = hasGround && dir.y < 0.0f;
+      const float distance = height / (down ? -dir.y : 1.0f) * std::sqrt(glm::dot(dir, dir));
+      fade[k] = oneMinusExpNeg(std::max(0.0f, distance) * inverseScale);
+      below[k] = down ? 1 : 0;
+    }
     for (int a = 0; a < 3; ++a) {
-      const float g = groundColour[a] + (hazeColour[a] - groundColour[a]) * fade;
-      out[a] = below ? toByte(g) : uint8_t(skyColour[a]);
+      const float g0 = groundColour[a], dg = hazeColour[a] - groundColour[a];
+      const uint8_t skyByte = uint8_t(skyColour[a]);
+      uint8_t* o = out + 3 * k0 + a;
+      for (int k = 0; k < m; ++k) o[3 * k] = below[k] ? toByte(g0 + dg * fade[k]) : skyByte;
     }
   }
 }
