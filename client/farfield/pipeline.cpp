@@ -252,11 +252,7 @@ struct FrameRun {
     r.raster_.draw(camera, triangles, r.near_, r.ids_, r.polygonDistance());
     rep.ms.nearDraw = clock.ms();
     clock = Stopwatch();
-    r.covered_.resize(pixels);
-    for (size_t p = 0; p < pixels; ++p)
-      r.covered_[p] = r.ids_.ids[p] == kNoTriangle       ? kUncovered
-                      : r.ids_.ids[p] == kBeyondDistance ? kBeyond
-                                                         : kCovered;
+    coverageOf(r.ids_, r.covered_);
     rep.ms.opacity = clock.ms();
   }
 

@@ -10,6 +10,8 @@
 #include <limits>
 #include <numeric>
 
+#include "common/core/cpu_dispatch.h"
+
 namespace vistream {
 namespace {
 
@@ -42,6 +44,26 @@ bool isTopLeft(int64_t dx, int64_t dy) {
 }
 
 }  // namespace
+
+namespace {
+
+VISTREAM_AVX2_CLONES void coverageOfRange(const uint32_t* ids, size_t n, uint8_t* out) {
+  for (size_t p = 0; p < n; ++p)
+    out[p] = ids[p] == kNoTriangle       ? uint8_t(kUncovered)
+             : ids[p] == kBeyondDistance ? uint8_t(kBeyond)
+                                         : uint8_t(kCovered);
+}
+
+}  // namespace
+
+void coverageOf(const IdBuffer& ids, std::vector<uint8_t>& covered) {
+  covered.resize(ids.ids.size());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, covered.size(), size_t(1) << 15),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      coverageOfRange(ids.ids.data() + r.begin(), r.size(),
+                                      covered.data() + r.begin());
+                    });
+}
 
 void IdBuffer::reset(int w, int h) {
   width = w;
@@ -389,11 +411,7 @@ RasterStats SoftwareRasterizer::coverage(const Camera& camera, const FlatTriangl
   setUp(camera, triangles, which);
   fill(camera, insetPx, scratch_);
   dropBeyond(camera, maxDistance * (1.0f - 1e-4f), scratch_);
-  covered.resize(scratch_.ids.size());
-  for (size_t p = 0; p < covered.size(); ++p)
-    covered[p] = scratch_.ids[p] == kNoTriangle       ? kUncovered
-                 : scratch_.ids[p] == kBeyondDistance ? kBeyond
-                                                      : kCovered;
+  coverageOf(scratch_, covered);
   // Pixels some grown triangle reaches are not certainly empty.
   if (insetPx > 0.0f) {
     fill(camera, -insetPx, scratch_);

@@ -62,6 +62,11 @@ struct IdBuffer {
   uint32_t at(int x, int y) const { return ids[size_t(y) * size_t(width) + size_t(x)]; }
 };
 
+// The opacity buffer of an id buffer, one Coverage a pixel: kUncovered for
+// kNoTriangle, kBeyond for kBeyondDistance, kCovered for a triangle
+// (in parallel).
+void coverageOf(const IdBuffer& ids, std::vector<uint8_t>& covered);
+
 struct RasterStats {
   size_t trianglesIn = 0;     // triangles handed in
   size_t trianglesSetUp = 0;  // after clipping and culling (a clipped triangle may count twice)
