@@ -164,39 +164,50 @@ std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& fs,
   glm::ivec2 at = randomColumn();
   glm::dvec2 pos = glm::dvec2(fs.columnCentre(at.x, at.y));
   double yaw = 0.0;  // set towards the first waypoint
-  std::vector<glm::dvec2> waypoints;
-  size_t nextWaypoint = 0;
+  // The polyline walked: legs to random goals, each a smoothed shortest
+  // grid path, the next planned before the walk reaches the end of the last
+  // (so the gaze, looking ahead, turns into the next leg instead of facing
+  // whatever lies beyond a goal).
+  std::vector<glm::dvec2> waypoints{pos};
+  size_t nextWaypoint = 1;
   int failures = 0;
+  auto planLeg = [&] {
+    const glm::ivec2 goal = randomColumn();
+    const std::vector<glm::ivec2> grid = gridPath(fs, at, goal);
+    if (grid.size() < 2) {
+      if (++failures > 1000)
+        throwInputError("scene '{}': no room to walk in its free space", scene.name);
+      return;
+    }
+    size_t anchor = 0;
+    while (anchor + 1 < grid.size()) {
+      size_t far = anchor + 1;
+      const glm::vec2 a = fs.columnCentre(grid[anchor].x, grid[anchor].y);
+      while (far + 1 < grid.size() &&
+             lineOfSight(fs, a, fs.columnCentre(grid[far + 1].x, grid[far + 1].y)))
+        ++far;
+      waypoints.push_back(glm::dvec2(fs.columnCentre(grid[far].x, grid[far].y)));
+      anchor = far;
+    }
+    at = goal;
+  };
+  // Path length from pos to the last waypoint, up to `enough`.
+  auto pathLeft = [&](double enough) {
+    double length = 0.0;
+    glm::dvec2 from = pos;
+    for (size_t w = nextWaypoint; w < waypoints.size() && length < enough; ++w) {
+      length += glm::length(waypoints[w] - from);
+      from = waypoints[w];
+    }
+    return length;
+  };
 
   while (out.size() < options.frames) {
-    if (nextWaypoint >= waypoints.size()) {
-      // A new goal at least a few metres away, reached by a smoothed shortest path.
-      const glm::ivec2 goal = randomColumn();
-      const glm::ivec2 from = fs.columnOf(glm::vec2(pos));
-      std::vector<glm::ivec2> grid = gridPath(fs, fs.walkable(from.x, from.y) ? from : at, goal);
-      if (grid.size() < 2) {
-        if (++failures > 1000)
-          throwInputError("scene '{}': no room to walk in its free space", scene.name);
-        continue;
-      }
-      waypoints.clear();
-      size_t anchor = 0;
-      waypoints.push_back(glm::dvec2(fs.columnCentre(grid[0].x, grid[0].y)));
-      while (anchor + 1 < grid.size()) {
-        size_t far = anchor + 1;
-        const glm::vec2 a = fs.columnCentre(grid[anchor].x, grid[anchor].y);
-        while (far + 1 < grid.size() &&
-               lineOfSight(fs, a, fs.columnCentre(grid[far + 1].x, grid[far + 1].y)))
-          ++far;
-        waypoints.push_back(glm::dvec2(fs.columnCentre(grid[far].x, grid[far].y)));
-        anchor = far;
-      }
-      nextWaypoint = 1;
-      at = goal;
-      if (out.empty()) {  // the walk starts looking where it goes
-        const glm::dvec2 d = waypoints[1] - pos;
-        if (glm::length(d) > 1e-9) yaw = std::atan2(-d.x, -d.y) / kDeg;
-      }
+    const double needed = step + options.lookAhead;
+    while (pathLeft(needed) < needed) planLeg();
+    if (out.empty()) {                          // the walk starts looking where it goes
+      const glm::dvec2 d = waypoints[1] - pos;  // the first leg: at least one column long
+      yaw = std::atan2(-d.x, -d.y) / kDeg;
     }
     // Advance one frame along the polyline.
     double remaining = step;
@@ -211,9 +222,19 @@ std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& fs,
         remaining = 0.0;
       }
     }
-    // The gaze turns towards the walking direction at a bounded rate.
+    // The gaze turns at a bounded rate towards the point lookAhead metres
+    // further along the path, so it turns into a corner before reaching it
+    // instead of facing the wall beside it.
     if (nextWaypoint < waypoints.size()) {
-      const glm::dvec2 d = waypoints[nextWaypoint] - pos;
+      glm::dvec2 ahead = pos;
+      double left = options.lookAhead;
+      for (size_t w = nextWaypoint; w < waypoints.size() && left > 0.0; ++w) {
+        const glm::dvec2 leg = waypoints[w] - ahead;
+        const double len = glm::length(leg);
+        ahead = len <= left ? waypoints[w] : ahead + leg * (left / len);
+        left -= len;
+      }
+      const glm::dvec2 d = ahead - pos;
       if (glm::length(d) > 1e-9) {
         const double target = std::atan2(-d.x, -d.y) / kDeg;
         double delta = std::remainder(target - yaw, 360.0);

@@ -33,6 +33,7 @@ struct PathOptions {
   double fps = 30.0;
   double eyeHeight = 1.7;         // metres above the floor under the viewer
   double maxTurnDegPerS = 120.0;  // how fast the gaze follows the walking direction
+  double lookAhead = 4.0;         // metres along the path to the point the gaze turns towards
   uint64_t seed = 1;
   // Where the walk's start and goals are drawn: the walkable columns whose
   // surroundings (the square of half-side goalRadius metres) hold the most
