@@ -148,6 +148,10 @@ bool decodeImpostor(std::span<const uint8_t> bytes, Impostor& out, std::string& 
   imp.cell = Box3f(vec(0), vec(3));
   imp.box = Box3f(vec(6), vec(9));
   if (imp.cell.empty() || imp.box.empty()) return fail("an empty cell or box");
+  // A box wider than float can hold (3e38 to -3e38) would turn every point into inf or NaN.
+  const glm::vec3 boxExtent = imp.box.extent();
+  if (!std::isfinite(boxExtent.x) || !std::isfinite(boxExtent.y) || !std::isfinite(boxExtent.z))
+    return fail("a box too large for float coordinates");
   imp.plane.origin = vec(12);
   imp.plane.uAxis = vec(15);
   imp.plane.vAxis = vec(18);
