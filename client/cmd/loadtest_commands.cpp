@@ -117,11 +117,12 @@ int runLoadTestTool(int argc, char** argv) {
       StaticWorldOptions worldOptions;
       worldOptions.ground = ground;
       const FreeSpace fs = buildStaticWorld(scene, worldOptions).freeSpace;
+      PathOptions po;
+      po.frames = size_t(std::max(2.0, 30.0 * (o.durationS * std::max(1.0, o.speed) + 2.0)));
+      const std::vector<glm::ivec2> goals = goalColumns(fs, po);  // one for every walk
       for (size_t i = 0; i < o.clients; ++i) {
-        PathOptions po;
         po.seed = 1000 + i;
-        po.frames = size_t(std::max(2.0, 30.0 * (o.durationS * std::max(1.0, o.speed) + 2.0)));
-        o.paths.push_back(generatePath(scene, fs, po));
+        o.paths.push_back(generatePath(scene, fs, goals, po));
       }
     }
     spdlog::info("{} clients walking for {:.0f} s at speed {:.2f} against {}:{}", o.clients,

@@ -19,6 +19,7 @@ constexpr int64_t kSub = 256;   // sub-pixel steps per pixel
 constexpr float kGuard = 8.0f;  // guard band, in multiples of w (|x|, |y| <= kGuard * w)
 constexpr int kBandRows = 16;   // rows per parallel band
 constexpr size_t kSetUpChunk = 4096;
+constexpr uint32_t kNoOwner = std::numeric_limits<uint32_t>::max();  // a pixel no triangle drew
 
 using Clip = glm::vec4;
 
@@ -303,7 +304,7 @@ size_t SoftwareRasterizer::fill(const Camera& camera, float insetPx, IdBuffer& o
     for (const ScreenTriangle& t : screen_) ++start[size_t(bucketOf(t)) + 1];
     for (int k = 0; k < kBuckets; ++k) start[size_t(k) + 1] += start[size_t(k)];
     for (uint32_t i = 0; i < screen_.size(); ++i) order_[start[size_t(bucketOf(screen_[i]))]++] = i;
-    owner_.assign(out.ids.size(), std::numeric_limits<uint32_t>::max());
+    owner_.assign(out.ids.size(), kNoOwner);
   } else {
     for (uint32_t i = 0; i < screen_.size(); ++i) order_[i] = i;
   }
@@ -356,7 +357,8 @@ size_t SoftwareRasterizer::fill(const Camera& camera, float insetPx, IdBuffer& o
           uint32_t* owner = owner_.data() + row;
           for (int x = xa; x <= xb; ++x, q += dqdx) {
             const float qf = float(q);
-            if (qf > depth[x] || (qf == depth[x] && i < owner[x])) {
+            // A tie goes to the earlier triangle, never to the background.
+            if (qf > depth[x] || (qf == depth[x] && i < owner[x] && owner[x] != kNoOwner)) {
               depth[x] = qf;
               ids[x] = s.id;
               owner[x] = i;

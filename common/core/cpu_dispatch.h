@@ -9,7 +9,11 @@
 // Elsewhere (Clang, other architectures) it is empty and the baseline runs.
 #pragma once
 
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
+#include <cstdlib>  // on glibc, defines __GLIBC__
+
+// target_clones needs the loader's ifunc support: glibc on x86-64 Linux.
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__) && \
+    defined(__GLIBC__)
 #define VISTREAM_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
 #else
 #define VISTREAM_AVX2_CLONES

@@ -71,6 +71,13 @@ bool lineOfSight(const FreeSpace& fs, glm::vec2 a, glm::vec2 b) {
   return true;
 }
 
+// Columns within `metres` of a column along one axis, cut at the grid's size
+// (so an absurd reach cannot overflow the window arithmetic).
+int columnsWithin(const FreeSpace& fs, double metres) {
+  const double cells = std::ceil(std::max(0.0, metres) / double(fs.cellSize()));
+  return int(std::min(cells, double(std::max(fs.columnsX(), fs.columnsZ()))));
+}
+
 // Per column of one line of `n`, whether a set entry of `set` lies within
 // r entries (a running count over the window [i - r, i + r]).
 void dilateLine(const uint8_t* set, size_t stride, int n, int r, uint8_t* out, size_t outStride) {
@@ -85,9 +92,30 @@ void dilateLine(const uint8_t* set, size_t stride, int n, int r, uint8_t* out, s
 
 }  // namespace
 
+void validatePathOptions(const PathOptions& o) {
+  auto finite = [](double v) { return std::isfinite(v); };
+  if (!(o.speed > 0.0) || !finite(o.speed))
+    throwInputError("path speed must be a positive number, got {}", o.speed);
+  if (!(o.fps > 0.0) || !finite(o.fps))
+    throwInputError("path fps must be a positive number, got {}", o.fps);
+  if (!(o.maxTurnDegPerS > 0.0) || !finite(o.maxTurnDegPerS))
+    throwInputError("path turn rate must be a positive number of degrees a second, got {}",
+                    o.maxTurnDegPerS);
+  if (!(o.lookAhead >= 0.0) || !finite(o.lookAhead))
+    throwInputError("path look-ahead must be a non-negative number of metres, got {}", o.lookAhead);
+  if (!finite(o.eyeHeight))
+    throwInputError("path eye height must be a finite number of metres, got {}", o.eyeHeight);
+  if (!(o.goalRadius >= 0.0) || !finite(o.goalRadius))
+    throwInputError("path goal radius must be a non-negative number of metres, got {}",
+                    o.goalRadius);
+  if (!(o.goalClearance >= 0.0) || !finite(o.goalClearance))
+    throwInputError("path goal clearance must be a non-negative number of metres, got {}",
+                    o.goalClearance);
+}
+
 std::vector<glm::ivec2> columnsNearObstacles(const FreeSpace& fs, double reach) {
   const int nx = fs.columnsX(), nz = fs.columnsZ();
-  const int r = int(std::ceil(std::max(0.0, reach) / double(fs.cellSize())));
+  const int r = columnsWithin(fs, reach);
   std::vector<uint8_t> blocked(size_t(nx) * size_t(nz)), alongX(blocked.size()),
       near(blocked.size());
   for (int k = 0; k < nz; ++k)
@@ -106,7 +134,7 @@ std::vector<glm::ivec2> columnsNearObstacles(const FreeSpace& fs, double reach) 
 
 std::vector<float> obstacleDensity(const FreeSpace& fs, double radius) {
   const int nx = fs.columnsX(), nz = fs.columnsZ();
-  const int r = int(std::ceil(std::max(0.0, radius) / double(fs.cellSize())));
+  const int r = columnsWithin(fs, radius);
   // Summed-area table of the unwalkable columns.
   const size_t stride = size_t(nx) + 1;
   std::vector<uint32_t> sum(stride * (size_t(nz) + 1), 0);
@@ -128,15 +156,8 @@ std::vector<float> obstacleDensity(const FreeSpace& fs, double radius) {
   return out;
 }
 
-std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& fs,
-                                     const PathOptions& options) {
-  if (fs.walkableCount() == 0)
-    throwInputError("scene '{}' has no free space to walk through: {}", scene.name,
-                    fs.emptyReason());
-  if (!(options.speed > 0.0) || !std::isfinite(options.speed))
-    throwInputError("speed must be a positive number, got {}", options.speed);
-  std::vector<glm::ivec2> columns;
-  if (options.goalRadius > 0.0) {
+std::vector<glm::ivec2> goalColumns(const FreeSpace& fs, const PathOptions& options) {
+  if (options.goalRadius > 0.0 && fs.walkableCount() > 0) {
     // The denser half by obstacles around, less the columns against one.
     const std::vector<glm::ivec2> all = fs.walkableColumns(),
                                   tooNear = columnsNearObstacles(fs, options.goalClearance);
@@ -145,14 +166,36 @@ std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& fs,
     std::nth_element(sorted.begin(), sorted.begin() + std::ptrdiff_t(sorted.size() / 2),
                      sorted.end());
     const float median = sorted[sorted.size() / 2];
+    std::vector<glm::ivec2> columns;
     size_t near = 0;  // walks tooNear, which is in the same order as all
     for (size_t c = 0; c < all.size(); ++c) {
       const bool against = near < tooNear.size() && tooNear[near] == all[c];
       near += against;
       if (!against && density[c] >= median && density[c] > 0.0f) columns.push_back(all[c]);
     }
+    // One column is no walk: a goal must differ from where the walk stands.
+    if (columns.size() >= 2) return columns;
   }
-  if (columns.empty()) columns = fs.walkableColumns();
+  return fs.walkableColumns();
+}
+
+std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& fs,
+                                     const PathOptions& options) {
+  validatePathOptions(options);
+  return generatePath(scene, fs, goalColumns(fs, options), options);
+}
+
+std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& fs,
+                                     const std::vector<glm::ivec2>& goals,
+                                     const PathOptions& options) {
+  if (fs.walkableCount() == 0)
+    throwInputError("scene '{}' has no free space to walk through: {}", scene.name,
+                    fs.emptyReason());
+  validatePathOptions(options);
+  for (const glm::ivec2& g : goals)
+    if (!fs.walkable(g.x, g.y))
+      throwInputError("path goal column ({}, {}) is not walkable", g.x, g.y);
+  const std::vector<glm::ivec2>& columns = goals.empty() ? fs.walkableColumns() : goals;
   std::mt19937_64 rng(options.seed);
   auto randomColumn = [&] {
     return columns[size_t(uniform01(rng) * double(columns.size())) % columns.size()];
@@ -173,7 +216,8 @@ std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& fs,
   int failures = 0;
   auto planLeg = [&] {
     const glm::ivec2 goal = randomColumn();
-    const std::vector<glm::ivec2> grid = gridPath(fs, at, goal);
+    const std::vector<glm::ivec2> grid =
+        goal == at ? std::vector<glm::ivec2>{} : gridPath(fs, at, goal);
     if (grid.size() < 2) {
       if (++failures > 1000)
         throwInputError("scene '{}': no room to walk in its free space", scene.name);
@@ -190,6 +234,7 @@ std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& fs,
       anchor = far;
     }
     at = goal;
+    failures = 0;
   };
   // Path length from pos to the last waypoint, up to `enough`.
   auto pathLeft = [&](double enough) {

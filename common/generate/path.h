@@ -57,9 +57,23 @@ inline constexpr double kWalkingSpeed = 1.4;  // m/s at relative speed 1.0
 // has no free space, saying why (FreeSpace::emptyReason).
 std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& freeSpace,
                                      const PathOptions& options);
+// The same with the goal columns given (goalColumns computed once for many
+// walks through one free space, as the load tester does); an empty list
+// means any walkable column. Throws InputError on a goal that is not walkable.
+std::vector<PathSample> generatePath(const Scene& scene, const FreeSpace& freeSpace,
+                                     const std::vector<glm::ivec2>& goals,
+                                     const PathOptions& options);
 // The same, building the scene's static world first (buildStaticWorld with
 // options.ground; for callers that need one path and no free space of their own).
 std::vector<PathSample> generatePath(const Scene& scene, const PathOptions& options);
+
+// Throws InputError naming the first option out of range: speed, fps and
+// turn rate must be positive, look-ahead, goal radius and clearance
+// non-negative, every figure finite.
+void validatePathOptions(const PathOptions& options);
+// Where walks with these options start and aim (PathOptions::goalRadius):
+// at least two columns, or every walkable column.
+std::vector<glm::ivec2> goalColumns(const FreeSpace& freeSpace, const PathOptions& options);
 
 // The walkable columns within `reach` metres (along each axis) of a column
 // inside the grid that is not walkable: a building, a wall, a step.

@@ -5,6 +5,8 @@
 
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <string>
 
 #include "common/core/error.h"
 #include "common/generate/scene_spec.h"
@@ -249,6 +251,65 @@ TEST(WalkthroughPath, IsDeterministicBySeed) {
   ASSERT_EQ(a.size(), b.size());
   for (size_t i = 0; i < a.size(); ++i) EXPECT_EQ(a[i].position, b[i].position);
   EXPECT_NE(a.front().position, c.front().position);
+}
+
+TEST(WalkthroughPath, RefusesOptionsOutOfRangeNamingTheOption) {
+  const Town& t = town();
+  auto refuses = [&](auto set, const char* word) {
+    PathOptions o;
+    o.frames = 10;
+    set(o);
+    try {
+      generatePath(t.scene, t.freeSpace, o);
+      ADD_FAILURE() << "accepted a bad " << word;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(word), std::string::npos) << e.what();
+    }
+  };
+  const double inf = std::numeric_limits<double>::infinity();
+  refuses([](PathOptions& o) { o.fps = 0.0; }, "fps");
+  refuses([&](PathOptions& o) { o.fps = inf; }, "fps");
+  refuses([](PathOptions& o) { o.speed = -1.0; }, "speed");
+  refuses([](PathOptions& o) { o.lookAhead = -1.0; }, "look-ahead");
+  refuses([](PathOptions& o) { o.maxTurnDegPerS = 0.0; }, "turn rate");
+  refuses([](PathOptions& o) { o.goalRadius = std::nan(""); }, "goal radius");
+  refuses([&](PathOptions& o) { o.goalClearance = inf; }, "goal clearance");
+  refuses([&](PathOptions& o) { o.eyeHeight = inf; }, "eye height");
+}
+
+TEST(WalkthroughPath, FallsBackToEveryWalkableColumnWhenTheGoalRuleLeavesNone) {
+  // A clearance wider than the town leaves no goal column; radius and
+  // clearance far beyond the grid must not overflow the window arithmetic.
+  PathOptions o;
+  o.frames = 60;
+  o.goalClearance = 1e12;
+  o.goalRadius = 1e12;
+  EXPECT_EQ(goalColumns(town().freeSpace, o), town().freeSpace.walkableColumns());
+  EXPECT_EQ(generatePath(town().scene, town().freeSpace, o).size(), 60u);
+}
+
+TEST(WalkthroughPath, StartsOnOneOfTheGoalColumnsItIsGiven) {
+  const Town& t = town();
+  const FreeSpace& fs = t.freeSpace;
+  const std::vector<glm::ivec2> all = fs.walkableColumns();
+  // Two far-apart columns: the walk starts on one of them.
+  const std::vector<glm::ivec2> goals{all.front(), all.back()};
+  for (uint64_t seed = 1; seed <= 4; ++seed) {
+    PathOptions o;
+    o.frames = 5;
+    o.seed = seed;
+    const glm::vec3 start = t.scene.toLocal(generatePath(t.scene, fs, goals, o).front().position);
+    const glm::ivec2 c = fs.columnOf(glm::vec2(start.x, start.z));
+    EXPECT_TRUE(c == goals[0] || c == goals[1]) << c.x << "," << c.y;
+  }
+  const glm::ivec2 blocked = [&] {
+    for (int k = 0; k < fs.columnsZ(); ++k)
+      for (int i = 0; i < fs.columnsX(); ++i)
+        if (!fs.walkable(i, k)) return glm::ivec2(i, k);
+    return glm::ivec2(-1, -1);
+  }();
+  ASSERT_GE(blocked.x, 0);
+  EXPECT_THROW(generatePath(t.scene, fs, {blocked, all.front()}, PathOptions{}), InputError);
 }
 
 TEST(ViewDirection, FollowsThePathFileConvention) {
