@@ -428,7 +428,7 @@ struct FrameRun {
         float tfar = std::numeric_limits<float>::infinity();
         // A hit at or beyond this depth loses to the pixel's point
         // (impostorCovers): no need to find it.
-        const float z = splatted ? r.splatter_.depth()[candidates[i]] : ImpostorSplatter::kEmpty;
+        const float z = splatted ? r.splatter_.score()[candidates[i]] : ImpostorSplatter::kEmpty;
         if (z < ImpostorSplatter::kEmpty) tfar = std::max(camera.zNear, (z - 0.01f) / 1.001f);
         rays.push_back(Ray{camera.eye, dirs[i], camera.zNear, tfar});
         shortened.push_back(z < ImpostorSplatter::kEmpty);
@@ -463,6 +463,7 @@ struct FrameRun {
       for (const auto& impostor : set->impostors)
         if (mayFill(tiles, *impostor)) gpu->impostors.push_back(impostor);
       gpu->depthLimit.assign(pixels, 0.0f);
+      gpu->splat = r.options_.splat;
       impostorsOn = true;
       rep.impostorsRan = true;
       rep.impostorsDrawn = gpu->impostors.size();
@@ -474,7 +475,7 @@ struct FrameRun {
       r.splatMask_.assign(pixels, 0);
       for (const std::vector<uint32_t>* list : {&candidates, &skyPixels, &backgroundPixels})
         for (const uint32_t p : *list) r.splatMask_[p] = 1;
-      r.splatter_.begin(camera, &r.splatMask_);
+      r.splatter_.begin(camera, &r.splatMask_, r.options_.splat);
       if (r.impostorImage_.width != W || r.impostorImage_.height != H)
         r.impostorImage_ = ImageRgb8(W, H);
       const std::vector<uint8_t> tiles = fillableTiles();
@@ -526,7 +527,7 @@ struct FrameRun {
       gpu->depthLimit[p] = impostorDepthLimit(farDepth);
       return false;
     }
-    const float z = r.splatter_.depth()[p];
+    const float z = r.splatter_.score()[p];
     return z < ImpostorSplatter::kEmpty && z <= impostorDepthLimit(farDepth);
   }
   void takeImpostor(size_t i) { takeImpostorPixel(candidates[i]); }

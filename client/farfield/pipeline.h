@@ -86,6 +86,7 @@ struct PipelineOptions {
   bool farFieldAllowed = true;
   float gridCellSize = 0.0f;  // near-field grid cell, metres (0: automatic)
   PanoramicCacheOptions cacheOptions;
+  PointSplat splat;  // how an impostor's point covers pixels, in software and OpenGL
 };
 
 // Table 4.1 of the thesis: where each pixel's colour came from.
@@ -183,6 +184,7 @@ struct FrameReport {
 struct GpuImpostors {
   std::vector<std::shared_ptr<const Impostor>> impostors;  // empty: none this frame
   std::vector<float> depthLimit;
+  PointSplat splat;  // PipelineOptions::splat
 };
 
 class FrameRenderer {

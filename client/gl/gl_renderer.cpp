@@ -190,9 +190,11 @@ void main() {
 // vertex program did: each point takes its colour seen from the eye (the
 // texel footprint where the line from the eye through the point crosses the
 // sampling plane, bilinear between the point's texels, as
-// Impostor::colourSeenFrom), covers the 2x2 pixels round its projection
-// (a point of size 2) and is depth tested by its view depth, linear, so the
-// depth limits of the far-field image compare exactly.
+// Impostor::colourSeenFrom), covers the pixels of the 2x2 round its
+// projection (a point of size 2) whose centres lie within the splat's radius
+// and is depth tested by its score (PointSplat::score: the view depth,
+// linear, raised off the point's centre), so the depth limits of the
+// far-field image compare as in the software splat.
 constexpr const char* kPointVertex = R"(#version 330 core
 layout(location = 0) in vec3 position;
 layout(location = 1) in uint texel;  // the point's first texel; the top bit: one colour
@@ -236,9 +238,14 @@ void main() {
 constexpr const char* kPointFragment = R"(#version 330 core
 flat in vec3 colour;
 flat in float depth;
+uniform float radius2;          // PointSplat::radius squared, pixels
+uniform float sameSurfaceScale; // PointSplat::sameSurface / radius2
 out vec4 fragColour;
 void main() {
-  gl_FragDepth = depth;
+  vec2 d = (gl_PointCoord - 0.5) * 2.0;  // from the point's centre, pixels (a point of size 2)
+  float d2 = dot(d, d);
+  if (d2 > radius2) discard;
+  gl_FragDepth = depth * (1.0 + sameSurfaceScale * d2);
   fragColour = vec4(clamp(colour, 0.0, 255.0) / 255.0, 1.0);
 }
 )";
@@ -376,7 +383,7 @@ struct GlRenderer::Impl {
   GLint imageDepthRange = imageDepthProgram.uniform("depthRange");
   struct PointUniforms {
     GLint rotationProjection, eye, planeOrigin, planeU, planeV, planeNormal, texels, colours,
-        depthRange;
+        depthRange, radius2, sameSurfaceScale;
   };
   PointUniforms point{pointProgram.uniform("rotationProjection"),
                       pointProgram.uniform("eye"),
@@ -386,7 +393,9 @@ struct GlRenderer::Impl {
                       pointProgram.uniform("planeNormal"),
                       pointProgram.uniform("texels"),
                       pointProgram.uniform("colours"),
-                      pointProgram.uniform("depthRange")};
+                      pointProgram.uniform("depthRange"),
+                      pointProgram.uniform("radius2"),
+                      pointProgram.uniform("sameSurfaceScale")};
   GLint hudViewport = hudProgram.uniform("viewport");
   GLint hudColour = hudProgram.uniform("colour");
 
@@ -562,6 +571,9 @@ struct GlRenderer::Impl {
     glUniform3f(point.eye, camera.eye.x, camera.eye.y, camera.eye.z);
     glUniform1i(point.colours, 1);
     glUniform1f(point.depthRange, depthRange);
+    const float radius2 = gpu.splat.radius * gpu.splat.radius;
+    glUniform1f(point.radius2, radius2);
+    glUniform1f(point.sameSurfaceScale, gpu.splat.sameSurface / radius2);
     // Strictly nearer: of two points at one depth the first drawn keeps the
     // pixel, as in the software splat.
     glEnable(GL_DEPTH_TEST);
@@ -728,7 +740,9 @@ void GlRenderer::draw(const Camera& camera, const ImageRgb8& farField,
           const glm::vec3 corner{k & 1 ? imp->box.hi.x : imp->box.lo.x,
                                  k & 2 ? imp->box.hi.y : imp->box.lo.y,
                                  k & 4 ? imp->box.hi.z : imp->box.lo.z};
-          range = std::max(range, 1.01f * glm::length(corner - camera.eye) + 1.0f);
+          range = std::max(
+              range,
+              (1.01f + impostors->splat.sameSurface) * glm::length(corner - camera.eye) + 1.0f);
         }
     glClearDepth(1.0);
     glClear(GL_DEPTH_BUFFER_BIT);

@@ -10,15 +10,24 @@
 #include <functional>
 
 #include "common/core/check.h"
+#include "common/core/error.h"
 #include "common/light/lighting.h"
 
 namespace vistream {
 
-void ImpostorSplatter::begin(const Camera& camera, const std::vector<uint8_t>* mask) {
+void ImpostorSplatter::begin(const Camera& camera, const std::vector<uint8_t>* mask,
+                             const PointSplat& splat) {
+  if (!(splat.radius > 0.0f && splat.radius < 1.0f))
+    throwInputError("impostor splat radius must lie between 0 and 1 pixel, got {}", splat.radius);
+  if (!(splat.sameSurface >= 0.0f) || !std::isfinite(splat.sameSurface))
+    throwInputError("impostor splat same-surface depth must be a non-negative number, got {}",
+                    splat.sameSurface);
   camera_ = camera;
+  splat_ = splat;
   VS_CHECK(!mask || mask->size() == size_t(camera.width) * size_t(camera.height));
   mask_ = mask;
   depth_.assign(size_t(camera.width) * size_t(camera.height), kEmpty);
+  score_.assign(depth_.size(), kEmpty);
   winner_.assign(depth_.size(), kNoWinner);
 }
 
@@ -63,7 +72,8 @@ size_t ImpostorSplatter::draw(const Impostor& impostor, ImageRgb8& out) {
   const glm::vec3 forward = camera_.forward();
   const float w = float(camera_.width), h = float(camera_.height);
   if (!impostorFootprint(camera_, impostor.box)) return 0;
-  // 1. Every point projected (in parallel): its 2x2 pixels' corner and depth.
+  // 1. Every point projected (in parallel): its 2x2 pixels' corner, its
+  // offset from that corner's centre and its depth.
   const size_t n = impostor.size();
   projected_.resize(n);
   const int width = camera_.width, height = camera_.height;
@@ -86,6 +96,8 @@ size_t ImpostorSplatter::draw(const Impostor& impostor, ImageRgb8& out) {
           const float py = (0.5f - clip.y / clip.w * 0.5f) * h;
           pr.x0 = int(std::floor(px - 0.5f));
           pr.y0 = int(std::floor(py - 0.5f));
+          pr.fx = px - (float(pr.x0) + 0.5f);
+          pr.fy = py - (float(pr.y0) + 0.5f);
           pr.z = z;
           ++count;
         }
@@ -93,9 +105,10 @@ size_t ImpostorSplatter::draw(const Impostor& impostor, ImageRgb8& out) {
       },
       std::plus<size_t>());
   // 2. Depth test in bands of rows, each band in parallel, every band's
-  // points in the impostor's order, so a pixel keeps the nearest point and
-  // of equals the first, as one pass would. 3. Each pixel a point won takes
-  // that point's colour seen from the eye.
+  // points in the impostor's order, so a pixel keeps the point of least
+  // score and of equals the first, as one pass would. 3. Each pixel a point
+  // won takes that point's colour seen from the eye.
+  const float radius2 = splat_.radius * splat_.radius;
   winner_.resize(depth_.size());
   const int bands =
       std::max(1, std::min(height / 8, 4 * int(tbb::this_task_arena::max_concurrency())));
@@ -108,9 +121,14 @@ size_t ImpostorSplatter::draw(const Impostor& impostor, ImageRgb8& out) {
       if (pt.y0 == kSkipped || pt.y0 + 1 < rowLo || pt.y0 >= rowHi) continue;
       for (int y = std::max(pt.y0, rowLo); y <= std::min(pt.y0 + 1, rowHi - 1); ++y)
         for (int x = std::max(pt.x0, 0); x <= std::min(pt.x0 + 1, width - 1); ++x) {
+          const float dx = pt.fx - float(x - pt.x0), dy = pt.fy - float(y - pt.y0);
+          const float d2 = dx * dx + dy * dy;
+          if (d2 > radius2) continue;
+          const float score = splat_.score(pt.z, d2);
           const size_t p = size_t(y) * size_t(width) + size_t(x);
-          if (!(pt.z < depth_[p]) || (mask_ && !(*mask_)[p])) continue;
+          if (!(score < score_[p]) || (mask_ && !(*mask_)[p])) continue;
           if (winner_[p] == kNoWinner) won.push_back(uint32_t(p));
+          score_[p] = score;
           depth_[p] = pt.z;
           winner_[p] = uint32_t(k);
         }

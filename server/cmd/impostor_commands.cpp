@@ -100,6 +100,11 @@ ImpostorCommand::ImpostorCommand(CLI::App& app, SceneLimits& limits)
                    "Monte Carlo stops once a texel's standard error is below this (8-bit levels)")
       ->capture_default_str()
       ->check(positive());
+  sub_->add_option("--pixel-filter", a.bake.pixelFilterSigma,
+                   "the Gaussian (sigma, pixels) that widens each appearance ray's pixel box; "
+                   "the thesis: about 0.5")
+      ->capture_default_str()
+      ->check(between(0.0, 4.0));
   sub_->add_option("--min-rays", a.bake.minRays, "appearance rays per texel, at least")
       ->capture_default_str()
       ->check(inRange<uint32_t>(2, 1 << 16));
@@ -155,6 +160,7 @@ std::string ImpostorCommand::settingsJson() const {
               {"max_layers", o.maxLayers},
               {"texture", {o.textureWidth, o.textureHeight}},
               {"variance", o.varianceThreshold},
+              {"pixel_filter", o.pixelFilterSigma},
               {"min_rays", o.minRays},
               {"max_rays", o.maxRays},
               {"single_colour", o.singleColourTolerance},

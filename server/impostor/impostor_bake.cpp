@@ -216,6 +216,9 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
                       ImpostorStats* statsOut) {
   if (!(options.resolutionFactor > 0.0f))
     throwInputError("impostor: the resolution factor must be positive");
+  if (!(options.pixelFilterSigma >= 0.0f) || !std::isfinite(options.pixelFilterSigma))
+    throwInputError("impostor: the pixel filter's sigma must be a non-negative number, got {}",
+                    options.pixelFilterSigma);
   if (options.textureWidth == 0 || options.textureHeight == 0 || options.textureWidth > 64 ||
       options.textureHeight > 64)
     throwInputError("impostor: texture size {}x{} (each side 1 to 64)", options.textureWidth,
@@ -465,13 +468,15 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
           const glm::vec3 w = s.position - eye;
           const float distance = glm::length(w);
           // A random orientation puts the point anywhere in its pixel; the
-          // monitor's Gaussian picks the ray about that pixel's centre.
+          // monitor's filter (a box, widened by a Gaussian of
+          // pixelFilterSigma) picks the ray about that pixel's centre.
           const glm::vec3 forward = w / distance;
           glm::vec3 a = glm::cross(forward, glm::vec3(0.0f, 1.0f, 0.0f));
           a = glm::dot(a, a) > 1e-8f ? glm::normalize(a) : glm::vec3(1.0f, 0.0f, 0.0f);
           const glm::vec3 b = glm::cross(a, forward);
-          const float ox = float(rng.uniform() - 0.5 + 0.5 * rng.normal());
-          const float oy = float(rng.uniform() - 0.5 + 0.5 * rng.normal());
+          const double sigma = double(options.pixelFilterSigma);
+          const float ox = float(rng.uniform() - 0.5 + sigma * rng.normal());
+          const float oy = float(rng.uniform() - 0.5 + sigma * rng.normal());
           const glm::vec3 dir = forward + (ox * a + oy * b) * screenPixel;
           ++pifRays;
           glm::vec3 colour;

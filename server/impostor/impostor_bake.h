@@ -47,9 +47,13 @@
 // Appearance (the plenoptic image function). For texel i of point p, c_i is
 // the integral of PIF(s, theta, x) against the texel's filter over viewer
 // positions s on the sampling rectangle (a Gaussian of half a texel about
-// the texel's centre) and the monitor's filter over pixels x (a Gaussian of
-// half a pixel about the pixel p projects to, after a uniformly random
-// camera orientation, which places p anywhere in its pixel), counting only
+// the texel's centre) and the monitor's filter over pixels x (the pixel p
+// projects to, after a uniformly random camera orientation, which places p
+// anywhere in its pixel: a box; the thesis widens it by a Gaussian of about
+// half a pixel, pixelFilterSigma, which blurs every crease and roof line by
+// a pixel more than the box-filtered pixels of the renderers and of the
+// benchmarks' supersampled reference: on the real city model the error
+// inside the impostors' footprint halves without it), counting only
 // views where p is visible (an occlusion ray from s to p against the
 // impostor's triangles: the points' z-buffer). PIF is what a ray from s
 // sees beyond the box's entry: the first scene triangle's baked colour with
@@ -102,6 +106,7 @@ struct ImpostorOptions {
   uint32_t maxLayers = 8;
   uint32_t textureWidth = 8, textureHeight = 2;
   float varianceThreshold = 4.0f;       // standard error of a texel's mean, 8-bit levels
+  float pixelFilterSigma = 0.0f;        // the Gaussian widening the pixel's box, in pixels
   uint32_t minRays = 8, maxRays = 64;   // per texel
   float singleColourTolerance = 12.0f;  // 8-bit levels
   uint64_t seed = 1;

@@ -83,11 +83,14 @@ std::vector<uint32_t> without(const std::vector<uint32_t>& all, const std::vecto
 }
 
 // The reference frame: k x k rays a pixel over every triangle, box
-// filtered, and the footprint: pixels where a sample meets a marked triangle.
+// filtered, and the footprint: pixels where a sample meets a marked triangle
+// (kInside: every sample does; kOutline: some do, some meet other triangles
+// or the sky, the silhouettes of the marked geometry).
 struct Reference {
   ImageRgb8 image;
   std::vector<uint8_t> footprint;
   size_t footprintPixels = 0;
+  static constexpr uint8_t kInside = 1, kOutline = 2;
 };
 
 Reference reference(const RenderGeometry& all, const RayQuery& rays,
@@ -99,7 +102,7 @@ Reference reference(const RenderGeometry& all, const RayQuery& rays,
   tbb::parallel_for(0, c.height, [&](int y) {
     for (int x = 0; x < c.width; ++x) {
       glm::vec3 sum(0.0f);
-      bool inFootprint = false;
+      int marks = 0;
       for (int sy = 0; sy < k; ++sy)
         for (int sx = 0; sx < k; ++sx) {
           const glm::vec3 dir = pr.at(float(x) + (float(sx) + 0.5f) / float(k),
@@ -108,25 +111,28 @@ Reference reference(const RenderGeometry& all, const RayQuery& rays,
           glm::u8vec3 colour;
           if (h.valid()) {
             colour = all.colourAt(h.triangle, h.u, h.v, h.t * glm::length(dir));
-            inFootprint = inFootprint || marked[h.triangle];
+            marks += marked[h.triangle];
           } else {
             colour = all.background(c.eye, dir);
           }
           sum += glm::vec3(colour);
         }
       r.image.set(x, y, glm::u8vec3(glm::round(sum / float(k * k))));
-      r.footprint[size_t(y) * size_t(c.width) + size_t(x)] = inFootprint;
+      r.footprint[size_t(y) * size_t(c.width) + size_t(x)] = marks == 0       ? 0
+                                                             : marks == k * k ? Reference::kInside
+                                                                              : Reference::kOutline;
     }
   });
-  r.footprintPixels = size_t(std::count(r.footprint.begin(), r.footprint.end(), uint8_t(1)));
+  r.footprintPixels = size_t(
+      std::count_if(r.footprint.begin(), r.footprint.end(), [](uint8_t f) { return f != 0; }));
   return r;
 }
 
 // Sums of a frame's error against the reference (8-bit levels, the mean
 // over channels per pixel).
 struct ErrorSums {
-  double footAbs = 0, footSq = 0, frameAbs = 0;
-  size_t footPixels = 0, footWrong = 0, framePixels = 0;
+  double footAbs = 0, footSq = 0, frameAbs = 0, outlineAbs = 0;
+  size_t footPixels = 0, footWrong = 0, framePixels = 0, outlinePixels = 0;
   void add(const ImageRgb8& image, const Reference& ref) {
     for (int y = 0; y < image.height; ++y)
       for (int x = 0; x < image.width; ++x) {
@@ -134,7 +140,12 @@ struct ErrorSums {
         const double e = (d.x + d.y + d.z) / 3.0;
         frameAbs += e;
         ++framePixels;
-        if (!ref.footprint[size_t(y) * size_t(image.width) + size_t(x)]) continue;
+        const uint8_t f = ref.footprint[size_t(y) * size_t(image.width) + size_t(x)];
+        if (!f) continue;
+        if (f == Reference::kOutline) {
+          outlineAbs += e;
+          ++outlinePixels;
+        }
         footAbs += e;
         footSq += (double(d.x) * d.x + double(d.y) * d.y + double(d.z) * d.z) / 3.0;
         ++footPixels;
@@ -147,6 +158,12 @@ struct ErrorSums {
     return footPixels ? double(footWrong) / double(footPixels) : 0.0;
   }
   double frameMae() const { return framePixels ? frameAbs / double(framePixels) : 0.0; }
+  // The footprint's silhouette pixels (Reference::kOutline) and the rest.
+  double outlineMae() const { return outlinePixels ? outlineAbs / double(outlinePixels) : 0.0; }
+  double insideMae() const {
+    return footPixels > outlinePixels ? (footAbs - outlineAbs) / double(footPixels - outlinePixels)
+                                      : 0.0;
+  }
 };
 
 struct ModeResult {
@@ -218,8 +235,8 @@ ImageRgb8 crops(const Reference& ref, const std::vector<const ImageRgb8*>& frame
   auto at = [&](int x, int y) -> uint32_t& { return sum[size_t(y) * size_t(w + 1) + size_t(x)]; };
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x)
-      at(x + 1, y + 1) =
-          at(x, y + 1) + at(x + 1, y) - at(x, y) + ref.footprint[size_t(y) * size_t(w) + size_t(x)];
+      at(x + 1, y + 1) = at(x, y + 1) + at(x + 1, y) - at(x, y) +
+                         (ref.footprint[size_t(y) * size_t(w) + size_t(x)] != 0);
   uint32_t best = 0;
   int cx = 0, cy = 0;
   for (int y = 0; y + ch <= h; y += 2)
@@ -253,6 +270,8 @@ json errorJson(const ModeResult& m) {
           {"footprint_mae", m.error.footMae()},
           {"footprint_rmse", m.error.footRmse()},
           {"footprint_wrong_share", m.error.footWrongShare()},
+          {"outline_mae", m.error.outlineMae()},
+          {"inside_mae", m.error.insideMae()},
           {"frame_mae", m.error.frameMae()},
           {"median_frame_ms", medianOf(m.ms)},
           {"mean_stage_ms",
@@ -269,12 +288,32 @@ json errorJson(const ModeResult& m) {
 struct SweepRow {
   std::string knob, value;
   ImpostorOptions options;
+  PointSplat splat;
 };
+
+// Holes: footprint pixels that every reference sample sees on the
+// impostors' faces (Reference::kInside) but no point of theirs covers.
+size_t holes(const std::vector<std::shared_ptr<const Impostor>>& impostors,
+             const std::vector<Camera>& cameras, const std::vector<Reference>& refs,
+             const PointSplat& splat) {
+  size_t count = 0;
+  ImageRgb8 scratch;
+  for (size_t i = 0; i < cameras.size(); ++i) {
+    ImpostorSplatter s;
+    s.begin(cameras[i], nullptr, splat);
+    scratch = ImageRgb8(cameras[i].width, cameras[i].height);
+    for (const auto& imp : impostors) s.draw(*imp, scratch);
+    for (size_t p = 0; p < refs[i].footprint.size(); ++p)
+      count +=
+          refs[i].footprint[p] == Reference::kInside && !(s.depth()[p] < ImpostorSplatter::kEmpty);
+  }
+  return count;
+}
 
 std::vector<SweepRow> sweepRows(const ImpostorOptions& base) {
   std::vector<SweepRow> rows;
   auto add = [&](std::string knob, std::string value, auto&& change) {
-    SweepRow r{std::move(knob), std::move(value), base};
+    SweepRow r{std::move(knob), std::move(value), base, PointSplat{}};
     change(r.options);
     rows.push_back(std::move(r));
   };
@@ -289,6 +328,14 @@ std::vector<SweepRow> sweepRows(const ImpostorOptions& base) {
     });
   for (float v : {2.0f, 8.0f})
     add("variance", fmt::format("{}", v), [v](ImpostorOptions& o) { o.varianceThreshold = v; });
+  add("filter", "0.5", [](ImpostorOptions& o) { o.pixelFilterSigma = 0.5f; });  // the thesis's
+  // The client's splat (the bake unchanged).
+  for (float r : {0.5f, 0.75f, 0.95f}) {
+    add("radius", fmt::format("{}", r), [](ImpostorOptions&) {});
+    rows.back().splat.radius = r;
+  }
+  add("same surf", "0", [](ImpostorOptions&) {});
+  rows.back().splat.sameSurface = 0.0f;
   return rows;
 }
 
@@ -455,9 +502,12 @@ int run(const Args& a) {
       one->impostors.push_back(std::make_shared<const Impostor>(
           bakeImpostor(view, cell, site.box, site.triangles, row.options, &stats)));
       one->expected = 1;
-      FrameRenderer r(heldOne, pipelineOptions(RenderMode::Pipeline, d));
+      PipelineOptions po = pipelineOptions(RenderMode::Pipeline, d);
+      po.splat = row.splat;
+      FrameRenderer r(heldOne, po);
       r.setImpostors(one);
       const ModeResult m = runMode("impostor", r, views, viewRefs, false);
+      const size_t rowHoles = holes(one->impostors, views, viewRefs, row.splat);
       sweep.push_back({{"knob", row.knob},
                        {"value", row.value},
                        {"points", stats.points},
@@ -467,6 +517,9 @@ int run(const Args& a) {
                        {"footprint_mae", m.error.footMae()},
                        {"footprint_rmse", m.error.footRmse()},
                        {"footprint_wrong_share", m.error.footWrongShare()},
+                       {"outline_mae", m.error.outlineMae()},
+                       {"inside_mae", m.error.insideMae()},
+                       {"holes", rowHoles},
                        {"median_frame_ms", medianOf(m.ms)}});
       bar.advance();
     }
@@ -494,6 +547,7 @@ int run(const Args& a) {
   }
   size_t footprint = 0;
   for (const Reference& r : refs) footprint += r.footprintPixels;
+  const size_t footprintHoles = holes(set->impostors, cameras, refs, PointSplat{});
   json modesJson = json::array();
   for (const ModeResult& m : modes) modesJson.push_back(errorJson(m));
   if (a.json) {
@@ -503,6 +557,7 @@ int run(const Args& a) {
                       {"size", a.size},
                       {"supersample", a.supersample},
                       {"footprint_pixels", footprint},
+                      {"holes", footprintHoles},
                       {"impostor_bytes", impostorBytes},
                       {"geometry_bytes", geometryBytes},
                       {"impostors", impostors},
@@ -514,14 +569,16 @@ int run(const Args& a) {
   }
   fmt::print("{} cell {}: {} impostors ({} bytes; the faces they replace: {} bytes as geometry)\n",
              scene.name, a.cell, baked.impostors.size(), impostorBytes, geometryBytes);
-  fmt::print("walk of {} frames at {}, reference {}x{} rays a pixel; footprint {} pixels\n\n",
-             cameras.size(), a.size, a.supersample, a.supersample, footprint);
-  fmt::print("  {:<10} {:>13} {:>14} {:>16} {:>10} {:>9}\n", "far field", "footprint MAE",
-             "footprint RMSE", "off > 32 levels", "frame MAE", "frame ms");
+  fmt::print(
+      "walk of {} frames at {}, reference {}x{} rays a pixel; footprint {} pixels, {} holes\n\n",
+      cameras.size(), a.size, a.supersample, a.supersample, footprint, footprintHoles);
+  fmt::print("  {:<10} {:>13} {:>14} {:>16} {:>11} {:>10} {:>10} {:>9}\n", "far field",
+             "footprint MAE", "footprint RMSE", "off > 32 levels", "outline MAE", "inside MAE",
+             "frame MAE", "frame ms");
   for (const ModeResult& m : modes)
-    fmt::print("  {:<10} {:>13.2f} {:>14.2f} {:>15.1f}% {:>10.2f} {:>9.2f}\n", m.name,
-               m.error.footMae(), m.error.footRmse(), 100.0 * m.error.footWrongShare(),
-               m.error.frameMae(), medianOf(m.ms));
+    fmt::print("  {:<10} {:>13.2f} {:>14.2f} {:>15.1f}% {:>11.2f} {:>10.2f} {:>10.2f} {:>9.2f}\n",
+               m.name, m.error.footMae(), m.error.footRmse(), 100.0 * m.error.footWrongShare(),
+               m.error.outlineMae(), m.error.insideMae(), m.error.frameMae(), medianOf(m.ms));
   fmt::print("\n  {:>6} {:>4} {:>9} {:>9} {:>7} {:>9} {:>10} {:>8} {:>9} {:>9}{}\n", "sector",
              "band", "triangles", "points", "pts/px", "bytes", "geometry B", "bake s", "splat ms",
              "splat fps", a.gl ? fmt::format(" {:>8} {:>8}", "GL ms", "GL fps") : "");
@@ -536,15 +593,18 @@ int run(const Args& a) {
                     : "");
   if (!sweep.empty()) {
     fmt::print("\n  knob sweep on the heaviest impostor (error on its footprint):\n");
-    fmt::print("  {:<10} {:>6} {:>8} {:>7} {:>9} {:>7} {:>6} {:>7} {:>9}\n", "knob", "value",
-               "points", "pts/px", "bytes", "bake s", "MAE", "RMSE", "frame ms");
+    fmt::print("  {:<10} {:>6} {:>8} {:>7} {:>9} {:>7} {:>6} {:>7} {:>8} {:>7} {:>6} {:>9}\n",
+               "knob", "value", "points", "pts/px", "bytes", "bake s", "MAE", "RMSE", "outline",
+               "inside", "holes", "frame ms");
     for (const json& r : sweep)
-      fmt::print("  {:<10} {:>6} {:>8} {:>7.2f} {:>9} {:>7.2f} {:>6.2f} {:>7.2f} {:>9.2f}\n",
-                 r["knob"].get<std::string>(), r["value"].get<std::string>(),
-                 r["points"].get<size_t>(), r["points_per_pixel"].get<double>(),
-                 r["bytes"].get<size_t>(), r["bake_s"].get<double>(),
-                 r["footprint_mae"].get<double>(), r["footprint_rmse"].get<double>(),
-                 r["median_frame_ms"].get<double>());
+      fmt::print(
+          "  {:<10} {:>6} {:>8} {:>7.2f} {:>9} {:>7.2f} {:>6.2f} {:>7.2f} {:>8.2f} {:>7.2f} {:>6} "
+          "{:>9.2f}\n",
+          r["knob"].get<std::string>(), r["value"].get<std::string>(), r["points"].get<size_t>(),
+          r["points_per_pixel"].get<double>(), r["bytes"].get<size_t>(), r["bake_s"].get<double>(),
+          r["footprint_mae"].get<double>(), r["footprint_rmse"].get<double>(),
+          r["outline_mae"].get<double>(), r["inside_mae"].get<double>(), r["holes"].get<size_t>(),
+          r["median_frame_ms"].get<double>());
   }
   return 0;
 }

@@ -135,8 +135,11 @@ std::shared_ptr<ImpostorSet> wallOfPoints() {
   std::uniform_int_distribution<int> level(0, 255);
   std::vector<glm::u8vec3> texels(imp.textureTexels());
   int k = 0;
-  for (float y = 0.0f; y <= 50.0f; y += 0.5f)
-    for (float x = -80.0f; x <= 80.0f; x += 0.5f, ++k) {
+  // Points half a pixel apart up to 25 m, then 1.3 pixels apart: a point
+  // covers only the pixel centres within its splat's radius, and the
+  // sparse part shows the gaps between them.
+  for (float y = 0.0f; y <= 50.0f; y += y < 25.0f ? 0.5f : 1.25f)
+    for (float x = -80.0f; x <= 80.0f; x += y < 25.0f ? 0.5f : 1.25f, ++k) {
       for (glm::u8vec3& t : texels) t = glm::u8vec3(level(random), level(random), level(random));
       // A little depth relief, so that points also compete among themselves.
       imp.appendPoint({x, y, -200.0f + 0.5f * std::sin(0.7f * x + 0.3f * y)}, texels.data(),

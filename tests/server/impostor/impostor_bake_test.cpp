@@ -22,7 +22,10 @@
 #include "client/render/camera.h"
 #include "client/render/impostor_splat.h"
 #include "common/core/error.h"
+#include "common/generate/scene_spec.h"
+#include "common/raycast/ray_query.h"
 #include "common/scene/scene.h"
+#include "server/impostor/impostor_world.h"
 #include "tests/common/support/box_scenes.h"
 
 namespace vistream {
@@ -481,6 +484,47 @@ TEST(ImpostorBake, FarFromTheOriginStillLeavesNoHole) {
   EXPECT_EQ(h.uncovered, 0u);
 }
 
+// The real city model: a street cell's heaviest impostor (the bake as the
+// server runs it: lighting, PVS, placement) leaves no hole from random
+// viewpoints in the cell. Oracle: a pixel whose centre ray's first hit over
+// the whole scene is one of the impostor's triangles must be covered.
+TEST(ImpostorBake, LeavesNoHoleOnTheRealCityModel) {
+  const Scene scene = openScene(std::string(VISTREAM_SHARED_DIR) + "/data/delfshaven.obj");
+  const ImpostorWorld world(scene, ImpostorWorldOptions{});
+  const Box3f cell({-300.0f, 1.0f, -200.0f}, {-296.0f, 3.0f, -196.0f});  // origin-centred file
+  ImpostorPlacementOptions placement;
+  placement.minTriangles = 300;
+  const ImpostorPlacement placed =
+      placeImpostors(cell, world.triangles(), world.pvsTriangles(cell), placement);
+  ASSERT_FALSE(placed.sites.empty()) << placed.why;
+  const ImpostorSite& site = *std::max_element(placed.sites.begin(), placed.sites.end(),
+                                               [](const ImpostorSite& a, const ImpostorSite& b) {
+                                                 return a.triangles.size() < b.triangles.size();
+                                               });
+  const Impostor imp =
+      bakeImpostor(world.view(), cell, site.box, site.triangles, quickOptions(320, 240));
+  std::vector<bool> mine(world.triangles().size(), false);
+  for (uint32_t t : site.triangles) mine[t] = true;
+  const auto rays = makeEmbreeRayQuery(world.triangles());
+  size_t seen = 0, uncovered = 0;
+  for (const Camera& c : viewsFromCell(cell, site.box, 24, 320, 240, 5)) {
+    ImpostorSplatter splatter;
+    splatter.begin(c);
+    ImageRgb8 image(c.width, c.height);
+    splatter.draw(imp, image);
+    for (int y = 0; y < c.height; ++y)
+      for (int x = 0; x < c.width; ++x) {
+        const Hit h = rays->firstHit(
+            Ray{c.eye, c.rayDirection(float(x) + 0.5f, float(y) + 0.5f), 0.0f, 1e30f});
+        if (!h.valid() || !mine[h.triangle]) continue;
+        ++seen;
+        uncovered += !splatter.covered(x, y);
+      }
+  }
+  EXPECT_GT(seen, 2000u);
+  EXPECT_EQ(uncovered, 0u) << "of " << seen << " pixels that see the impostor's faces";
+}
+
 TEST(ImpostorBake, GivesTheSameBytesOnAnyThreadCount) {
   const ColouredScene s = buildingBlock();
   const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
@@ -540,8 +584,10 @@ TEST(ImpostorSplat, SkipsOnlyBoxesWhollyOutOfView) {
 }
 
 // The parallel splat draws what one pass over the points in order draws:
-// oracle, that pass written out here, over two impostors sharing a depth
-// buffer, from views at, beside and inside the block's footprint.
+// oracle, that pass written out here (every pixel of the 3x3 round a point
+// tested against the disc, the least score kept), over two impostors sharing
+// a depth buffer, from views at, beside and inside the block's footprint,
+// with the default splat, a wide one and one that compares depth alone.
 TEST(ImpostorSplat, DrawsWhatOnePassInThePointsOrderDraws) {
   const ColouredScene s = buildingBlock();
   const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
@@ -550,7 +596,10 @@ TEST(ImpostorSplat, DrawsWhatOnePassInThePointsOrderDraws) {
   ImpostorOptions other = quickOptions(320, 240);
   other.resolutionFactor = 1.3f;  // another sampling of the same surfaces: depth ties and overlaps
   const Impostor b = bakeImpostor(s.view(), cell, boundsOf(s.triangles), s.facingCell(cell), other);
+  const std::array<PointSplat, 3> splats = {PointSplat{}, PointSplat{0.95f, 0.05f},
+                                            PointSplat{0.6f, 0.0f}};
   for (int k = 0; k < 6; ++k) {
+    const PointSplat& splat = splats[size_t(k) % splats.size()];
     Camera c;
     c.width = 320;
     c.height = 240;
@@ -558,14 +607,15 @@ TEST(ImpostorSplat, DrawsWhatOnePassInThePointsOrderDraws) {
     c.yawDeg = -20.0f + 8.0f * float(k);
     c.pitchDeg = float(k % 3) * 4.0f;
     ImpostorSplatter splatter;
-    splatter.begin(c);
+    splatter.begin(c, nullptr, splat);
     ImageRgb8 image(c.width, c.height);
     const size_t landed = splatter.draw(a, image) + splatter.draw(b, image);
     // One pass.
     const glm::mat4 rp = c.rotationProjection();
-    std::vector<float> depth(size_t(c.width) * size_t(c.height), ImpostorSplatter::kEmpty);
+    const size_t n = size_t(c.width) * size_t(c.height);
+    std::vector<float> depth(n, ImpostorSplatter::kEmpty), score(n, ImpostorSplatter::kEmpty);
     ImageRgb8 expected(c.width, c.height);
-    size_t expectedLanded = 0;
+    size_t expectedLanded = 0, ties = 0;
     for (const Impostor* imp : {&a, &b})
       for (size_t p = 0; p < imp->size(); ++p) {
         const glm::vec3 rel = imp->points[p] - c.eye;
@@ -575,19 +625,88 @@ TEST(ImpostorSplat, DrawsWhatOnePassInThePointsOrderDraws) {
         ++expectedLanded;
         const float px = (clip.x / clip.w * 0.5f + 0.5f) * float(c.width);
         const float py = (0.5f - clip.y / clip.w * 0.5f) * float(c.height);
-        const int x0 = int(std::floor(px - 0.5f)), y0 = int(std::floor(py - 0.5f));
-        for (int y = std::max(y0, 0); y <= std::min(y0 + 1, c.height - 1); ++y)
-          for (int x = std::max(x0, 0); x <= std::min(x0 + 1, c.width - 1); ++x) {
-            float& d = depth[size_t(y) * size_t(c.width) + size_t(x)];
-            if (!(z < d)) continue;
-            d = z;
+        const int cx = int(std::floor(px)), cy = int(std::floor(py));
+        for (int y = std::max(cy - 1, 0); y <= std::min(cy + 1, c.height - 1); ++y)
+          for (int x = std::max(cx - 1, 0); x <= std::min(cx + 1, c.width - 1); ++x) {
+            const float dx = px - (float(x) + 0.5f), dy = py - (float(y) + 0.5f);
+            const float d2 = dx * dx + dy * dy;
+            if (d2 > splat.radius * splat.radius) continue;
+            const float sc = z * (1.0f + splat.sameSurface / (splat.radius * splat.radius) * d2);
+            const size_t at = size_t(y) * size_t(c.width) + size_t(x);
+            ties += sc == score[at];
+            if (!(sc < score[at])) continue;
+            score[at] = sc;
+            depth[at] = z;
             expected.set(x, y, toBytes(imp->colourSeenFrom(p, c.eye)));
           }
       }
     EXPECT_GT(expectedLanded, 1000u) << "view " << k;
     EXPECT_EQ(landed, expectedLanded) << "view " << k;
-    EXPECT_EQ(splatter.depth(), depth) << "view " << k;
-    EXPECT_TRUE(image.pixels == expected.pixels) << "view " << k;
+    // The disc's tests round alike up to a float's last bit; a pixel on its
+    // very rim may differ, no more.
+    size_t differ = 0;
+    for (size_t p = 0; p < n; ++p)
+      differ += splatter.depth()[p] != depth[p] || splatter.score()[p] != score[p] ||
+                image.pixels[3 * p] != expected.pixels[3 * p] ||
+                image.pixels[3 * p + 1] != expected.pixels[3 * p + 1] ||
+                image.pixels[3 * p + 2] != expected.pixels[3 * p + 2];
+    EXPECT_LE(differ, n / 10000) << "view " << k << " (ties " << ties << ")";
+    // The views see the block: the comparison is not of empty frames.
+    size_t covered = 0;
+    for (size_t p = 0; p < n; ++p) covered += depth[p] < ImpostorSplatter::kEmpty;
+    EXPECT_GT(covered, 500u) << "view " << k;
+  }
+}
+
+TEST(ImpostorSplat, RefusesARadiusOutsideOnePixelAndANegativeSameSurfaceDepth) {
+  Camera c;
+  ImpostorSplatter splatter;
+  EXPECT_THROW(splatter.begin(c, nullptr, PointSplat{0.0f, 0.01f}), InputError);
+  EXPECT_THROW(splatter.begin(c, nullptr, PointSplat{1.0f, 0.01f}), InputError);
+  EXPECT_THROW(splatter.begin(c, nullptr, PointSplat{0.6f, -0.1f}), InputError);
+  EXPECT_THROW(splatter.begin(c, nullptr, PointSplat{0.6f, std::nanf("")}), InputError);
+  EXPECT_NO_THROW(splatter.begin(c, nullptr, PointSplat{0.6f, 0.0f}));
+}
+
+// A point nearer the pixel's centre wins over a point of the same surface a
+// little nearer the viewer, and loses to a surface well in front.
+TEST(ImpostorSplat, OfOneSurfaceThePointNearerThePixelCentreWins) {
+  Camera c;
+  c.width = 64;
+  c.height = 48;
+  c.eye = glm::vec3(0.0f);
+  // Two points projecting a quarter pixel right of and 0.45 pixel left of
+  // the centre of pixel (32, 24), the second 0.1% nearer the viewer.
+  const float z = 100.0f;
+  auto at = [&](float pxOff, float depthScale) {
+    const glm::vec3 dir = c.rayDirection(32.5f + pxOff, 24.5f);
+    return dir * (z * depthScale / glm::dot(dir, c.forward()));
+  };
+  auto one = [&](const glm::vec3& p, const glm::u8vec3& colour) {
+    Impostor imp;
+    imp.cell = Box3f({-1.0f, -1.0f, 1.0f}, {1.0f, 1.0f, 2.0f});
+    imp.box = Box3f(glm::vec3(-50.0f, -50.0f, -200.0f), glm::vec3(50.0f, 50.0f, -50.0f));
+    imp.textureWidth = imp.textureHeight = 1;
+    imp.appendPoint(p, &colour, true);
+    return imp;
+  };
+  const Impostor centre = one(at(0.25f, 1.0f), {200, 0, 0}),
+                 nearer = one(at(-0.45f, 0.999f), {0, 200, 0}),
+                 front = one(at(-0.45f, 0.9f), {0, 0, 200});
+  for (bool centreFirst : {true, false}) {
+    ImpostorSplatter splatter;
+    splatter.begin(c);
+    ImageRgb8 image(c.width, c.height);
+    if (centreFirst) {
+      splatter.draw(centre, image);
+      splatter.draw(nearer, image);
+    } else {
+      splatter.draw(nearer, image);
+      splatter.draw(centre, image);
+    }
+    EXPECT_EQ(image.at(32, 24), glm::u8vec3(200, 0, 0)) << centreFirst;
+    splatter.draw(front, image);
+    EXPECT_EQ(image.at(32, 24), glm::u8vec3(0, 0, 200)) << centreFirst;
   }
 }
 
