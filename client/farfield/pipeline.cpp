@@ -459,9 +459,14 @@ struct FrameRun {
     } else if (candidates.empty() && skyPixels.empty() && backgroundPixels.empty()) {
       rep.impostorsWhy = "no far-field pixels to fill";
     } else if (gpu) {
-      const std::vector<uint8_t> tiles = fillableTiles();
+      // Those whose footprint meets a pixel they may fill (far-field,
+      // horizon-sky or background): not those behind the near field's walls.
+      ScreenTiles tiles;
+      tiles.reset(W, H);
+      for (const std::vector<uint32_t>* list : {&candidates, &skyPixels, &backgroundPixels})
+        for (const uint32_t p : *list) tiles.mark(p);
       for (const auto& impostor : set->impostors)
-        if (mayFill(tiles, *impostor)) gpu->impostors.push_back(impostor);
+        if (tiles.mayCover(camera, impostor->box)) gpu->impostors.push_back(impostor);
       gpu->depthLimit.assign(pixels, 0.0f);
       gpu->splat = r.options_.splat;
       impostorsOn = true;
@@ -478,11 +483,12 @@ struct FrameRun {
       r.splatter_.begin(camera, &r.splatMask_, r.options_.splat);
       if (r.impostorImage_.width != W || r.impostorImage_.height != H)
         r.impostorImage_ = ImageRgb8(W, H);
-      const std::vector<uint8_t> tiles = fillableTiles();
+      // The splatter skips an impostor (or a block of its points) over no
+      // pixel of the mask: behind the near field's walls.
       for (const auto& impostor : set->impostors) {
-        if (!mayFill(tiles, *impostor)) continue;
-        rep.impostorPoints += r.splatter_.draw(*impostor, r.impostorImage_);
-        ++rep.impostorsDrawn;
+        const size_t landed = r.splatter_.draw(*impostor, r.impostorImage_);
+        rep.impostorPoints += landed;
+        rep.impostorsDrawn += landed > 0;
       }
       impostorsOn = true;
       rep.impostorsRan = true;
@@ -491,28 +497,6 @@ struct FrameRun {
                                      set->index.x, set->index.y, set->index.z);
     }
     rep.ms.impostors = clock.ms();
-  }
-  // Tiles of kTile x kTile pixels holding a pixel an impostor may fill
-  // (far-field, horizon-sky or background): an impostor whose footprint
-  // meets none of them (behind the near field's walls) is not drawn at all.
-  static constexpr int kTile = 16;
-  std::vector<uint8_t> fillableTiles() const {
-    const int tw = (W + kTile - 1) / kTile, th = (H + kTile - 1) / kTile;
-    std::vector<uint8_t> tiles(size_t(tw) * size_t(th), 0);
-    for (const std::vector<uint32_t>* list : {&candidates, &skyPixels, &backgroundPixels})
-      for (const uint32_t p : *list)
-        tiles[size_t(int(p / uint32_t(W)) / kTile) * size_t(tw) +
-              size_t(int(p % uint32_t(W)) / kTile)] = 1;
-    return tiles;
-  }
-  bool mayFill(const std::vector<uint8_t>& tiles, const Impostor& impostor) const {
-    const std::optional<glm::ivec4> f = impostorFootprint(camera, impostor.box);
-    if (!f) return false;
-    const int tw = (W + kTile - 1) / kTile;
-    for (int ty = f->y / kTile; ty <= f->w / kTile; ++ty)
-      for (int tx = f->x / kTile; tx <= f->z / kTile; ++tx)
-        if (tiles[size_t(ty) * size_t(tw) + size_t(tx)]) return true;
-    return false;
   }
   // Whether candidate i shows the impostor rather than the far field's hit
   // at view depth `farDepth` (infinity: a miss).

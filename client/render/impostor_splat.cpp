@@ -26,9 +26,33 @@ void ImpostorSplatter::begin(const Camera& camera, const std::vector<uint8_t>* m
   splat_ = splat;
   VS_CHECK(!mask || mask->size() == size_t(camera.width) * size_t(camera.height));
   mask_ = mask;
-  depth_.assign(size_t(camera.width) * size_t(camera.height), kEmpty);
-  score_.assign(depth_.size(), kEmpty);
-  winner_.assign(depth_.size(), kNoWinner);
+  const size_t pixels = size_t(camera.width) * size_t(camera.height);
+  // Every pixel at infinity: those the last frame wrote are reset, unless
+  // the size changed (winner_ is reset by each draw itself).
+  if (depth_.size() == pixels && frameWidth_ == camera.width) {
+    for (std::vector<uint32_t>& band : touched_) {
+      for (uint32_t p : band) depth_[p] = score_[p] = kEmpty;
+      band.clear();
+    }
+  } else {
+    depth_.assign(pixels, kEmpty);
+    score_.assign(pixels, kEmpty);
+    winner_.assign(pixels, kNoWinner);
+    touched_.clear();
+  }
+  frameWidth_ = camera.width;
+  rotationProjection_ = camera.rotationProjection();
+  forward_ = camera.forward();
+  maskTiles_.reset(camera.width, camera.height);
+  if (mask) maskTiles_.markMask(*mask);
+  // The bands of rows the depth test runs in, one task each.
+  bands_ =
+      std::max(1, std::min(camera.height / 8, 4 * int(tbb::this_task_arena::max_concurrency())));
+  bandOfRow_.resize(size_t(camera.height));
+  for (int b = 0; b < bands_; ++b)
+    for (int y = b * camera.height / bands_; y < (b + 1) * camera.height / bands_; ++y)
+      bandOfRow_[size_t(y)] = b;
+  touched_.resize(size_t(bands_));
 }
 
 std::optional<glm::ivec4> impostorFootprint(const Camera& camera, const Box3f& box) {
@@ -66,40 +90,97 @@ std::optional<glm::ivec4> impostorFootprint(const Camera& camera, const Box3f& b
                     std::min(camera.height - 1, int(std::floor(hi.y + 0.5f))));
 }
 
+bool ImpostorSplatter::project(const glm::vec3& point, Projected& pr) const {
+  pr.y0 = kSkipped;
+  const glm::vec3 rel = point - camera_.eye;
+  const float z = glm::dot(rel, forward_);
+  if (!(z > camera_.zNear)) return false;
+  const glm::vec4 clip = rotationProjection_ * glm::vec4(rel, 1.0f);
+  // A point whose projection is off the screen is clipped whole, as
+  // OpenGL clips a point by its centre.
+  if (!(std::abs(clip.x) <= clip.w && std::abs(clip.y) <= clip.w)) return false;
+  // Window coordinates, row 0 at the top (camera.h); the 2x2 pixels whose
+  // centres (x + 0.5, y + 0.5) surround (px, py).
+  const float px = (clip.x / clip.w * 0.5f + 0.5f) * float(camera_.width);
+  const float py = (0.5f - clip.y / clip.w * 0.5f) * float(camera_.height);
+  pr.x0 = int(std::floor(px - 0.5f));
+  pr.y0 = int(std::floor(py - 0.5f));
+  pr.fx = px - (float(pr.x0) + 0.5f);
+  pr.fy = py - (float(pr.y0) + 0.5f);
+  pr.z = z;
+  return true;
+}
+
+bool ImpostorSplatter::mayCover(const Box3f& bounds) const {
+  return mask_ ? maskTiles_.mayCover(camera_, bounds)
+               : impostorFootprint(camera_, bounds).has_value();
+}
+
+void ScreenTiles::reset(int width, int height) {
+  width_ = width;
+  height_ = height;
+  tilesX_ = (width + kTile - 1) / kTile;
+  tiles_.assign(size_t(tilesX_) * size_t((height + kTile - 1) / kTile), 0);
+}
+
+void ScreenTiles::markMask(const std::vector<uint8_t>& mask) {
+  VS_CHECK(mask.size() == size_t(width_) * size_t(height_));
+  for (int y = 0; y < height_; ++y) {
+    const uint8_t* row = mask.data() + size_t(y) * size_t(width_);
+    uint8_t* tiles = tiles_.data() + size_t(y / kTile) * size_t(tilesX_);
+    for (int tx = 0; tx < tilesX_; ++tx) {
+      if (tiles[tx]) continue;
+      const int x0 = tx * kTile, x1 = std::min(width_, x0 + kTile);
+      tiles[tx] = std::any_of(row + x0, row + x1, [](uint8_t m) { return m != 0; });
+    }
+  }
+}
+
+bool ScreenTiles::mayCover(const Camera& camera, const Box3f& box) const {
+  VS_CHECK(camera.width == width_ && camera.height == height_);
+  const std::optional<glm::ivec4> rect = impostorFootprint(camera, box);
+  if (!rect) return false;
+  for (int ty = rect->y / kTile; ty <= rect->w / kTile; ++ty)
+    for (int tx = rect->x / kTile; tx <= rect->z / kTile; ++tx)
+      if (tiles_[size_t(ty) * size_t(tilesX_) + size_t(tx)]) return true;
+  return false;
+}
+
 size_t ImpostorSplatter::draw(const Impostor& impostor, ImageRgb8& out) {
   VS_CHECK(out.width == camera_.width && out.height == camera_.height);
-  const glm::mat4 rp = camera_.rotationProjection();
-  const glm::vec3 forward = camera_.forward();
-  const float w = float(camera_.width), h = float(camera_.height);
-  if (!impostorFootprint(camera_, impostor.box)) return 0;
-  // 1. Every point projected (in parallel): its 2x2 pixels' corner, its
-  // offset from that corner's centre and its depth.
+  if (!mayCover(impostor.box)) return 0;
+  // 1. Every point projected (in parallel, by blocks): its 2x2 pixels'
+  // corner, its offset from that corner's centre and its depth. A block of
+  // points (Impostor::blockBounds) wholly out of view, or over none of the
+  // pixels the mask lets through, is skipped whole.
   const size_t n = impostor.size();
   projected_.resize(n);
   const int width = camera_.width, height = camera_.height;
+  const bool blocked = impostor.hasBlockBounds();
+  const size_t blockSize = blocked ? Impostor::kBlockPoints : 4096;
+  const size_t blockCount = (n + blockSize - 1) / blockSize;
+  // Per block, the bands its points' rows fall in (first > last: none).
+  blockBands_.resize(blockCount);
   const size_t landed = tbb::parallel_reduce(
-      tbb::blocked_range<size_t>(0, n, 4096), size_t(0),
-      [&](const tbb::blocked_range<size_t>& range, size_t count) {
-        for (size_t k = range.begin(); k < range.end(); ++k) {
-          Projected& pr = projected_[k];
-          pr.y0 = kSkipped;
-          const glm::vec3 rel = impostor.points[k] - camera_.eye;
-          const float z = glm::dot(rel, forward);
-          if (!(z > camera_.zNear)) continue;
-          const glm::vec4 clip = rp * glm::vec4(rel, 1.0f);
-          // A point whose projection is off the screen is clipped whole, as
-          // OpenGL clips a point by its centre.
-          if (!(std::abs(clip.x) <= clip.w && std::abs(clip.y) <= clip.w)) continue;
-          // Window coordinates, row 0 at the top (camera.h); the 2x2 pixels
-          // whose centres (x + 0.5, y + 0.5) surround (px, py).
-          const float px = (clip.x / clip.w * 0.5f + 0.5f) * w;
-          const float py = (0.5f - clip.y / clip.w * 0.5f) * h;
-          pr.x0 = int(std::floor(px - 0.5f));
-          pr.y0 = int(std::floor(py - 0.5f));
-          pr.fx = px - (float(pr.x0) + 0.5f);
-          pr.fy = py - (float(pr.y0) + 0.5f);
-          pr.z = z;
-          ++count;
+      tbb::blocked_range<size_t>(0, blockCount, blocked ? 16 : 1), size_t(0),
+      [&](const tbb::blocked_range<size_t>& blocks, size_t count) {
+        for (size_t b = blocks.begin(); b < blocks.end(); ++b) {
+          const size_t first = b * blockSize, last = std::min(n, first + blockSize);
+          int yLo = height, yHi = -2;
+          if (!blocked || mayCover(impostor.blockBounds[b])) {
+            for (size_t k = first; k < last; ++k)
+              if (project(impostor.points[k], projected_[k])) {
+                ++count;
+                yLo = std::min(yLo, projected_[k].y0);
+                yHi = std::max(yHi, projected_[k].y0);
+              }
+          } else {
+            for (size_t k = first; k < last; ++k) projected_[k].y0 = kSkipped;
+          }
+          blockBands_[b] = yHi < yLo
+                               ? glm::ivec2(1, 0)
+                               : glm::ivec2(bandOfRow_[size_t(std::max(yLo, 0))],
+                                            bandOfRow_[size_t(std::min(yHi + 1, height - 1))]);
         }
         return count;
       },
@@ -109,35 +190,38 @@ size_t ImpostorSplatter::draw(const Impostor& impostor, ImageRgb8& out) {
   // score and of equals the first, as one pass would. 3. Each pixel a point
   // won takes that point's colour seen from the eye.
   const float radius2 = splat_.radius * splat_.radius;
-  winner_.resize(depth_.size());
-  const int bands =
-      std::max(1, std::min(height / 8, 4 * int(tbb::this_task_arena::max_concurrency())));
-  tbb::parallel_for(0, bands, [&](int band) {
-    const int rowLo = band * height / bands, rowHi = (band + 1) * height / bands;
+  tbb::parallel_for(0, bands_, [&](int band) {
+    const int rowLo = band * height / bands_, rowHi = (band + 1) * height / bands_;
     std::vector<uint32_t>& won = wonScratch_.local();
     won.clear();
-    for (size_t k = 0; k < n; ++k) {
-      const Projected& pt = projected_[k];
-      if (pt.y0 == kSkipped || pt.y0 + 1 < rowLo || pt.y0 >= rowHi) continue;
-      for (int y = std::max(pt.y0, rowLo); y <= std::min(pt.y0 + 1, rowHi - 1); ++y)
-        for (int x = std::max(pt.x0, 0); x <= std::min(pt.x0 + 1, width - 1); ++x) {
-          const float dx = pt.fx - float(x - pt.x0), dy = pt.fy - float(y - pt.y0);
-          const float d2 = dx * dx + dy * dy;
-          if (d2 > radius2) continue;
-          const float score = splat_.score(pt.z, d2);
-          const size_t p = size_t(y) * size_t(width) + size_t(x);
-          if (!(score < score_[p]) || (mask_ && !(*mask_)[p])) continue;
-          if (winner_[p] == kNoWinner) won.push_back(uint32_t(p));
-          score_[p] = score;
-          depth_[p] = pt.z;
-          winner_[p] = uint32_t(k);
-        }
+    for (size_t b = 0; b < blockCount; ++b) {
+      if (band < blockBands_[b].x || band > blockBands_[b].y) continue;
+      const size_t last = std::min(n, (b + 1) * blockSize);
+      for (size_t k = b * blockSize; k < last; ++k) {
+        const Projected& pt = projected_[k];
+        if (pt.y0 == kSkipped || pt.y0 + 1 < rowLo || pt.y0 >= rowHi) continue;
+        for (int y = std::max(pt.y0, rowLo); y <= std::min(pt.y0 + 1, rowHi - 1); ++y)
+          for (int x = std::max(pt.x0, 0); x <= std::min(pt.x0 + 1, width - 1); ++x) {
+            const float dx = pt.fx - float(x - pt.x0), dy = pt.fy - float(y - pt.y0);
+            const float d2 = dx * dx + dy * dy;
+            if (d2 > radius2) continue;
+            const float score = splat_.score(pt.z, d2);
+            const size_t p = size_t(y) * size_t(width) + size_t(x);
+            if (!(score < score_[p]) || (mask_ && !(*mask_)[p])) continue;
+            if (winner_[p] == kNoWinner) won.push_back(uint32_t(p));
+            score_[p] = score;
+            depth_[p] = pt.z;
+            winner_[p] = uint32_t(k);
+          }
+      }
     }
     for (uint32_t p : won) {
       out.set(int(p % uint32_t(width)), int(p / uint32_t(width)),
               toBytes(impostor.colourSeenFrom(winner_[p], camera_.eye)));
       winner_[p] = kNoWinner;
     }
+    std::vector<uint32_t>& touched = touched_[size_t(band)];
+    touched.insert(touched.end(), won.begin(), won.end());
   });
   return landed;
 }

@@ -79,6 +79,30 @@ struct PointSplat {
   }
 };
 
+// Which tiles of kTile x kTile pixels hold a pixel an impostor may fill,
+// so that an impostor, or a block of its points, whose footprint meets none
+// is skipped whole (the software splatter with its mask, the pipeline for
+// the OpenGL splat).
+class ScreenTiles {
+ public:
+  static constexpr int kTile = 16;
+  // No tile marked.
+  void reset(int width, int height);
+  void mark(uint32_t pixel) { tiles_[tileOf(pixel)] = 1; }
+  // Marks the tiles with a non-zero byte of `mask` (one a pixel, row 0 at the top).
+  void markMask(const std::vector<uint8_t>& mask);
+  // Whether a point inside `box` may land on a marked tile (impostorFootprint).
+  bool mayCover(const Camera& camera, const Box3f& box) const;
+
+ private:
+  size_t tileOf(uint32_t pixel) const {
+    return size_t(int(pixel / uint32_t(width_)) / kTile) * size_t(tilesX_) +
+           size_t(int(pixel % uint32_t(width_)) / kTile);
+  }
+  int width_ = 0, height_ = 0, tilesX_ = 0;
+  std::vector<uint8_t> tiles_;
+};
+
 class ImpostorSplatter {
  public:
   // Starts a frame of the camera's size: every depth at infinity. With
@@ -90,7 +114,9 @@ class ImpostorSplatter {
   void begin(const Camera& camera, const std::vector<uint8_t>* mask = nullptr,
              const PointSplat& splat = {});
   // Draws an impostor's points into the frame's depth and `out` (which has
-  // the camera's size). Returns the points that landed on the screen.
+  // the camera's size). Returns the points that landed on the screen (with
+  // a mask, those of blocks over no pixel it lets through are not counted:
+  // they are skipped unprojected).
   size_t draw(const Impostor& impostor, ImageRgb8& out);
   // Per pixel, the depth of the point that won it (kEmpty: no point).
   const std::vector<float>& depth() const { return depth_; }
@@ -111,14 +137,26 @@ class ImpostorSplatter {
     float fx = 0.0f, fy = 0.0f;  // the projection from the top left pixel's centre
     float z = 0.0f;
   };
+  // Projects a point (y0 kSkipped and false when it is not drawn).
+  bool project(const glm::vec3& point, Projected& pr) const;
+  // False when no point inside `bounds` can land on a pixel the mask lets through.
+  bool mayCover(const Box3f& bounds) const;
+
   Camera camera_;
+  glm::mat4 rotationProjection_{1.0f};
+  glm::vec3 forward_{0.0f, 0.0f, -1.0f};
   const std::vector<uint8_t>* mask_ = nullptr;
+  ScreenTiles maskTiles_;  // the tiles the mask lets a point into
   PointSplat splat_;
   std::vector<float> depth_, score_;
   // Scratch of draw(): per point its projection, per pixel the point that
-  // won it in this draw, per band the pixels won.
+  // won it in this draw, per band of rows the pixels won.
   std::vector<Projected> projected_;
   std::vector<uint32_t> winner_;
+  int bands_ = 1, frameWidth_ = 0;
+  std::vector<int> bandOfRow_;
+  std::vector<glm::ivec2> blockBands_;          // per block of points: its first and last band
+  std::vector<std::vector<uint32_t>> touched_;  // per band: pixels written this frame
   tbb::enumerable_thread_specific<std::vector<uint32_t>> wonScratch_;
 };
 

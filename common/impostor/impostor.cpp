@@ -44,6 +44,11 @@ size_t Impostor::bytesUncompressed() const {
   return points.size() * (12 + 4 + size_t(textureTexels()) * 3);
 }
 
+void Impostor::boundBlocks() {
+  blockBounds.assign(blockCount(), Box3f{});
+  for (size_t k = 0; k < points.size(); ++k) blockBounds[k / kBlockPoints].extend(points[k]);
+}
+
 void Impostor::appendPoint(const glm::vec3& p, const glm::u8vec3* colours, bool single) {
   points.push_back(p);
   firstTexel.push_back(uint32_t(texels.size()));

@@ -23,10 +23,10 @@
 // so a renderer draws them as they are.
 //
 // Drawing (every renderer the same): each point is projected with the
-// viewer's camera and covers the 2x2 pixels whose centres surround its
-// projection (an OpenGL point of size 2), z-buffered. The bake's sampling
-// density keeps neighbouring points less than a pixel apart, so the 2x2
-// footprint leaves no hole (tests/server/impostor: 0 uncovered pixels).
+// viewer's camera and covers the pixel centres within a splat radius of its
+// projection, z-buffered (PointSplat in client/render/impostor_splat.h). The
+// bake's sampling density keeps neighbouring points less than a pixel apart,
+// so the splat leaves no hole (tests/server/impostor: 0 uncovered pixels).
 //
 // Thread safety: immutable after the bake; lookups are const.
 #pragma once
@@ -66,8 +66,19 @@ struct Impostor {
   std::vector<uint32_t> firstTexel;
   std::vector<uint8_t> singleColour;  // per point: 1 if it keeps one texel
   std::vector<glm::u8vec3> texels;
+  // The bounds of each run of kBlockPoints consecutive points (the last run
+  // may be shorter), for a renderer to skip runs wholly out of view or
+  // wholly behind nearer geometry; filled by boundBlocks() (the bake and the
+  // decoder call it). Not part of the wire format or bytes(). A count that
+  // does not match the points means "not computed": renderers then draw
+  // every point.
+  static constexpr size_t kBlockPoints = 256;
+  std::vector<Box3f> blockBounds;
 
   size_t size() const { return points.size(); }
+  size_t blockCount() const { return (points.size() + kBlockPoints - 1) / kBlockPoints; }
+  bool hasBlockBounds() const { return blockBounds.size() == blockCount(); }
+  void boundBlocks();
   uint32_t textureTexels() const { return textureWidth * textureHeight; }
   // The colour of point k seen from `eye` (0..255 per channel, unrounded).
   glm::vec3 colourSeenFrom(size_t k, const glm::vec3& eye) const;

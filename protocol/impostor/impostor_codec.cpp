@@ -202,6 +202,7 @@ bool decodeImpostor(std::span<const uint8_t> bytes, Impostor& out, std::string& 
     for (uint32_t i = 1; i < texels; ++i, c += 3)
       t[i] = {uint8_t(t[0].x + c[0]), uint8_t(t[0].y + c[1]), uint8_t(t[0].z + c[2])};
   }
+  imp.boundBlocks();
   out = std::move(imp);
   return true;
 }

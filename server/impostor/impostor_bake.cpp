@@ -554,6 +554,7 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
     imp.appendPoint(samples[i].position, colours.data() + i * texelCount, single[i] != 0);
     stats.singleColour += single[i];
   }
+  imp.boundBlocks();
   stats.points = imp.size();
   const ScreenCoverage coverage =
       screenCoverage(imp.points, cell.center(), box.center(), options.screen);

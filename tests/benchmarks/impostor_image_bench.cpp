@@ -171,6 +171,7 @@ struct ModeResult {
   ErrorSums error;
   std::vector<double> ms;
   StageTimes stages;  // summed over the frames
+  std::vector<StageTimes> perFrame;
   std::vector<ImageRgb8> frames;
 };
 
@@ -215,7 +216,9 @@ ModeResult runMode(const std::string& name, FrameRenderer& renderer,
   for (size_t i = 0; i < cameras.size(); ++i) {
     ImageRgb8 image;
     const auto start = std::chrono::steady_clock::now();
-    m.stages += renderer.render(cameras[i], image).ms;
+    const StageTimes ms = renderer.render(cameras[i], image).ms;
+    m.stages += ms;
+    m.perFrame.push_back(ms);
     m.ms.push_back(
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
             .count());
@@ -282,7 +285,20 @@ json errorJson(const ModeResult& m) {
             {"raycast", m.stages.raycast / n},
             {"impostors", m.stages.impostors / n},
             {"compose", m.stages.compose / n},
-            {"total", m.stages.total / n}}}};
+            {"total", m.stages.total / n}}},
+          {"median_stage_ms", [&] {
+             json stages = json::object();
+             StageTimes first;
+             first.forEachField([&](const StatField& f, double) {
+               std::vector<double> v;
+               for (const StageTimes& t : m.perFrame)
+                 t.forEachField([&](const StatField& g, double x) {
+                   if (g.key == f.key) v.push_back(x);
+                 });
+               stages[std::string(f.key)] = medianOf(v);
+             });
+             return stages;
+           }()}};
 }
 
 struct SweepRow {
