@@ -106,6 +106,9 @@ int runImpostorBench(const ImpostorBenchOptions& options) {
         o.varianceThreshold = v;
         sweep.emplace_back(fmt::format("variance {:g}", v), o);
       }
+      o = defaults;
+      o.pixelFilterSigma = 0.5f;  // the thesis's Gaussian
+      sweep.emplace_back("pixel filter 0.5", o);
     }
     ProgressBar bar(fmt::format("impostor-bench {}", scene.name),
                     (order.size() + sweep.size()) * options.repeats);

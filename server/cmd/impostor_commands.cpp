@@ -104,7 +104,7 @@ ImpostorCommand::ImpostorCommand(CLI::App& app, SceneLimits& limits)
                    "the Gaussian (sigma, pixels) that widens each appearance ray's pixel box; "
                    "the thesis: about 0.5")
       ->capture_default_str()
-      ->check(between(0.0, 4.0));
+      ->check(inRange<float>(0.0f, 4.0f));
   sub_->add_option("--min-rays", a.bake.minRays, "appearance rays per texel, at least")
       ->capture_default_str()
       ->check(inRange<uint32_t>(2, 1 << 16));

@@ -188,7 +188,7 @@ TEST(PvsTool, ImpostorsPrintTheContractedJsonForEachImpostorOfTheCell) {
   const fs::path scene = dir.write("row.obj", farRowScene());
   const std::string common = "impostors --scene " + scene.string() +
                              " --cell -2,1,-2,2,3,2 --near-distance 100 "
-                             "--lighting-cache none --max-rays 8 ";
+                             "--lighting-cache none --max-rays 8 --pixel-filter 0 ";
   const ToolRun r = runPvs(common + "--json --min-triangles 20");
   ASSERT_EQ(r.status, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);
@@ -269,7 +269,7 @@ TEST(PvsTool, ImpostorBenchPrintsTable51AndEveryKnobOfTheSweep) {
   const auto& sweep = j[0]["sweep"];
   std::map<std::string, nlohmann::json> rows;
   for (const auto& row : sweep) rows[row["setting"].get<std::string>()] = row;
-  ASSERT_EQ(rows.size(), 13u);
+  ASSERT_EQ(rows.size(), 14u);
   auto points = [&](const char* s) { return rows.at(s)["points"].get<uint64_t>(); };
   // The defaults are resolution 1, 8x2 texels and variance 4: those rows are
   // the table's impostor again.
@@ -279,6 +279,8 @@ TEST(PvsTool, ImpostorBenchPrintsTable51AndEveryKnobOfTheSweep) {
   EXPECT_LT(points("resolution 0.5"), points("resolution 1.4"));
   EXPECT_GT(points("no point removal"), points("resolution 1.0"));
   EXPECT_GT(points("hidden points kept"), points("resolution 1.0"));
+  // The pixel filter changes colours, not points.
+  EXPECT_EQ(points("pixel filter 0.5"), points("resolution 1.0"));
   // One texel a point is one colour a point, and the smallest.
   EXPECT_DOUBLE_EQ(rows.at("texture 1x1")["single_colour_share"].get<double>(), 1.0);
   EXPECT_LT(rows.at("texture 1x1")["bytes"].get<uint64_t>(),
@@ -292,9 +294,9 @@ TEST(PvsTool, ImpostorArgumentsFailBeforeTheSceneLoadsNamingTheOption) {
       .tool = "vistream-pvs", .common = "impostors --scene " + missing, .unopened = missing};
   expectEachOptionNamed(pvs, {"--cell 1,2,3"});
   pvs.common = "impostors --scene " + missing + " --cell 0,0,0,1,1,1";
-  expectEachOptionNamed(
-      pvs, {"--texture 0x2", "--texture eight", "--screen 8x8", "--resolution 0", "--sectors 0",
-            "--near-distance -5", "--min-rays 10 --max-rays 5", "--visibility-views 0"});
+  expectEachOptionNamed(pvs, {"--texture 0x2", "--texture eight", "--screen 8x8", "--resolution 0",
+                              "--sectors 0", "--near-distance -5", "--min-rays 10 --max-rays 5",
+                              "--visibility-views 0", "--pixel-filter -0.5", "--pixel-filter 5"});
 }
 
 TEST(PvsTool, BenchPrintsOneRowPerSceneSizeAndMethodWithNoMissingFacesAndTheDistrictBakes) {
