@@ -411,7 +411,7 @@ RasterStats SoftwareRasterizer::coverage(const Camera& camera, const FlatTriangl
                                          std::span<const uint32_t> which, float insetPx,
                                          std::vector<uint8_t>& covered, float maxDistance) {
   setUp(camera, triangles, which);
-  fill(camera, insetPx, scratch_);
+  const size_t skipped = fill(camera, insetPx, scratch_);
   dropBeyond(camera, maxDistance * (1.0f - 1e-4f), scratch_);
   coverageOf(scratch_, covered);
   // Pixels some grown triangle reaches are not certainly empty.
@@ -420,7 +420,7 @@ RasterStats SoftwareRasterizer::coverage(const Camera& camera, const FlatTriangl
     for (size_t p = 0; p < covered.size(); ++p)
       if (covered[p] == kUncovered && scratch_.ids[p] != kNoTriangle) covered[p] = kBeyond;
   }
-  return {which.size(), screen_.size(), 0};
+  return {which.size(), screen_.size(), skipped};
 }
 
 }  // namespace vistream

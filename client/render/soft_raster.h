@@ -71,7 +71,8 @@ struct RasterStats {
   size_t trianglesIn = 0;     // triangles handed in
   size_t trianglesSetUp = 0;  // after clipping and culling (a clipped triangle may count twice)
   // Set-up triangles skipped in a band of rows because everything the band
-  // already held there was nearer (hierarchical depth; draw() only).
+  // already held there was nearer (hierarchical depth; draw(), and coverage()
+  // with an inset of 0 or more).
   size_t bandsSkipped = 0;
 };
 
