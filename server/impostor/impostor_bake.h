@@ -12,8 +12,9 @@
 // narrower than an LDI pixel) can fall between the rays: where a triangle's
 // projection comes within half a pixel diagonal of the centre of an LDI
 // pixel whose ray met nothing, the point of its edges nearest that centre
-// is added, one a pixel. Together these keep every viewer's pixel that sees
-// the geometry within a pixel of a point: the 2x2 footprint covers it.
+// is added, one a pixel. Together these keep every viewer's pixel centre
+// that sees the geometry within about 0.6 pixels of a point: the client's
+// splat (a disc of 0.7 pixels, client/render/impostor_splat.h) covers it.
 //
 // Point removal (optional). Camera j's sample spacing on a surface at p is
 // bounded by s_j = a z_j / |n . w_j| (a its pixel size, z_j the depth of p
