@@ -485,11 +485,12 @@ struct FrameRun {
         r.impostorImage_ = ImageRgb8(W, H);
       // The splatter skips an impostor (or a block of its points) over no
       // pixel of the mask: behind the near field's walls.
-      for (const auto& impostor : set->impostors) {
-        const size_t landed = r.splatter_.draw(*impostor, r.impostorImage_);
-        rep.impostorPoints += landed;
-        rep.impostorsDrawn += landed > 0;
-      }
+      std::vector<const Impostor*> all;
+      for (const auto& impostor : set->impostors) all.push_back(impostor.get());
+      std::vector<size_t> landed;
+      rep.impostorPoints += r.splatter_.draw(all, r.impostorImage_, &landed);
+      rep.impostorsDrawn +=
+          size_t(std::count_if(landed.begin(), landed.end(), [](size_t n) { return n > 0; }));
       impostorsOn = true;
       rep.impostorsRan = true;
       rep.impostorsWhy = fmt::format("{} impostor{} of the viewer's cell ({}, {}, {})",

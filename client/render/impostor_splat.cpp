@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <mutex>
 
 #include "common/core/check.h"
 #include "common/core/error.h"
@@ -147,48 +148,92 @@ bool ScreenTiles::mayCover(const Camera& camera, const Box3f& box) const {
 }
 
 size_t ImpostorSplatter::draw(const Impostor& impostor, ImageRgb8& out) {
+  const Impostor* one[] = {&impostor};
+  return draw(one, out);
+}
+
+size_t ImpostorSplatter::draw(std::span<const Impostor* const> impostors, ImageRgb8& out,
+                              std::vector<size_t>* landedEach) {
   VS_CHECK(out.width == camera_.width && out.height == camera_.height);
-  if (!mayCover(impostor.box)) return 0;
+  // The impostors that may cover a pixel, their points and blocks laid end
+  // to end: point k of impostor i is point firstPoint_[i] + k, its block
+  // firstBlock_[i] + k / blockSize[i].
+  drawn_.clear();
+  firstPoint_.assign(1, 0);
+  firstBlock_.assign(1, 0);
+  if (landedEach) landedEach->assign(impostors.size(), 0);
+  for (size_t i = 0; i < impostors.size(); ++i) {
+    const Impostor& imp = *impostors[i];
+    if (imp.size() == 0 || !mayCover(imp.box)) continue;
+    drawn_.push_back(uint32_t(i));
+    const size_t blockSize = imp.hasBlockBounds() ? Impostor::kBlockPoints : 4096;
+    firstPoint_.push_back(firstPoint_.back() + imp.size());
+    firstBlock_.push_back(firstBlock_.back() + (imp.size() + blockSize - 1) / blockSize);
+  }
+  if (drawn_.empty()) return 0;
+  const size_t blockCount = firstBlock_.back();
+  projected_.resize(firstPoint_.back());
+  blockBands_.resize(blockCount);
+  blockOwner_.resize(blockCount);
+  for (size_t d = 0; d < drawn_.size(); ++d)
+    std::fill(blockOwner_.begin() + std::ptrdiff_t(firstBlock_[d]),
+              blockOwner_.begin() + std::ptrdiff_t(firstBlock_[d + 1]), uint32_t(d));
+  const int width = camera_.width, height = camera_.height;
+  // Block b of the drawn impostors: its impostor, and its points' range in
+  // that impostor.
+  struct Block {
+    const Impostor* imp;
+    size_t offset, first, last;
+  };
+  auto blockAt = [&](size_t b) {
+    const uint32_t d = blockOwner_[b];
+    const Impostor* imp = impostors[drawn_[d]];
+    const size_t blockSize = imp->hasBlockBounds() ? Impostor::kBlockPoints : 4096;
+    const size_t first = (b - firstBlock_[d]) * blockSize;
+    return Block{imp, firstPoint_[d], first, std::min(imp->size(), first + blockSize)};
+  };
   // 1. Every point projected (in parallel, by blocks): its 2x2 pixels'
   // corner, its offset from that corner's centre and its depth. A block of
   // points (Impostor::blockBounds) wholly out of view, or over none of the
-  // pixels the mask lets through, is skipped whole.
-  const size_t n = impostor.size();
-  projected_.resize(n);
-  const int width = camera_.width, height = camera_.height;
-  const bool blocked = impostor.hasBlockBounds();
-  const size_t blockSize = blocked ? Impostor::kBlockPoints : 4096;
-  const size_t blockCount = (n + blockSize - 1) / blockSize;
-  // Per block, the bands its points' rows fall in (first > last: none).
-  blockBands_.resize(blockCount);
-  const size_t landed = tbb::parallel_reduce(
-      tbb::blocked_range<size_t>(0, blockCount, blocked ? 16 : 1), size_t(0),
-      [&](const tbb::blocked_range<size_t>& blocks, size_t count) {
-        for (size_t b = blocks.begin(); b < blocks.end(); ++b) {
-          const size_t first = b * blockSize, last = std::min(n, first + blockSize);
-          int yLo = height, yHi = -2;
-          if (!blocked || mayCover(impostor.blockBounds[b])) {
-            for (size_t k = first; k < last; ++k)
-              if (project(impostor.points[k], projected_[k])) {
-                ++count;
-                yLo = std::min(yLo, projected_[k].y0);
-                yHi = std::max(yHi, projected_[k].y0);
-              }
-          } else {
-            for (size_t k = first; k < last; ++k) projected_[k].y0 = kSkipped;
+  // pixels the mask lets through, is skipped whole. Per block, the bands its
+  // points' rows fall in (first > last: none).
+  std::vector<size_t> landed(drawn_.size(), 0);
+  std::mutex landedMutex;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, blockCount, 8), [&](const auto& blocks) {
+    std::vector<std::pair<uint32_t, size_t>> counts;  // (drawn impostor, points landed)
+    for (size_t b = blocks.begin(); b < blocks.end(); ++b) {
+      const Block blk = blockAt(b);
+      int yLo = height, yHi = -2;
+      size_t count = 0;
+      if (!blk.imp->hasBlockBounds() ||
+          mayCover(blk.imp->blockBounds[b - firstBlock_[blockOwner_[b]]])) {
+        for (size_t k = blk.first; k < blk.last; ++k) {
+          Projected& pr = projected_[blk.offset + k];
+          if (project(blk.imp->points[k], pr)) {
+            ++count;
+            yLo = std::min(yLo, pr.y0);
+            yHi = std::max(yHi, pr.y0);
           }
-          blockBands_[b] = yHi < yLo
-                               ? glm::ivec2(1, 0)
-                               : glm::ivec2(bandOfRow_[size_t(std::max(yLo, 0))],
-                                            bandOfRow_[size_t(std::min(yHi + 1, height - 1))]);
         }
-        return count;
-      },
-      std::plus<size_t>());
+      } else {
+        for (size_t k = blk.first; k < blk.last; ++k) projected_[blk.offset + k].y0 = kSkipped;
+      }
+      blockBands_[b] = yHi < yLo ? glm::ivec2(1, 0)
+                                 : glm::ivec2(bandOfRow_[size_t(std::max(yLo, 0))],
+                                              bandOfRow_[size_t(std::min(yHi + 1, height - 1))]);
+      if (count) {
+        if (counts.empty() || counts.back().first != blockOwner_[b])
+          counts.emplace_back(blockOwner_[b], 0);
+        counts.back().second += count;
+      }
+    }
+    const std::lock_guard<std::mutex> lock(landedMutex);
+    for (const auto& [d, c] : counts) landed[d] += c;
+  });
   // 2. Depth test in bands of rows, each band in parallel, every band's
-  // points in the impostor's order, so a pixel keeps the point of least
-  // score and of equals the first, as one pass would. 3. Each pixel a point
-  // won takes that point's colour seen from the eye.
+  // points in the impostors' order, so a pixel keeps the point of least
+  // score and of equals the first, as one pass over them would. 3. Each
+  // pixel a point won takes that point's colour seen from the eye.
   const float radius2 = splat_.radius * splat_.radius;
   tbb::parallel_for(0, bands_, [&](int band) {
     const int rowLo = band * height / bands_, rowHi = (band + 1) * height / bands_;
@@ -196,8 +241,8 @@ size_t ImpostorSplatter::draw(const Impostor& impostor, ImageRgb8& out) {
     won.clear();
     for (size_t b = 0; b < blockCount; ++b) {
       if (band < blockBands_[b].x || band > blockBands_[b].y) continue;
-      const size_t last = std::min(n, (b + 1) * blockSize);
-      for (size_t k = b * blockSize; k < last; ++k) {
+      const Block blk = blockAt(b);
+      for (size_t k = blk.offset + blk.first; k < blk.offset + blk.last; ++k) {
         const Projected& pt = projected_[k];
         if (pt.y0 == kSkipped || pt.y0 + 1 < rowLo || pt.y0 >= rowHi) continue;
         for (int y = std::max(pt.y0, rowLo); y <= std::min(pt.y0 + 1, rowHi - 1); ++y)
@@ -205,8 +250,8 @@ size_t ImpostorSplatter::draw(const Impostor& impostor, ImageRgb8& out) {
             const float dx = pt.fx - float(x - pt.x0), dy = pt.fy - float(y - pt.y0);
             const float d2 = dx * dx + dy * dy;
             if (d2 > radius2) continue;
-            const float score = splat_.score(pt.z, d2);
             const size_t p = size_t(y) * size_t(width) + size_t(x);
+            const float score = splat_.score(pt.z, d2);
             if (!(score < score_[p]) || (mask_ && !(*mask_)[p])) continue;
             if (winner_[p] == kNoWinner) won.push_back(uint32_t(p));
             score_[p] = score;
@@ -216,14 +261,23 @@ size_t ImpostorSplatter::draw(const Impostor& impostor, ImageRgb8& out) {
       }
     }
     for (uint32_t p : won) {
+      const uint32_t k = winner_[p];
+      const size_t d = size_t(std::upper_bound(firstPoint_.begin(), firstPoint_.end(), size_t(k)) -
+                              firstPoint_.begin()) -
+                       1;
       out.set(int(p % uint32_t(width)), int(p / uint32_t(width)),
-              toBytes(impostor.colourSeenFrom(winner_[p], camera_.eye)));
+              toBytes(impostors[drawn_[d]]->colourSeenFrom(k - firstPoint_[d], camera_.eye)));
       winner_[p] = kNoWinner;
     }
     std::vector<uint32_t>& touched = touched_[size_t(band)];
     touched.insert(touched.end(), won.begin(), won.end());
   });
-  return landed;
+  size_t total = 0;
+  for (size_t d = 0; d < drawn_.size(); ++d) {
+    total += landed[d];
+    if (landedEach) (*landedEach)[drawn_[d]] = landed[d];
+  }
+  return total;
 }
 
 }  // namespace vistream

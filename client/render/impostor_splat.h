@@ -43,6 +43,7 @@
 #include <limits>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -118,6 +119,12 @@ class ImpostorSplatter {
   // a mask, those of blocks over no pixel it lets through are not counted:
   // they are skipped unprojected).
   size_t draw(const Impostor& impostor, ImageRgb8& out);
+  // Draws several impostors in one pass, as draw() one after another would
+  // (a pixel keeps the first of equal scores, in the impostors' order), at
+  // the cost of one. Returns the points that landed, and in `landedEach`
+  // (when given) those of each impostor.
+  size_t draw(std::span<const Impostor* const> impostors, ImageRgb8& out,
+              std::vector<size_t>* landedEach = nullptr);
   // Per pixel, the depth of the point that won it (kEmpty: no point).
   const std::vector<float>& depth() const { return depth_; }
   // Per pixel, the winner's score (PointSplat::score; kEmpty: no point):
@@ -155,8 +162,11 @@ class ImpostorSplatter {
   std::vector<uint32_t> winner_;
   int bands_ = 1, frameWidth_ = 0;
   std::vector<int> bandOfRow_;
-  std::vector<glm::ivec2> blockBands_;          // per block of points: its first and last band
-  std::vector<std::vector<uint32_t>> touched_;  // per band: pixels written this frame
+  std::vector<glm::ivec2> blockBands_;           // per block of points: its first and last band
+  std::vector<uint32_t> blockOwner_;             // per block: its impostor among drawn_
+  std::vector<uint32_t> drawn_;                  // the impostors drawn (index into the span)
+  std::vector<size_t> firstPoint_, firstBlock_;  // per drawn impostor, then the totals
+  std::vector<std::vector<uint32_t>> touched_;   // per band: pixels written this frame
   tbb::enumerable_thread_specific<std::vector<uint32_t>> wonScratch_;
 };
 

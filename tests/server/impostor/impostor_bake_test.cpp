@@ -598,6 +598,7 @@ TEST(ImpostorSplat, DrawsWhatOnePassInThePointsOrderDraws) {
   const Impostor b = bakeImpostor(s.view(), cell, boundsOf(s.triangles), s.facingCell(cell), other);
   const std::array<PointSplat, 3> splats = {PointSplat{}, PointSplat{0.95f, 0.05f},
                                             PointSplat{0.6f, 0.0f}};
+  ImpostorSplatter together;
   for (int k = 0; k < 6; ++k) {
     const PointSplat& splat = splats[size_t(k) % splats.size()];
     Camera c;
@@ -642,6 +643,19 @@ TEST(ImpostorSplat, DrawsWhatOnePassInThePointsOrderDraws) {
       }
     EXPECT_GT(expectedLanded, 1000u) << "view " << k;
     EXPECT_EQ(landed, expectedLanded) << "view " << k;
+    // Both impostors in one pass: the frame of the two draws, bit for bit
+    // (by a splatter kept from view to view, which resets only what the
+    // last view wrote).
+    together.begin(c, nullptr, splat);
+    ImageRgb8 togetherImage(c.width, c.height);
+    std::vector<size_t> landedEach;
+    const Impostor* both[] = {&a, &b};
+    EXPECT_EQ(together.draw(both, togetherImage, &landedEach), landed) << "view " << k;
+    ASSERT_EQ(landedEach.size(), 2u);
+    EXPECT_EQ(landedEach[0] + landedEach[1], landed);
+    EXPECT_EQ(together.score(), splatter.score()) << "view " << k;
+    EXPECT_EQ(together.depth(), splatter.depth()) << "view " << k;
+    EXPECT_TRUE(togetherImage.pixels == image.pixels) << "view " << k;
     // The disc's tests round alike up to a float's last bit; a pixel on its
     // very rim may differ, no more.
     size_t differ = 0;
