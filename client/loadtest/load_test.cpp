@@ -17,6 +17,8 @@
 #include "common/core/ivec_less.h"
 #include "common/raycast/ray_query.h"
 #include "common/raycast/sampled_visibility.h"
+#include "common/world/sealed_surface.h"
+#include "common/world/solids.h"
 #include "protocol/geometry/byte_coding.h"
 #include "protocol/geometry/geometry_codec.h"
 #include "protocol/wire/peer.h"
@@ -550,7 +552,9 @@ LoadTestReport runLoadTest(const LoadTestOptions& options) {
   Shared shared{options, nullptr, {}, {}};
   if (options.scene) {
     shared.triangles = flattenScene(*options.scene, true);
-    shared.rays = makeEmbreeRayQuery(shared.triangles);
+    // The miss check samples the surface the PVS is proved for: cracks
+    // narrower than the weld tolerance closed (common/world/sealed_surface.h).
+    shared.rays = makeSealedRayQuery(shared.triangles, SolidsOptions{}.weldTolerance);
   }
   asio::io_context io;
   {

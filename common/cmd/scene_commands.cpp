@@ -22,6 +22,7 @@
 #include "common/raycast/sampled_visibility.h"
 #include "common/scene/manifest.h"
 #include "common/world/effects.h"
+#include "common/world/sealed_surface.h"
 #include "common/world/static_world.h"
 
 namespace vistream {
@@ -218,7 +219,11 @@ int cmdVisible(const std::string& spec, const SceneLimits& limits, const std::st
   options.skipViewpoint = [&](const glm::vec3& p) {
     return world.solids.unservedViewpoint(*world.rays, p);
   };
-  const SampledVisibility vis = sampleVisibleFaces(*world.rays, *world.triangles, cell, options);
+  // The surface the PVS is proved for: cracks narrower than the weld
+  // tolerance closed (common/world/sealed_surface.h).
+  const std::unique_ptr<RayQuery> sealed =
+      makeSealedRayQuery(*world.triangles, SolidsOptions{}.weldTolerance);
+  const SampledVisibility vis = sampleVisibleFaces(*sealed, *world.triangles, cell, options);
   if (asJson) {
     std::cout << json{{"faces", vis.faces},
                       {"stats",

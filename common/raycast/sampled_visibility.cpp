@@ -33,7 +33,10 @@ uint32_t seenTriangle(const RayQuery& rays, const Ray& ray, const Hit& h, std::v
   if (!(glm::dot(h.normal, ray.dir) > 0.0f)) return h.triangle;
   const float window = 1e-5f * std::max(h.t, 1e-3f);
   tied.clear();
-  rays.allHits(Ray{ray.org, ray.dir, std::max(ray.tnear, h.t - window), h.t + window}, tied);
+  // From the ray's start: the query's own tie window (which grows with the
+  // triangles' size) may have put a front-facing triangle a little nearer
+  // than `h` behind it by index, and such a triangle is seen.
+  rays.allHits(Ray{ray.org, ray.dir, ray.tnear, h.t + window}, tied);
   uint32_t best = kNoHit;
   for (const Hit& o : tied)
     if (glm::dot(o.normal, ray.dir) < 0.0f && o.triangle < best) best = o.triangle;

@@ -62,9 +62,10 @@ std::vector<glm::vec3> cellViewpoints(const Box3f& cell, size_t points, uint64_t
 
 // The triangle a ray sees at its first hit `h`, or kNoHit: the rule of
 // open faces above. When `h` faces away from the ray, a triangle facing the
-// ray within the tie window (ray_query.h resolves ties within float error to
-// the smaller index, which can credit the back of a roof over the wall that
-// meets it at the rim) is seen instead; failing that, a hit on the
+// ray no farther than the tie window beyond it (ray_query.h resolves ties
+// within float error to the smaller index, which can credit the back of a
+// roof over the wall that meets it at the rim, or a sliver a fraction of a
+// millimetre behind a wall) is seen instead; failing that, a hit on the
 // triangle's boundary only grazes its edge and credits nothing. `scratch`
 // is reused between calls. Every visibility oracle (this sampler, the load
 // tester's miss check) applies it.

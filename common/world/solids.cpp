@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <numbers>
 #include <numeric>
 #include <optional>
@@ -248,7 +249,121 @@ std::vector<EdgeUse> edgeUses(const FlatTriangles& tris, const std::vector<uint8
   return out;
 }
 
+// The topology welded within `tol` (0: exact positions only): vertices,
+// the triangles that collapse, and the edge pieces.
+struct WeldedTopology {
+  std::vector<uint32_t> vertexOf;    // by corner 3 t + k: welded vertex, kNoHit when skipped
+  std::vector<glm::dvec3> position;  // by vertex (representatives carry their own position)
+  std::vector<uint8_t> collapsed;    // by triangle: two corners weld
+  std::vector<EdgeUse> edges;        // edge pieces, sorted by key
+};
+
+WeldedTopology weldTopology(const FlatTriangles& tris, double tol) {
+  WeldedTopology w;
+  const size_t n = tris.size();
+  exactVertices(tris, w.vertexOf, w.position);
+  // A triangle two of whose corners weld is thinner than the tolerance: it
+  // takes no part in the topology and is a component of its own (open).
+  w.collapsed.assign(n, 0);
+  if (tol > 0.0) {
+    const std::vector<uint32_t> rep = weldVertices(w.position, tol);
+    for (uint32_t& v : w.vertexOf)
+      if (v != kNoHit) v = rep[v];
+    for (size_t t = 0; t < n; ++t) {
+      if (tris.degenerate[t]) continue;
+      uint32_t* v = &w.vertexOf[3 * t];
+      if (v[0] == v[1] || v[1] == v[2] || v[2] == v[0]) {
+        w.collapsed[t] = 1;
+        v[0] = v[1] = v[2] = kNoHit;
+      }
+    }
+  }
+  std::vector<uint8_t> skip(n, 0);
+  for (size_t t = 0; t < n; ++t) skip[t] = tris.degenerate[t] || w.collapsed[t];
+  w.edges = edgeUses(tris, skip, w.vertexOf, w.position, tol);
+  return w;
+}
+
+constexpr uint8_t kEnclosureNone = 0, kEnclosureSealed = 1, kEnclosureBaseOpen = 2;
+
+// Peeling: a triangle with a side piece that no other remaining triangle
+// uses, above its group's base (higher than the lowest point plus tol), is
+// taken out, and so on until no such side is left. A dangling sheet (a party
+// wall whose top meets the inside of a roof, not its edges) goes, the shell
+// it hangs in stays; a surface with a real hole unravels whole. What remains
+// of a group is an enclosure when each of its side pieces is used an even
+// number of times (sealed) or the odd ones all lie at the base (base-open).
+void findEnclosures(const std::vector<EdgeUse>& edges, const std::vector<glm::dvec3>& position,
+                    double tol, const std::vector<uint32_t>& componentOf,
+                    const std::vector<uint32_t>& groupOf, const std::vector<Box3f>& groupBounds,
+                    std::vector<uint8_t>& groupEnclosure, std::vector<uint8_t>& peeled) {
+  const size_t n = componentOf.size();
+  peeled.assign(n, 0);
+  groupEnclosure.assign(groupBounds.size(), kEnclosureSealed);
+  // Runs of equal keys: one per side piece, with its remaining uses.
+  std::vector<uint32_t> runStart, live;
+  std::vector<uint8_t> atBase;
+  std::vector<uint32_t> triStart(n + 1, 0), triRuns;
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i;
+    while (j < edges.size() && edges[j].key == edges[i].key) ++triStart[edges[j++].triangle + 1];
+    const uint32_t g = groupOf[componentOf[edges[i].triangle]];
+    const double top = double(groupBounds[g].lo.y) + tol;
+    runStart.push_back(uint32_t(i));
+    live.push_back(uint32_t(j - i));
+    atBase.push_back(position[uint32_t(edges[i].key >> 32)].y <= top &&
+                     position[uint32_t(edges[i].key)].y <= top);
+    i = j;
+  }
+  runStart.push_back(uint32_t(edges.size()));
+  for (size_t t = 0; t < n; ++t) triStart[t + 1] += triStart[t];
+  triRuns.resize(triStart[n]);
+  {
+    std::vector<uint32_t> fill(triStart.begin(), triStart.end() - 1);
+    for (uint32_t r = 0; r + 1 < runStart.size(); ++r)
+      for (uint32_t e = runStart[r]; e < runStart[r + 1]; ++e)
+        triRuns[fill[edges[e].triangle]++] = r;
+  }
+  std::vector<uint32_t> queue;
+  for (uint32_t r = 0; r < live.size(); ++r)
+    if (live[r] == 1 && !atBase[r]) queue.push_back(r);
+  while (!queue.empty()) {
+    const uint32_t r = queue.back();
+    queue.pop_back();
+    if (live[r] != 1) continue;
+    uint32_t t = kNoHit;
+    for (uint32_t e = runStart[r]; e < runStart[r + 1] && t == kNoHit; ++e)
+      if (!peeled[edges[e].triangle]) t = edges[e].triangle;
+    if (t == kNoHit) continue;
+    peeled[t] = 1;
+    for (uint32_t k = triStart[t]; k < triStart[t + 1]; ++k) {
+      const uint32_t r2 = triRuns[k];
+      if (live[r2] > 0 && --live[r2] == 1 && !atBase[r2]) queue.push_back(r2);
+    }
+  }
+  // Side pieces left with an odd count decide each group.
+  for (uint32_t r = 0; r < live.size(); ++r) {
+    if (live[r] % 2 == 0) continue;
+    const uint32_t g = groupOf[componentOf[edges[runStart[r]].triangle]];
+    if (!atBase[r])
+      groupEnclosure[g] = kEnclosureNone;
+    else if (groupEnclosure[g] == kEnclosureSealed)
+      groupEnclosure[g] = kEnclosureBaseOpen;
+  }
+  // A group peeled away entirely, or down to sheets at its base, encloses nothing.
+  std::vector<uint8_t> rises(groupBounds.size(), 0);
+  for (uint32_t r = 0; r < live.size(); ++r)
+    if (live[r] > 0 && !atBase[r]) rises[groupOf[componentOf[edges[runStart[r]].triangle]]] = 1;
+  for (size_t g = 0; g < groupBounds.size(); ++g)
+    if (!rises[g]) groupEnclosure[g] = kEnclosureNone;
+}
+
 }  // namespace
+
+const std::array<glm::vec3, kSolidTestDirections>& solidTestDirections() {
+  static const std::array<glm::vec3, kSolidTestDirections> dirs = testDirections();
+  return dirs;
+}
 
 const char* solidClassName(SolidClass c) {
   constexpr std::array<const char*, 5> kNames{"closed_outward", "closed_inward", "open",
@@ -271,18 +386,33 @@ Solids Solids::build(const FlatTriangles& tris, const SolidsOptions& options) {
   const Solids& welded = weldedReading ? *weldedReading : s;
   s.weldedComponentOf_ = welded.componentOf_;
   s.weldedComponents_ = welded.components_;
-  std::vector<uint32_t> sealedOfGroup(welded.groupBounds_.size(), kNoHit);
+  // Sealed groups, and enclosures: sealed groups and groups open only at
+  // their base, without their peeled triangles. Both numbered in order of
+  // first appearance.
+  s.weldTolerance_ = options.weldTolerance;
+  const size_t groups = welded.groupBounds_.size();
+  std::vector<uint32_t> sealedOfGroup(groups, kNoHit), enclosureOfGroup(groups, kNoHit);
+  auto number = [&](std::vector<uint32_t>& ofGroup, std::vector<Box3f>& bounds, uint32_t g) {
+    if (ofGroup[g] == kNoHit) {
+      ofGroup[g] = uint32_t(bounds.size());
+      bounds.push_back(welded.groupBounds_[g]);
+    }
+    return ofGroup[g];
+  };
   s.sealedOf_.assign(tris.size(), kNoHit);
+  s.enclosureOf_.assign(tris.size(), kNoHit);
   for (size_t t = 0; t < tris.size(); ++t) {
     const uint32_t c = welded.componentOf(uint32_t(t));
     if (c == kNoHit) continue;
     const uint32_t g = welded.groupOf_[c];
-    if (!welded.groupSealed_[g]) continue;
-    if (sealedOfGroup[g] == kNoHit) {
-      sealedOfGroup[g] = uint32_t(s.sealedBounds_.size());
-      s.sealedBounds_.push_back(welded.groupBounds_[g]);
-    }
-    s.sealedOf_[t] = sealedOfGroup[g];
+    if (welded.groupSealed_[g]) s.sealedOf_[t] = number(sealedOfGroup, s.sealedBounds_, g);
+    if (welded.groupEnclosure_[g] == kEnclosureNone || welded.peeled_[t]) continue;
+    const size_t before = s.enclosureBounds_.size();
+    s.enclosureOf_[t] = number(enclosureOfGroup, s.enclosureBounds_, g);
+    if (s.enclosureBounds_.size() > before)
+      s.enclosureFloor_.push_back(welded.groupEnclosure_[g] == kEnclosureSealed
+                                      ? -std::numeric_limits<float>::infinity()
+                                      : welded.groupBounds_[g].lo.y + float(options.weldTolerance));
   }
   return s;
 }
@@ -292,28 +422,10 @@ Solids Solids::classify(const FlatTriangles& tris, double tol) {
   const size_t n = tris.size();
   s.componentOf_.assign(n, kNoHit);
 
-  std::vector<uint32_t> vertexOf;
-  std::vector<glm::dvec3> position;
-  exactVertices(tris, vertexOf, position);
-  // A triangle two of whose corners weld is thinner than the tolerance: it
-  // takes no part in the topology and is a component of its own (open).
-  std::vector<uint8_t> collapsed(n, 0);
-  if (tol > 0.0) {
-    const std::vector<uint32_t> rep = weldVertices(position, tol);
-    for (uint32_t& v : vertexOf)
-      if (v != kNoHit) v = rep[v];
-    for (size_t t = 0; t < n; ++t) {
-      if (tris.degenerate[t]) continue;
-      const uint32_t* v = &vertexOf[3 * t];
-      if (v[0] == v[1] || v[1] == v[2] || v[2] == v[0]) {
-        collapsed[t] = 1;
-        vertexOf[3 * t] = vertexOf[3 * t + 1] = vertexOf[3 * t + 2] = kNoHit;
-      }
-    }
-  }
-  std::vector<uint8_t> skip(n, 0);
-  for (size_t t = 0; t < n; ++t) skip[t] = tris.degenerate[t] || collapsed[t];
-  const std::vector<EdgeUse> edges = edgeUses(tris, skip, vertexOf, position, tol);
+  const WeldedTopology topo = weldTopology(tris, tol);
+  const std::vector<uint8_t>& collapsed = topo.collapsed;
+  const std::vector<glm::dvec3>& position = topo.position;
+  const std::vector<EdgeUse>& edges = topo.edges;
 
   // Components: triangles joined across manifold edges (used by exactly two
   // triangles). A vertex or a non-manifold edge does not join, so a floor
@@ -425,7 +537,66 @@ Solids Solids::classify(const FlatTriangles& tris, double tol) {
       s.groupClosed_[s.groupOf_[c]] = 0;
     if (oddEdge[c]) s.groupSealed_[s.groupOf_[c]] = 0;
   }
+  // Enclosures: peel dangling sheets, then keep the groups whose remaining
+  // odd edge pieces (if any) all lie at their base.
+  findEnclosures(edges, position, tol, s.componentOf_, s.groupOf_, s.groupBounds_,
+                 s.groupEnclosure_, s.peeled_);
   return s;
+}
+
+FlatTriangles weldedSurface(const FlatTriangles& tris, double tol,
+                            std::vector<uint32_t>& originalOf) {
+  VS_CHECK(std::isfinite(tol) && tol >= 0.0);
+  const WeldedTopology topo = weldTopology(tris, tol);
+  // Each triangle's directed side pieces, in edge order.
+  std::vector<std::array<uint32_t, 3>> pieces;  // triangle, from, to
+  pieces.reserve(topo.edges.size());
+  for (const EdgeUse& e : topo.edges) {
+    const uint32_t lo = uint32_t(e.key >> 32), hi = uint32_t(e.key);
+    pieces.push_back(e.forward ? std::array{e.triangle, lo, hi} : std::array{e.triangle, hi, lo});
+  }
+  std::sort(pieces.begin(), pieces.end());
+  FlatTriangles out;
+  originalOf.clear();
+  auto emit = [&](uint32_t t, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c) {
+    const glm::vec3 fa(a), fb(b), fc(c);
+    out.positions.insert(out.positions.end(), {fa, fb, fc});
+    out.faceIds.push_back(tris.faceIds[t]);
+    out.objectIds.push_back(tris.objectIds[t]);
+    out.degenerate.push_back(isDegenerateTriangle(fa, fb, fc) ? 1 : 0);
+    originalOf.push_back(t);
+  };
+  std::vector<uint32_t> loop;
+  for (size_t i = 0; i < pieces.size();) {
+    const uint32_t t = pieces[i][0];
+    size_t j = i;
+    while (j < pieces.size() && pieces[j][0] == t) ++j;
+    // Walk the boundary from the first corner; a side without pieces (its
+    // corners welded away) or a broken walk keeps the welded corners.
+    loop.assign(1, topo.vertexOf[3 * size_t(t)]);
+    while (loop.size() <= j - i) {
+      uint32_t next = kNoHit;
+      for (size_t k = i; k < j && next == kNoHit; ++k)
+        if (pieces[k][1] == loop.back()) next = pieces[k][2];
+      if (next == kNoHit || next == loop.front()) break;
+      loop.push_back(next);
+    }
+    const auto& P = topo.position;
+    if (loop.size() <= 3) {
+      emit(t, P[topo.vertexOf[3 * size_t(t)]], P[topo.vertexOf[3 * size_t(t) + 1]],
+           P[topo.vertexOf[3 * size_t(t) + 2]]);
+    } else {
+      // Cut at T-junctions: a fan from the centroid of the boundary points,
+      // which lies inside the triangle, so no piece is degenerate.
+      glm::dvec3 centre(0.0);
+      for (uint32_t v : loop) centre += P[v];
+      centre /= double(loop.size());
+      for (size_t k = 0; k < loop.size(); ++k)
+        emit(t, centre, P[loop[k]], P[loop[(k + 1) % loop.size()]]);
+    }
+    i = j;
+  }
+  return out;
 }
 
 size_t Solids::sealedTriangles() const {
@@ -474,7 +645,7 @@ bool Solids::insideGroup(const RayQuery& rays, const glm::vec3& p, bool closedOn
   odd.assign(candidates.size(), 0);
   parity.resize(candidates.size());
 
-  static const std::array<glm::vec3, kSolidTestDirections> dirs = testDirections();
+  const std::array<glm::vec3, kSolidTestDirections>& dirs = solidTestDirections();
   for (int d = 0; d < kSolidTestDirections; ++d) {
     const glm::vec3& dir = dirs[size_t(d)];
     float tfar = 0.0f;

@@ -43,7 +43,17 @@
 // manifoldness): parity along a ray then does not depend on the ray, and a
 // segment from outside to inside crosses one of its triangles. The welded
 // components (weldedComponents()) serve back-face culling, which needs a
-// closed, manifold, consistently outward one. The price: a
+// closed, manifold, consistently outward one.
+//
+// Enclosures are a wider reading of the welded topology, for back-face
+// culling by parity (common/world/back_faces.h): the welded parity groups
+// that are sealed, and those open only at their base, every edge piece used
+// an odd number of times lying within the tolerance above the group's lowest
+// point (a LoD2 building without its ground surface, a box without its
+// bottom face). Closed by a cap at the base, such a group is a cycle modulo
+// 2 as well, and a segment that stays above the cap (enclosureFloor()) meets
+// only real triangles of it: parity along such segments, and along upward
+// rays from above the floor, is that of a sealed solid. The price: a
 // crack narrower than the tolerance counts as closed, so a line of sight
 // through it may be taken as blocked. The inside tests above stay on the
 // exact topology: welding joins the floor and ceiling sheets of an interior
@@ -70,6 +80,8 @@ inline constexpr size_t kSolidClassCount = 5;
 const char* solidClassName(SolidClass c);
 
 inline constexpr int kSolidTestDirections = 9;
+// The upward unit directions the parity tests cast rays along.
+const std::array<glm::vec3, kSolidTestDirections>& solidTestDirections();
 
 struct SolidComponent {
   SolidClass kind = SolidClass::Open;
@@ -93,6 +105,17 @@ struct SolidsOptions {
   double weldTolerance = 0.01;
 };
 
+// The surface as the welded topology reads it (`tol` as
+// SolidsOptions::weldTolerance): corners within tol are one vertex at their
+// representative's position, a triangle whose side passes within tol of a
+// boundary vertex is cut there (fanned from the centroid of its boundary
+// points), and degenerate and collapsed triangles are left out. Each piece
+// keeps its triangle's face and object; originalOf[piece] is its triangle's
+// index in `triangles`. Rays over it do not leak through the cracks of
+// T-junctions and corners a few millimetres apart (sealed_surface.h).
+FlatTriangles weldedSurface(const FlatTriangles& triangles, double tol,
+                            std::vector<uint32_t>& originalOf);
+
 class Solids {
  public:
   // Degenerate triangles take no part (they are never hit by rays).
@@ -110,6 +133,15 @@ class Solids {
   // The components of the welded topology, classified as components() are.
   const std::vector<SolidComponent>& weldedComponents() const { return weldedComponents_; }
   uint32_t weldedComponentOf(uint32_t triangle) const { return weldedComponentOf_[triangle]; }
+  // Enclosures (see above): the enclosure of a triangle, or kNoHit.
+  uint32_t enclosureOf(uint32_t triangle) const { return enclosureOf_[triangle]; }
+  size_t enclosureCount() const { return enclosureBounds_.size(); }
+  const Box3f& enclosureBounds(uint32_t enclosure) const { return enclosureBounds_[enclosure]; }
+  // The height (y, metres) the cap of an enclosure open at its base reaches:
+  // its lowest point plus the weld tolerance. -infinity for a sealed one.
+  float enclosureFloor(uint32_t enclosure) const { return enclosureFloor_[enclosure]; }
+  // The weld tolerance this was built with (SolidsOptions::weldTolerance).
+  double weldTolerance() const { return weldTolerance_; }
 
   // True if `point` lies inside a solid component. `rays` must answer over
   // the same triangles this was built from. A point on a surface is outside
@@ -138,6 +170,12 @@ class Solids {
   std::vector<Box3f> sealedBounds_;   // by sealed group
   std::vector<uint32_t> weldedComponentOf_;
   std::vector<SolidComponent> weldedComponents_;
+  std::vector<uint32_t> enclosureOf_;    // by triangle
+  std::vector<Box3f> enclosureBounds_;   // by enclosure
+  std::vector<float> enclosureFloor_;    // by enclosure
+  std::vector<uint8_t> groupEnclosure_;  // by group, after peeling: none, sealed, base-open
+  std::vector<uint8_t> peeled_;          // by triangle: peeled off its group
+  double weldTolerance_ = 0.0;
 
   // Components and parity groups of the topology welded within `tol`.
   static Solids classify(const FlatTriangles& triangles, double tol);

@@ -29,6 +29,7 @@
 #include "common/raycast/ray_query.h"
 #include "common/raycast/sampled_visibility.h"
 #include "common/world/free_space.h"
+#include "common/world/sealed_surface.h"
 #include "common/world/static_world.h"
 #include "server/stream/stream_world.h"
 #include "server/visibility/epsilon_pvs.h"
@@ -50,6 +51,9 @@ struct World {
   Scene scene;
   StaticWorld statics;  // triangles, rays, solids, free space (static_world.h)
   std::unique_ptr<EpsilonPvs> pvs;
+  // The oracle's rays: the surface with sub-tolerance cracks closed, as the
+  // solids behind back-face culling and fusion read it (sealed_surface.h).
+  std::unique_ptr<RayQuery> oracleRays;
   double typicalBuilding = 16.0;  // metres: median horizontal size of objects
 };
 
@@ -57,6 +61,7 @@ World makeWorld(const std::string& spec) {
   World w;
   w.scene = openScene(spec);
   w.statics = buildStaticWorld(w.scene);
+  w.oracleRays = makeSealedRayQuery(*w.statics.triangles, SolidsOptions{}.weldTolerance);
   Stopwatch sw;
   w.pvs = std::make_unique<EpsilonPvs>(w.scene);
   spdlog::info("{}: {} occluders ({} solids, {} polygons), prepared in {:.0f} ms", spec,
@@ -358,7 +363,7 @@ int runPvsBench(const PvsBenchOptions& options) {
           gt.probeSamples = options.groundTruthProbes;
         }
         const SampledVisibility truth =
-            sampleVisibleFaces(*w.statics.rays, *w.statics.triangles, cell, gt);
+            sampleVisibleFaces(*w.oracleRays, *w.statics.triangles, cell, gt);
         seen.push_back(double(truth.faces.size()));
         probeOnly.push_back(double(truth.probeOnly));
         for (size_t mi = 0; mi < methods.size(); ++mi) {
@@ -413,7 +418,7 @@ int runPvsBench(const PvsBenchOptions& options) {
         SampledVisibilityOptions gt = groundTruthOptions(w, options);
         gt.probeFaces = candidates.back();
         gt.probeSamples = std::max(1, options.groundTruthProbes);
-        truths.push_back(sampleVisibleFaces(*w.statics.rays, *w.statics.triangles, cell, gt).faces);
+        truths.push_back(sampleVisibleFaces(*w.oracleRays, *w.statics.triangles, cell, gt).faces);
       }
       struct Knob {
         double epsilon;

@@ -358,7 +358,7 @@ int runPvsTool(int argc, char** argv) {
                   "keep occluded objects as occluders");
     sub->add_flag("--no-redundant-rays", noRedundantRays, "cast every corner-vertex line");
     sub->add_flag("--no-back-faces", noBackFaces,
-                  "keep faces of closed outward solids that face away from the whole cell");
+                  "keep faces that face away from the whole cell with a solid behind them");
   };
   cell->add_option("--scene", scene, "SCENE")->required();
   cell->add_option("--cell", cellText, "x0,y0,z0,x1,y1,z1 in file coordinates")->required();

@@ -24,6 +24,8 @@
 
 #include "common/core/check.h"
 #include "common/core/timer.h"
+#include "common/raycast/ray_query.h"
+#include "common/world/back_faces.h"
 #include "common/world/solids.h"
 #include "server/visibility/horizon_fusion.h"
 
@@ -123,33 +125,37 @@ void splitGroups(std::vector<EpsilonPvs::Face>& faces, uint32_t first, uint32_t 
 namespace {
 
 // Which faces may be culled for facing away: those whose every
-// non-degenerate triangle lies in one closed, manifold, consistently outward
-// component of the topology welded within the weld tolerance
-// (common/world/solids.h). Per face the component's index into `bounds`, or
-// kNoHit for a two-sided face.
+// non-degenerate triangle has the inside of one solid behind it, by the
+// orientation or the parity proof of common/world/back_faces.h. Per face the
+// solid's index into `bounds`/`floor`, or kNoHit for a two-sided face.
 struct OneSidedFaces {
-  std::vector<uint32_t> solidOf;  // by face ID
-  std::vector<Box3f> bounds;      // by component
+  std::vector<uint32_t> solidOf;           // by face ID
+  std::vector<Box3f> bounds;               // by solid
+  std::vector<float> floor;                // by solid: a viewpoint must lie above this y
+  size_t byOrientation = 0, byParity = 0;  // triangles
 };
 
 OneSidedFaces oneSidedFaces(const Scene& scene) {
   const FlatTriangles flat = flattenScene(scene, /*staticOnly=*/true);
   const Solids solids = Solids::build(flat);
+  const std::unique_ptr<RayQuery> rays = makeEmbreeRayQuery(flat);
+  BackFaceSolids behind = backFaceSolids(flat, solids, *rays);
   constexpr uint32_t kUnseen = kNoHit - 1;
   OneSidedFaces out;
   out.solidOf.assign(scene.faceCount, kUnseen);
   for (size_t t = 0; t < flat.size(); ++t) {
     const uint32_t face = flat.faceIds[t];
     if (face >= out.solidOf.size() || flat.degenerate[t]) continue;
-    const uint32_t c = solids.weldedComponentOf(uint32_t(t));
-    const bool outward =
-        c != kNoHit && solids.weldedComponents()[c].kind == SolidClass::ClosedOutward;
+    const uint32_t c = behind.solidOf[t];
     uint32_t& s = out.solidOf[face];
-    s = outward && (s == kUnseen || s == c) ? c : kNoHit;
+    s = c != kNoHit && (s == kUnseen || s == c) ? c : kNoHit;
   }
   for (uint32_t& s : out.solidOf)
     if (s == kUnseen) s = kNoHit;
-  for (const SolidComponent& c : solids.weldedComponents()) out.bounds.push_back(c.bounds);
+  out.bounds = std::move(behind.bounds);
+  out.floor = std::move(behind.floor);
+  out.byOrientation = behind.byOrientation;
+  out.byParity = behind.byParity;
   return out;
 }
 
@@ -160,6 +166,7 @@ EpsilonPvs::EpsilonPvs(const Scene& scene, const OccluderOptions& occluderOption
   occluders_ = extractOccluders(scene, occluderOptions);
   OneSidedFaces oneSided = oneSidedFaces(scene);
   solidBounds_ = std::move(oneSided.bounds);
+  solidFloor_ = std::move(oneSided.floor);
   std::vector<Box3f> bounds;
   bounds.reserve(occluders_.occluders.size());
   for (const auto& o : occluders_.occluders) bounds.push_back(o.bounds);
@@ -182,8 +189,12 @@ EpsilonPvs::EpsilonPvs(const Scene& scene, const OccluderOptions& occluderOption
         corner[size_t(k)] = size_t(it - f.vertices.begin());
         if (it == f.vertices.end()) f.vertices.push_back(v);
       }
-      const bool distinct =
-          corner[0] != corner[1] && corner[1] != corner[2] && corner[0] != corner[2];
+      // Degenerate triangles are never hit: they need not face away.
+      const bool distinct = corner[0] != corner[1] && corner[1] != corner[2] &&
+                            corner[0] != corner[2] &&
+                            !isDegenerateTriangle(o.mesh.positions[o.mesh.triangles[t][0]],
+                                                  o.mesh.positions[o.mesh.triangles[t][1]],
+                                                  o.mesh.positions[o.mesh.triangles[t][2]]);
       if (distinct && corner[0] < 255 && corner[1] < 255 && corner[2] < 255)
         f.oneSided.push_back({uint8_t(corner[0]), uint8_t(corner[1]), uint8_t(corner[2])});
     }
@@ -251,13 +262,15 @@ void splitGroups(std::vector<EpsilonPvs::Face>& faces, uint32_t first, uint32_t 
 
 // True if the closed cell lies strictly behind the plane of every triangle
 // of a one-sided face, by more than the rounding margin, and does not meet
-// the face's solid (`solid`, its bounds): no point of the cell sees the
-// face's front, and none lies inside the solid or on its surface (a point
-// on the surface would look into the solid past the surface it stands on).
+// the face's solid (`solid`, its bounds) and lies above the solid's floor
+// (`floor`: the cap of a solid open at its base): no point of the cell sees
+// the face's front, and none lies inside the solid or on its surface (a
+// point on the surface would look into the solid past the surface it stands
+// on) or where a line could pass below the solid's open base.
 // In double from float inputs: the cross product and the box support are
 // exact to a few ulps, far below the margin.
-bool facesAway(const EpsilonPvs::Face& f, const Box3f& cell, const Box3f& solid) {
-  if (f.oneSided.empty() || cell.overlaps(solid)) return false;
+bool facesAway(const EpsilonPvs::Face& f, const Box3f& cell, const Box3f& solid, float floor) {
+  if (f.oneSided.empty() || cell.overlaps(solid) || !(cell.lo.y > floor)) return false;
   const glm::dvec3 centre(cell.center()), half(0.5 * (glm::dvec3(cell.hi) - glm::dvec3(cell.lo)));
   const double magnitude =
       std::max(glm::length(glm::dvec3(cell.hi)), glm::length(glm::dvec3(cell.lo)));
@@ -485,7 +498,7 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
   };
 
   auto faceAway = [&](const Face& f) {
-    return f.solid != kNoHit && facesAway(f, cell, solidBounds_[f.solid]);
+    return f.solid != kNoHit && facesAway(f, cell, solidBounds_[f.solid], solidFloor_[f.solid]);
   };
 
   double boxMs = 0.0, faceMs = 0.0;

@@ -22,19 +22,23 @@
 // holds inside open solids (a wall box without its bottom face) and for an
 // eye on a closed solid's surface, which looks into the solid.
 //
-// Back faces (PvsOptions::backFaces, on by default): a face whose every
-// triangle belongs to a closed, manifold, consistently OUTWARD component
-// (read with corners welded and T-junctions cut within 1 cm, so cracks
-// narrower than that count as closed: common/world/solids.h) is
-// culled when the closed cell lies strictly behind every triangle's plane
-// (by a rounding margin) and does not meet the solid's bounding box (so no
-// viewpoint of the cell lies inside the solid or on its surface). From a
-// viewpoint outside the solid, a line reaching
-// such a face from behind was inside the solid just before, so it crossed
-// the surface earlier and the face is not the first thing it meets. Faces of
-// open, non-manifold, inconsistently wound and inward-wound components stay
-// two-sided (inward meshes are ambiguous: a solid exported inside out, or a
-// room to be seen from inside).
+// Back faces (PvsOptions::backFaces, on by default): a face is culled when
+// every non-degenerate triangle of it has the inside of one solid right
+// behind it (common/world/back_faces.h: a closed, consistently outward
+// component, or, proved triangle by triangle by parity, a welded group that
+// is sealed or open only at its base, as LoD2 buildings without a ground
+// surface are), the closed cell lies strictly behind every triangle's plane
+// (by a rounding margin), does not meet the solid's bounding box (so no
+// viewpoint of the cell lies inside the solid or on its surface) and lies
+// above the solid's floor (a base-open solid's cap). From such a viewpoint,
+// a line reaching the face from behind was inside the solid just before, so
+// it crossed the solid's surface earlier and the face is not the first thing
+// it meets. Solids are read with corners welded and T-junctions cut within
+// 1 cm, so cracks narrower than that count as closed; the oracles that check
+// the PVS sample the same sealed surface (common/world/sealed_surface.h).
+// Faces of open, non-manifold and inward-wound parts stay two-sided, as do
+// faces with the solid on both sides (coincident walls) or cut by another
+// triangle of their solid.
 //
 // The paper's accelerations, each switchable (PvsOptions):
 //  - bounding-box stage: an object whose bounding box is hidden is culled
@@ -192,7 +196,8 @@ class EpsilonPvs {
   std::vector<std::pair<uint32_t, uint32_t>> faceIndex_;  // face ID -> (object entry, face), or ~0u
   std::vector<std::vector<uint32_t>> occludersOf_;        // scene object -> its occluders
   const HorizonFusion* fusion_ = nullptr;
-  std::vector<Box3f> solidBounds_;  // bounds of the closed components of one-sided faces
+  std::vector<Box3f> solidBounds_;  // by solid behind one-sided faces: its bounds
+  std::vector<float> solidFloor_;   // ... the height a viewpoint must exceed
   double prepareMs_ = 0.0;
 
   friend struct PvsQuery;

@@ -15,17 +15,7 @@ using testing::addWoundBox;
 using testing::Loop;
 using testing::Winding;
 
-struct Built {
-  Scene scene;
-  FlatTriangles triangles;
-  std::unique_ptr<RayQuery> rays;
-  Solids solids;
-  void build(const SolidsOptions& options = {}) {
-    finalizeScene(scene);
-    triangles = flattenScene(scene);
-    rays = makeEmbreeRayQuery(triangles);
-    solids = Solids::build(triangles, options);
-  }
+struct Built : testing::SolidsScene {
   size_t count(SolidClass c) const { return solids.census().components[size_t(c)]; }
   bool inside(glm::vec3 p) const { return solids.inside(*rays, p); }
   bool insideClosed(glm::vec3 p) const { return solids.insideClosed(*rays, p); }

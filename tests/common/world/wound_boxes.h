@@ -4,9 +4,12 @@
 // welding equal positions.
 #pragma once
 
+#include <memory>
 #include <string>
 #include <vector>
 
+#include "common/raycast/ray_query.h"
+#include "common/world/solids.h"
 #include "tests/common/support/box_scenes.h"
 
 namespace vistream::testing {
@@ -42,5 +45,19 @@ inline void addWoundBox(Scene& scene, const std::string& name, glm::vec3 lo, glm
   }
   addFaces(scene, name, loops);
 }
+
+// A scene with its flattened triangles, an Embree ray query and its solids.
+struct SolidsScene {
+  Scene scene;
+  FlatTriangles triangles;
+  std::unique_ptr<RayQuery> rays;
+  Solids solids;
+  void build(const SolidsOptions& options = {}) {
+    finalizeScene(scene);
+    triangles = flattenScene(scene);
+    rays = makeEmbreeRayQuery(triangles);
+    solids = Solids::build(triangles, options);
+  }
+};
 
 }  // namespace vistream::testing

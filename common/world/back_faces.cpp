@@ -1,0 +1,210 @@
+#include "common/world/back_faces.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <span>
+
+#include "common/core/check.h"
+#include "common/spatial/xz_grid.h"
+
+namespace vistream {
+namespace {
+
+using Polygon2 = std::vector<glm::dvec2>;
+
+// Sutherland-Hodgman: the part of `poly` where dot(n, x) <= d. Closed
+// half-planes, so a polygon touching the line keeps the touching point.
+void clipHalfPlane(Polygon2& poly, glm::dvec2 n, double d, Polygon2& scratch) {
+  scratch.clear();
+  for (size_t i = 0; i < poly.size(); ++i) {
+    const glm::dvec2 a = poly[i], b = poly[(i + 1) % poly.size()];
+    const double da = glm::dot(n, a) - d, db = glm::dot(n, b) - d;
+    if (da <= 0.0) scratch.push_back(a);
+    if ((da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0))
+      scratch.push_back(a + (b - a) * (da / (da - db)));
+  }
+  poly.swap(scratch);
+}
+
+// The triangle's frame: unit normal, two in-plane axes, a corner.
+struct TriangleFrame {
+  glm::dvec3 origin, u, v, n;
+  std::array<glm::dvec2, 3> corners{};  // in (u, v)
+  glm::dvec2 incentre{};
+  double inradius = 0.0;
+
+  glm::dvec2 project(const glm::dvec3& p) const {
+    return {glm::dot(p - origin, u), glm::dot(p - origin, v)};
+  }
+  glm::dvec3 lift(glm::dvec2 q) const { return origin + u * q.x + v * q.y; }
+};
+
+TriangleFrame frameOf(const FlatTriangles& tris, size_t t) {
+  TriangleFrame f;
+  const glm::dvec3 a(tris.vertex(t, 0)), b(tris.vertex(t, 1)), c(tris.vertex(t, 2));
+  f.origin = a;
+  const glm::dvec3 cr = glm::cross(b - a, c - a);
+  const double area2 = glm::length(cr);
+  if (!(area2 > 0.0)) return f;
+  f.n = cr / area2;
+  f.u = glm::normalize(b - a);
+  f.v = glm::cross(f.n, f.u);
+  f.corners = {glm::dvec2(0.0), f.project(b), f.project(c)};
+  const double la = glm::distance(b, c), lb = glm::distance(a, c), lc = glm::distance(a, b);
+  const double perimeter = la + lb + lc;
+  f.inradius = area2 / perimeter;
+  f.incentre = (f.corners[0] * la + f.corners[1] * lb + f.corners[2] * lc) / perimeter;
+  return f;
+}
+
+// True if some point of triangle `other` lies within `c` of the plane of
+// `frame`'s triangle and projects into that triangle shrunk by `c`.
+bool comesClose(const TriangleFrame& frame, const FlatTriangles& tris, size_t other, double c,
+                Polygon2& poly, Polygon2& scratch) {
+  // Clip the other triangle to the slab |distance| <= c, in 3D as (u, v, w).
+  std::array<glm::dvec3, 3> p{};
+  for (int k = 0; k < 3; ++k) {
+    const glm::dvec3 x = glm::dvec3(tris.vertex(other, k)) - frame.origin;
+    p[size_t(k)] = {glm::dot(x, frame.u), glm::dot(x, frame.v), glm::dot(x, frame.n)};
+  }
+  std::vector<glm::dvec3> poly3(p.begin(), p.end()), next;
+  for (const double side : {1.0, -1.0}) {
+    next.clear();
+    for (size_t i = 0; i < poly3.size(); ++i) {
+      const glm::dvec3 a = poly3[i], b = poly3[(i + 1) % poly3.size()];
+      const double da = side * a.z - c, db = side * b.z - c;
+      if (da <= 0.0) next.push_back(a);
+      if ((da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0))
+        next.push_back(a + (b - a) * (da / (da - db)));
+    }
+    poly3.swap(next);
+    if (poly3.empty()) return false;
+  }
+  poly.clear();
+  for (const glm::dvec3& q : poly3) poly.emplace_back(q.x, q.y);
+  // Then to the shrunk triangle: each side's inward half-plane moved by c.
+  const auto& k = frame.corners;
+  for (int e = 0; e < 3; ++e) {
+    const glm::dvec2 a = k[size_t(e)], b = k[size_t((e + 1) % 3)],
+                     opposite = k[size_t((e + 2) % 3)];
+    glm::dvec2 outward = glm::normalize(glm::dvec2(b.y - a.y, a.x - b.x));
+    if (glm::dot(outward, opposite - a) > 0.0) outward = -outward;
+    clipHalfPlane(poly, outward, glm::dot(outward, a) - c, scratch);
+    if (poly.empty()) return false;
+  }
+  return true;
+}
+
+// Parity of enclosure `e` at `p` along the upward test directions: the
+// number of directions with an odd crossing count, or -1 if a ray starts on
+// a surface.
+int oddDirections(const FlatTriangles& tris, const Solids& solids, const RayQuery& rays, uint32_t e,
+                  const glm::vec3& p, std::vector<Hit>& hits) {
+  const Box3f& box = solids.enclosureBounds(e);
+  const float reach = glm::length(box.hi - box.lo) + glm::length(p - box.center()) + 1.0f;
+  int odd = 0;
+  for (const glm::vec3& dir : solidTestDirections()) {
+    hits.clear();
+    rays.allHits(Ray{p, dir, 0.0f, reach}, hits);
+    int crossings = 0;
+    for (const Hit& h : hits) {
+      if (h.t <= 0.0f) return -1;
+      if (h.triangle < tris.size() && solids.enclosureOf(h.triangle) == e) ++crossings;
+    }
+    odd += crossings % 2;
+  }
+  return odd;
+}
+
+}  // namespace
+
+BackFaceSolids backFaceSolids(const FlatTriangles& tris, const Solids& solids, const RayQuery& rays,
+                              const BackFaceOptions& options) {
+  VS_CHECK(std::isfinite(options.clearance) && options.clearance > 0.0);
+  const size_t n = tris.size();
+  BackFaceSolids out;
+  out.solidOf.assign(n, kNoHit);
+
+  // Orientation proof: the welded components come first in `bounds`.
+  const auto& components = solids.weldedComponents();
+  for (const SolidComponent& c : components) {
+    out.bounds.push_back(c.bounds);
+    out.floor.push_back(-std::numeric_limits<float>::infinity());
+  }
+  for (size_t t = 0; t < n; ++t) {
+    if (tris.degenerate[t]) continue;
+    const uint32_t c = solids.weldedComponentOf(uint32_t(t));
+    if (c != kNoHit && components[c].kind == SolidClass::ClosedOutward) {
+      out.solidOf[t] = c;
+      ++out.byOrientation;
+    }
+  }
+  if (!options.parity || solids.enclosureCount() == 0) return out;
+
+  const uint32_t enclosureBase = uint32_t(out.bounds.size());
+  for (uint32_t e = 0; e < solids.enclosureCount(); ++e) {
+    out.bounds.push_back(solids.enclosureBounds(e));
+    out.floor.push_back(solids.enclosureFloor(e));
+  }
+
+  // The enclosures' triangles by X/Z cell, for the clearance test.
+  std::vector<uint32_t> members;
+  std::vector<Box3f> boxes;
+  Box3f all;
+  for (size_t t = 0; t < n; ++t) {
+    if (tris.degenerate[t] || solids.enclosureOf(uint32_t(t)) == kNoHit) continue;
+    members.push_back(uint32_t(t));
+    boxes.push_back(tris.triangleBounds(t));
+    all.extend(boxes.back());
+  }
+  if (members.empty()) return out;
+  const float extent = std::max(all.hi.x - all.lo.x, all.hi.z - all.lo.z);
+  const XzGrid grid(all, std::max(extent / 2048.0f, 0.5f), boxes);
+
+  Polygon2 poly, scratch;
+  std::vector<Hit> hits;
+  for (size_t i = 0; i < members.size(); ++i) {
+    const uint32_t t = members[i];
+    if (out.solidOf[t] != kNoHit) continue;
+    const uint32_t e = solids.enclosureOf(t);
+    const TriangleFrame frame = frameOf(tris, t);
+    const Box3f& tb = boxes[i];
+    const float magnitude = std::max(glm::length(tb.lo), glm::length(tb.hi));
+    const double c =
+        std::max(options.clearance, 8.0 * double(std::nextafter(magnitude, INFINITY) - magnitude));
+    if (!(frame.inradius > 2.0 * c)) continue;
+
+    // (a) No other triangle of the enclosure near the shrunk triangle.
+    bool clear = true;
+    const float grow = float(c);
+    const glm::vec3 lo = tb.lo - grow, hi = tb.hi + grow;
+    for (uint32_t j : grid.itemsNear({lo.x, lo.z}, {hi.x, hi.z})) {
+      const uint32_t other = members[j];
+      if (other == t || solids.enclosureOf(other) != e) continue;
+      const Box3f& ob = boxes[j];
+      if (ob.lo.x > hi.x || ob.hi.x < lo.x || ob.lo.y > hi.y || ob.hi.y < lo.y || ob.lo.z > hi.z ||
+          ob.hi.z < lo.z)
+        continue;
+      if (comesClose(frame, tris, other, c, poly, scratch)) {
+        clear = false;
+        break;
+      }
+    }
+    if (!clear) continue;
+
+    // (b) Odd behind, even in front, both above the floor.
+    const glm::dvec3 centre = frame.lift(frame.incentre);
+    const glm::vec3 behind(centre - frame.n * (0.5 * c)), before(centre + frame.n * (0.5 * c));
+    const float floorY = solids.enclosureFloor(e);
+    if (!(behind.y > floorY) || !(before.y > floorY)) continue;
+    if (oddDirections(tris, solids, rays, e, before, hits) != 0) continue;
+    if (2 * oddDirections(tris, solids, rays, e, behind, hits) <= kSolidTestDirections) continue;
+    out.solidOf[t] = enclosureBase + e;
+    ++out.byParity;
+  }
+  return out;
+}
+
+}  // namespace vistream
