@@ -198,8 +198,8 @@ BackFaceSolids backFaceSolids(const FlatTriangles& tris, const Solids& solids, c
     const glm::dvec3 centre = frame.lift(frame.incentre);
     const glm::vec3 behind(centre - frame.n * (0.5 * c)), before(centre + frame.n * (0.5 * c));
     const float floorY = solids.enclosureFloor(e);
-    if (!(behind.y > floorY) || !(before.y > floorY)) continue;
-    if (oddDirections(tris, solids, rays, e, before, hits) != 0) continue;
+    if (!(behind.y > floorY)) continue;
+    if (before.y > floorY && oddDirections(tris, solids, rays, e, before, hits) != 0) continue;
     if (2 * oddDirections(tris, solids, rays, e, behind, hits) <= kSolidTestDirections) continue;
     out.solidOf[t] = enclosureBase + e;
     ++out.byParity;

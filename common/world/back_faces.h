@@ -13,11 +13,12 @@
 //      (a) no other triangle of E comes within the clearance c of the
 //          triangle shrunk by c (clipped to the slab |distance| <= c of its
 //          plane and projected onto it), and its inradius exceeds 2c;
-//      (b) from the point c/2 behind its incentre, upward rays cross E an
-//          odd number of times (a strict majority of the
-//          kSolidTestDirections directions), and from the point c/2 in
-//          front of it an even number (every direction), both points above
-//          E's floor (Solids::enclosureFloor()).
+//      (b) from the point c/2 behind its incentre, which lies above E's
+//          floor (Solids::enclosureFloor()), upward rays cross E an odd
+//          number of times (a strict majority of the kSolidTestDirections
+//          directions), and from the point c/2 in front of it, if that lies
+//          above the floor too, an even number (every direction). A bottom
+//          face in the plane of an open base has only its back above.
 //    By (a) the points within c behind the shrunk triangle form a connected
 //    set that no triangle of E meets, so parity is the same over all of it
 //    and by (b) odd. Take a viewpoint p outside E's bounding box (parity

@@ -296,8 +296,10 @@ constexpr uint8_t kEnclosureNone = 0, kEnclosureSealed = 1, kEnclosureBaseOpen =
 void findEnclosures(const std::vector<EdgeUse>& edges, const std::vector<glm::dvec3>& position,
                     double tol, const std::vector<uint32_t>& componentOf,
                     const std::vector<uint32_t>& groupOf, const std::vector<Box3f>& groupBounds,
-                    std::vector<uint8_t>& groupEnclosure, std::vector<uint8_t>& peeled) {
+                    std::vector<uint8_t>& groupEnclosure, std::vector<uint8_t>& peeled,
+                    std::vector<float>& groupBaseTop) {
   const size_t n = componentOf.size();
+  groupBaseTop.assign(groupBounds.size(), -std::numeric_limits<float>::infinity());
   peeled.assign(n, 0);
   groupEnclosure.assign(groupBounds.size(), kEnclosureSealed);
   // Runs of equal keys: one per side piece, with its remaining uses.
@@ -345,10 +347,15 @@ void findEnclosures(const std::vector<EdgeUse>& edges, const std::vector<glm::dv
   for (uint32_t r = 0; r < live.size(); ++r) {
     if (live[r] % 2 == 0) continue;
     const uint32_t g = groupOf[componentOf[edges[runStart[r]].triangle]];
-    if (!atBase[r])
+    if (!atBase[r]) {
       groupEnclosure[g] = kEnclosureNone;
-    else if (groupEnclosure[g] == kEnclosureSealed)
-      groupEnclosure[g] = kEnclosureBaseOpen;
+      continue;
+    }
+    if (groupEnclosure[g] == kEnclosureSealed) groupEnclosure[g] = kEnclosureBaseOpen;
+    // The highest point of the open base: the cap stays below it.
+    const float top = float(std::max(position[uint32_t(edges[runStart[r]].key >> 32)].y,
+                                     position[uint32_t(edges[runStart[r]].key)].y));
+    groupBaseTop[g] = std::max(groupBaseTop[g], top);
   }
   // A group peeled away entirely, or down to sheets at its base, encloses nothing.
   std::vector<uint8_t> rises(groupBounds.size(), 0);
@@ -412,7 +419,7 @@ Solids Solids::build(const FlatTriangles& tris, const SolidsOptions& options) {
     if (s.enclosureBounds_.size() > before)
       s.enclosureFloor_.push_back(welded.groupEnclosure_[g] == kEnclosureSealed
                                       ? -std::numeric_limits<float>::infinity()
-                                      : welded.groupBounds_[g].lo.y + float(options.weldTolerance));
+                                      : welded.groupBaseTop_[g]);
   }
   return s;
 }
@@ -540,7 +547,7 @@ Solids Solids::classify(const FlatTriangles& tris, double tol) {
   // Enclosures: peel dangling sheets, then keep the groups whose remaining
   // odd edge pieces (if any) all lie at their base.
   findEnclosures(edges, position, tol, s.componentOf_, s.groupOf_, s.groupBounds_,
-                 s.groupEnclosure_, s.peeled_);
+                 s.groupEnclosure_, s.peeled_, s.groupBaseTop_);
   return s;
 }
 

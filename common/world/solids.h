@@ -138,7 +138,8 @@ class Solids {
   size_t enclosureCount() const { return enclosureBounds_.size(); }
   const Box3f& enclosureBounds(uint32_t enclosure) const { return enclosureBounds_[enclosure]; }
   // The height (y, metres) the cap of an enclosure open at its base reaches:
-  // its lowest point plus the weld tolerance. -infinity for a sealed one.
+  // the highest point of its open base edges (at most its lowest point plus
+  // the weld tolerance). -infinity for a sealed one.
   float enclosureFloor(uint32_t enclosure) const { return enclosureFloor_[enclosure]; }
   // The weld tolerance this was built with (SolidsOptions::weldTolerance).
   double weldTolerance() const { return weldTolerance_; }
@@ -175,6 +176,7 @@ class Solids {
   std::vector<float> enclosureFloor_;    // by enclosure
   std::vector<uint8_t> groupEnclosure_;  // by group, after peeling: none, sealed, base-open
   std::vector<uint8_t> peeled_;          // by triangle: peeled off its group
+  std::vector<float> groupBaseTop_;      // by group: highest point of its open base
   double weldTolerance_ = 0.0;
 
   // Components and parity groups of the topology welded within `tol`.

@@ -48,7 +48,7 @@ TEST(Enclosures, ABoxOpenOnlyBelowEnclosesAboveAFloorAtItsBase) {
   addWoundBox(b.scene, "house", {0, 2, 0}, {4, 5, 4}, Winding::Outward, /*bottom=*/false);
   b.build();
   ASSERT_EQ(b.solids.enclosureCount(), 1u);
-  EXPECT_FLOAT_EQ(b.solids.enclosureFloor(0), 2.0f + float(b.solids.weldTolerance()));
+  EXPECT_EQ(b.solids.enclosureFloor(0), 2.0f) << "the open base lies at y = 2";
   for (uint32_t t = 0; t < b.triangles.size(); ++t) EXPECT_EQ(b.solids.enclosureOf(t), 0u);
 }
 
@@ -148,8 +148,21 @@ TEST(BackFaces, FarFromTheOriginABoxOpenBelowIsStillProvedByParity) {
     b.build();
     for (uint32_t f = 0; f < 5; ++f) EXPECT_TRUE(b.oneSided(f)) << f;
     ASSERT_NE(b.behind.solidOf[0], kNoHit);
-    EXPECT_GT(b.behind.floor[b.behind.solidOf[0]], 0.0f) << "viewpoints must be above the base";
+    EXPECT_EQ(b.behind.floor[b.behind.solidOf[0]], 0.0f) << "viewpoints must be above the base";
   }
+}
+
+// Half the bottom is there: it faces down with the inside above it, and
+// only its back lies above the open base.
+TEST(BackFaces, TheBottomHalfOfABoxOpenOnlyBelowIsOneSided) {
+  Built b;
+  std::vector<Loop> loops = boxLoops({0, 0, 0}, {4, 3, 4});
+  loops[kBottom] = {{0, 0, 0}, {2, 0, 0}, {2, 0, 4}, {0, 0, 4}};
+  addFaces(b.scene, "house", loops);
+  b.build();
+  ASSERT_EQ(b.solids.enclosureCount(), 1u);
+  EXPECT_EQ(b.solids.enclosureFloor(0), 0.0f);
+  for (uint32_t f = 0; f < 6; ++f) EXPECT_TRUE(b.oneSided(f)) << f;
 }
 
 // The roof is two quads whose shared corners lie on the long top sides of
