@@ -12,14 +12,15 @@
 namespace vistream {
 namespace {
 
-using Polygon2 = std::vector<glm::dvec2>;
+using Polygon = std::vector<glm::dvec3>;
 
-// Sutherland-Hodgman: the part of `poly` where dot(n, x) <= d. Closed
-// half-planes, so a polygon touching the line keeps the touching point.
-void clipHalfPlane(Polygon2& poly, glm::dvec2 n, double d, Polygon2& scratch) {
+// Sutherland-Hodgman: the part of the convex `poly` where dot(n, x) <= d.
+// Closed half-spaces, so a polygon touching the plane keeps the touching
+// point.
+void clipHalfSpace(Polygon& poly, glm::dvec3 n, double d, Polygon& scratch) {
   scratch.clear();
   for (size_t i = 0; i < poly.size(); ++i) {
-    const glm::dvec2 a = poly[i], b = poly[(i + 1) % poly.size()];
+    const glm::dvec3 a = poly[i], b = poly[(i + 1) % poly.size()];
     const double da = glm::dot(n, a) - d, db = glm::dot(n, b) - d;
     if (da <= 0.0) scratch.push_back(a);
     if ((da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0))
@@ -62,39 +63,25 @@ TriangleFrame frameOf(const FlatTriangles& tris, size_t t) {
 // True if some point of triangle `other` lies within `c` of the plane of
 // `frame`'s triangle and projects into that triangle shrunk by `c`.
 bool comesClose(const TriangleFrame& frame, const FlatTriangles& tris, size_t other, double c,
-                Polygon2& poly, Polygon2& scratch) {
-  // Clip the other triangle to the slab |distance| <= c, in 3D as (u, v, w).
-  std::array<glm::dvec3, 3> p{};
+                Polygon& poly, Polygon& scratch) {
+  // In the frame's (u, v, w) coordinates: the slab is |w| <= c, the shrunk
+  // triangle each side's inward half-plane moved by c.
+  poly.clear();
   for (int k = 0; k < 3; ++k) {
     const glm::dvec3 x = glm::dvec3(tris.vertex(other, k)) - frame.origin;
-    p[size_t(k)] = {glm::dot(x, frame.u), glm::dot(x, frame.v), glm::dot(x, frame.n)};
+    poly.emplace_back(glm::dot(x, frame.u), glm::dot(x, frame.v), glm::dot(x, frame.n));
   }
-  std::vector<glm::dvec3> poly3(p.begin(), p.end()), next;
-  for (const double side : {1.0, -1.0}) {
-    next.clear();
-    for (size_t i = 0; i < poly3.size(); ++i) {
-      const glm::dvec3 a = poly3[i], b = poly3[(i + 1) % poly3.size()];
-      const double da = side * a.z - c, db = side * b.z - c;
-      if (da <= 0.0) next.push_back(a);
-      if ((da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0))
-        next.push_back(a + (b - a) * (da / (da - db)));
-    }
-    poly3.swap(next);
-    if (poly3.empty()) return false;
-  }
-  poly.clear();
-  for (const glm::dvec3& q : poly3) poly.emplace_back(q.x, q.y);
-  // Then to the shrunk triangle: each side's inward half-plane moved by c.
+  clipHalfSpace(poly, {0.0, 0.0, 1.0}, c, scratch);
+  clipHalfSpace(poly, {0.0, 0.0, -1.0}, c, scratch);
   const auto& k = frame.corners;
-  for (int e = 0; e < 3; ++e) {
+  for (int e = 0; e < 3 && !poly.empty(); ++e) {
     const glm::dvec2 a = k[size_t(e)], b = k[size_t((e + 1) % 3)],
                      opposite = k[size_t((e + 2) % 3)];
     glm::dvec2 outward = glm::normalize(glm::dvec2(b.y - a.y, a.x - b.x));
     if (glm::dot(outward, opposite - a) > 0.0) outward = -outward;
-    clipHalfPlane(poly, outward, glm::dot(outward, a) - c, scratch);
-    if (poly.empty()) return false;
+    clipHalfSpace(poly, {outward, 0.0}, glm::dot(outward, a) - c, scratch);
   }
-  return true;
+  return !poly.empty();
 }
 
 // Parity of enclosure `e` at `p` along the upward test directions: the
@@ -163,7 +150,7 @@ BackFaceSolids backFaceSolids(const FlatTriangles& tris, const Solids& solids, c
   const float extent = std::max(all.hi.x - all.lo.x, all.hi.z - all.lo.z);
   const XzGrid grid(all, std::max(extent / 2048.0f, 0.5f), boxes);
 
-  Polygon2 poly, scratch;
+  Polygon poly, scratch;
   std::vector<Hit> hits;
   for (size_t i = 0; i < members.size(); ++i) {
     const uint32_t t = members[i];
