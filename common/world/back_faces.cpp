@@ -7,27 +7,13 @@
 #include <span>
 
 #include "common/core/check.h"
+#include "common/spatial/convex_polygon.h"
 #include "common/spatial/xz_grid.h"
 
 namespace vistream {
 namespace {
 
 using Polygon = std::vector<glm::dvec3>;
-
-// Sutherland-Hodgman: the part of the convex `poly` where dot(n, x) <= d.
-// Closed half-spaces, so a polygon touching the plane keeps the touching
-// point.
-void clipHalfSpace(Polygon& poly, glm::dvec3 n, double d, Polygon& scratch) {
-  scratch.clear();
-  for (size_t i = 0; i < poly.size(); ++i) {
-    const glm::dvec3 a = poly[i], b = poly[(i + 1) % poly.size()];
-    const double da = glm::dot(n, a) - d, db = glm::dot(n, b) - d;
-    if (da <= 0.0) scratch.push_back(a);
-    if ((da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0))
-      scratch.push_back(a + (b - a) * (da / (da - db)));
-  }
-  poly.swap(scratch);
-}
 
 // The triangle's frame: unit normal, two in-plane axes, a corner.
 struct TriangleFrame {
@@ -71,15 +57,15 @@ bool comesClose(const TriangleFrame& frame, const FlatTriangles& tris, size_t ot
     const glm::dvec3 x = glm::dvec3(tris.vertex(other, k)) - frame.origin;
     poly.emplace_back(glm::dot(x, frame.u), glm::dot(x, frame.v), glm::dot(x, frame.n));
   }
-  clipHalfSpace(poly, {0.0, 0.0, 1.0}, c, scratch);
-  clipHalfSpace(poly, {0.0, 0.0, -1.0}, c, scratch);
+  clipToHalfSpace(poly, scratch, {0.0, 0.0, 1.0}, c);
+  clipToHalfSpace(poly, scratch, {0.0, 0.0, -1.0}, c);
   const auto& k = frame.corners;
   for (int e = 0; e < 3 && !poly.empty(); ++e) {
     const glm::dvec2 a = k[size_t(e)], b = k[size_t((e + 1) % 3)],
                      opposite = k[size_t((e + 2) % 3)];
     glm::dvec2 outward = glm::normalize(glm::dvec2(b.y - a.y, a.x - b.x));
     if (glm::dot(outward, opposite - a) > 0.0) outward = -outward;
-    clipHalfSpace(poly, {outward, 0.0}, glm::dot(outward, a) - c, scratch);
+    clipToHalfSpace(poly, scratch, {outward, 0.0}, glm::dot(outward, a) - c);
   }
   return !poly.empty();
 }
@@ -114,12 +100,9 @@ BackFaceSolids backFaceSolids(const FlatTriangles& tris, const Solids& solids, c
   BackFaceSolids out;
   out.solidOf.assign(n, kNoHit);
 
-  // Orientation proof: the welded components come first in `bounds`.
+  // Orientation proof: the welded components come first in `floor`.
   const auto& components = solids.weldedComponents();
-  for (const SolidComponent& c : components) {
-    out.bounds.push_back(c.bounds);
-    out.floor.push_back(-std::numeric_limits<float>::infinity());
-  }
+  out.floor.assign(components.size(), -std::numeric_limits<float>::infinity());
   for (size_t t = 0; t < n; ++t) {
     if (tris.degenerate[t]) continue;
     const uint32_t c = solids.weldedComponentOf(uint32_t(t));
@@ -130,11 +113,9 @@ BackFaceSolids backFaceSolids(const FlatTriangles& tris, const Solids& solids, c
   }
   if (!options.parity || solids.enclosureCount() == 0) return out;
 
-  const uint32_t enclosureBase = uint32_t(out.bounds.size());
-  for (uint32_t e = 0; e < solids.enclosureCount(); ++e) {
-    out.bounds.push_back(solids.enclosureBounds(e));
+  const uint32_t enclosureBase = uint32_t(out.floor.size());
+  for (uint32_t e = 0; e < solids.enclosureCount(); ++e)
     out.floor.push_back(solids.enclosureFloor(e));
-  }
 
   // The enclosures' triangles by X/Z cell, for the clearance test.
   std::vector<uint32_t> members;

@@ -1,12 +1,14 @@
 // Which triangles have the inside of a solid right behind them: the
 // triangles back-face culling may drop for a view cell that lies behind
-// their plane and outside the solid (server/visibility/epsilon_pvs.h).
+// their plane and above the solid's floor (server/visibility/epsilon_pvs.h),
+// seen from viewpoints outside the solid.
 //
 // Two proofs, tried in this order for each non-degenerate triangle:
 //
 //  - Orientation. The triangle lies in a closed, manifold, consistently
 //    OUTWARD welded component (Solids::weldedComponents()): its back side
-//    faces the inside.
+//    faces the inside. Such a component's group is sealed, so an
+//    enclosure, whose inside no served viewpoint lies in.
 //
 //  - Parity. The triangle lies in an enclosure E (Solids::enclosureOf(): a
 //    welded parity group that is sealed, or open only at its base), and
@@ -21,8 +23,10 @@
 //          face in the plane of an open base has only its back above.
 //    By (a) the points within c behind the shrunk triangle form a connected
 //    set that no triangle of E meets, so parity is the same over all of it
-//    and by (b) odd. Take a viewpoint p outside E's bounding box (parity
-//    even) and above its floor, and a line from p reaching the shrunk
+//    and by (b) odd. Take a viewpoint p outside E (parity even: outside
+//    its bounding box, or any viewpoint the PVS contract serves, which
+//    excludes the inside and surface of every enclosure,
+//    Solids::unservedViewpoint) and above its floor, and a line from p reaching the shrunk
 //    triangle from behind at q: points just before q are in that set, so the
 //    segment from p to them changes parity and, staying above the cap,
 //    crosses a real triangle of E before q. The triangle is never the first
@@ -60,11 +64,10 @@ struct BackFaceOptions {
 
 // The solid behind each one-sided triangle. A solid is a welded component
 // (orientation proof) or an enclosure (parity proof); a viewpoint may have
-// a triangle culled only from outside the solid's bounds and strictly above
-// its floor.
+// a triangle culled only from outside the solid and strictly above its
+// floor.
 struct BackFaceSolids {
-  std::vector<uint32_t> solidOf;  // by triangle: index into bounds/floor, or kNoHit
-  std::vector<Box3f> bounds;      // by solid
+  std::vector<uint32_t> solidOf;  // by triangle: index into floor, or kNoHit
   std::vector<float> floor;       // by solid: y a viewpoint must exceed (-inf: none)
   size_t byOrientation = 0;       // triangles proved one-sided by orientation
   size_t byParity = 0;            // ... by parity (and not by orientation)

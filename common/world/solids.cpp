@@ -421,6 +421,13 @@ Solids Solids::build(const FlatTriangles& tris, const SolidsOptions& options) {
                                       ? -std::numeric_limits<float>::infinity()
                                       : welded.groupBaseTop_[g]);
   }
+  Box3f enclosed;
+  for (const Box3f& b : s.enclosureBounds_) enclosed.extend(b);
+  if (!enclosed.empty())
+    s.enclosureGrid_ = XzGrid(
+        enclosed,
+        std::max({enclosed.hi.x - enclosed.lo.x, enclosed.hi.z - enclosed.lo.z, 1e-3f}) / 256.0f,
+        s.enclosureBounds_);
   return s;
 }
 
@@ -632,42 +639,39 @@ bool Solids::insideClosed(const RayQuery& rays, const glm::vec3& p) const {
 
 // inside() || insideClosed() in one pass: inside a closed group is inside a
 // group, so the vote over every group decides both, and an eye on a closed
-// group's surface is unserved whatever the vote.
+// group's surface is unserved whatever the vote; then insideEnclosure().
 bool Solids::unservedViewpoint(const RayQuery& rays, const glm::vec3& p) const {
-  return insideGroup(rays, p, false, true);
+  return insideGroup(rays, p, false, true) || insideEnclosure(rays, p);
 }
 
-bool Solids::insideGroup(const RayQuery& rays, const glm::vec3& p, bool closedOnly,
-                         bool closedSurfaceInside) const {
-  if (grid_.empty()) return false;
-  const auto listed = grid_.itemsIn(grid_.cellOf({p.x, p.z}));
-  thread_local std::vector<uint32_t> candidates;
+namespace {
+
+// Strict-majority parity vote along the upward test directions: true when
+// some candidate has odd parity along more than half of them. `idOf(t)`
+// names the candidate triangle t belongs to (or kNoHit), `boundsOf(c)` a
+// candidate's box; a hit at the ray's start (the point lies on a surface)
+// returns onSurface(t) at once.
+template <class IdOf, class BoundsOf, class OnSurface>
+bool oddMajority(const RayQuery& rays, const glm::vec3& p, std::span<const uint32_t> candidates,
+                 IdOf&& idOf, BoundsOf&& boundsOf, OnSurface&& onSurface) {
   thread_local std::vector<int> odd;
   thread_local std::vector<uint8_t> parity;
   thread_local std::vector<Hit> hits;
-  candidates.clear();
-  for (uint32_t g : listed)
-    if (groupBounds_[g].contains(p) && (!closedOnly || groupClosed_[g])) candidates.push_back(g);
-  if (candidates.empty()) return false;
   odd.assign(candidates.size(), 0);
   parity.resize(candidates.size());
-
   const std::array<glm::vec3, kSolidTestDirections>& dirs = solidTestDirections();
   for (int d = 0; d < kSolidTestDirections; ++d) {
     const glm::vec3& dir = dirs[size_t(d)];
     float tfar = 0.0f;
-    for (uint32_t g : candidates) tfar = std::max(tfar, exitDistance(groupBounds_[g], p, dir));
+    for (uint32_t c : candidates) tfar = std::max(tfar, exitDistance(boundsOf(c), p, dir));
     hits.clear();
     rays.allHits(Ray{p, dir, 0.0f, tfar * 1.001f + 1e-3f}, hits);
     std::fill(parity.begin(), parity.end(), uint8_t(0));
     for (const Hit& h : hits) {
-      // On a surface: outside by convention, except on the surface of a
-      // closed solid for insideClosed (whose contract counts the surface in).
-      if (h.t == 0.0f)
-        return closedSurfaceInside && groupClosed_[groupOf_[componentOf_[h.triangle]]];
-      const uint32_t g = groupOf_[componentOf_[h.triangle]];
+      if (h.t == 0.0f) return onSurface(h.triangle);
+      const uint32_t c = idOf(h.triangle);
       for (size_t i = 0; i < candidates.size(); ++i)
-        if (candidates[i] == g) parity[i] ^= 1;
+        if (candidates[i] == c) parity[i] ^= 1;
     }
     // Decide as soon as the vote is settled for every candidate.
     const int remaining = kSolidTestDirections - d - 1;
@@ -680,6 +684,37 @@ bool Solids::insideGroup(const RayQuery& rays, const glm::vec3& p, bool closedOn
     if (!undecided) return false;
   }
   return false;
+}
+
+}  // namespace
+
+bool Solids::insideGroup(const RayQuery& rays, const glm::vec3& p, bool closedOnly,
+                         bool closedSurfaceInside) const {
+  if (grid_.empty()) return false;
+  thread_local std::vector<uint32_t> candidates;
+  candidates.clear();
+  for (uint32_t g : grid_.itemsIn(grid_.cellOf({p.x, p.z})))
+    if (groupBounds_[g].contains(p) && (!closedOnly || groupClosed_[g])) candidates.push_back(g);
+  if (candidates.empty()) return false;
+  return oddMajority(
+      rays, p, candidates, [&](uint32_t t) { return groupOf_[componentOf_[t]]; },
+      [&](uint32_t g) -> const Box3f& { return groupBounds_[g]; },
+      // On a surface: outside by convention, except on the surface of a
+      // closed solid for insideClosed (whose contract counts the surface in).
+      [&](uint32_t t) { return closedSurfaceInside && groupClosed_[groupOf_[componentOf_[t]]]; });
+}
+
+bool Solids::insideEnclosure(const RayQuery& rays, const glm::vec3& p) const {
+  if (enclosureGrid_.empty()) return false;
+  thread_local std::vector<uint32_t> candidates;
+  candidates.clear();
+  for (uint32_t e : enclosureGrid_.itemsIn(enclosureGrid_.cellOf({p.x, p.z})))
+    if (enclosureBounds_[e].contains(p) && p.y > enclosureFloor_[e]) candidates.push_back(e);
+  if (candidates.empty()) return false;
+  return oddMajority(
+      rays, p, candidates, [&](uint32_t t) { return enclosureOf_[t]; },
+      [&](uint32_t e) -> const Box3f& { return enclosureBounds_[e]; },
+      [&](uint32_t t) { return enclosureOf_[t] != kNoHit; });
 }
 
 }  // namespace vistream

@@ -153,10 +153,16 @@ class Solids {
   // oriented (outward or inward); an eye on a wall's surface looks into the
   // wall.
   bool insideClosed(const RayQuery& rays, const glm::vec3& point) const;
+  // True if `point` lies above an enclosure's floor and inside it (parity
+  // of its triangles along a strict majority of the upward test
+  // directions), or on an enclosure's surface: the welded reading of a
+  // building, party walls and T-junction cracks aside.
+  bool insideEnclosure(const RayQuery& rays, const glm::vec3& point) const;
   // The viewpoint rule of the PVS contract (server/visibility/epsilon_pvs.h):
-  // a viewer inside any solid (inside()), or inside or on the surface of a
-  // closed one (insideClosed()), is not served.
-  // Equal to inside() || insideClosed(), in one pass over the rays.
+  // a viewer inside any solid (inside()), inside or on the surface of a
+  // closed one (insideClosed()), or inside or on an enclosure
+  // (insideEnclosure()) is not served.
+  // Equal to inside() || insideClosed() || insideEnclosure().
   bool unservedViewpoint(const RayQuery& rays, const glm::vec3& point) const;
 
  private:
@@ -177,6 +183,7 @@ class Solids {
   std::vector<uint8_t> groupEnclosure_;  // by group, after peeling: none, sealed, base-open
   std::vector<uint8_t> peeled_;          // by triangle: peeled off its group
   std::vector<float> groupBaseTop_;      // by group: highest point of its open base
+  XzGrid enclosureGrid_;                 // enclosures by X/Z cell of their bounds
   double weldTolerance_ = 0.0;
 
   // Components and parity groups of the topology welded within `tol`.

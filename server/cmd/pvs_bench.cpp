@@ -63,7 +63,7 @@ World makeWorld(const std::string& spec) {
   w.statics = buildStaticWorld(w.scene);
   w.oracleRays = makeSealedRayQuery(*w.statics.triangles, SolidsOptions{}.weldTolerance);
   Stopwatch sw;
-  w.pvs = std::make_unique<EpsilonPvs>(w.scene);
+  w.pvs = std::make_unique<EpsilonPvs>(w.scene, OccluderOptions{}, &w.statics);
   spdlog::info("{}: {} occluders ({} solids, {} polygons), prepared in {:.0f} ms", spec,
                w.pvs->occluders().occluders.size(), w.pvs->occluders().stats.solids,
                w.pvs->occluders().stats.polygons, sw.ms());
@@ -123,6 +123,7 @@ std::vector<Config> table2Configs() {
   PvsOptions naive;
   naive.boxStage = naive.incremental = naive.dropOccludedOccluders = naive.removeRedundantLines =
       false;
+  naive.planarFusion = false;  // the paper's single occluders (its accelerations are timed)
   PvsOptions box = naive;
   box.boxStage = true;
   PvsOptions occl = box;
@@ -130,6 +131,7 @@ std::vector<Config> table2Configs() {
   PvsOptions rays = box;
   rays.removeRedundantLines = true;
   PvsOptions full;
+  full.planarFusion = false;
   return {{"no optimization", naive},
           {"bounding box", box},
           {"redundant occluders", occl},
@@ -138,9 +140,10 @@ std::vector<Config> table2Configs() {
 }
 
 // Every method and combination the accuracy table and the district bake
-// compare: the paper's single convex occluders, + back faces of closed
-// outward solids (the default of `vistream-pvs cell` and the bake), + fused
-// occlusion horizons (when the PVS has them: not indoors).
+// compare: the paper's single convex occluders, + back faces of solids,
+// + solids fused within a plane (planar_fusion.h), + fused occlusion
+// horizons (when the PVS has them: not indoors; the default of `vistream-pvs
+// cell` and the bake).
 struct Method {
   const char* name;
   PvsOptions options;
@@ -150,9 +153,13 @@ std::vector<Method> benchMethods(bool horizons) {
   PvsOptions paper;
   paper.backFaces = false;
   paper.fusion = false;
-  PvsOptions backFaces;
-  backFaces.fusion = false;
-  std::vector<Method> methods{{"paper", paper}, {"+back faces", backFaces}};
+  paper.planarFusion = false;
+  PvsOptions backFaces = paper;
+  backFaces.backFaces = true;
+  PvsOptions planar = backFaces;
+  planar.planarFusion = true;
+  std::vector<Method> methods{
+      {"paper", paper}, {"+back faces", backFaces}, {"+planar fusion", planar}};
   if (horizons) methods.push_back({"+horizons", PvsOptions{}});
   return methods;
 }

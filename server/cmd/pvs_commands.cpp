@@ -124,7 +124,7 @@ int cmdBake(const std::string& spec, const SceneLimits& limits, const GroundChoi
     StaticWorldOptions worldOptions;
     worldOptions.ground = ground;
     const StaticWorld world = buildStaticWorld(scene, worldOptions);
-    EpsilonPvs pvs(scene);
+    EpsilonPvs pvs(scene, OccluderOptions{}, &world);
     const std::unique_ptr<HorizonFusion> horizons =
         makeHorizonFusion(scene, *parseFusionChoice(fusion), &world);
     pvs.setFusion(horizons.get());
@@ -348,7 +348,7 @@ int runPvsTool(int argc, char** argv) {
   auto* cell = app.add_subcommand("cell", "the PVS of one view cell");
   std::string scene, cellText, method = "auto", fusion = "auto";
   bool asJson = false, noBbox = false, noIncremental = false, noRedundantOccluders = false,
-       noRedundantRays = false, noBackFaces = false;
+       noRedundantRays = false, noBackFaces = false, noPlanarFusion = false;
   size_t largeOccluders = 0;
   // The PVS stages every subcommand that computes a PVS can switch off.
   auto addPvsStageFlags = [&](CLI::App* sub) {
@@ -359,6 +359,9 @@ int runPvsTool(int argc, char** argv) {
     sub->add_flag("--no-redundant-rays", noRedundantRays, "cast every corner-vertex line");
     sub->add_flag("--no-back-faces", noBackFaces,
                   "keep faces that face away from the whole cell with a solid behind them");
+    sub->add_flag("--no-planar-fusion", noPlanarFusion,
+                  "keep faces that only solids fused within one plane hide (a wall of several "
+                  "pieces)");
   };
   cell->add_option("--scene", scene, "SCENE")->required();
   cell->add_option("--cell", cellText, "x0,y0,z0,x1,y1,z1 in file coordinates")->required();
@@ -553,6 +556,7 @@ int runPvsTool(int argc, char** argv) {
     options.dropOccludedOccluders = !noRedundantOccluders;
     options.removeRedundantLines = !noRedundantRays;
     options.backFaces = !noBackFaces;
+    options.planarFusion = !noPlanarFusion;
     return options;
   };
   return runToolApp("vistream-pvs", app, argc, argv, logLevel, [&]() -> int {

@@ -149,7 +149,9 @@ StreamWorld::~StreamWorld() = default;
 const EpsilonPvs& StreamWorld::epsilonPvs() {
   std::call_once(pvsOnce_, [this] {
     Stopwatch clock;
-    pvs_ = std::make_unique<EpsilonPvs>(scene_);
+    // Over the static world when there is one (no database): its solids
+    // are built already.
+    pvs_ = std::make_unique<EpsilonPvs>(scene_, OccluderOptions{}, statics_.get());
     pvs_->setFusion(horizons_.get());
     spdlog::info("PVS occluders prepared in {:.0f} ms", clock.ms());
   });

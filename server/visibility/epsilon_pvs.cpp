@@ -28,6 +28,7 @@
 #include "common/world/back_faces.h"
 #include "common/world/solids.h"
 #include "server/visibility/horizon_fusion.h"
+#include "server/visibility/planar_fusion.h"
 
 namespace vistream {
 
@@ -39,7 +40,7 @@ struct EpsilonPvs::Face {
   // consistently outward solid): the triangles as indices into `vertices`,
   // wound as in the scene. Empty: the face is two-sided.
   std::vector<std::array<uint8_t, 3>> oneSided;
-  uint32_t solid = kNoHit;  // one-sided faces: their component (EpsilonPvs::solidBounds_)
+  uint32_t solid = kNoHit;  // one-sided faces: their solid (EpsilonPvs::solidFloor_)
 };
 
 // A spatially compact group of one object's faces with its bounding box:
@@ -130,16 +131,25 @@ namespace {
 // solid's index into `bounds`/`floor`, or kNoHit for a two-sided face.
 struct OneSidedFaces {
   std::vector<uint32_t> solidOf;           // by face ID
-  std::vector<Box3f> bounds;               // by solid
   std::vector<float> floor;                // by solid: a viewpoint must lie above this y
   size_t byOrientation = 0, byParity = 0;  // triangles
 };
 
-OneSidedFaces oneSidedFaces(const Scene& scene) {
-  const FlatTriangles flat = flattenScene(scene, /*staticOnly=*/true);
-  const Solids solids = Solids::build(flat);
-  const std::unique_ptr<RayQuery> rays = makeEmbreeRayQuery(flat);
-  BackFaceSolids behind = backFaceSolids(flat, solids, *rays);
+// Over the static world's triangles, solids and rays when given (parts
+// Solids or more), else over its own.
+OneSidedFaces oneSidedFaces(const Scene& scene, const StaticWorld* world) {
+  StaticWorld own;  // without the ground decision, which back faces do not need
+  if (!world) {
+    own.triangles = std::make_unique<const FlatTriangles>(flattenScene(scene, /*staticOnly=*/true));
+    own.rays = makeEmbreeRayQuery(*own.triangles);
+    own.solids = Solids::build(*own.triangles);
+    world = &own;
+  }
+  VS_CHECK(world->triangles && world->rays);
+  // The solids part was built (a scene with triangles has components).
+  VS_CHECK(world->triangles->size() == 0 || !world->solids.components().empty());
+  const FlatTriangles& flat = *world->triangles;
+  BackFaceSolids behind = backFaceSolids(flat, world->solids, *world->rays);
   constexpr uint32_t kUnseen = kNoHit - 1;
   OneSidedFaces out;
   out.solidOf.assign(scene.faceCount, kUnseen);
@@ -152,7 +162,6 @@ OneSidedFaces oneSidedFaces(const Scene& scene) {
   }
   for (uint32_t& s : out.solidOf)
     if (s == kUnseen) s = kNoHit;
-  out.bounds = std::move(behind.bounds);
   out.floor = std::move(behind.floor);
   out.byOrientation = behind.byOrientation;
   out.byParity = behind.byParity;
@@ -161,11 +170,13 @@ OneSidedFaces oneSidedFaces(const Scene& scene) {
 
 }  // namespace
 
-EpsilonPvs::EpsilonPvs(const Scene& scene, const OccluderOptions& occluderOptions) : scene_(scene) {
+EpsilonPvs::EpsilonPvs(const Scene& scene, const OccluderOptions& occluderOptions,
+                       const StaticWorld* world)
+    : scene_(scene) {
   Stopwatch clock;
   occluders_ = extractOccluders(scene, occluderOptions);
-  OneSidedFaces oneSided = oneSidedFaces(scene);
-  solidBounds_ = std::move(oneSided.bounds);
+  planar_ = std::make_unique<PlanarFusion>(occluders_);
+  OneSidedFaces oneSided = oneSidedFaces(scene, world);
   solidFloor_ = std::move(oneSided.floor);
   std::vector<Box3f> bounds;
   bounds.reserve(occluders_.occluders.size());
@@ -261,16 +272,16 @@ void splitGroups(std::vector<EpsilonPvs::Face>& faces, uint32_t first, uint32_t 
 }
 
 // True if the closed cell lies strictly behind the plane of every triangle
-// of a one-sided face, by more than the rounding margin, and does not meet
-// the face's solid (`solid`, its bounds) and lies above the solid's floor
-// (`floor`: the cap of a solid open at its base): no point of the cell sees
-// the face's front, and none lies inside the solid or on its surface (a
-// point on the surface would look into the solid past the surface it stands
-// on) or where a line could pass below the solid's open base.
+// of a one-sided face, by more than the rounding margin, and above the
+// face's solid's floor (`floor`: the cap of a solid open at its base): no
+// point of the cell sees the face's front, and none lies where a line could
+// pass below the solid's open base. Viewpoints of the cell inside the solid
+// or on its surface (which would look into it past the surface they stand
+// on) are not served (Solids::unservedViewpoint).
 // In double from float inputs: the cross product and the box support are
 // exact to a few ulps, far below the margin.
-bool facesAway(const EpsilonPvs::Face& f, const Box3f& cell, const Box3f& solid, float floor) {
-  if (f.oneSided.empty() || cell.overlaps(solid) || !(cell.lo.y > floor)) return false;
+bool facesAway(const EpsilonPvs::Face& f, const Box3f& cell, float floor) {
+  if (f.oneSided.empty() || !(cell.lo.y > floor)) return false;
   const glm::dvec3 centre(cell.center()), half(0.5 * (glm::dvec3(cell.hi) - glm::dvec3(cell.lo)));
   const double magnitude =
       std::max(glm::length(glm::dvec3(cell.hi)), glm::length(glm::dvec3(cell.lo)));
@@ -497,8 +508,11 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
            std::binary_search(options.candidateFaces->begin(), options.candidateFaces->end(), face);
   };
 
+  // Solids fused within a plane, for the faces no single occluder hides.
+  const PlanarFusion::CellPlanes planes =
+      options.planarFusion && planar_ ? planar_->planesFor(cell) : PlanarFusion::CellPlanes{};
   auto faceAway = [&](const Face& f) {
-    return f.solid != kNoHit && facesAway(f, cell, solidBounds_[f.solid], solidFloor_[f.solid]);
+    return f.solid != kNoHit && facesAway(f, cell, solidFloor_[f.solid]);
   };
 
   double boxMs = 0.0, faceMs = 0.0;
@@ -544,10 +558,16 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
         ++stats.boxes;
         stats.objectBoxes += e.groups.size() == 1;
         bool byFirst = false;
-        const bool boxHidden = q.hidden(
+        bool boxHidden = q.hidden(
             g.boxCorners,
             options.removeRedundantLines ? std::span(boxPairs) : std::span(allPairs).first(64),
             stats.lineBoxTests, &byFirst);
+        // Solids fused in a plane may hide the whole box (then each face
+        // of it, whose footprint lies in the box's).
+        if (!boxHidden && !planes.planes.empty() && planar_->hidden(cell, planes, g.boxCorners)) {
+          boxHidden = true;
+          stats.facesPlanar += g.faceCount;
+        }
         boxMs += sw.ms();
         if (boxHidden) {
           ++stats.boxesOccluded;
@@ -579,6 +599,9 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
                     : std::span(allPairs).first(8 * std::min<size_t>(f.vertices.size(), 255));
         if (f.vertices.size() <= 255 &&
             q.hidden(f.vertices, lines, stats.linePolygonTests, nullptr)) {
+          ++stats.facesOccluded;
+        } else if (!planes.planes.empty() && planar_->hidden(cell, planes, f.vertices)) {
+          ++stats.facesPlanar;
           ++stats.facesOccluded;
         } else {
           result.faces.push_back(f.id);

@@ -12,8 +12,10 @@
 // outside closed solids, and any view direction (frustum culling stays on
 // the client).
 //
-// Viewpoints inside solids, or on the surface of closed ones, are not
-// served (Solids::unservedViewpoint, common/world/solids.h). A solid
+// Viewpoints inside solids, on the surface of closed ones, or inside or on
+// an enclosure (a building as the welded reading sees it, open at its base
+// or not) are not served (Solids::unservedViewpoint, common/world/solids.h).
+// A solid
 // occluder is the inside of a closed mesh: it blocks a line only because the
 // line must cross the mesh's surface to enter it, which holds for viewpoints
 // outside it. A cell that reaches into a closed building (a street cell
@@ -28,10 +30,10 @@
 // component, or, proved triangle by triangle by parity, a welded group that
 // is sealed or open only at its base, as LoD2 buildings without a ground
 // surface are), the closed cell lies strictly behind every triangle's plane
-// (by a rounding margin), does not meet the solid's bounding box (so no
-// viewpoint of the cell lies inside the solid or on its surface) and lies
-// above the solid's floor (a base-open solid's cap). From such a viewpoint,
-// a line reaching the face from behind was inside the solid just before, so
+// (by a rounding margin) and lies above the solid's floor (a base-open
+// solid's cap). From a served viewpoint of such a cell (outside the solid
+// and off its surface: the cell may still reach into the building), a line
+// reaching the face from behind was inside the solid just before, so
 // it crossed the solid's surface earlier and the face is not the first thing
 // it meets. Solids are read with corners welded and T-junctions cut within
 // 1 cm, so cracks narrower than that count as closed; the oracles that check
@@ -39,6 +41,13 @@
 // Faces of open, non-manifold and inward-wound parts stay two-sided, as do
 // faces with the solid on both sides (coincident walls) or cut by another
 // triangle of their solid.
+//
+// Solids fused within a plane (PvsOptions::planarFusion, on by default;
+// server/visibility/planar_fusion.h): a face no single occluder hides is
+// tested against each plane that faces of several solid occluders lie in
+// (a wall of patches, a wall and its lintel), with the cell in front and
+// the face behind; the union of their cross-sections just behind the plane
+// must cover the shaft's footprint there.
 //
 // The paper's accelerations, each switchable (PvsOptions):
 //  - bounding-box stage: an object whose bounding box is hidden is culled
@@ -73,11 +82,13 @@
 #include "common/core/stats_fields.h"
 #include "common/scene/scene.h"
 #include "common/spatial/kdtree.h"
+#include "common/world/static_world.h"
 #include "server/visibility/occluders.h"
 
 namespace vistream {
 
 class HorizonFusion;
+class PlanarFusion;
 
 struct PvsOptions {
   bool boxStage = true;               // --no-bbox turns it off
@@ -87,6 +98,7 @@ struct PvsOptions {
   size_t largeOccluders = 0;          // 0: every occluder; K: the K largest by solid angle
   bool backFaces = true;              // --no-back-faces: keep faces that face away from the cell
   bool fusion = true;                 // run the fused stage, when EpsilonPvs has one (setFusion)
+  bool planarFusion = true;  // --no-planar-fusion: solids fused within a plane (planar_fusion.h)
   // Coarse-to-fine: when non-null, only these faces (sorted) can be in the PVS.
   const std::vector<uint32_t>* candidateFaces = nullptr;
 };
@@ -114,6 +126,7 @@ struct PvsStats {
   size_t facesBackFacing = 0;  // culled because they face away from the whole cell
   size_t facesFused = 0;       // culled by the fused stage (hidden by several occluders together)
   double fusionMs = 0.0;
+  size_t facesPlanar = 0;  // culled by solids fused within a plane (in the face stage)
 
   // Every field above, once: `vistream-pvs cell` prints its JSON and its
   // table from this list (common/core/stats_output.h).
@@ -143,10 +156,11 @@ struct PvsStats {
     f(StatField{"faces_back_facing", "faces facing away from the cell", ""}, facesBackFacing);
     f(StatField{"faces_fused", "faces hidden by fused occluders", ""}, facesFused);
     f(StatField{"fusion_ms", "fusion stage", "ms"}, fusionMs);
+    f(StatField{"faces_planar", "faces hidden by solids fused in a plane", ""}, facesPlanar);
   }
 };
-// 20 fields of 8 bytes: a field added above must be added to forEachField too.
-static_assert(sizeof(PvsStats) == 20 * 8, "PvsStats changed: update PvsStats::forEachField");
+// 21 fields of 8 bytes: a field added above must be added to forEachField too.
+static_assert(sizeof(PvsStats) == 21 * 8, "PvsStats changed: update PvsStats::forEachField");
 
 struct PvsResult {
   std::vector<uint32_t> faces;    // sorted face IDs of the PVS
@@ -157,8 +171,12 @@ struct PvsResult {
 class EpsilonPvs {
  public:
   // Prepares occluders, their kD-tree and per-face line pairs. The scene must
-  // outlive this object.
-  explicit EpsilonPvs(const Scene& scene, const OccluderOptions& occluderOptions = {});
+  // outlive this object. With `world` (the scene's static world, parts
+  // Solids or more; used only while constructing), back faces are proved
+  // over its triangles, solids and rays instead of a copy built here (the
+  // same reading: the PVS contract's solids).
+  explicit EpsilonPvs(const Scene& scene, const OccluderOptions& occluderOptions = {},
+                      const StaticWorld* world = nullptr);
   ~EpsilonPvs();
   EpsilonPvs(const EpsilonPvs&) = delete;
   EpsilonPvs& operator=(const EpsilonPvs&) = delete;
@@ -196,8 +214,9 @@ class EpsilonPvs {
   std::vector<std::pair<uint32_t, uint32_t>> faceIndex_;  // face ID -> (object entry, face), or ~0u
   std::vector<std::vector<uint32_t>> occludersOf_;        // scene object -> its occluders
   const HorizonFusion* fusion_ = nullptr;
-  std::vector<Box3f> solidBounds_;  // by solid behind one-sided faces: its bounds
-  std::vector<float> solidFloor_;   // ... the height a viewpoint must exceed
+  std::unique_ptr<PlanarFusion> planar_;  // over occluders_
+  std::vector<float>
+      solidFloor_;  // by solid behind one-sided faces: the height a viewpoint must exceed
   double prepareMs_ = 0.0;
 
   friend struct PvsQuery;

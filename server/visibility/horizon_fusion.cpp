@@ -17,14 +17,20 @@
 //    margin), leaving out exactly vertical triangles
 //    (collinear in X/Z). So only vertical triangles meet the closed box
 //    S x [b, t]; their lines cut S into convex pieces. At the centroid of
-//    each piece with area, at mid-gap height, one closed solid K (a sealed
-//    solid of common/world/solids.h, whose edge pieces are each used an even
-//    number of times: a cycle modulo 2, whatever its winding or manifoldness)
-//    has odd crossing parity along three generic rays (parity of a cycle
-//    does not depend on the ray; three rays guard against a ray through an
-//    edge). Solids welds corners and cuts T-junctions within its tolerance
-//    (1 cm), so the proof holds for the surface with cracks narrower than
-//    that closed: such a crack is taken as blocking.
+//    each piece with area, at mid-gap height (or, when that is not above
+//    the floor f of the enclosure found, midway between f and t), one
+//    enclosure K of common/world/solids.h has odd crossing parity along
+//    three generic upward rays. K, its dangling sheets peeled, is a cycle
+//    modulo 2 (its edge pieces each used an even number of times, whatever
+//    its winding or manifoldness), or one once closed by vertical curtains
+//    down from its open base pieces, which all lie at or below its floor f,
+//    and a cap far below. Call that cycle K'. Parity of a cycle does not
+//    depend on the ray, and an upward ray from above f meets no curtain, so
+//    the test reads K' (three rays guard against a ray through an edge).
+//    Only the part of the gap above f (by the margin) is kept: the column
+//    is [max(b, f + margin), t]. Solids welds corners and cuts T-junctions
+//    within its tolerance (1 cm), so the proof holds for the surface with
+//    cracks narrower than that closed: such a crack is taken as blocking.
 //    A piece's slice of the box meets no triangle, and every point of the
 //    piece's prism is joined to that slice by a vertical segment meeting no
 //    triangle, unless it lies on a vertical triangle; so every point of the
@@ -34,25 +40,29 @@
 //    tenth of the margin leaves the column out (float rounding could carry
 //    its test point across a wall). A column that no vertical triangle cuts
 //    takes the answer of its uncut left neighbour for a gap overlapping one
-//    of the neighbour's by more than the margin: up one column, across
-//    their shared side within the overlap (a triangle meeting that side is
-//    in both columns' spans) and down the other, the two test points are
-//    joined by a path meeting no triangle, so they lie inside the same
-//    components.
+//    of the neighbour's above that answer's floor by more than the margin:
+//    up one column, across their shared side within the overlap (a triangle
+//    meeting that side is in both columns' spans) and down the other, the
+//    two test points are joined by a path above the floor meeting no
+//    triangle, so they lie inside the same components.
 //
-// 2. Jordan. Let v be a point outside K (even parity) and q a point of K's
-//    interior. The parity of K along the segment v-q changes, so the segment
-//    crosses a triangle of K strictly between v and q. Hence: if the line of
+// 2. Jordan. Let v be a point above K's floor f outside K' (even parity)
+//    and q a point of K's interior above f (every column point is). The
+//    parity of K' along the segment v-q changes, so the segment crosses K'
+//    strictly between v and q; it stays above f, where K' has no curtain,
+//    so it crosses a triangle of K. Hence: if the line of
 //    sight from v to a point p passes strictly before p through a point q of
 //    a column, either q is on a triangle or the line crosses one before q;
 //    either way p is not the first surface point on it, so p is not seen
 //    from v. A face is hidden from v if each of its points is.
-//    Every viewpoint of the cell is outside K when K's triangles do not meet
-//    the closed cell (clipped with a margin) and the cell's centre has even
-//    parity with K along all three rays: the cell is connected and crosses
-//    no triangle of K. Solids failing this (a cell cutting into a building,
-//    a cell inside one) are excluded: their columns block nothing for this
-//    cell (issue 13, item 4).
+//    Every viewpoint of the cell is above f when the cell's bottom lies
+//    above f (by the margin); enclosures failing this (a cell reaching down
+//    to an open base) are excluded: their columns block nothing for this
+//    cell. Every served viewpoint is outside K' and off its triangles: the
+//    PVS contract serves no viewpoint inside an enclosure or on its surface
+//    (Solids::unservedViewpoint; issue 13, item 4), so a cell that cuts
+//    into a building still has that building's columns block for its
+//    viewpoints outside it.
 //
 // 3. Shrinking. The shrunk column field keeps, for each grid square c, the
 //    lowest top and the highest base over every column whose square meets c
@@ -132,6 +142,7 @@
 #include "common/core/check.h"
 #include "common/core/timer.h"
 #include "common/raycast/ray_query.h"
+#include "common/spatial/convex_polygon.h"
 #include "common/world/solids.h"
 
 namespace vistream {
@@ -171,35 +182,6 @@ void clipAxis(std::vector<glm::dvec3>& poly, std::vector<glm::dvec3>& out, int a
   poly.swap(out);
 }
 
-// Keeps the part of the convex polygon where nx * x + nz * z >= 0.
-void clipHalfPlane(std::vector<glm::dvec3>& poly, std::vector<glm::dvec3>& out, double nx,
-                   double nz) {
-  out.clear();
-  const size_t n = poly.size();
-  for (size_t i = 0; i < n; ++i) {
-    const glm::dvec3& a = poly[i];
-    const glm::dvec3& b = poly[(i + 1) % n];
-    const double da = nx * a.x + nz * a.z, db = nx * b.x + nz * b.z;
-    if (da >= 0.0) out.push_back(a);
-    if ((da >= 0.0) != (db >= 0.0)) out.push_back(a + (da / (da - db)) * (b - a));
-  }
-  poly.swap(out);
-}
-
-// The triangle clipped to the box (only the axes in `axes`); empty if they
-// do not meet.
-void clipTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c, const glm::dvec3& lo,
-                  const glm::dvec3& hi, std::initializer_list<int> axes,
-                  std::vector<glm::dvec3>& poly, std::vector<glm::dvec3>& tmp) {
-  poly.assign({glm::dvec3(a), glm::dvec3(b), glm::dvec3(c)});
-  for (int axis : axes) {
-    clipAxis(poly, tmp, axis, lo[axis], true);
-    if (poly.empty()) return;
-    clipAxis(poly, tmp, axis, hi[axis], false);
-    if (poly.empty()) return;
-  }
-}
-
 double pointSegmentDistance(glm::dvec2 p, glm::dvec2 a, glm::dvec2 b) {
   const glm::dvec2 ab = b - a;
   const double len2 = glm::dot(ab, ab);
@@ -227,10 +209,10 @@ struct HorizonFusion::Impl {
   const FlatTriangles& tris;
   const RayQuery& rays;
   const Solids& solids;
-  // Solids here are the sealed solids of Solids (cycles modulo 2 once
-  // welded, either winding): "component" below means such a solid.
-  std::vector<uint8_t> hasColumns;            // per sealed solid: some column lies inside it
-  std::vector<uint32_t> compStart, compTris;  // triangles by sealed solid
+  // Solids here are the enclosures of Solids (welded parity groups that are
+  // cycles modulo 2, or once capped below their floor; either winding):
+  // "component" below means such a solid.
+  std::vector<uint8_t> hasColumns;            // per enclosure: some column lies inside it
   std::vector<uint32_t> faceStart, faceTris;  // static triangles by face ID
   // The grid and its shrunk columns (proof, step 3).
   glm::dvec2 lo{0.0};
@@ -270,7 +252,7 @@ struct HorizonFusion::Impl {
     rays.allHits(Ray{p, dir, 0.0f, std::numeric_limits<float>::infinity()}, hits);
     for (const Hit& h : hits) {
       if (h.t <= 0.0f) return false;
-      const uint32_t c = solids.sealedOf(h.triangle);
+      const uint32_t c = solids.enclosureOf(h.triangle);
       if (c != kNoHit) odd.push_back(c);
     }
     std::sort(odd.begin(), odd.end());
@@ -301,6 +283,25 @@ struct HorizonFusion::Impl {
     return first.front();
   }
 
+  // The floor of an enclosure (-infinity for a sealed one or for kNoHit):
+  // parity by upward rays tells inside from outside only above it.
+  double floorOf(uint32_t e) const {
+    return e == kNoHit ? -kInf : double(solids.enclosureFloor(e));
+  }
+
+  // The enclosure holding the points of the gap [a, b] over (x, z) that
+  // lie above its floor, tested at mid-gap, or again midway between the
+  // floor and b when mid-gap is not above it; kNoHit if none.
+  uint32_t insideAbove(double x, double z, double a, double b) const {
+    const uint32_t e = insideClosed(glm::vec3(float(x), float(0.5 * (a + b)), float(z)));
+    if (e == kNoHit) return e;
+    const double floor = floorOf(e) + margin;
+    if (floor < 0.5 * (a + b) - margin) return e;
+    if (b - floor <= 4.0 * margin) return kNoHit;
+    const double y = 0.5 * (floor + b);
+    return insideClosed(glm::vec3(float(x), float(y), float(z))) == e ? e : kNoHit;
+  }
+
   void build(const HorizonFusionOptions& o);
   IRect rectOf(const Box3f& b, int grow) const {
     auto ix = [&](double x) { return int(std::floor((x - lo.x) / g)); };
@@ -310,28 +311,20 @@ struct HorizonFusion::Impl {
 };
 
 void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
-  const size_t nc = solids.sealedCount();
+  const size_t nc = solids.enclosureCount();
   hasColumns.assign(nc, 0);
-  // Triangles by component and by face (counting sort).
-  compStart.assign(nc + 1, 0);
+  // Triangles by face (counting sort).
   faceStart.assign(size_t(scene.faceCount) + 1, 0);
   Box3f bounds;
   for (size_t t = 0; t < tris.size(); ++t) {
-    const uint32_t c = solids.sealedOf(uint32_t(t));
-    if (c != kNoHit) ++compStart[c + 1];
     if (tris.faceIds[t] < scene.faceCount) ++faceStart[tris.faceIds[t] + 1];
     if (!tris.degenerate[t]) bounds.extend(tris.triangleBounds(t));
   }
-  for (size_t c = 0; c < nc; ++c) compStart[c + 1] += compStart[c];
   for (size_t f = 0; f < scene.faceCount; ++f) faceStart[f + 1] += faceStart[f];
-  compTris.resize(compStart.back());
   faceTris.resize(faceStart.back());
   {
-    std::vector<uint32_t> cn(compStart.begin(), compStart.end() - 1);
     std::vector<uint32_t> fn(faceStart.begin(), faceStart.end() - 1);
     for (size_t t = 0; t < tris.size(); ++t) {
-      const uint32_t c = solids.sealedOf(uint32_t(t));
-      if (c != kNoHit) compTris[cn[c]++] = uint32_t(t);
       if (tris.faceIds[t] < scene.faceCount) faceTris[fn[tris.faceIds[t]]++] = uint32_t(t);
     }
   }
@@ -560,13 +553,12 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
           bool known = false;
           if (uncut && leftColumn == i - 1)
             for (const Tested& t : left)
-              if (std::min(b, t.b) - std::max(a, t.a) > margin) {
+              if (std::min(b, t.b) - std::max({a, t.a, floorOf(t.inside)}) > margin) {
                 inside = t.inside;
                 known = true;
                 break;
               }
-          if (!known)
-            inside = insideClosed(glm::vec3(float(c.x), float(0.5 * (a + b)), float(c.z)));
+          if (!known) inside = insideAbove(c.x, c.z, a, b);
           if (uncut) here.push_back({a, b, inside});
           if (inside == kNoHit) {
             solid = false;
@@ -575,10 +567,14 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
           comps.push_back(inside);
         }
         if (!solid) continue;
+        // Only the part above every floor is inside (proof, step 1).
+        double base = a;
+        for (uint32_t e : comps) base = std::max(base, floorOf(e) + margin);
+        if (b - base <= margin) continue;
         const size_t idx = size_t(j) * size_t(nx) + size_t(i);
         // Rounded inward to float.
         rawTop[idx] = std::nextafter(float(b), -std::numeric_limits<float>::infinity());
-        rawBase[idx] = std::nextafter(float(a), std::numeric_limits<float>::infinity());
+        rawBase[idx] = std::nextafter(float(base), std::numeric_limits<float>::infinity());
         rawSolid[idx] = 1;
         rowComps[size_t(j)].insert(rowComps[size_t(j)].end(), comps.begin(), comps.end());
         break;
@@ -699,31 +695,12 @@ struct HorizonQuery {
   uint32_t generation = 0;
   std::vector<glm::dvec3> poly, tmp;  // scratch for clipping faces to bins
 
-  // Proof, step 2: solids whose surface or interior meets the cell.
-  void excludeSolidsMeetingTheCell() {
-    const double m = w.margin;
-    const glm::dvec3 clo = glm::dvec3(cell.lo) - m, chi = glm::dvec3(cell.hi) + m;
-    std::vector<uint8_t> out(w.hasColumns.size(), 0);
-    std::vector<uint32_t> odd;
-    for (const glm::vec3& d : parityDirections()) {
-      if (!w.oddComponents(cell.center(), d, odd)) continue;  // on a surface: clipping finds it
-      for (uint32_t c : odd) out[c] = 1;
-    }
-    const Box3f grown{glm::vec3(clo), glm::vec3(chi)};
-    for (size_t c = 0; c < w.hasColumns.size(); ++c) {
-      if (!w.hasColumns[c] || out[c]) continue;
-      if (!w.solids.sealedBounds(uint32_t(c)).overlaps(grown)) continue;
-      for (uint32_t k = w.compStart[c]; k < w.compStart[c + 1] && !out[c]; ++k) {
-        const uint32_t t = w.compTris[k];
-        if (!w.tris.triangleBounds(t).overlaps(grown)) continue;
-        clipTriangle(w.tris.vertex(t, 0), w.tris.vertex(t, 1), w.tris.vertex(t, 2), clo, chi,
-                     {0, 1, 2}, poly, tmp);
-        out[c] = !poly.empty();
-      }
-    }
-    for (size_t c = 0; c < out.size(); ++c)
-      if (out[c] && w.hasColumns[c]) {
-        excluded.push_back(w.rectOf(w.solids.sealedBounds(uint32_t(c)), w.window + 1));
+  // Proof, step 2: enclosures whose floor the cell reaches down to.
+  void excludeSolidsBelowTheCell() {
+    const double bottom = double(cell.lo.y) - w.margin;
+    for (size_t c = 0; c < w.hasColumns.size(); ++c)
+      if (w.hasColumns[c] && bottom <= w.floorOf(uint32_t(c))) {
+        excluded.push_back(w.rectOf(w.solids.enclosureBounds(uint32_t(c)), w.window + 1));
         ++stats.excludedSolids;
       }
   }
@@ -898,8 +875,9 @@ struct HorizonQuery {
         const uint32_t t = w.faceTris[n];
         poly.clear();
         for (int v = 0; v < 3; ++v) poly.push_back(glm::dvec3(w.tris.vertex(t, v)) - s);
-        clipHalfPlane(poly, tmp, -std::sin(p0), std::cos(p0));
-        clipHalfPlane(poly, tmp, std::sin(p1), -std::cos(p1));
+        // The wedge between azimuths p0 and p1 (x = cos, z = sin).
+        clipToHalfSpace(poly, tmp, {std::sin(p0), 0.0, -std::cos(p0)}, 0.0);
+        clipToHalfSpace(poly, tmp, {-std::sin(p1), 0.0, std::cos(p1)}, 0.0);
         for (size_t v = 0; v < poly.size(); ++v) {
           const glm::dvec3& a = poly[v];
           const glm::dvec3& c = poly[(v + 1) % poly.size()];
@@ -980,7 +958,7 @@ HorizonFusionResult HorizonFusion::cull(const Box3f& cell,
   for (uint32_t f : candidates)
     if (f < w.scene.faceCount && w.faceStart[f] < w.faceStart[f + 1]) hidden.push_back(f);
   if (w.nx > 0 && !hidden.empty()) {
-    q.excludeSolidsMeetingTheCell();
+    q.excludeSolidsBelowTheCell();
     size_t nbins = size_t(options_.azimuthBins);
     for (int l = 0; l <= options_.refinements; ++l, nbins *= size_t(kRefine)) {
       HorizonQuery::Level& level = q.levels.emplace_back();

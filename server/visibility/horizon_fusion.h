@@ -12,19 +12,22 @@
 // solids hide together (a row of buildings, a wall and the next wall).
 //
 // What occludes: columns of an X/Z grid (side gridSize metres) whose box
-// [base, top] no triangle touches and which lie inside a sealed solid of
-// the static geometry (common/world/solids.h): a parity group that is a
-// cycle modulo 2 once corners are welded and T-junctions cut within the
-// weld tolerance (either winding; row houses whose party walls are left
-// out close up together). Groups with a real hole (a missing wall) never
-// occlude here; they still take part through the single-occluder PVS. Cracks
-// narrower than the weld tolerance are taken as closed. A solid whose surface or
-// interior meets the cell (a cell that cuts into a building) does not
-// occlude anything for that cell.
+// [base, top] no triangle touches and which lie inside an enclosure of the
+// static geometry (common/world/solids.h): a welded parity group, its
+// dangling sheets peeled, that is a cycle modulo 2 (either winding; row
+// houses whose party walls are left out close up together) or one open only
+// at its base (LoD2 buildings without a ground surface), above its floor.
+// Corners are welded and T-junctions cut within the weld tolerance, so
+// cracks narrower than that are taken as closed. Groups with a real hole
+// above the base (a missing wall or roof) never occlude here; they still
+// take part through the single-occluder PVS. An enclosure whose floor is
+// not below the cell does not occlude anything for that cell.
 //
 // Frames and units: the scene's local frame, metres, Y up. The cell is a
 // closed axis-aligned box; the result is valid for every viewpoint in it
-// that is outside the closed solids it does not meet, in every direction.
+// that the PVS contract serves (Solids::unservedViewpoint: not inside a
+// solid or an enclosure, nor on a closed one's surface; a cell that cuts
+// into a building is served outside it), in every direction.
 // Dynamic objects never occlude and their faces are never removed.
 //
 // Thread safety: cull() is const and may run concurrently. Bad input: a
@@ -77,7 +80,7 @@ struct HorizonFusionStats {
   size_t candidateFaces = 0;  // faces given
   size_t culled = 0;          // of those, hidden from every sample
   size_t samples = 0;         // points on the cell's top face
-  size_t excludedSolids = 0;  // solids that meet the cell and so occlude nothing
+  size_t excludedSolids = 0;  // enclosures whose floor the cell reaches: they occlude nothing
   uint64_t columnSteps = 0;   // height-field columns walked by the horizons
   uint64_t horizonBins = 0;   // azimuth bins traced (lazily, only where a face needs one)
 
@@ -88,7 +91,7 @@ struct HorizonFusionStats {
     f(StatField{"candidate_faces", "candidate faces", ""}, candidateFaces);
     f(StatField{"culled", "culled by fused horizons", ""}, culled);
     f(StatField{"samples", "samples", ""}, samples);
-    f(StatField{"excluded_solids", "solids meeting the cell", ""}, excludedSolids);
+    f(StatField{"excluded_solids", "enclosures reaching below the cell", ""}, excludedSolids);
     f(StatField{"column_steps", "columns walked", ""}, columnSteps);
     f(StatField{"horizon_bins", "azimuth bins traced", ""}, horizonBins);
   }

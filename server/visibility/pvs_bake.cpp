@@ -117,6 +117,7 @@ BakeReport bakePvs(const Scene& scene, const EpsilonPvs& pvs, const FreeSpace& f
   header.cellSize = grid.cellSize();
   header.dims = grid.dims();
   header.method = std::string(options.pvs.backFaces ? "paper+back-faces" : "paper") +
+                  (options.pvs.planarFusion ? "+planar" : "") +
                   (pvs.fusion() && options.pvs.fusion ? "+horizons" : "");
 
   // Blocks of 2 x 1 x 2 cells: the coarse level, and the unit of sharding.

@@ -121,7 +121,7 @@ TEST(PvsTool, BakeNamesTheFusedStageInTheDatabasesMethod) {
     const ToolRun info = runPvs("query --db " + db + " --point 0,1.5,1 --json");
     ASSERT_EQ(info.status, 0) << info.err;
     EXPECT_EQ(nlohmann::json::parse(info.out)["method"],
-              fusion == "none" ? "paper+back-faces" : "paper+back-faces+horizons");
+              fusion == "none" ? "paper+back-faces+planar" : "paper+back-faces+planar+horizons");
   }
 }
 
@@ -307,8 +307,9 @@ TEST(PvsTool, BenchPrintsOneRowPerSceneSizeAndMethodWithNoMissingFacesAndTheDist
                            "--district 24 --json");
   ASSERT_EQ(r.status, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);
-  // Not indoors: paper, + back faces and + horizons, at 2, 4, 8 and 16 m.
-  const std::vector<std::string> methods{"paper", "+back faces", "+horizons"};
+  // Not indoors: paper, + back faces, + planar fusion and + horizons, at 2,
+  // 4, 8 and 16 m.
+  const std::vector<std::string> methods{"paper", "+back faces", "+planar fusion", "+horizons"};
   ASSERT_EQ(j["accuracy"].size(), 4 * methods.size());
   std::set<std::pair<double, std::string>> rows;
   for (const auto& row : j["accuracy"]) {

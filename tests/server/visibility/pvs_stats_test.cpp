@@ -41,6 +41,7 @@ PvsStats distinctPvsStats() {
   s.facesBackFacing = 118;
   s.facesFused = 119;
   s.fusionMs = 4.5;
+  s.facesPlanar = 120;
   return s;
 }
 
@@ -67,10 +68,11 @@ const std::map<std::string, std::pair<std::string, std::string>> kPvsFields = {
     {"faces_back_facing", {"faces facing away from the cell", "118"}},
     {"faces_fused", {"faces hidden by fused occluders", "119"}},
     {"fusion_ms", {"fusion stage (ms)", "4.500"}},
+    {"faces_planar", {"faces hidden by solids fused in a plane", "120"}},
 };
-// Four doubles and sixteen 8-byte counts: a member added to PvsStats
+// Four doubles and seventeen 8-byte counts: a member added to PvsStats
 // without a line above fails here.
-static_assert(sizeof(PvsStats) == 20 * 8);
+static_assert(sizeof(PvsStats) == 21 * 8);
 
 std::vector<std::string> linesOf(const std::string& text) {
   std::vector<std::string> lines;
