@@ -564,7 +564,7 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
             stats.lineBoxTests, &byFirst);
         // Solids fused in a plane may hide the whole box (then each face
         // of it, whose footprint lies in the box's).
-        if (!boxHidden && !planes.planes.empty() && planar_->hidden(cell, planes, g.boxCorners)) {
+        if (!boxHidden && !planes.empty() && planar_->hidden(cell, planes, g.boxCorners)) {
           boxHidden = true;
           stats.facesPlanar += g.faceCount;
         }
@@ -600,7 +600,7 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
         if (f.vertices.size() <= 255 &&
             q.hidden(f.vertices, lines, stats.linePolygonTests, nullptr)) {
           ++stats.facesOccluded;
-        } else if (!planes.planes.empty() && planar_->hidden(cell, planes, f.vertices)) {
+        } else if (!planes.empty() && planar_->hidden(cell, planes, f.vertices)) {
           ++stats.facesPlanar;
           ++stats.facesOccluded;
         } else {

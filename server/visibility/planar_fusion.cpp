@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numeric>
 #include <span>
 
 #include "common/spatial/convex_hull.h"
@@ -11,49 +12,6 @@
 
 namespace vistream {
 namespace {
-
-// Keeps the part of the convex polygon where a * p.x + b * p.y <= c; less
-// than a triangle is nothing.
-void clipHalfPlane(std::vector<glm::dvec2>& poly, std::vector<glm::dvec2>& scratch, double a,
-                   double b, double c) {
-  clipToHalfSpace(poly, scratch, glm::dvec2(a, b), c);
-  if (poly.size() < 3) poly.clear();
-}
-
-double twiceArea(const std::vector<glm::dvec2>& poly) {
-  double a = 0.0;
-  for (size_t i = 0; i < poly.size(); ++i) {
-    const glm::dvec2& p = poly[i];
-    const glm::dvec2& q = poly[(i + 1) % poly.size()];
-    a += p.x * q.y - q.x * p.y;
-  }
-  return a;
-}
-
-// True if the convex polygon is narrower than `width` (twice its area over
-// its perimeter: about the width of a thin strip).
-bool narrower(const std::vector<glm::dvec2>& poly, double width) {
-  double perimeter = 0.0;
-  for (size_t i = 0; i < poly.size(); ++i)
-    perimeter += glm::length(poly[(i + 1) % poly.size()] - poly[i]);
-  return !(perimeter > 0.0) || std::abs(twiceArea(poly)) < width * perimeter;
-}
-
-glm::dvec4 boundsOf(const std::vector<glm::dvec2>& poly) {
-  glm::dvec4 b(std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
-               -std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity());
-  for (const glm::dvec2& p : poly) {
-    b.x = std::min(b.x, p.x);
-    b.y = std::min(b.y, p.y);
-    b.z = std::max(b.z, p.x);
-    b.w = std::max(b.w, p.y);
-  }
-  return b;
-}
-
-bool overlaps(const glm::dvec4& a, const glm::dvec4& b) {
-  return a.x <= b.z && b.x <= a.z && a.y <= b.w && b.y <= a.w;
-}
 
 // True if p lies in the counter-clockwise convex polygon grown by `slack`.
 bool insidePiece(const std::vector<glm::dvec2>& poly, const glm::dvec2& p, double slack) {
@@ -65,71 +23,51 @@ bool insidePiece(const std::vector<glm::dvec2>& poly, const glm::dvec2& p, doubl
   return true;
 }
 
-// True if the convex `region` minus the convex `pieces` (counter-clockwise,
-// with their bounds) leaves nothing wider than `slack` (planar_fusion.h,
-// numerics): the region is cut, piece after piece, into convex parts
-// outside each piece's edges; parts narrower than the slack are dropped.
-// False as well past 64 parts (give up).
-bool coveredBy(const std::vector<glm::dvec2>& region,
-               std::span<const std::vector<glm::dvec2>> pieces, std::span<const glm::dvec4> bounds,
-               double slack) {
-  thread_local std::vector<std::vector<glm::dvec2>> left, next;
-  thread_local std::vector<glm::dvec2> cur, part, tmp;
-  left.assign(1, region);
-  for (size_t q = 0; q < pieces.size() && !left.empty(); ++q) {
-    const std::vector<glm::dvec2>& Q = pieces[q];
-    next.clear();
-    for (const std::vector<glm::dvec2>& piece : left) {
-      if (!overlaps(boundsOf(piece), bounds[q])) {
-        next.push_back(piece);
-        continue;
-      }
-      cur = piece;
-      for (size_t k = 0; k < Q.size() && !cur.empty(); ++k) {
-        const glm::dvec2& a = Q[k];
-        const glm::dvec2& b = Q[(k + 1) % Q.size()];
-        // Inside Q is left of a -> b: (b - a) x (p - a) >= 0, i.e.
-        // A p.x + B p.y <= C with (A, B) = (dy, -dx).
-        const double A = b.y - a.y, B = a.x - b.x, C = A * a.x + B * a.y;
-        part = cur;
-        clipHalfPlane(part, tmp, -A, -B, -C);  // outside of this edge
-        if (!part.empty() && !narrower(part, slack)) next.push_back(part);
-        clipHalfPlane(cur, tmp, A, B, C);  // inside, on to the next edge
-      }
-      if (next.size() > 64) return false;
-    }
-    left.swap(next);
-  }
-  return left.empty();
-}
-
 // Replaces two pieces by their convex hull where the two cover the hull
 // but for strips narrower than `slack` (the seam the shrinking opens
 // between abutting solids: coveredBy): a row of wall patches becomes one
 // rectangle, so a footprint is tested against a few pieces instead of many.
 void mergePieces(std::vector<std::vector<glm::dvec2>>& pieces, std::vector<glm::dvec4>& bounds,
                  double slack) {
+  // Merging only saves work later (coverage is decided by coveredBy over
+  // whatever pieces there are), so one sweep in order of lowest u, each
+  // piece absorbing the later ones it can while their u ranges meet, is
+  // enough: O(n log n + merges) for a street of facades instead of
+  // restarting after every merge.
+  std::vector<size_t> order(pieces.size());
+  std::iota(order.begin(), order.end(), size_t(0));
+  std::sort(order.begin(), order.end(),
+            [&](size_t a, size_t b) { return bounds[a].x < bounds[b].x; });
+  std::vector<std::vector<glm::dvec2>> out;
+  std::vector<glm::dvec4> outBounds;
+  std::vector<uint8_t> gone(pieces.size(), 0);
   std::vector<glm::dvec2> both;
-  for (bool merged = true; merged;) {
-    merged = false;
-    for (size_t i = 0; i < pieces.size() && !merged; ++i)
-      for (size_t j = i + 1; j < pieces.size() && !merged; ++j) {
-        const glm::dvec4 gi = bounds[i] + glm::dvec4(-slack, -slack, slack, slack);
-        if (!overlaps(gi, bounds[j])) continue;
-        both = pieces[i];
-        both.insert(both.end(), pieces[j].begin(), pieces[j].end());
-        std::vector<glm::dvec2> hull = convexHull2d(both);
-        if (hull.size() < 3) continue;
-        const std::vector<glm::dvec2> two[2] = {pieces[i], pieces[j]};
-        const glm::dvec4 twoBounds[2] = {bounds[i], bounds[j]};
-        if (!coveredBy(hull, two, twoBounds, slack)) continue;
-        pieces[i] = std::move(hull);
-        bounds[i] = boundsOf(pieces[i]);
-        pieces.erase(pieces.begin() + std::ptrdiff_t(j));
-        bounds.erase(bounds.begin() + std::ptrdiff_t(j));
-        merged = true;
-      }
+  for (size_t a = 0; a < order.size(); ++a) {
+    const size_t i = order[a];
+    if (gone[i]) continue;
+    std::vector<glm::dvec2> piece = std::move(pieces[i]);
+    glm::dvec4 box = bounds[i];
+    for (size_t b = a + 1; b < order.size() && bounds[order[b]].x <= box.z + slack; ++b) {
+      const size_t j = order[b];
+      if (gone[j]) continue;
+      const glm::dvec4 grown = box + glm::dvec4(-slack, -slack, slack, slack);
+      if (!rectsOverlap(grown, bounds[j])) continue;
+      both = piece;
+      both.insert(both.end(), pieces[j].begin(), pieces[j].end());
+      std::vector<glm::dvec2> hull = convexHull2d(both);
+      if (hull.size() < 3) continue;
+      const std::vector<glm::dvec2> two[2] = {piece, pieces[j]};
+      const glm::dvec4 twoBounds[2] = {box, bounds[j]};
+      if (!coveredBy(hull, two, twoBounds, slack)) continue;
+      piece = std::move(hull);
+      box = polygonBounds(piece);
+      gone[j] = 1;
+    }
+    out.push_back(std::move(piece));
+    outBounds.push_back(box);
   }
+  pieces = std::move(out);
+  bounds = std::move(outBounds);
 }
 
 }  // namespace
@@ -199,12 +137,12 @@ PlanarFusion::PlanarFusion(const OccluderSet& occluders) {
         if (std::abs(a) < 1e-12 && std::abs(b) < 1e-12) {
           if (!(0.0 < limit)) poly.clear();
         } else {
-          clipHalfPlane(poly, tmp, a, b, limit);
+          clipToHalfPlane(poly, tmp, a, b, limit);
         }
         if (poly.empty()) break;
       }
       if (poly.size() < 3 || !(twiceArea(poly) > 0.0)) continue;
-      pl.pieceBounds.push_back(boundsOf(poly));
+      pl.pieceBounds.push_back(polygonBounds(poly));
       for (const glm::dvec2& q : poly) {
         const glm::dvec3 x = q.x * pl.u + q.y * pl.v + pl.top * pl.n;
         pl.bounds.extend(glm::vec3(x));
@@ -215,6 +153,20 @@ PlanarFusion::PlanarFusion(const OccluderSet& occluders) {
     if (pl.pieces.size() >= 2) {
       pl.margin = occluderMargin(planeMagnitude);
       mergePieces(pl.pieces, pl.pieceBounds, 4.0 * pl.margin);
+      // By lowest u, so that a point's pieces are found by binary search.
+      std::vector<size_t> order(pl.pieces.size());
+      std::iota(order.begin(), order.end(), size_t(0));
+      std::sort(order.begin(), order.end(),
+                [&](size_t a, size_t b) { return pl.pieceBounds[a].x < pl.pieceBounds[b].x; });
+      std::vector<std::vector<glm::dvec2>> sortedPieces;
+      std::vector<glm::dvec4> sortedBounds;
+      for (size_t k : order) {
+        sortedPieces.push_back(std::move(pl.pieces[k]));
+        sortedBounds.push_back(pl.pieceBounds[k]);
+        pl.widest = std::max(pl.widest, sortedBounds.back().z - sortedBounds.back().x);
+      }
+      pl.pieces = std::move(sortedPieces);
+      pl.pieceBounds = std::move(sortedBounds);
       pl.unionBounds = pl.pieceBounds[0];
       for (const glm::dvec4& b : pl.pieceBounds)
         pl.unionBounds =
@@ -227,16 +179,35 @@ PlanarFusion::PlanarFusion(const OccluderSet& occluders) {
     }
     i = j;
   }
+  // The planes by X/Z cell, each box grown by the slack the point tests allow.
+  std::vector<Box3f> boxes;
+  Box3f all;
+  for (const Plane& pl : planes_) {
+    Box3f b = pl.bounds;
+    const float grow = float(4.0 * pl.margin) + 1e-3f;
+    b.lo -= glm::vec3(grow);
+    b.hi += glm::vec3(grow);
+    boxes.push_back(b);
+    all.extend(b);
+  }
+  if (!all.empty()) {
+    const float extent = std::max(all.hi.x - all.lo.x, all.hi.z - all.lo.z);
+    grid_ = XzGrid(all, std::max(extent / 1024.0f, 2.0f), boxes);
+  }
 }
 
 PlanarFusion::CellPlanes PlanarFusion::planesFor(const Box3f& cell) const {
   CellPlanes out;
+  out.inFront.assign(planes_.size(), 0);
   const glm::dvec3 centre(cell.center()), half(0.5 * (glm::dvec3(cell.hi) - glm::dvec3(cell.lo)));
   for (size_t i = 0; i < planes_.size(); ++i) {
     const Plane& p = planes_[i];
     // The lowest height of a cell point along n, above the slab's top.
     const double lowest = glm::dot(p.n, centre) - glm::dot(glm::abs(p.n), half);
-    if (lowest > p.top + p.margin) out.planes.push_back(uint32_t(i));
+    if (lowest > p.top + p.margin) {
+      out.inFront[i] = 1;
+      ++out.count;
+    }
   }
   return out;
 }
@@ -251,7 +222,66 @@ bool PlanarFusion::hidden(const Box3f& cell, const CellPlanes& cellPlanes,
     corners[k] = glm::dvec3((k & 1) ? cell.hi.x : cell.lo.x, (k & 2) ? cell.hi.y : cell.lo.y,
                             (k & 4) ? cell.hi.z : cell.lo.z);
   thread_local std::vector<glm::dvec2> points;
-  for (uint32_t index : cellPlanes.planes) {
+  // Candidates: the planes of the grid cells the X/Z segment from the
+  // cell's centre to the first vertex passes through (a 2D DDA), each once.
+  thread_local std::vector<uint32_t> candidates, stamp;
+  thread_local uint32_t query = 0;
+  candidates.clear();
+  if (stamp.size() != planes_.size()) {
+    stamp.assign(planes_.size(), 0);
+    query = 0;
+  }
+  if (++query == 0) {  // wrapped: start the stamps again
+    std::fill(stamp.begin(), stamp.end(), 0);
+    query = 1;
+  }
+  auto collect = [&](glm::ivec2 at) {
+    for (uint32_t i : grid_.itemsIn(at))
+      if (cellPlanes.inFront[i] && stamp[i] != query) {
+        stamp[i] = query;
+        candidates.push_back(i);
+      }
+  };
+  if (grid_.empty()) return false;
+  {
+    const glm::vec3 c = cell.center();
+    const glm::vec2 a(c.x, c.z), b(float(vertices[0].x), float(vertices[0].z));
+    const float size = grid_.cellSize();
+    const glm::vec2 g0 = (a - grid_.lo()) / size, g1 = (b - grid_.lo()) / size;
+    glm::ivec2 at(int(std::floor(g0.x)), int(std::floor(g0.y)));
+    const glm::ivec2 end(int(std::floor(g1.x)), int(std::floor(g1.y)));
+    const glm::vec2 d = g1 - g0;
+    const glm::ivec2 step(d.x > 0 ? 1 : -1, d.y > 0 ? 1 : -1);
+    auto firstCross = [](float p, float dp) {
+      if (dp == 0.0f) return std::numeric_limits<float>::infinity();
+      const float edge = dp > 0 ? std::floor(p) + 1.0f : std::floor(p);
+      return (edge - p) / dp;
+    };
+    glm::vec2 tMax(firstCross(g0.x, d.x), firstCross(g0.y, d.y));
+    const glm::vec2 tDelta(
+        d.x != 0.0f ? std::abs(1.0f / d.x) : std::numeric_limits<float>::infinity(),
+        d.y != 0.0f ? std::abs(1.0f / d.y) : std::numeric_limits<float>::infinity());
+    const glm::ivec2 dims = grid_.dims();
+    const size_t limit = size_t(std::abs(end.x - at.x) + std::abs(end.y - at.y)) + 2;
+    for (size_t k = 0; k < limit; ++k) {
+      // Cells outside the grid clamp to its border (xz_grid.h).
+      collect(glm::clamp(at, glm::ivec2(0), dims - 1));
+      if (at == end) break;
+      // Step both ways at a corner, so no cell the segment touches is skipped.
+      if (tMax.x < tMax.y) {
+        at.x += step.x;
+        tMax.x += tDelta.x;
+      } else if (tMax.y < tMax.x) {
+        at.y += step.y;
+        tMax.y += tDelta.y;
+      } else {
+        collect(glm::clamp(glm::ivec2(at.x + step.x, at.y), glm::ivec2(0), dims - 1));
+        at += step;
+        tMax += tDelta;
+      }
+    }
+  }
+  for (uint32_t index : candidates) {
     const Plane& pl = planes_[index];
     if (!pl.bounds.overlaps(shaft)) continue;
     bool behind = true;
@@ -270,11 +300,19 @@ bool PlanarFusion::hidden(const Box3f& cell, const CellPlanes& cellPlanes,
       points.push_back(q);
       if (insidePiece(pl.pieces[home], q, slack)) return true;
       inOne = false;
-      for (size_t k = 0; k < pl.pieces.size(); ++k)
+      // Pieces whose u range can hold q: lowest u in [q.u - widest - slack, q.u + slack].
+      const double from = q.x - pl.widest - slack;
+      size_t k = size_t(std::partition_point(pl.pieceBounds.begin(), pl.pieceBounds.end(),
+                                             [&](const glm::dvec4& b) { return b.x < from; }) -
+                        pl.pieceBounds.begin());
+      for (; k < pl.pieces.size() && pl.pieceBounds[k].x <= q.x + slack; ++k) {
+        const glm::dvec4& b = pl.pieceBounds[k];
+        if (b.z < q.x - slack || b.y > q.y + slack || b.w < q.y - slack) continue;
         if (insidePiece(pl.pieces[k], q, slack)) {
           home = k;
           return true;
         }
+      }
       return false;
     };
     // The line from the cell's centre to the face's first vertex first.

@@ -48,6 +48,7 @@
 #include <vector>
 
 #include "common/core/box.h"
+#include "common/spatial/xz_grid.h"
 #include "server/visibility/occluders.h"
 
 namespace vistream {
@@ -61,12 +62,18 @@ class PlanarFusion {
   // The planes worth trying for a cell (those with the cell in front),
   // computed once per cell.
   struct CellPlanes {
-    std::vector<uint32_t> planes;
+    std::vector<uint8_t> inFront;  // by plane
+    size_t count = 0;              // planes in front
+    bool empty() const { return count == 0; }
   };
   CellPlanes planesFor(const Box3f& cell) const;
 
   // True if the occluders of one plane together hide the convex hull of
   // `vertices` (an occludee face, local frame) from every point of `cell`.
+  // Only planes met by the X/Z segment from the cell's centre to the first
+  // vertex are tried (the line along it must cross a piece), found by
+  // walking the planes' X/Z grid along it: the cost follows the segment's
+  // length, not the number of planes (bigcity has tens of thousands).
   bool hidden(const Box3f& cell, const CellPlanes& planes,
               std::span<const glm::dvec3> vertices) const;
 
@@ -78,11 +85,13 @@ class PlanarFusion {
     double top = 0.0, bottom = 0.0;               // the slab S along n
     Box3f bounds;                                 // of the member polygons (at height top)
     std::vector<std::vector<glm::dvec2>> pieces;  // the Q_i, counter-clockwise in (u, v)
-    std::vector<glm::dvec4> pieceBounds;          // (min u, min v, max u, max v) of each
+    std::vector<glm::dvec4> pieceBounds;          // (min u, min v, max u, max v), by min u
+    double widest = 0.0;                          // largest u extent of a piece
     glm::dvec4 unionBounds{0.0};                  // of all of them
     double margin = 0.0;                          // rounding margin of its coordinates
   };
   std::vector<Plane> planes_;
+  XzGrid grid_;  // planes by X/Z cell of their bounds (grown by the slack)
 };
 
 }  // namespace vistream

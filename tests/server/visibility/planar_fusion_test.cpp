@@ -108,6 +108,18 @@ TEST(PlanarFusion, AWallOfPatchesHidesWhatNoSinglePatchHides) {
   }
 }
 
+// The planes are found by walking their X/Z grid along the line from the
+// cell to the face: a cell far off to the side, its line crossing many grid
+// cells diagonally (and the grid's border), still finds the wall.
+TEST(PlanarFusion, FindsTheWallFromACellFarOffAlongADiagonal) {
+  WallScene w = wallScene(Wall::Whole);
+  w.cell = Box3f(glm::vec3(-31.0f, 0.2f, -61.0f), glm::vec3(-29.0f, 1.8f, -59.0f));
+  ASSERT_FALSE(has(seenFaces(w), w.target));
+  const EpsilonPvs pvs(w.scene);
+  ASSERT_TRUE(has(pvs.compute(w.cell, withoutPlanarFusion()).faces, w.target));
+  EXPECT_FALSE(has(pvs.compute(w.cell).faces, w.target));
+}
+
 TEST(PlanarFusion, KeepsAFaceSeenThroughADoorInTheWall) {
   for (const glm::vec3 offset : {glm::vec3(0.0f), glm::vec3(1e4f, 0.0f, -1e4f)}) {
     const WallScene w = wallScene(Wall::Door, offset);

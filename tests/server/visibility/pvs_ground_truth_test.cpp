@@ -14,9 +14,10 @@
 // viewpoints that see it are printed.
 //
 // bigcity (1.3 million faces) is included with fewer cells: its set-up
-// (generation, Embree, free space, occluders and per-face line pairs) takes
-// about 15 s in Release on two busy cores and each cell about 1 s, so it
-// stays near 30 s.
+// (generation, Embree, free space, solids, occluders, their planes and
+// per-face line pairs) takes about 45 s in Release on an idle machine and
+// each cell about 2.5 s, so it stays near 80 s (twice that on two busy
+// cores).
 //
 // Slow (about 75 s in Release on two busy cores): carries the ctest label "slow".
 #include <gtest/gtest.h>
