@@ -27,6 +27,8 @@ bool insidePiece(const std::vector<glm::dvec2>& poly, const glm::dvec2& p, doubl
 // but for strips narrower than `slack` (the seam the shrinking opens
 // between abutting solids: coveredBy): a row of wall patches becomes one
 // rectangle, so a footprint is tested against a few pieces instead of many.
+// The pieces come out in order of lowest u (a merged piece keeps the lowest
+// u of the first of its parts), as PlanarFusion::hidden searches them.
 void mergePieces(std::vector<std::vector<glm::dvec2>>& pieces, std::vector<glm::dvec4>& bounds,
                  double slack) {
   // Merging only saves work later (coverage is decided by coveredBy over
@@ -153,25 +155,7 @@ PlanarFusion::PlanarFusion(const OccluderSet& occluders) {
     if (pl.pieces.size() >= 2) {
       pl.margin = occluderMargin(planeMagnitude);
       mergePieces(pl.pieces, pl.pieceBounds, 4.0 * pl.margin);
-      // By lowest u, so that a point's pieces are found by binary search.
-      std::vector<size_t> order(pl.pieces.size());
-      std::iota(order.begin(), order.end(), size_t(0));
-      std::sort(order.begin(), order.end(),
-                [&](size_t a, size_t b) { return pl.pieceBounds[a].x < pl.pieceBounds[b].x; });
-      std::vector<std::vector<glm::dvec2>> sortedPieces;
-      std::vector<glm::dvec4> sortedBounds;
-      for (size_t k : order) {
-        sortedPieces.push_back(std::move(pl.pieces[k]));
-        sortedBounds.push_back(pl.pieceBounds[k]);
-        pl.widest = std::max(pl.widest, sortedBounds.back().z - sortedBounds.back().x);
-      }
-      pl.pieces = std::move(sortedPieces);
-      pl.pieceBounds = std::move(sortedBounds);
-      pl.unionBounds = pl.pieceBounds[0];
-      for (const glm::dvec4& b : pl.pieceBounds)
-        pl.unionBounds =
-            glm::dvec4(std::min(pl.unionBounds.x, b.x), std::min(pl.unionBounds.y, b.y),
-                       std::max(pl.unionBounds.z, b.z), std::max(pl.unionBounds.w, b.w));
+      for (const glm::dvec4& b : pl.pieceBounds) pl.widest = std::max(pl.widest, b.z - b.x);
       // Grown by the float rounding of the bounds.
       pl.bounds.lo -= glm::vec3(float(1e-5 * (1.0 + planeMagnitude)));
       pl.bounds.hi += glm::vec3(float(1e-5 * (1.0 + planeMagnitude)));

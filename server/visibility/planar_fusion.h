@@ -87,7 +87,6 @@ class PlanarFusion {
     std::vector<std::vector<glm::dvec2>> pieces;  // the Q_i, counter-clockwise in (u, v)
     std::vector<glm::dvec4> pieceBounds;          // (min u, min v, max u, max v), by min u
     double widest = 0.0;                          // largest u extent of a piece
-    glm::dvec4 unionBounds{0.0};                  // of all of them
     double margin = 0.0;                          // rounding margin of its coordinates
   };
   std::vector<Plane> planes_;
