@@ -163,16 +163,24 @@ PlanarFusion::PlanarFusion(const OccluderSet& occluders) {
     }
     i = j;
   }
-  // The planes by X/Z cell, each box grown by the slack the point tests allow.
+  // The pieces by X/Z cell (a plane's bounds can span a whole street of
+  // facades, its pieces do not), each box grown by the slack the point
+  // tests allow; a grid item is a piece, pieceOwner_ names its plane.
   std::vector<Box3f> boxes;
   Box3f all;
-  for (const Plane& pl : planes_) {
-    Box3f b = pl.bounds;
+  for (size_t i = 0; i < planes_.size(); ++i) {
+    const Plane& pl = planes_[i];
     const float grow = float(4.0 * pl.margin) + 1e-3f;
-    b.lo -= glm::vec3(grow);
-    b.hi += glm::vec3(grow);
-    boxes.push_back(b);
-    all.extend(b);
+    for (const std::vector<glm::dvec2>& piece : pl.pieces) {
+      Box3f b;
+      for (const glm::dvec2& q : piece)
+        b.extend(glm::vec3(q.x * pl.u + q.y * pl.v + pl.top * pl.n));
+      b.lo -= glm::vec3(grow);
+      b.hi += glm::vec3(grow);
+      boxes.push_back(b);
+      pieceOwner_.push_back(uint32_t(i));
+      all.extend(b);
+    }
   }
   if (!all.empty()) {
     const float extent = std::max(all.hi.x - all.lo.x, all.hi.z - all.lo.z);
@@ -220,8 +228,8 @@ bool PlanarFusion::hidden(const Box3f& cell, const CellPlanes& cellPlanes,
     query = 1;
   }
   auto collect = [&](glm::ivec2 at) {
-    for (uint32_t i : grid_.itemsIn(at))
-      if (cellPlanes.inFront[i] && stamp[i] != query) {
+    for (uint32_t piece : grid_.itemsIn(at))
+      if (const uint32_t i = pieceOwner_[piece]; cellPlanes.inFront[i] && stamp[i] != query) {
         stamp[i] = query;
         candidates.push_back(i);
       }

@@ -72,7 +72,7 @@ class PlanarFusion {
   // `vertices` (an occludee face, local frame) from every point of `cell`.
   // Only planes met by the X/Z segment from the cell's centre to the first
   // vertex are tried (the line along it must cross a piece), found by
-  // walking the planes' X/Z grid along it: the cost follows the segment's
+  // walking the pieces' X/Z grid along it: the cost follows the segment's
   // length, not the number of planes (bigcity has tens of thousands).
   bool hidden(const Box3f& cell, const CellPlanes& planes,
               std::span<const glm::dvec3> vertices) const;
@@ -90,7 +90,8 @@ class PlanarFusion {
     double margin = 0.0;                          // rounding margin of its coordinates
   };
   std::vector<Plane> planes_;
-  XzGrid grid_;  // planes by X/Z cell of their bounds (grown by the slack)
+  XzGrid grid_;                       // pieces by X/Z cell of their bounds (grown by the slack)
+  std::vector<uint32_t> pieceOwner_;  // a grid item's plane
 };
 
 }  // namespace vistream
