@@ -70,27 +70,6 @@ bool comesClose(const TriangleFrame& frame, const FlatTriangles& tris, size_t ot
   return !poly.empty();
 }
 
-// Parity of enclosure `e` at `p` along the upward test directions: the
-// number of directions with an odd crossing count, or -1 if a ray starts on
-// a surface.
-int oddDirections(const FlatTriangles& tris, const Solids& solids, const RayQuery& rays, uint32_t e,
-                  const glm::vec3& p, std::vector<Hit>& hits) {
-  const Box3f& box = solids.enclosureBounds(e);
-  const float reach = glm::length(box.hi - box.lo) + glm::length(p - box.center()) + 1.0f;
-  int odd = 0;
-  for (const glm::vec3& dir : solidTestDirections()) {
-    hits.clear();
-    rays.allHits(Ray{p, dir, 0.0f, reach}, hits);
-    int crossings = 0;
-    for (const Hit& h : hits) {
-      if (h.t <= 0.0f) return -1;
-      if (h.triangle < tris.size() && solids.enclosureOf(h.triangle) == e) ++crossings;
-    }
-    odd += crossings % 2;
-  }
-  return odd;
-}
-
 }  // namespace
 
 BackFaceSolids backFaceSolids(const FlatTriangles& tris, const Solids& solids, const RayQuery& rays,
@@ -132,7 +111,6 @@ BackFaceSolids backFaceSolids(const FlatTriangles& tris, const Solids& solids, c
   const XzGrid grid(all, std::max(extent / 2048.0f, 0.5f), boxes);
 
   Polygon poly, scratch;
-  std::vector<Hit> hits;
   for (size_t i = 0; i < members.size(); ++i) {
     const uint32_t t = members[i];
     if (out.solidOf[t] != kNoHit) continue;
@@ -167,8 +145,8 @@ BackFaceSolids backFaceSolids(const FlatTriangles& tris, const Solids& solids, c
     const glm::vec3 behind(centre - frame.n * (0.5 * c)), before(centre + frame.n * (0.5 * c));
     const float floorY = solids.enclosureFloor(e);
     if (!(behind.y > floorY)) continue;
-    if (before.y > floorY && oddDirections(tris, solids, rays, e, before, hits) != 0) continue;
-    if (2 * oddDirections(tris, solids, rays, e, behind, hits) <= kSolidTestDirections) continue;
+    if (before.y > floorY && solids.enclosureVotes(rays, before, e) != 0) continue;
+    if (2 * solids.enclosureVotes(rays, behind, e) <= kSolidTestDirections) continue;
     out.solidOf[t] = enclosureBase + e;
     ++out.byParity;
   }

@@ -646,6 +646,36 @@ bool Solids::unservedViewpoint(const RayQuery& rays, const glm::vec3& p) const {
 
 namespace {
 
+// Parity along one ray, the core of every inside test: into `odd`, sorted
+// and each once, the ids (idOf(triangle); kNoHit counts for nothing) whose
+// triangles `ray` crosses an odd number of times. Returns the triangle of a
+// hit at the ray's start (the ray starts on a surface), with `odd` empty,
+// or kNoHit.
+template <class IdOf>
+uint32_t oddIds(const RayQuery& rays, const Ray& ray, IdOf&& idOf, std::vector<uint32_t>& odd) {
+  thread_local std::vector<Hit> hits;
+  hits.clear();
+  odd.clear();
+  rays.allHits(ray, hits);
+  for (const Hit& h : hits) {
+    if (h.t <= 0.0f) {
+      odd.clear();
+      return h.triangle;
+    }
+    if (const uint32_t id = idOf(h.triangle); id != kNoHit) odd.push_back(id);
+  }
+  std::sort(odd.begin(), odd.end());
+  size_t w = 0;
+  for (size_t i = 0; i < odd.size();) {
+    size_t j = i;
+    while (j < odd.size() && odd[j] == odd[i]) ++j;
+    if ((j - i) % 2) odd[w++] = odd[i];
+    i = j;
+  }
+  odd.resize(w);
+  return kNoHit;
+}
+
 // Strict-majority parity vote along the upward test directions: true when
 // some candidate has odd parity along more than half of them. `idOf(t)`
 // names the candidate triangle t belongs to (or kNoHit), `boundsOf(c)` a
@@ -654,32 +684,24 @@ namespace {
 template <class IdOf, class BoundsOf, class OnSurface>
 bool oddMajority(const RayQuery& rays, const glm::vec3& p, std::span<const uint32_t> candidates,
                  IdOf&& idOf, BoundsOf&& boundsOf, OnSurface&& onSurface) {
-  thread_local std::vector<int> odd;
-  thread_local std::vector<uint8_t> parity;
-  thread_local std::vector<Hit> hits;
-  odd.assign(candidates.size(), 0);
-  parity.resize(candidates.size());
+  thread_local std::vector<int> votes;
+  thread_local std::vector<uint32_t> odd;
+  votes.assign(candidates.size(), 0);
   const std::array<glm::vec3, kSolidTestDirections>& dirs = solidTestDirections();
   for (int d = 0; d < kSolidTestDirections; ++d) {
     const glm::vec3& dir = dirs[size_t(d)];
     float tfar = 0.0f;
     for (uint32_t c : candidates) tfar = std::max(tfar, exitDistance(boundsOf(c), p, dir));
-    hits.clear();
-    rays.allHits(Ray{p, dir, 0.0f, tfar * 1.001f + 1e-3f}, hits);
-    std::fill(parity.begin(), parity.end(), uint8_t(0));
-    for (const Hit& h : hits) {
-      if (h.t == 0.0f) return onSurface(h.triangle);
-      const uint32_t c = idOf(h.triangle);
-      for (size_t i = 0; i < candidates.size(); ++i)
-        if (candidates[i] == c) parity[i] ^= 1;
-    }
+    if (const uint32_t t = oddIds(rays, Ray{p, dir, 0.0f, tfar * 1.001f + 1e-3f}, idOf, odd);
+        t != kNoHit)
+      return onSurface(t);
     // Decide as soon as the vote is settled for every candidate.
     const int remaining = kSolidTestDirections - d - 1;
     bool undecided = false;
     for (size_t i = 0; i < candidates.size(); ++i) {
-      odd[i] += parity[i];
-      if (2 * odd[i] > kSolidTestDirections) return true;
-      if (2 * (odd[i] + remaining) > kSolidTestDirections) undecided = true;
+      votes[i] += std::binary_search(odd.begin(), odd.end(), candidates[i]) ? 1 : 0;
+      if (2 * votes[i] > kSolidTestDirections) return true;
+      if (2 * (votes[i] + remaining) > kSolidTestDirections) undecided = true;
     }
     if (!undecided) return false;
   }
@@ -697,7 +719,11 @@ bool Solids::insideGroup(const RayQuery& rays, const glm::vec3& p, bool closedOn
     if (groupBounds_[g].contains(p) && (!closedOnly || groupClosed_[g])) candidates.push_back(g);
   if (candidates.empty()) return false;
   return oddMajority(
-      rays, p, candidates, [&](uint32_t t) { return groupOf_[componentOf_[t]]; },
+      rays, p, candidates,
+      [&](uint32_t t) {
+        const uint32_t c = t < componentOf_.size() ? componentOf_[t] : kNoHit;
+        return c == kNoHit ? kNoHit : groupOf_[c];
+      },
       [&](uint32_t g) -> const Box3f& { return groupBounds_[g]; },
       // On a surface: outside by convention, except on the surface of a
       // closed solid for insideClosed (whose contract counts the surface in).
@@ -712,9 +738,26 @@ bool Solids::insideEnclosure(const RayQuery& rays, const glm::vec3& p) const {
     if (enclosureBounds_[e].contains(p) && p.y > enclosureFloor_[e]) candidates.push_back(e);
   if (candidates.empty()) return false;
   return oddMajority(
-      rays, p, candidates, [&](uint32_t t) { return enclosureOf_[t]; },
+      rays, p, candidates, [&](uint32_t t) { return enclosureOfHit(t); },
       [&](uint32_t e) -> const Box3f& { return enclosureBounds_[e]; },
-      [&](uint32_t t) { return enclosureOf_[t] != kNoHit; });
+      [&](uint32_t t) { return enclosureOfHit(t) != kNoHit; });
+}
+
+bool Solids::oddEnclosures(const RayQuery& rays, const Ray& ray, std::vector<uint32_t>& odd) const {
+  return oddIds(
+             rays, ray, [&](uint32_t t) { return enclosureOfHit(t); }, odd) == kNoHit;
+}
+
+int Solids::enclosureVotes(const RayQuery& rays, const glm::vec3& p, uint32_t enclosure) const {
+  const Box3f& box = enclosureBounds_[enclosure];
+  const float reach = glm::length(box.hi - box.lo) + glm::length(p - box.center()) + 1.0f;
+  thread_local std::vector<uint32_t> odd;
+  int votes = 0;
+  for (const glm::vec3& dir : solidTestDirections()) {
+    if (!oddEnclosures(rays, Ray{p, dir, 0.0f, reach}, odd)) return -1;
+    votes += std::binary_search(odd.begin(), odd.end(), enclosure) ? 1 : 0;
+  }
+  return votes;
 }
 
 }  // namespace vistream

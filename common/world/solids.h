@@ -165,6 +165,18 @@ class Solids {
   // Equal to inside() || insideClosed() || insideEnclosure().
   bool unservedViewpoint(const RayQuery& rays, const glm::vec3& point) const;
 
+  // Parity over the enclosures along one ray, the count every enclosure
+  // test above and elsewhere (back faces, horizons) is made of: the
+  // enclosures whose triangles `ray` crosses an odd number of times, into
+  // `odd`, sorted and each once (hits of triangles this was not built from
+  // count for nothing). False, with `odd` empty, if the ray starts on a
+  // surface (a hit at t = 0).
+  bool oddEnclosures(const RayQuery& rays, const Ray& ray, std::vector<uint32_t>& odd) const;
+  // The number of test directions (solidTestDirections()) along which the
+  // upward ray from `point` crosses `enclosure` an odd number of times; -1
+  // if `point` lies on a surface.
+  int enclosureVotes(const RayQuery& rays, const glm::vec3& point, uint32_t enclosure) const;
+
  private:
   std::vector<uint32_t> componentOf_;
   std::vector<SolidComponent> components_;
@@ -185,6 +197,11 @@ class Solids {
   std::vector<float> groupBaseTop_;      // by group: highest point of its open base
   XzGrid enclosureGrid_;                 // enclosures by X/Z cell of their bounds
   double weldTolerance_ = 0.0;
+
+  // enclosureOf() of a ray's hit: kNoHit for a triangle not built from.
+  uint32_t enclosureOfHit(uint32_t triangle) const {
+    return triangle < enclosureOf_.size() ? enclosureOf_[triangle] : kNoHit;
+  }
 
   // Components and parity groups of the topology welded within `tol`.
   static Solids classify(const FlatTriangles& triangles, double tol);

@@ -153,6 +153,9 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 
 // Steep, generic upward directions for the parity votes (no axis, no
 // diagonal of an axis-aligned box, no rational slope a city would use).
+// Steeper and fewer than solidTestDirections(): the height field asks
+// once per column gap, a steep ray leaves the city after few hits, and a
+// column counts as inside only by a unanimous vote.
 const std::array<glm::vec3, 3>& parityDirections() {
   static const std::array<glm::vec3, 3> d{glm::normalize(glm::vec3(0.1234f, 1.0f, 0.0719f)),
                                           glm::normalize(glm::vec3(-0.0871f, 1.0f, 0.1537f)),
@@ -243,37 +246,16 @@ struct HorizonFusion::Impl {
         rays(*world.rays),
         solids(world.solids) {}
 
-  // Sealed solids with odd crossing parity along `dir` from p; false if
-  // the ray starts on a surface.
-  bool oddComponents(const glm::vec3& p, const glm::vec3& dir, std::vector<uint32_t>& odd) const {
-    thread_local std::vector<Hit> hits;
-    hits.clear();
-    odd.clear();
-    rays.allHits(Ray{p, dir, 0.0f, std::numeric_limits<float>::infinity()}, hits);
-    for (const Hit& h : hits) {
-      if (h.t <= 0.0f) return false;
-      const uint32_t c = solids.enclosureOf(h.triangle);
-      if (c != kNoHit) odd.push_back(c);
-    }
-    std::sort(odd.begin(), odd.end());
-    size_t w = 0;
-    for (size_t i = 0; i < odd.size();) {
-      size_t j = i;
-      while (j < odd.size() && odd[j] == odd[i]) ++j;
-      if ((j - i) % 2) odd[w++] = odd[i];
-      i = j;
-    }
-    odd.resize(w);
-    return true;
-  }
-
-  // The closed component whose interior holds p by all three votes, or kNoHit.
+  // The enclosure whose interior holds p by all three votes
+  // (Solids::oddEnclosures), or kNoHit.
   uint32_t insideClosed(const glm::vec3& p) const {
     std::vector<uint32_t> first, other, both;
     const auto& dirs = parityDirections();
-    if (!oddComponents(p, dirs[0], first) || first.empty()) return kNoHit;
+    const float far = std::numeric_limits<float>::infinity();
+    if (!solids.oddEnclosures(rays, Ray{p, dirs[0], 0.0f, far}, first) || first.empty())
+      return kNoHit;
     for (size_t d = 1; d < dirs.size(); ++d) {
-      if (!oddComponents(p, dirs[d], other)) return kNoHit;
+      if (!solids.oddEnclosures(rays, Ray{p, dirs[d], 0.0f, far}, other)) return kNoHit;
       both.clear();
       std::set_intersection(first.begin(), first.end(), other.begin(), other.end(),
                             std::back_inserter(both));

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
 #include <random>
 
 #include "common/scene/scene_loader.h"
@@ -310,6 +311,44 @@ TEST(Solids, TheRealCityModelsSealedSolidsHaveTheSameParityAlongEveryRay) {
   EXPECT_GT(points, 500u);
   EXPECT_GT(insideSome, points / 10) << "the points fall inside solids too";
   EXPECT_LE(split * 100, points) << split << " of " << points << " points split the vote";
+}
+
+// The parity every enclosure test is made of, on a scene whose answers are
+// known: a box, and a second box stacked above it with a gap.
+TEST(Solids, AnUpwardRayCrossesTheEnclosuresItStartsInOnceAndThoseAboveItTwice) {
+  Built b;
+  addWoundBox(b.scene, "low", {0, 0, 0}, {10, 6, 10}, Winding::Outward);
+  addWoundBox(b.scene, "high", {0, 8, 0}, {10, 12, 10}, Winding::SidesInward);
+  b.build();
+  ASSERT_EQ(b.solids.enclosureCount(), 2u);
+  const uint32_t low = b.solids.enclosureOf(0);
+  const uint32_t high = b.solids.enclosureOf(uint32_t(b.triangles.size() - 1));
+  ASSERT_NE(low, high);
+  const float far = std::numeric_limits<float>::infinity();
+  std::vector<uint32_t> odd{99};
+  // Vertical rays off the diagonals that split the boxes' faces into triangles.
+  // From inside the low box straight up: out of it once, through the high one twice.
+  ASSERT_TRUE(b.solids.oddEnclosures(*b.rays, Ray{{3, 1, 6}, {0, 1, 0}, 0.0f, far}, odd));
+  EXPECT_EQ(odd, std::vector<uint32_t>{low});
+  // From the gap: through the high box only, twice.
+  ASSERT_TRUE(b.solids.oddEnclosures(*b.rays, Ray{{3, 7, 6}, {0, 1, 0}, 0.0f, far}, odd));
+  EXPECT_TRUE(odd.empty());
+  // From inside the high box (wound with its sides inward: parity ignores winding).
+  ASSERT_TRUE(b.solids.oddEnclosures(*b.rays, Ray{{3, 9, 6}, {0, 1, 0}, 0.0f, far}, odd));
+  EXPECT_EQ(odd, std::vector<uint32_t>{high});
+  // A ray ending before the high box sees only the low one.
+  ASSERT_TRUE(b.solids.oddEnclosures(*b.rays, Ray{{3, 1, 6}, {0, 1, 0}, 0.0f, 6.5f}, odd));
+  EXPECT_EQ(odd, std::vector<uint32_t>{low});
+  // On the low box's roof: a surface, no answer.
+  EXPECT_FALSE(b.solids.oddEnclosures(*b.rays, Ray{{3, 6, 6}, {0, 1, 0}, 0.0f, far}, odd));
+  EXPECT_TRUE(odd.empty());
+
+  // The votes over every test direction: all of them inside, none outside.
+  EXPECT_EQ(b.solids.enclosureVotes(*b.rays, {5, 1, 5}, low), kSolidTestDirections);
+  EXPECT_EQ(b.solids.enclosureVotes(*b.rays, {5, 1, 5}, high), 0);
+  EXPECT_EQ(b.solids.enclosureVotes(*b.rays, {5, 7, 5}, low), 0);
+  EXPECT_EQ(b.solids.enclosureVotes(*b.rays, {-3, 1, 5}, low), 0);
+  EXPECT_EQ(b.solids.enclosureVotes(*b.rays, {5, 6, 5}, low), -1);
 }
 
 // The rule against its definition on the real city model
