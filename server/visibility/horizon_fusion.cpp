@@ -124,9 +124,12 @@
 //    a sample), which is what is culled.
 //
 // Cost: the horizon of a sample is traced lazily, bin by bin, only where a
-// face still needs it; a bin skips blocks of 8 x 8 columns whose highest top
-// cannot raise it (skipping changes no step), and stops once no column of
-// the scene can raise it, or at the reach. Faces seen from one sample are
+// face still needs it, and each bin only as far as the faces asking need
+// (their R_min), stopping at the first step that hides the face; a later
+// face resumes the walk where it stopped. A bin skips blocks of 8 x 8
+// columns whose highest top cannot raise it (skipping changes no step), and
+// stops once no column of the scene can raise it, or at the reach. Faces
+// seen from one sample are
 // not tested from the next.
 #include "server/visibility/horizon_fusion.h"
 
@@ -667,10 +670,20 @@ struct HorizonQuery {
   // The horizon of the current sample at each level of bins (level l has
   // kRefine^l times the bins of level 0 and reaches as many times farther),
   // traced lazily by bin.
+  // A bin's walk along its central ray, resumed where a face needs it to
+  // reach farther: `steps` are the horizon's steps over [0, tin).
+  struct Walk {
+    std::vector<Step> steps;
+    int i = 0, j = 0;            // the column the walk is in
+    double tx = 0.0, tz = 0.0;   // ray distances to its next X and Z column sides
+    double tin = 0.0, t1 = 0.0;  // where the column is entered; where the walk ends
+    double best = -kInf;         // the slope of the last step
+    bool done = false;           // nothing farther can add a step
+  };
   struct Level {
     double binWidth = 0.0, reach = 0.0;
-    std::vector<uint32_t> traced;  // generation that traced each bin
-    std::vector<std::vector<Step>> bins;
+    std::vector<uint32_t> traced;  // generation that started each bin's walk
+    std::vector<Walk> bins;
   };
   std::vector<Level> levels;
   glm::dvec3 s{0.0};
@@ -693,18 +706,19 @@ struct HorizonQuery {
     return false;
   }
 
-  // Proof, step 5: the steps of bin k, walking the shrunk columns along the
-  // bin's central ray (Amanatides and Woo's grid walk).
-  void trace(const Level& level, size_t k, std::vector<Step>& steps) {
-    const double binWidth = level.binWidth, reach = level.reach;
-    steps.clear();
+  // Proof, step 5: starts the walk of bin k along the bin's central ray
+  // over the shrunk columns (Amanatides and Woo's grid walk).
+  void start(const Level& level, size_t k, Walk& walk) {
+    walk.steps.clear();
+    walk.best = -kInf;
+    walk.done = true;
     ++stats.horizonBins;
-    const double phi = (double(k) + 0.5) * binWidth;
+    const double phi = (double(k) + 0.5) * level.binWidth;
     const glm::dvec2 dir(std::cos(phi), std::sin(phi));
     const glm::dvec2 org(s.x, s.z);
     // Enter the grid's rectangle.
     const glm::dvec2 glo = w.lo, ghi = w.lo + glm::dvec2(w.nx, w.nz) * w.g;
-    double t0 = 0.0, t1 = reach;
+    double t0 = 0.0, t1 = level.reach;
     for (int a = 0; a < 2; ++a) {
       if (dir[a] == 0.0) {
         if (org[a] < glo[a] || org[a] > ghi[a]) return;
@@ -717,19 +731,39 @@ struct HorizonQuery {
     }
     if (!(t0 < t1)) return;
     const glm::dvec2 p0 = org + t0 * dir;
-    int i = std::clamp(int(std::floor((p0.x - glo.x) / w.g)), 0, w.nx - 1);
-    int j = std::clamp(int(std::floor((p0.y - glo.y) / w.g)), 0, w.nz - 1);
+    walk.i = std::clamp(int(std::floor((p0.x - glo.x) / w.g)), 0, w.nx - 1);
+    walk.j = std::clamp(int(std::floor((p0.y - glo.y) / w.g)), 0, w.nz - 1);
+    const int si = dir.x > 0 ? 1 : -1, sj = dir.y > 0 ? 1 : -1;
+    walk.tx = dir.x != 0.0 ? (glo.x + (walk.i + (si > 0)) * w.g - org.x) / dir.x : kInf;
+    walk.tz = dir.y != 0.0 ? (glo.y + (walk.j + (sj > 0)) * w.g - org.y) / dir.y : kInf;
+    walk.tin = t0;
+    walk.t1 = t1;
+    walk.done = false;
+  }
+
+  // Proof, step 5, lazily: walks bin k on until it has every step closer
+  // than `until` (or the walk is done), or, earlier, until a new step
+  // satisfies `hides`. The steps come out as the whole walk would make them:
+  // walking a prefix changes none.
+  template <class Hides>
+  bool advance(const Level& level, size_t k, Walk& walk, double until, Hides&& hides) {
+    if (walk.done || walk.tin >= until) return false;
+    const double phi = (double(k) + 0.5) * level.binWidth;
+    const glm::dvec2 dir(std::cos(phi), std::sin(phi));
+    const glm::dvec2 org(s.x, s.z);
+    const glm::dvec2 glo = w.lo;
+    const double reach = level.reach, t1 = walk.t1;
+    int i = walk.i, j = walk.j;
+    double tx = walk.tx, tz = walk.tz, tin = walk.tin, best = walk.best;
     const int si = dir.x > 0 ? 1 : -1, sj = dir.y > 0 ? 1 : -1;
     // Reciprocals: the walk below multiplies instead of dividing.
     const double invX = dir.x != 0.0 ? 1.0 / dir.x : 0.0, invZ = dir.y != 0.0 ? 1.0 / dir.y : 0.0;
     const double invG = 1.0 / w.g;
     const double dtx = dir.x != 0.0 ? w.g / std::abs(dir.x) : kInf;
     const double dtz = dir.y != 0.0 ? w.g / std::abs(dir.y) : kInf;
-    double tx = dir.x != 0.0 ? (glo.x + (i + (si > 0)) * w.g - org.x) / dir.x : kInf;
-    double tz = dir.y != 0.0 ? (glo.y + (j + (sj > 0)) * w.g - org.y) / dir.y : kInf;
     const double y = s.y, lowest = double(cell.lo.y) - w.margin;
-    double best = -kInf, tin = t0;
     int block = -1;
+    bool done = false, found = false;
     // Into the next column along the ray; false once it leaves the grid.
     auto stepToNextColumn = [&] {
       if (tx < tz) {
@@ -742,37 +776,49 @@ struct HorizonQuery {
       return i >= 0 && j >= 0 && i < w.nx && j < w.nz;
     };
     constexpr int kB = HorizonFusion::Impl::kBlock;
-    while (tin < t1) {
+    for (;;) {
+      if (!(tin < t1)) {
+        done = true;
+        break;
+      }
+      if (tin >= until || found) break;
       // A block none of whose columns can raise the horizon is walked
       // without reading its columns: a top h adds a step only with a slope
       // above `best`, at most (h - y) / tin when h > y, and at most
       // (h - y) / (the block's exit, or the reach) otherwise.
-      const int b = (j / HorizonFusion::Impl::kBlock) * w.bx + i / HorizonFusion::Impl::kBlock;
+      const int b = (j / kB) * w.bx + i / kB;
       if (b != block) {
         block = b;
         const double h = w.blockTop[size_t(b)];
-        const int bi = i / HorizonFusion::Impl::kBlock, bj = j / HorizonFusion::Impl::kBlock;
+        const int bi = i / kB, bj = j / kB;
         double exit = t1;
         if (dir.x != 0.0)
-          exit = std::min(
-              exit, (glo.x + (bi + (si > 0)) * HorizonFusion::Impl::kBlock * w.g - org.x) * invX);
+          exit = std::min(exit, (glo.x + (bi + (si > 0)) * kB * w.g - org.x) * invX);
         if (dir.y != 0.0)
-          exit = std::min(
-              exit, (glo.y + (bj + (sj > 0)) * HorizonFusion::Impl::kBlock * w.g - org.y) * invZ);
+          exit = std::min(exit, (glo.y + (bj + (sj > 0)) * kB * w.g - org.y) * invZ);
         const double bound = h == double(kNoTop) ? -kInf
                                                  : (h > y ? (tin > 1e-9 ? (h - y) / tin : kInf)
                                                           : (h - y) / std::max(exit, 1e-9));
         if (!(bound > best)) {
           // Jump to where the ray leaves the block: the cell just past the
           // exit point (stepped cell by cell if rounding keeps it inside).
-          if (exit >= t1) break;
+          if (exit >= t1) {
+            done = true;
+            break;
+          }
           const glm::dvec2 p = org + (exit + 1e-7 * w.g) * dir;
           const int ni = int(std::floor((p.x - glo.x) * invG));
           const int nj = int(std::floor((p.y - glo.y) * invG));
-          if (ni < 0 || nj < 0 || ni >= w.nx || nj >= w.nz) break;
+          if (ni < 0 || nj < 0 || ni >= w.nx || nj >= w.nz) {
+            done = true;
+            break;
+          }
           if (ni / kB == bi && nj / kB == bj) {
             tin = std::min({tx, tz, t1});
-            if (!stepToNextColumn()) break;
+            if (!stepToNextColumn()) {
+              done = true;
+              break;
+            }
             block = -1;
             continue;
           }
@@ -798,35 +844,58 @@ struct HorizonQuery {
           st.slope = (h - y) / st.d;
         }
         if (st.slope > best) {
-          steps.push_back(st);
+          walk.steps.push_back(st);
           best = st.slope;
+          found = hides(st);
         }
       }
       // Nothing farther can rise above `best`: every later square starts at
       // tout or beyond and no top exceeds maxTop.
-      if (w.maxTop > y && best * tout >= w.maxTop - y) break;
-      if (!stepToNextColumn()) break;
+      if (w.maxTop > y && best * tout >= w.maxTop - y) {
+        done = true;
+        break;
+      }
+      if (!stepToNextColumn()) {
+        done = true;
+        break;
+      }
       tin = tout;
     }
+    walk.i = i;
+    walk.j = j;
+    walk.tx = tx;
+    walk.tz = tz;
+    walk.tin = tin;
+    walk.best = best;
+    walk.done = done;
+    return found;
   }
 
-  // Proof, step 6, within one bin.
+  // Proof, step 6, for one step: does it hide points at horizontal
+  // distance at least rmin, of elevation slope at most `slope` and at
+  // least minY high?
+  bool stepHides(const Step& st, double rmin, double slope, double minY) const {
+    if (!(st.slope > slope) || !(st.d < rmin * (1.0 - 1e-9))) return false;
+    if (minY >= st.base) return true;
+    const double a = double(cell.lo.y) - st.base;
+    return a > 0.0 && st.d * (a + st.base - minY) <= rmin * a * (1.0 - 1e-9);
+  }
+
+  // Proof, step 6, within one bin: its steps so far first, then the walk
+  // on to rmin, stopping at the first step that hides.
   bool binHides(Level& level, size_t k, double rmin, double slope, double minY) {
+    Walk& walk = level.bins[k];
     if (level.traced[k] != generation) {
-      trace(level, k, level.bins[k]);
+      start(level, k, walk);
       level.traced[k] = generation;
     }
-    const std::vector<Step>& steps = level.bins[k];
-    const double lowest = double(cell.lo.y);
-    for (size_t n = steps.size(); n-- > 0;) {
-      const Step& st = steps[n];
-      if (!(st.slope > slope)) return false;  // earlier steps are lower still
-      if (!(st.d < rmin * (1.0 - 1e-9))) continue;
-      if (minY >= st.base) return true;
-      const double a = lowest - st.base;
-      if (a > 0.0 && st.d * (a + st.base - minY) <= rmin * a * (1.0 - 1e-9)) return true;
+    for (size_t n = walk.steps.size(); n-- > 0;) {
+      const Step& st = walk.steps[n];
+      if (!(st.slope > slope)) break;  // earlier steps are lower still
+      if (stepHides(st, rmin, slope, minY)) return true;
     }
-    return false;
+    return advance(level, k, walk, rmin,
+                   [&](const Step& st) { return stepHides(st, rmin, slope, minY); });
   }
 
   // An upper bound of the elevation slope of points at horizontal distance
