@@ -129,8 +129,7 @@
 // face resumes the walk where it stopped. A bin skips blocks of 8 x 8
 // columns whose highest top cannot raise it (skipping changes no step), and
 // stops once no column of the scene can raise it, or at the reach. Faces
-// seen from one sample are
-// not tested from the next.
+// seen from one sample are not tested from the next.
 #include "server/visibility/horizon_fusion.h"
 
 #include <spdlog/spdlog.h>
