@@ -44,9 +44,11 @@ XzGrid::XzGrid(const Box3f& bounds, float cellSize, std::span<const Box3f> boxes
   for (size_t c = 0; c < cells; ++c) cellStart_[c + 1] += cellStart_[c];
   items_.resize(cellStart_.back());
   std::vector<uint32_t> fill(cellStart_.begin(), cellStart_.end() - 1);
+  itemLo_.assign(boxes.size(), glm::ivec2(0));
   for (size_t i = 0; i < boxes.size(); ++i) {
     if (boxes[i].empty()) continue;
     const CellRange r = rangeOf(boxes[i]);
+    itemLo_[i] = r.lo;
     for (int z = r.lo.y; z <= r.hi.y; ++z)
       for (int x = r.lo.x; x <= r.hi.x; ++x) items_[fill[index({x, z})]++] = uint32_t(i);
   }
@@ -72,14 +74,8 @@ std::span<const uint32_t> XzGrid::itemsIn(glm::ivec2 cell) const {
 
 std::vector<uint32_t> XzGrid::itemsNear(glm::vec2 lo, glm::vec2 hi) const {
   std::vector<uint32_t> out;
-  const CellRange r = cellsOverlapping(lo, hi);
-  for (int z = r.lo.y; z <= r.hi.y; ++z)
-    for (int x = r.lo.x; x <= r.hi.x; ++x) {
-      const std::span<const uint32_t> items = itemsIn({x, z});
-      out.insert(out.end(), items.begin(), items.end());
-    }
+  forEachItemNear(lo, hi, [&](uint32_t item) { out.push_back(item); });
   std::sort(out.begin(), out.end());
-  out.erase(std::unique(out.begin(), out.end()), out.end());
   return out;
 }
 

@@ -63,6 +63,17 @@ class XzGrid {
   // Every item entered in a cell that [lo, hi] overlaps, each once,
   // ascending: a superset of the items whose X/Z rectangle meets [lo, hi].
   std::vector<uint32_t> itemsNear(glm::vec2 lo, glm::vec2 hi) const;
+  // The same items, each once, in no set order, without sorting: an item
+  // is visited in the first cell of the range that it was entered in (the
+  // larger of its lowest cell and the range's, per axis).
+  template <class F>
+  void forEachItemNear(glm::vec2 lo, glm::vec2 hi, F&& f) const {
+    const CellRange r = cellsOverlapping(lo, hi);
+    for (int z = r.lo.y; z <= r.hi.y; ++z)
+      for (int x = r.lo.x; x <= r.hi.x; ++x)
+        for (uint32_t item : itemsIn({x, z}))
+          if (glm::max(itemLo_[item], r.lo) == glm::ivec2(x, z)) f(item);
+  }
 
  private:
   size_t index(glm::ivec2 cell) const { return size_t(cell.y) * size_t(dims_.x) + size_t(cell.x); }
@@ -73,6 +84,7 @@ class XzGrid {
   // CSR: the items of cell c are items_[cellStart_[c] .. cellStart_[c + 1]).
   std::vector<uint32_t> cellStart_{0};
   std::vector<uint32_t> items_;
+  std::vector<glm::ivec2> itemLo_;  // by item: the lowest cell it was entered in
 };
 
 // An X/Z grid that takes items up and lets them go one at a time (a

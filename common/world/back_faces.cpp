@@ -126,18 +126,15 @@ BackFaceSolids backFaceSolids(const FlatTriangles& tris, const Solids& solids, c
     bool clear = true;
     const float grow = float(c);
     const glm::vec3 lo = tb.lo - grow, hi = tb.hi + grow;
-    for (uint32_t j : grid.itemsNear({lo.x, lo.z}, {hi.x, hi.z})) {
+    grid.forEachItemNear({lo.x, lo.z}, {hi.x, hi.z}, [&](uint32_t j) {
       const uint32_t other = members[j];
-      if (other == t || solids.enclosureOf(other) != e) continue;
+      if (!clear || other == t || solids.enclosureOf(other) != e) return;
       const Box3f& ob = boxes[j];
       if (ob.lo.x > hi.x || ob.hi.x < lo.x || ob.lo.y > hi.y || ob.hi.y < lo.y || ob.lo.z > hi.z ||
           ob.hi.z < lo.z)
-        continue;
-      if (comesClose(frame, tris, other, c, poly, scratch)) {
-        clear = false;
-        break;
-      }
-    }
+        return;
+      if (comesClose(frame, tris, other, c, poly, scratch)) clear = false;
+    });
     if (!clear) continue;
 
     // (b) Odd behind, even in front, both above the floor.

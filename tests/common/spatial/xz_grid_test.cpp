@@ -109,6 +109,11 @@ TEST(XzGrid, ItemsNearFindsEveryItemWhoseRectangleMeetsTheQueryAndOnlyThoseOfIts
     const glm::vec2 hi = lo + glm::vec2(float(size(rng)), float(size(rng))) * kLattice;
     const std::vector<uint32_t> near = grid.itemsNear(lo, hi);
     ASSERT_TRUE(std::is_sorted(near.begin(), near.end()));
+    // forEachItemNear visits the same items, each once.
+    std::vector<uint32_t> visited;
+    grid.forEachItemNear(lo, hi, [&](uint32_t i) { visited.push_back(i); });
+    std::sort(visited.begin(), visited.end());
+    ASSERT_EQ(visited, near);
     ASSERT_EQ(std::adjacent_find(near.begin(), near.end()), near.end()) << "duplicates";
     const Span qx = cellsByWalking(lo.x, hi.x, 0.0f, kCell, 25);
     const Span qz = cellsByWalking(lo.y, hi.y, 0.0f, kCell, 25);
