@@ -20,6 +20,7 @@
 #include <array>
 #include <map>
 #include <numeric>
+#include <set>
 #include <span>
 
 #include "common/core/check.h"
@@ -37,9 +38,14 @@ struct EpsilonPvs::Face {
   std::vector<glm::dvec3> vertices;
   std::vector<std::pair<uint8_t, uint8_t>> keptLines;  // (cell corner pattern, vertex index)
   // One-sided faces only (every non-degenerate triangle in a closed,
-  // consistently outward solid): the triangles as indices into `vertices`,
-  // wound as in the scene. Empty: the face is two-sided.
-  std::vector<std::array<uint8_t, 3>> oneSided;
+  // consistently outward solid): the planes of its triangles, wound as in
+  // the scene. Empty: the face is two-sided.
+  struct FrontPlane {
+    glm::dvec3 n{0.0};       // unit normal, to the front
+    double offset = 0.0;     // n . a for a corner a
+    double magnitude = 0.0;  // |a|, for the rounding margin
+  };
+  std::vector<FrontPlane> oneSided;
   uint32_t solid = kNoHit;  // one-sided faces: their solid (EpsilonPvs::solidFloor_)
 };
 
@@ -191,6 +197,7 @@ EpsilonPvs::EpsilonPvs(const Scene& scene, const OccluderOptions& occluderOption
     e.dynamic = o.dynamic;
     e.bounds = o.bounds;
     std::map<uint32_t, Face> byFace;
+    std::set<uint32_t> twoSided;
     for (size_t t = 0; t < o.mesh.triangles.size(); ++t) {
       Face& f = byFace[o.mesh.faceIds[t]];
       std::array<size_t, 3> corner{};
@@ -206,15 +213,23 @@ EpsilonPvs::EpsilonPvs(const Scene& scene, const OccluderOptions& occluderOption
                             !isDegenerateTriangle(o.mesh.positions[o.mesh.triangles[t][0]],
                                                   o.mesh.positions[o.mesh.triangles[t][1]],
                                                   o.mesh.positions[o.mesh.triangles[t][2]]);
-      if (distinct && corner[0] < 255 && corner[1] < 255 && corner[2] < 255)
-        f.oneSided.push_back({uint8_t(corner[0]), uint8_t(corner[1]), uint8_t(corner[2])});
+      if (distinct && corner[0] < 255 && corner[1] < 255 && corner[2] < 255) {
+        const glm::dvec3& a = f.vertices[corner[0]];
+        const glm::dvec3 n = glm::cross(f.vertices[corner[1]] - a, f.vertices[corner[2]] - a);
+        const double len = glm::length(n);
+        // A zero normal cannot face away: the face stays two-sided.
+        if (!(len > 0.0))
+          twoSided.insert(o.mesh.faceIds[t]);
+        else
+          f.oneSided.push_back({n / len, glm::dot(n / len, a), glm::length(a)});
+      }
     }
     for (auto& [id, f] : byFace) {
       f.id = id;
       VS_CHECK_LE(f.vertices.size(), 255u * 3u);
       if (f.vertices.size() <= 255) f.keptLines = keptLinesFor(f.vertices);
       f.solid = id < oneSided.solidOf.size() ? oneSided.solidOf[id] : kNoHit;
-      if (f.vertices.size() > 255 || f.solid == kNoHit) {
+      if (f.vertices.size() > 255 || f.solid == kNoHit || twoSided.count(id)) {
         f.oneSided.clear();
         f.solid = kNoHit;
       }
@@ -271,6 +286,17 @@ void splitGroups(std::vector<EpsilonPvs::Face>& faces, uint32_t first, uint32_t 
   splitGroups(faces, first + count / 2, count - count / 2, out);
 }
 
+// The cell as facesAway reads it, computed once per cell.
+struct CellSupport {
+  glm::dvec3 centre{0.0}, half{0.0};
+  double margin = 0.0;  // occluderMargin of the cell's coordinates
+  explicit CellSupport(const Box3f& cell)
+      : centre(cell.center()),
+        half(0.5 * (glm::dvec3(cell.hi) - glm::dvec3(cell.lo))),
+        margin(occluderMargin(
+            std::max(glm::length(glm::dvec3(cell.hi)), glm::length(glm::dvec3(cell.lo))))) {}
+};
+
 // True if the closed cell lies strictly behind the plane of every triangle
 // of a one-sided face, by more than the rounding margin, and above the
 // face's solid's floor (`floor`: the cap of a solid open at its base): no
@@ -278,21 +304,15 @@ void splitGroups(std::vector<EpsilonPvs::Face>& faces, uint32_t first, uint32_t 
 // pass below the solid's open base. Viewpoints of the cell inside the solid
 // or on its surface (which would look into it past the surface they stand
 // on) are not served (Solids::unservedViewpoint).
-// In double from float inputs: the cross product and the box support are
-// exact to a few ulps, far below the margin.
-bool facesAway(const EpsilonPvs::Face& f, const Box3f& cell, float floor) {
+// In double from float inputs: the unit normals and offsets (made once,
+// with the face) and the box support are exact to a few ulps, far below
+// the margin.
+bool facesAway(const EpsilonPvs::Face& f, const Box3f& cell, const CellSupport& c, float floor) {
   if (f.oneSided.empty() || !(cell.lo.y > floor)) return false;
-  const glm::dvec3 centre(cell.center()), half(0.5 * (glm::dvec3(cell.hi) - glm::dvec3(cell.lo)));
-  const double magnitude =
-      std::max(glm::length(glm::dvec3(cell.hi)), glm::length(glm::dvec3(cell.lo)));
-  for (const auto& t : f.oneSided) {
-    const glm::dvec3& a = f.vertices[t[0]];
-    const glm::dvec3 n = glm::cross(f.vertices[t[1]] - a, f.vertices[t[2]] - a);
-    const double len = glm::length(n);
-    if (!(len > 0.0)) return false;
-    // The largest signed distance of a cell point from the plane, times |n|.
-    const double support = glm::dot(n, centre - a) + glm::dot(glm::abs(n), half);
-    if (!(support < -occluderMargin(std::max(magnitude, glm::length(a))) * len)) return false;
+  for (const EpsilonPvs::Face::FrontPlane& p : f.oneSided) {
+    // The largest signed distance of a cell point from the plane.
+    const double support = glm::dot(p.n, c.centre) - p.offset + glm::dot(glm::abs(p.n), c.half);
+    if (!(support < -std::max(c.margin, occluderMargin(p.magnitude)))) return false;
   }
   return true;
 }
@@ -511,8 +531,9 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
   // Solids fused within a plane, for the faces no single occluder hides.
   const PlanarFusion::CellPlanes planes =
       options.planarFusion && planar_ ? planar_->planesFor(cell) : PlanarFusion::CellPlanes{};
+  const CellSupport support(cell);
   auto faceAway = [&](const Face& f) {
-    return f.solid != kNoHit && facesAway(f, cell, solidFloor_[f.solid]);
+    return f.solid != kNoHit && facesAway(f, cell, support, solidFloor_[f.solid]);
   };
 
   double boxMs = 0.0, faceMs = 0.0;
@@ -543,13 +564,14 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
         }
       }
       if (options.backFaces) {
-        // A group facing away from the cell entirely needs no box stage.
-        uint32_t away = 0;
-        for (uint32_t fi = g.firstFace; fi < g.firstFace + g.faceCount; ++fi)
-          away += faceAway(e.faces[fi]);
-        if (away == g.faceCount) {
-          stats.facesBackFacing += away;
-          stats.facesOccluded += away;
+        // A group facing away from the cell entirely needs no box stage
+        // (the first face that does not settles it).
+        bool allAway = true;
+        for (uint32_t fi = g.firstFace; fi < g.firstFace + g.faceCount && allAway; ++fi)
+          allAway = faceAway(e.faces[fi]);
+        if (allAway) {
+          stats.facesBackFacing += g.faceCount;
+          stats.facesOccluded += g.faceCount;
           continue;
         }
       }
