@@ -670,13 +670,17 @@ struct HorizonQuery {
   // kRefine^l times the bins of level 0 and reaches as many times farther),
   // traced lazily by bin.
   // A bin's walk along its central ray, resumed where a face needs it to
-  // reach farther: `steps` are the horizon's steps over [0, tin).
+  // reach farther: `steps` are those of the columns entered before `tin`.
+  // Everything the walk carries from column to column is kept, so a walk
+  // made in several pieces takes the same steps, bit for bit, as one made
+  // at once.
   struct Walk {
     std::vector<Step> steps;
     int i = 0, j = 0;            // the column the walk is in
     double tx = 0.0, tz = 0.0;   // ray distances to its next X and Z column sides
     double tin = 0.0, t1 = 0.0;  // where the column is entered; where the walk ends
     double best = -kInf;         // the slope of the last step
+    int block = -1;              // the block whose bound the walk last took
     bool done = false;           // nothing farther can add a step
   };
   struct Level {
@@ -710,6 +714,7 @@ struct HorizonQuery {
   void start(const Level& level, size_t k, Walk& walk) {
     walk.steps.clear();
     walk.best = -kInf;
+    walk.block = -1;
     walk.done = true;
     ++stats.horizonBins;
     const double phi = (double(k) + 0.5) * level.binWidth;
@@ -761,7 +766,7 @@ struct HorizonQuery {
     const double dtx = dir.x != 0.0 ? w.g / std::abs(dir.x) : kInf;
     const double dtz = dir.y != 0.0 ? w.g / std::abs(dir.y) : kInf;
     const double y = s.y, lowest = double(cell.lo.y) - w.margin;
-    int block = -1;
+    int block = walk.block;
     bool done = false, found = false;
     // Into the next column along the ray; false once it leaves the grid.
     auto stepToNextColumn = [&] {
@@ -866,6 +871,7 @@ struct HorizonQuery {
     walk.tz = tz;
     walk.tin = tin;
     walk.best = best;
+    walk.block = block;
     walk.done = done;
     return found;
   }

@@ -164,16 +164,23 @@ PlanarFusion::PlanarFusion(const OccluderSet& occluders) {
     i = j;
   }
   // The pieces by X/Z cell (a plane's bounds can span a whole street of
-  // facades, its pieces do not), each box grown by the slack the point
-  // tests allow; a grid item is a piece, pieceOwner_ names its plane.
+  // facades, its pieces do not); a grid item is a piece, pieceOwner_ names
+  // its plane. Each box holds its piece's bounds grown by the slack the
+  // point tests allow (they accept nothing beyond: hidden()), and more for
+  // the float rounding of the box and of the walk along the grid (100
+  // margins, as the plane's bounds) and a millimetre.
   std::vector<Box3f> boxes;
   Box3f all;
   for (size_t i = 0; i < planes_.size(); ++i) {
     const Plane& pl = planes_[i];
-    const float grow = float(4.0 * pl.margin) + 1e-3f;
+    const float grow = float(100.0 * pl.margin) + 1e-3f;
     for (const std::vector<glm::dvec2>& piece : pl.pieces) {
       Box3f b;
-      for (const glm::dvec2& q : piece)
+      const glm::dvec4& pb = pl.pieceBounds[size_t(&piece - pl.pieces.data())];
+      const double slack = 4.0 * pl.margin;
+      for (const glm::dvec2 q :
+           {glm::dvec2(pb.x - slack, pb.y - slack), glm::dvec2(pb.z + slack, pb.y - slack),
+            glm::dvec2(pb.z + slack, pb.w + slack), glm::dvec2(pb.x - slack, pb.w + slack)})
         b.extend(glm::vec3(q.x * pl.u + q.y * pl.v + pl.top * pl.n));
       b.lo -= glm::vec3(grow);
       b.hi += glm::vec3(grow);
@@ -290,7 +297,13 @@ bool PlanarFusion::hidden(const Box3f& cell, const CellPlanes& cellPlanes,
     auto take = [&](const glm::dvec3& x) {
       const glm::dvec2 q(glm::dot(x, pl.u), glm::dot(x, pl.v));
       points.push_back(q);
-      if (insidePiece(pl.pieces[home], q, slack)) return true;
+      // A point counts as in a piece when it lies in the piece grown by
+      // `slack` and in its bounds grown by as much (a sharp corner's grown
+      // tip reaches farther: the pieces' grid holds only the bounds).
+      auto inBounds = [&](const glm::dvec4& b) {
+        return b.x <= q.x + slack && b.z >= q.x - slack && b.y <= q.y + slack && b.w >= q.y - slack;
+      };
+      if (inBounds(pl.pieceBounds[home]) && insidePiece(pl.pieces[home], q, slack)) return true;
       inOne = false;
       // Pieces whose u range can hold q: lowest u in [q.u - widest - slack, q.u + slack].
       const double from = q.x - pl.widest - slack;
@@ -298,8 +311,7 @@ bool PlanarFusion::hidden(const Box3f& cell, const CellPlanes& cellPlanes,
                                              [&](const glm::dvec4& b) { return b.x < from; }) -
                         pl.pieceBounds.begin());
       for (; k < pl.pieces.size() && pl.pieceBounds[k].x <= q.x + slack; ++k) {
-        const glm::dvec4& b = pl.pieceBounds[k];
-        if (b.z < q.x - slack || b.y > q.y + slack || b.w < q.y - slack) continue;
+        if (!inBounds(pl.pieceBounds[k])) continue;
         if (insidePiece(pl.pieces[k], q, slack)) {
           home = k;
           return true;
