@@ -10,8 +10,10 @@
 
 #include <algorithm>
 #include <boost/asio/connect.hpp>
+#include <chrono>
 #include <functional>
 #include <set>
+#include <thread>
 
 #include "common/core/error.h"
 #include "protocol/geometry/byte_coding.h"
@@ -99,6 +101,21 @@ TEST(Failover, FacesHeldFromAnotherSceneAreIgnored) {
   ServerFixture fx;
   const std::vector<uint32_t> held = firstLoad(fx);
   ASSERT_FALSE(held.empty());
+  // Without a database a session gets the coarse set first and the cell's
+  // own once a worker has refined it; every client below must find the
+  // refined set cached, or the first would get the coarse one and a later
+  // one the refined one. A client standing in the cell asks for the
+  // refinement; wait until it is cached.
+  TestClient warm(fx.port());
+  ASSERT_TRUE(warm.join("", wire::kProtocolVersion, 40.0f));
+  ASSERT_TRUE(loadCell(warm, fx, kEye).ready);
+  const glm::ivec3 cell = *fx.world().cellOf(glm::vec3(kEye));
+  const StreamServerConfig config;
+  const float radius = std::min(40.0f, config.maxRadius);
+  for (int k = 0;
+       k < 3000 && !fx.world().hasCellFaceSet(cell, CellLevel::Fine, config.policy, radius); ++k)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  ASSERT_TRUE(fx.world().hasCellFaceSet(cell, CellLevel::Fine, config.policy, radius));
   // What a client holding nothing gets now (the cell's sets are cached).
   TestClient fresh(fx.port());
   ASSERT_TRUE(fresh.join("", wire::kProtocolVersion, 40.0f));
