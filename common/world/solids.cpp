@@ -727,7 +727,10 @@ bool Solids::insideGroup(const RayQuery& rays, const glm::vec3& p, bool closedOn
       [&](uint32_t g) -> const Box3f& { return groupBounds_[g]; },
       // On a surface: outside by convention, except on the surface of a
       // closed solid for insideClosed (whose contract counts the surface in).
-      [&](uint32_t t) { return closedSurfaceInside && groupClosed_[groupOf_[componentOf_[t]]]; });
+      [&](uint32_t t) {
+        const uint32_t c = t < componentOf_.size() ? componentOf_[t] : kNoHit;
+        return closedSurfaceInside && c != kNoHit && groupClosed_[groupOf_[c]];
+      });
 }
 
 bool Solids::insideEnclosure(const RayQuery& rays, const glm::vec3& p) const {

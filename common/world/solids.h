@@ -170,11 +170,13 @@ class Solids {
   // enclosures whose triangles `ray` crosses an odd number of times, into
   // `odd`, sorted and each once (hits of triangles this was not built from
   // count for nothing). False, with `odd` empty, if the ray starts on a
-  // surface (a hit at t = 0).
+  // surface (a hit at t = 0, on any triangle the ray query holds).
   bool oddEnclosures(const RayQuery& rays, const Ray& ray, std::vector<uint32_t>& odd) const;
   // The number of test directions (solidTestDirections()) along which the
   // upward ray from `point` crosses `enclosure` an odd number of times; -1
-  // if `point` lies on a surface.
+  // if `point` lies on a surface. Each ray reaches just past the
+  // enclosure's bounds (their diagonal plus the point's distance from
+  // their centre, plus a metre), so the rest of the scene costs nothing.
   int enclosureVotes(const RayQuery& rays, const glm::vec3& point, uint32_t enclosure) const;
 
  private:

@@ -250,7 +250,7 @@ struct HorizonFusion::Impl {
 
   // The enclosure whose interior holds p by all three votes
   // (Solids::oddEnclosures), or kNoHit.
-  uint32_t insideClosed(const glm::vec3& p) const {
+  uint32_t enclosureHolding(const glm::vec3& p) const {
     std::vector<uint32_t> first, other, both;
     const auto& dirs = parityDirections();
     const float far = std::numeric_limits<float>::infinity();
@@ -277,13 +277,13 @@ struct HorizonFusion::Impl {
   // lie above its floor, tested at mid-gap, or again midway between the
   // floor and b when mid-gap is not above it; kNoHit if none.
   uint32_t insideAbove(double x, double z, double a, double b) const {
-    const uint32_t e = insideClosed(glm::vec3(float(x), float(0.5 * (a + b)), float(z)));
+    const uint32_t e = enclosureHolding(glm::vec3(float(x), float(0.5 * (a + b)), float(z)));
     if (e == kNoHit) return e;
     const double floor = floorOf(e) + margin;
     if (floor < 0.5 * (a + b) - margin) return e;
     if (b - floor <= 4.0 * margin) return kNoHit;
     const double y = 0.5 * (floor + b);
-    return insideClosed(glm::vec3(float(x), float(y), float(z))) == e ? e : kNoHit;
+    return enclosureHolding(glm::vec3(float(x), float(y), float(z))) == e ? e : kNoHit;
   }
 
   void build(const HorizonFusionOptions& o);
