@@ -529,7 +529,7 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
   };
 
   // Solids fused within a plane, for the faces no single occluder hides.
-  const PlanarFusion::CellPlanes planes =
+  PlanarFusion::CellPlanes planes =
       options.planarFusion && planar_ ? planar_->planesFor(cell) : PlanarFusion::CellPlanes{};
   const CellSupport support(cell);
   auto faceAway = [&](const Face& f) {

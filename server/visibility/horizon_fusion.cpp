@@ -126,10 +126,11 @@
 // Cost: the horizon of a sample is traced lazily, bin by bin, only where a
 // face still needs it, and each bin only as far as the faces asking need
 // (their R_min), stopping at the first step that hides the face; a later
-// face resumes the walk where it stopped. A bin skips blocks of 8 x 8
-// columns whose highest top cannot raise it (skipping changes no step), and
-// stops once no column of the scene can raise it, or at the reach. Faces
-// seen from one sample are not tested from the next.
+// face resumes the walk where it stopped. A bin skips regions whose
+// highest top cannot raise it (skipping changes no step): first
+// super-blocks of 64 x 64 columns, then blocks of 8 x 8 within the rest,
+// and stops once no column of the scene can raise it, or at the reach.
+// Faces seen from one sample are not tested from the next.
 #include "server/visibility/horizon_fusion.h"
 
 #include <spdlog/spdlog.h>
@@ -238,6 +239,11 @@ struct HorizonFusion::Impl {
   static constexpr int kBlock = 8;
   int bx = 0, bz = 0;
   std::vector<float> blockTop;
+  // The same per super-block of kSuper x kSuper blocks: a horizon crossing
+  // a street grid or open land passes most of its blocks by these.
+  static constexpr int kSuper = 8;
+  int sx = 0, sz = 0;
+  std::vector<float> superTop;
   size_t solidColumns = 0;
   double margin = 1e-3;  // metres, for clipping and heights
 
@@ -612,6 +618,14 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
       b = std::max(b, t);
       if (t != kNoTop) maxTop = std::max(maxTop, double(t));
     }
+  sx = (bx + kSuper - 1) / kSuper;
+  sz = (bz + kSuper - 1) / kSuper;
+  superTop.assign(size_t(sx) * size_t(sz), kNoTop);
+  for (int j = 0; j < bz; ++j)
+    for (int i = 0; i < bx; ++i) {
+      float& t = superTop[size_t(j / kSuper) * size_t(sx) + size_t(i / kSuper)];
+      t = std::max(t, blockTop[size_t(j) * size_t(bx) + size_t(i)]);
+    }
 }
 
 namespace {
@@ -681,6 +695,7 @@ struct HorizonQuery {
     double tin = 0.0, t1 = 0.0;  // where the column is entered; where the walk ends
     double best = -kInf;         // the slope of the last step
     int block = -1;              // the block whose bound the walk last took
+    int super = -1;              // the super-block whose bound it last took
     bool done = false;           // nothing farther can add a step
   };
   struct Level {
@@ -715,6 +730,7 @@ struct HorizonQuery {
     walk.steps.clear();
     walk.best = -kInf;
     walk.block = -1;
+    walk.super = -1;
     walk.done = true;
     ++stats.horizonBins;
     const double phi = (double(k) + 0.5) * level.binWidth;
@@ -766,7 +782,7 @@ struct HorizonQuery {
     const double dtx = dir.x != 0.0 ? w.g / std::abs(dir.x) : kInf;
     const double dtz = dir.y != 0.0 ? w.g / std::abs(dir.y) : kInf;
     const double y = s.y, lowest = double(cell.lo.y) - w.margin;
-    int block = walk.block;
+    int block = walk.block, super = walk.super;
     bool done = false, found = false;
     // Into the next column along the ray; false once it leaves the grid.
     auto stepToNextColumn = [&] {
@@ -779,58 +795,71 @@ struct HorizonQuery {
       }
       return i >= 0 && j >= 0 && i < w.nx && j < w.nz;
     };
-    constexpr int kB = HorizonFusion::Impl::kBlock;
+    // A region (ri, rj) of `size` x `size` columns none of whose columns
+    // can raise the horizon is walked without reading its columns: a top h
+    // adds a step only with a slope above `best`, at most (h - y) / tin when
+    // h > y, and at most (h - y) / (the region's exit, or the reach)
+    // otherwise. The walk then jumps to the column just past the exit point
+    // (or steps one column when rounding keeps it inside: `again` is set,
+    // and the region is tested anew from there).
+    enum class Pass { Read, Moved, Done };
+    auto passRegion = [&](float top, int ri, int rj, int size, bool& again) {
+      again = false;
+      const double h = top;
+      double exit = t1;
+      if (dir.x != 0.0)
+        exit = std::min(exit, (glo.x + (ri + (si > 0)) * size * w.g - org.x) * invX);
+      if (dir.y != 0.0)
+        exit = std::min(exit, (glo.y + (rj + (sj > 0)) * size * w.g - org.y) * invZ);
+      const double bound = h == double(kNoTop) ? -kInf
+                                               : (h > y ? (tin > 1e-9 ? (h - y) / tin : kInf)
+                                                        : (h - y) / std::max(exit, 1e-9));
+      if (bound > best) return Pass::Read;
+      if (exit >= t1) return Pass::Done;
+      const glm::dvec2 p = org + (exit + 1e-7 * w.g) * dir;
+      const int ni = int(std::floor((p.x - glo.x) * invG));
+      const int nj = int(std::floor((p.y - glo.y) * invG));
+      if (ni < 0 || nj < 0 || ni >= w.nx || nj >= w.nz) return Pass::Done;
+      if (ni / size == ri && nj / size == rj) {
+        tin = std::min({tx, tz, t1});
+        if (!stepToNextColumn()) return Pass::Done;
+        again = true;
+        return Pass::Moved;
+      }
+      i = ni;
+      j = nj;
+      tin = exit;
+      tx = dir.x != 0.0 ? (glo.x + (i + (si > 0)) * w.g - org.x) * invX : kInf;
+      tz = dir.y != 0.0 ? (glo.y + (j + (sj > 0)) * w.g - org.y) * invZ : kInf;
+      return Pass::Moved;
+    };
+    constexpr int kB = HorizonFusion::Impl::kBlock, kS = kB * HorizonFusion::Impl::kSuper;
     for (;;) {
       if (!(tin < t1)) {
         done = true;
         break;
       }
       if (tin >= until || found) break;
-      // A block none of whose columns can raise the horizon is walked
-      // without reading its columns: a top h adds a step only with a slope
-      // above `best`, at most (h - y) / tin when h > y, and at most
-      // (h - y) / (the block's exit, or the reach) otherwise.
       const int b = (j / kB) * w.bx + i / kB;
       if (b != block) {
         block = b;
-        const double h = w.blockTop[size_t(b)];
-        const int bi = i / kB, bj = j / kB;
-        double exit = t1;
-        if (dir.x != 0.0)
-          exit = std::min(exit, (glo.x + (bi + (si > 0)) * kB * w.g - org.x) * invX);
-        if (dir.y != 0.0)
-          exit = std::min(exit, (glo.y + (bj + (sj > 0)) * kB * w.g - org.y) * invZ);
-        const double bound = h == double(kNoTop) ? -kInf
-                                                 : (h > y ? (tin > 1e-9 ? (h - y) / tin : kInf)
-                                                          : (h - y) / std::max(exit, 1e-9));
-        if (!(bound > best)) {
-          // Jump to where the ray leaves the block: the cell just past the
-          // exit point (stepped cell by cell if rounding keeps it inside).
-          if (exit >= t1) {
-            done = true;
-            break;
-          }
-          const glm::dvec2 p = org + (exit + 1e-7 * w.g) * dir;
-          const int ni = int(std::floor((p.x - glo.x) * invG));
-          const int nj = int(std::floor((p.y - glo.y) * invG));
-          if (ni < 0 || nj < 0 || ni >= w.nx || nj >= w.nz) {
-            done = true;
-            break;
-          }
-          if (ni / kB == bi && nj / kB == bj) {
-            tin = std::min({tx, tz, t1});
-            if (!stepToNextColumn()) {
-              done = true;
-              break;
-            }
-            block = -1;
-            continue;
-          }
-          i = ni;
-          j = nj;
-          tin = exit;
-          tx = dir.x != 0.0 ? (glo.x + (i + (si > 0)) * w.g - org.x) * invX : kInf;
-          tz = dir.y != 0.0 ? (glo.y + (j + (sj > 0)) * w.g - org.y) * invZ : kInf;
+        bool again = false;
+        const int c = (j / kS) * w.sx + i / kS;
+        Pass pass = Pass::Read;
+        if (c != super) {
+          super = c;
+          pass = passRegion(w.superTop[size_t(c)], i / kS, j / kS, kS, again);
+          if (again) super = -1;
+        }
+        if (pass == Pass::Read) {
+          pass = passRegion(w.blockTop[size_t(b)], i / kB, j / kB, kB, again);
+        }
+        if (pass == Pass::Done) {
+          done = true;
+          break;
+        }
+        if (pass == Pass::Moved) {
+          if (again) block = -1;
           continue;
         }
       }
@@ -872,6 +901,7 @@ struct HorizonQuery {
     walk.tin = tin;
     walk.best = best;
     walk.block = block;
+    walk.super = super;
     walk.done = done;
     return found;
   }

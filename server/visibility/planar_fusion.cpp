@@ -211,7 +211,7 @@ PlanarFusion::CellPlanes PlanarFusion::planesFor(const Box3f& cell) const {
   return out;
 }
 
-bool PlanarFusion::hidden(const Box3f& cell, const CellPlanes& cellPlanes,
+bool PlanarFusion::hidden(const Box3f& cell, CellPlanes& cellPlanes,
                           std::span<const glm::dvec3> vertices) const {
   if (vertices.empty()) return false;
   Box3f shaft = cell;
@@ -234,14 +234,29 @@ bool PlanarFusion::hidden(const Box3f& cell, const CellPlanes& cellPlanes,
     std::fill(stamp.begin(), stamp.end(), 0);
     query = 1;
   }
+  if (grid_.empty()) return false;
+  const glm::ivec2 dims = grid_.dims();
+  if (cellPlanes.slot.size() != size_t(dims.x) * size_t(dims.y))
+    cellPlanes.slot.assign(size_t(dims.x) * size_t(dims.y), 0);
   auto collect = [&](glm::ivec2 at) {
-    for (uint32_t piece : grid_.itemsIn(at))
-      if (const uint32_t i = pieceOwner_[piece]; cellPlanes.inFront[i] && stamp[i] != query) {
+    uint32_t& slot = cellPlanes.slot[size_t(at.y) * size_t(dims.x) + size_t(at.x)];
+    if (slot == 0) {
+      std::vector<uint32_t>& lists = cellPlanes.lists;
+      const size_t begin = lists.size();
+      for (uint32_t piece : grid_.itemsIn(at))
+        if (const uint32_t i = pieceOwner_[piece]; cellPlanes.inFront[i]) lists.push_back(i);
+      std::sort(lists.begin() + ptrdiff_t(begin), lists.end());
+      lists.erase(std::unique(lists.begin() + ptrdiff_t(begin), lists.end()), lists.end());
+      cellPlanes.ranges.emplace_back(uint32_t(begin), uint32_t(lists.size()));
+      slot = uint32_t(cellPlanes.ranges.size());
+    }
+    const auto [from, to] = cellPlanes.ranges[slot - 1];
+    for (uint32_t k = from; k < to; ++k)
+      if (const uint32_t i = cellPlanes.lists[k]; stamp[i] != query) {
         stamp[i] = query;
         candidates.push_back(i);
       }
   };
-  if (grid_.empty()) return false;
   {
     const glm::vec3 c = cell.center();
     const glm::vec2 a(c.x, c.z), b(float(vertices[0].x), float(vertices[0].z));
@@ -260,7 +275,6 @@ bool PlanarFusion::hidden(const Box3f& cell, const CellPlanes& cellPlanes,
     const glm::vec2 tDelta(
         d.x != 0.0f ? std::abs(1.0f / d.x) : std::numeric_limits<float>::infinity(),
         d.y != 0.0f ? std::abs(1.0f / d.y) : std::numeric_limits<float>::infinity());
-    const glm::ivec2 dims = grid_.dims();
     const size_t limit = size_t(std::abs(end.x - at.x) + std::abs(end.y - at.y)) + 2;
     for (size_t k = 0; k < limit; ++k) {
       // Cells outside the grid clamp to its border (xz_grid.h).

@@ -39,7 +39,8 @@
 //
 // Cost: per cell, the planes with the cell in front; per face, those of
 // them whose occluders' bounds meet the face's shaft and that have the face
-// behind. Thread safety: hidden() is const and may run concurrently.
+// behind. Thread safety: hidden() is const and may run concurrently, each
+// thread with its own CellPlanes.
 #pragma once
 
 #include <cstdint>
@@ -60,11 +61,20 @@ class PlanarFusion {
   explicit PlanarFusion(const OccluderSet& occluders);
 
   // The planes worth trying for a cell (those with the cell in front),
-  // computed once per cell.
+  // computed once per cell. hidden() keeps in it, for each cell of the
+  // pieces' grid it has read, the planes in front that the grid cell lists
+  // (each once), so that later faces of the same view cell read those short
+  // lists instead of every piece (on bigcity a 2 m grid cell lists about 23
+  // pieces, 7 of them of planes in front). One CellPlanes serves one thread.
   struct CellPlanes {
     std::vector<uint8_t> inFront;  // by plane
     size_t count = 0;              // planes in front
     bool empty() const { return count == 0; }
+    // Per grid cell: 0 until read, then 1 + its index in `ranges`, the range
+    // of `lists` holding its planes in front.
+    std::vector<uint32_t> slot;
+    std::vector<std::pair<uint32_t, uint32_t>> ranges;
+    std::vector<uint32_t> lists;
   };
   CellPlanes planesFor(const Box3f& cell) const;
 
@@ -74,8 +84,7 @@ class PlanarFusion {
   // vertex are tried (the line along it must cross a piece), found by
   // walking the pieces' X/Z grid along it: the cost follows the segment's
   // length, not the number of planes (bigcity has tens of thousands).
-  bool hidden(const Box3f& cell, const CellPlanes& planes,
-              std::span<const glm::dvec3> vertices) const;
+  bool hidden(const Box3f& cell, CellPlanes& planes, std::span<const glm::dvec3> vertices) const;
 
   size_t planeCount() const { return planes_.size(); }
 

@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "common/generate/scene_spec.h"
 #include "common/raycast/ray_query.h"
 #include "common/raycast/sampled_visibility.h"
 #include "server/visibility/epsilon_pvs.h"
@@ -156,14 +157,48 @@ TEST(PlanarFusion, TakesOnlyPlanesWithTheCellInFront) {
   // A cell that reaches into the wall's front plane has it behind no
   // candidate plane of the wall's front (z = 5, normal -z).
   const Box3f touching(glm::vec3(-1.0f, 0.2f, 3.0f), glm::vec3(1.0f, 1.8f, 5.1f));
-  const PlanarFusion::CellPlanes planes = fusion.planesFor(touching);
+  PlanarFusion::CellPlanes planes = fusion.planesFor(touching);
   const FlatTriangles triangles = flattenScene(w.scene);
   std::vector<glm::dvec3> face;
   for (size_t t = 0; t < triangles.size(); ++t)
     if (triangles.faceIds[t] == w.target)
       for (int k = 0; k < 3; ++k) face.push_back(glm::dvec3(triangles.vertex(t, k)));
   EXPECT_FALSE(fusion.hidden(touching, planes, face));
-  EXPECT_TRUE(fusion.hidden(w.cell, fusion.planesFor(w.cell), face));
+  PlanarFusion::CellPlanes inFront = fusion.planesFor(w.cell);
+  EXPECT_TRUE(fusion.hidden(w.cell, inFront, face));
+}
+
+// A cell's planes keep the lists of the grid cells read for one face for
+// the next: every face gets the answer a fresh CellPlanes gives it, faces
+// taken in either order (interior2's walls of patches, three cells).
+TEST(PlanarFusion, AnswersEveryFaceAsAFreshCellWouldWhenTheCellsListsAreKept) {
+  const Scene scene = openScene("interior2");
+  const OccluderSet occluders = extractOccluders(scene);
+  const PlanarFusion fusion(occluders);
+  const FlatTriangles triangles = flattenScene(scene);
+  std::vector<std::vector<glm::dvec3>> faces(scene.faceCount);
+  for (size_t t = 0; t < triangles.size(); ++t)
+    for (int k = 0; k < 3; ++k)
+      faces[triangles.faceIds[t]].push_back(glm::dvec3(triangles.vertex(t, k)));
+  const glm::vec3 c = scene.bounds().center();
+  size_t hiddenCount = 0;
+  for (const glm::vec3 at :
+       {c, c + glm::vec3(7.0f, 0.0f, -5.0f), c + glm::vec3(-9.0f, 0.0f, 6.0f)}) {
+    const Box3f cell(glm::vec3(at.x - 1.0f, scene.bounds().lo.y + 0.2f, at.z - 1.0f),
+                     glm::vec3(at.x + 1.0f, scene.bounds().lo.y + 1.8f, at.z + 1.0f));
+    std::vector<uint8_t> fresh(faces.size());
+    for (size_t f = 0; f < faces.size(); ++f) {
+      PlanarFusion::CellPlanes own = fusion.planesFor(cell);
+      fresh[f] = fusion.hidden(cell, own, faces[f]);
+      hiddenCount += fresh[f];
+    }
+    PlanarFusion::CellPlanes forward = fusion.planesFor(cell), backward = forward;
+    for (size_t f = 0; f < faces.size(); ++f)
+      EXPECT_EQ(fusion.hidden(cell, forward, faces[f]), bool(fresh[f])) << "face " << f;
+    for (size_t f = faces.size(); f-- > 0;)
+      EXPECT_EQ(fusion.hidden(cell, backward, faces[f]), bool(fresh[f])) << "face " << f;
+  }
+  EXPECT_GT(hiddenCount, 0u) << "the premise: some face is hidden by fused patches";
 }
 
 }  // namespace
