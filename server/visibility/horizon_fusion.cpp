@@ -690,6 +690,7 @@ struct HorizonQuery {
   // at once.
   struct Walk {
     std::vector<Step> steps;
+    glm::dvec2 dir{1.0, 0.0};    // the bin's central direction (x, z)
     int i = 0, j = 0;            // the column the walk is in
     double tx = 0.0, tz = 0.0;   // ray distances to its next X and Z column sides
     double tin = 0.0, t1 = 0.0;  // where the column is entered; where the walk ends
@@ -735,6 +736,7 @@ struct HorizonQuery {
     ++stats.horizonBins;
     const double phi = (double(k) + 0.5) * level.binWidth;
     const glm::dvec2 dir(std::cos(phi), std::sin(phi));
+    walk.dir = dir;
     const glm::dvec2 org(s.x, s.z);
     // Enter the grid's rectangle.
     const glm::dvec2 glo = w.lo, ghi = w.lo + glm::dvec2(w.nx, w.nz) * w.g;
@@ -761,15 +763,14 @@ struct HorizonQuery {
     walk.done = false;
   }
 
-  // Proof, step 5, lazily: walks bin k on until it has every step closer
+  // Proof, step 5, lazily: walks a bin on until it has every step closer
   // than `until` (or the walk is done), or, earlier, until a new step
   // satisfies `hides`. The steps come out as the whole walk would make them:
   // walking a prefix changes none.
   template <class Hides>
-  bool advance(const Level& level, size_t k, Walk& walk, double until, Hides&& hides) {
+  bool advance(const Level& level, Walk& walk, double until, Hides&& hides) {
     if (walk.done || walk.tin >= until) return false;
-    const double phi = (double(k) + 0.5) * level.binWidth;
-    const glm::dvec2 dir(std::cos(phi), std::sin(phi));
+    const glm::dvec2 dir = walk.dir;
     const glm::dvec2 org(s.x, s.z);
     const glm::dvec2 glo = w.lo;
     const double reach = level.reach, t1 = walk.t1;
@@ -929,7 +930,7 @@ struct HorizonQuery {
       if (!(st.slope > slope)) break;  // earlier steps are lower still
       if (stepHides(st, rmin, slope, minY)) return true;
     }
-    return advance(level, k, walk, rmin,
+    return advance(level, walk, rmin,
                    [&](const Step& st) { return stepHides(st, rmin, slope, minY); });
   }
 

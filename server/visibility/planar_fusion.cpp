@@ -189,9 +189,14 @@ PlanarFusion::PlanarFusion(const OccluderSet& occluders) {
       all.extend(b);
     }
   }
+  // Grid cells of 8 m (more on scenes wider than 8 km): a line crosses a
+  // quarter of the cells it would at 2 m, and each cell's list of planes
+  // in front (CellPlanes) is read once per view cell, so longer lists cost
+  // little (bigcity, 4 m view cells: 2 m 225 ms a cell, 6 m 208, 8 m 192,
+  // 12 m 195-200, 24 m 244).
   if (!all.empty()) {
     const float extent = std::max(all.hi.x - all.lo.x, all.hi.z - all.lo.z);
-    grid_ = XzGrid(all, std::max(extent / 1024.0f, 2.0f), boxes);
+    grid_ = XzGrid(all, std::max(extent / 1024.0f, 8.0f), boxes);
   }
 }
 
