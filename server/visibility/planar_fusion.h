@@ -64,8 +64,9 @@ class PlanarFusion {
   // computed once per cell. hidden() keeps in it, for each cell of the
   // pieces' grid it has read, the planes in front that the grid cell lists
   // (each once), so that later faces of the same view cell read those short
-  // lists instead of every piece (on bigcity a 2 m grid cell lists about 23
-  // pieces, 7 of them of planes in front). One CellPlanes serves one thread.
+  // lists instead of every piece (on bigcity, with 2 m grid cells, a cell
+  // listed about 23 pieces, 7 of them of planes in front). One CellPlanes
+  // serves one thread.
   struct CellPlanes {
     std::vector<uint8_t> inFront;  // by plane
     size_t count = 0;              // planes in front
