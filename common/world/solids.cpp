@@ -718,18 +718,18 @@ bool Solids::insideGroup(const RayQuery& rays, const glm::vec3& p, bool closedOn
   for (uint32_t g : grid_.itemsIn(grid_.cellOf({p.x, p.z})))
     if (groupBounds_[g].contains(p) && (!closedOnly || groupClosed_[g])) candidates.push_back(g);
   if (candidates.empty()) return false;
+  // The group of a hit triangle; kNoHit for one these solids were not built from.
+  auto groupOfHit = [&](uint32_t t) {
+    const uint32_t c = t < componentOf_.size() ? componentOf_[t] : kNoHit;
+    return c == kNoHit ? kNoHit : groupOf_[c];
+  };
   return oddMajority(
-      rays, p, candidates,
-      [&](uint32_t t) {
-        const uint32_t c = t < componentOf_.size() ? componentOf_[t] : kNoHit;
-        return c == kNoHit ? kNoHit : groupOf_[c];
-      },
-      [&](uint32_t g) -> const Box3f& { return groupBounds_[g]; },
+      rays, p, candidates, groupOfHit, [&](uint32_t g) -> const Box3f& { return groupBounds_[g]; },
       // On a surface: outside by convention, except on the surface of a
       // closed solid for insideClosed (whose contract counts the surface in).
       [&](uint32_t t) {
-        const uint32_t c = t < componentOf_.size() ? componentOf_[t] : kNoHit;
-        return closedSurfaceInside && c != kNoHit && groupClosed_[groupOf_[c]];
+        const uint32_t g = groupOfHit(t);
+        return closedSurfaceInside && g != kNoHit && groupClosed_[g];
       });
 }
 
