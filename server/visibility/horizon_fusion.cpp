@@ -254,6 +254,16 @@ struct HorizonFusion::Impl {
   std::vector<uint8_t> emptyReach;
   size_t solidColumns = 0;
   double margin = 1e-3;  // metres, for clipping and heights
+  // Per level of bins (HorizonFusion::kRefine times finer each), bin k's
+  // central direction (cos, sin of its azimuth) and the half-spaces
+  // (x, z normals) bounding its wedge, each side widened by 1e-9 rad: the
+  // same for every sample and cell, so a cull computes no sines.
+  struct BinTable {
+    double binWidth = 0.0;
+    std::vector<glm::dvec2> centre;
+    std::vector<glm::dvec3> lowSide, highSide;
+  };
+  std::vector<BinTable> binTables;
 
   Impl(const Scene& s, std::unique_ptr<const StaticWorld> own, const StaticWorld& world)
       : scene(s),
@@ -309,6 +319,19 @@ struct HorizonFusion::Impl {
 };
 
 void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
+  size_t nbins = size_t(o.azimuthBins);
+  for (int l = 0; l <= o.refinements; ++l, nbins *= size_t(HorizonFusion::kRefine)) {
+    BinTable& t = binTables.emplace_back();
+    t.binWidth = 2.0 * std::numbers::pi / double(nbins);
+    for (size_t k = 0; k < nbins; ++k) {
+      const double phi = (double(k) + 0.5) * t.binWidth;
+      const double p0 = double(k) * t.binWidth - 1e-9, p1 = double(k + 1) * t.binWidth + 1e-9;
+      t.centre.emplace_back(std::cos(phi), std::sin(phi));
+      // The wedge between azimuths p0 and p1 (x = cos, z = sin).
+      t.lowSide.emplace_back(std::sin(p0), 0.0, -std::cos(p0));
+      t.highSide.emplace_back(-std::sin(p1), 0.0, std::cos(p1));
+    }
+  }
   const size_t nc = solids.enclosureCount();
   hasColumns.assign(nc, 0);
   // Triangles by face (counting sort).
@@ -727,6 +750,7 @@ struct HorizonQuery {
     bool done = false;           // nothing farther can add a step
   };
   struct Level {
+    const HorizonFusion::Impl::BinTable* table = nullptr;
     double binWidth = 0.0, reach = 0.0;
     std::vector<uint32_t> traced;  // generation that started each bin's walk
     std::vector<Walk> bins;
@@ -735,6 +759,7 @@ struct HorizonQuery {
   glm::dvec3 s{0.0};
   uint32_t generation = 0;
   std::vector<glm::dvec3> poly, tmp;  // scratch for clipping faces to bins
+  bool skipBlocks = true;             // HorizonFusionOptions::skipBlocks
 
   // Proof, step 2: enclosures whose floor the cell reaches down to.
   void excludeSolidsBelowTheCell() {
@@ -761,8 +786,7 @@ struct HorizonQuery {
     walk.super = -1;
     walk.done = true;
     ++stats.horizonBins;
-    const double phi = (double(k) + 0.5) * level.binWidth;
-    const glm::dvec2 dir(std::cos(phi), std::sin(phi));
+    const glm::dvec2 dir = level.table->centre[k];
     walk.dir = dir;
     const glm::dvec2 org(s.x, s.z);
     // Enter the grid's rectangle.
@@ -812,6 +836,7 @@ struct HorizonQuery {
     const double y = s.y, lowest = double(cell.lo.y) - w.margin;
     int block = walk.block, super = walk.super;
     bool done = false, found = false;
+    const bool skip = skipBlocks;
     // Into the next column along the ray; false once it leaves the grid.
     auto stepToNextColumn = [&] {
       if (tx < tz) {
@@ -872,7 +897,7 @@ struct HorizonQuery {
       }
       if (tin >= until || found) break;
       const int b = (j / kB) * w.bx + i / kB;
-      if (b != block) {
+      if (b != block && skip) {
         block = b;
         bool again = false;
         const int c = (j / kS) * w.sx + i / kS;
@@ -993,15 +1018,12 @@ struct HorizonQuery {
     bool hiddenHere = binHides(level, k, rmin, slope, minY);
     if (!hiddenHere && !whole) {
       double bmin = kInf, bmax = 0.0, bminY = kInf, bmaxY = -kInf;
-      const double p0 = double(b) * level.binWidth - 1e-9;
-      const double p1 = double(b + 1) * level.binWidth + 1e-9;
       for (uint32_t n = w.faceStart[f]; n < w.faceStart[f + 1]; ++n) {
         const uint32_t t = w.faceTris[n];
         poly.clear();
         for (int v = 0; v < 3; ++v) poly.push_back(glm::dvec3(w.tris.vertex(t, v)) - s);
-        // The wedge between azimuths p0 and p1 (x = cos, z = sin).
-        clipToHalfSpace(poly, tmp, {std::sin(p0), 0.0, -std::cos(p0)}, 0.0);
-        clipToHalfSpace(poly, tmp, {-std::sin(p1), 0.0, std::cos(p1)}, 0.0);
+        clipToHalfSpace(poly, tmp, level.table->lowSide[k], 0.0);
+        clipToHalfSpace(poly, tmp, level.table->highSide[k], 0.0);
         for (size_t v = 0; v < poly.size(); ++v) {
           const glm::dvec3& a = poly[v];
           const glm::dvec3& c = poly[(v + 1) % poly.size()];
@@ -1076,7 +1098,7 @@ HorizonFusionResult HorizonFusion::cull(const Box3f& cell,
   HorizonFusionResult r;
   r.stats.candidateFaces = candidates.size();
   const Impl& w = *impl_;
-  HorizonQuery q{w, cell, r.stats, {}, {}, {}, 0, {}, {}};
+  HorizonQuery q{w, cell, r.stats, {}, {}, {}, 0, {}, {}, options_.skipBlocks};
   // Faces that can be tested: static faces of this scene.
   std::vector<uint32_t> hidden;
   for (uint32_t f : candidates)
@@ -1086,7 +1108,9 @@ HorizonFusionResult HorizonFusion::cull(const Box3f& cell,
     size_t nbins = size_t(options_.azimuthBins);
     for (int l = 0; l <= options_.refinements; ++l, nbins *= size_t(kRefine)) {
       HorizonQuery::Level& level = q.levels.emplace_back();
-      level.binWidth = 2.0 * std::numbers::pi / double(nbins);
+      level.table = &w.binTables[size_t(l)];
+      VS_CHECK(level.table->centre.size() == nbins);
+      level.binWidth = level.table->binWidth;
       level.reach = 2.0 * options_.binMargin / level.binWidth;
       level.traced.assign(nbins, 0);
       level.bins.resize(nbins);

@@ -73,6 +73,11 @@ struct HorizonFusionOptions {
   // square hidden by buildings 300 m away). Traced lazily, only for the bins
   // that need them. 0: azimuthBins only.
   int refinements = 1;
+  // Walks pass blocks and super-blocks of columns that cannot raise their
+  // horizon, and runs of empty blocks, without reading their columns. The
+  // steps and the culled faces are the same either way; false reads every
+  // column (for tests and as the benchmark's baseline).
+  bool skipBlocks = true;
 };
 
 struct HorizonFusionStats {
