@@ -133,6 +133,12 @@
 // one with a top (on city2 all but 0.3% of the skipped blocks were empty,
 // one at a time), and stops once no column of the scene can raise it, or
 // at the reach.
+// A bin remembers the distance of the step that last hid a face in it; at
+// the next sample it first reads only the columns from 4 m before to 2 m
+// after that distance (a piece of walk: step 5 holds for every column the
+// central ray crosses, wherever the reading starts), and walks from the
+// sample only for a face that piece does not hide (city2 4 m cells: 11.6 k
+// bins walked a cell -> 4.3 k, columns read 228 k -> 158 k).
 // Faces seen from one sample are not tested from the next.
 #include "server/visibility/horizon_fusion.h"
 
@@ -144,6 +150,7 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <optional>
 
 #include "common/core/check.h"
 #include "common/core/timer.h"
@@ -754,12 +761,20 @@ struct HorizonQuery {
     double binWidth = 0.0, reach = 0.0;
     std::vector<uint32_t> traced;  // generation that started each bin's walk
     std::vector<Walk> bins;
+    // Per bin, the distance of the step that last hid a face in it (from
+    // this sample or an earlier one; negative: none yet).
+    std::vector<double> hint;
+    std::vector<uint32_t> pieceTraced;  // generation that read each bin's piece
+    std::vector<Walk> pieces;
   };
   std::vector<Level> levels;
   glm::dvec3 s{0.0};
   uint32_t generation = 0;
   std::vector<glm::dvec3> poly, tmp;  // scratch for clipping faces to bins
   bool skipBlocks = true;             // HorizonFusionOptions::skipBlocks
+  // Metres before and after a bin's last hiding distance that its piece of
+  // walk covers: samples of a cell are at most a few metres apart.
+  static constexpr double kHintBefore = 4.0, kHintAfter = 2.0;
 
   // Proof, step 2: enclosures whose floor the cell reaches down to.
   void excludeSolidsBelowTheCell() {
@@ -779,19 +794,20 @@ struct HorizonQuery {
 
   // Proof, step 5: starts the walk of bin k along the bin's central ray
   // over the shrunk columns (Amanatides and Woo's grid walk).
-  void start(const Level& level, size_t k, Walk& walk) {
+  // The same from distance `from` to `to` only (a piece of the walk).
+  void start(const Level& level, size_t k, Walk& walk, double from = 0.0, double to = kInf) {
     walk.steps.clear();
     walk.best = -kInf;
     walk.block = -1;
     walk.super = -1;
     walk.done = true;
-    ++stats.horizonBins;
+    if (from == 0.0) ++stats.horizonBins;
     const glm::dvec2 dir = level.table->centre[k];
     walk.dir = dir;
     const glm::dvec2 org(s.x, s.z);
     // Enter the grid's rectangle.
     const glm::dvec2 glo = w.lo, ghi = w.lo + glm::dvec2(w.nx, w.nz) * w.g;
-    double t0 = 0.0, t1 = level.reach;
+    double t0 = from, t1 = std::min(to, level.reach);
     for (int a = 0; a < 2; ++a) {
       if (dir[a] == 0.0) {
         if (org[a] < glo[a] || org[a] > ghi[a]) return;
@@ -979,21 +995,49 @@ struct HorizonQuery {
     return a > 0.0 && st.d * (a + st.base - minY) <= rmin * a * (1.0 - 1e-9);
   }
 
-  // Proof, step 6, within one bin: its steps so far first, then the walk
-  // on to rmin, stopping at the first step that hides.
+  // The last of `steps` (a horizon's, slopes rising) that hides points at
+  // horizontal distance at least rmin, of slope at most `slope` and at least
+  // minY high; null if none.
+  const Step* hidingStep(const std::vector<Step>& steps, double rmin, double slope,
+                         double minY) const {
+    for (size_t n = steps.size(); n-- > 0;) {
+      const Step& st = steps[n];
+      if (!(st.slope > slope)) break;  // earlier steps are lower still
+      if (stepHides(st, rmin, slope, minY)) return &st;
+    }
+    return nullptr;
+  }
+
+  // Proof, step 6, within one bin. Until the bin's walk is needed for this
+  // sample: the steps of a piece of walk around the distance where a step
+  // last hid a face in it (every column the central ray crosses within the
+  // reach gives a step, step 5, wherever the walk starts), read once per
+  // sample. Then the walk's steps so far, then the walk on to rmin,
+  // stopping at the first step that hides.
   bool binHides(Level& level, size_t k, double rmin, double slope, double minY) {
     Walk& walk = level.bins[k];
+    if (level.traced[k] != generation && level.hint[k] >= 0.0) {
+      Walk& piece = level.pieces[k];
+      if (level.pieceTraced[k] != generation) {
+        level.pieceTraced[k] = generation;
+        const double d = level.hint[k];
+        start(level, k, piece, std::max(0.0, d - kHintBefore), d + kHintAfter);
+        advance(level, piece, kInf, [](const Step&) { return false; });
+      }
+      if (hidingStep(piece.steps, rmin, slope, minY)) return true;
+    }
     if (level.traced[k] != generation) {
       start(level, k, walk);
       level.traced[k] = generation;
     }
-    for (size_t n = walk.steps.size(); n-- > 0;) {
-      const Step& st = walk.steps[n];
-      if (!(st.slope > slope)) break;  // earlier steps are lower still
-      if (stepHides(st, rmin, slope, minY)) return true;
+    if (const Step* st = hidingStep(walk.steps, rmin, slope, minY)) {
+      level.hint[k] = st->d;
+      return true;
     }
-    return advance(level, walk, rmin,
-                   [&](const Step& st) { return stepHides(st, rmin, slope, minY); });
+    const bool found = advance(level, walk, rmin,
+                               [&](const Step& st) { return stepHides(st, rmin, slope, minY); });
+    if (found) level.hint[k] = walk.steps.back().d;
+    return found;
   }
 
   // An upper bound of the elevation slope of points at horizontal distance
@@ -1114,6 +1158,9 @@ HorizonFusionResult HorizonFusion::cull(const Box3f& cell,
       level.reach = 2.0 * options_.binMargin / level.binWidth;
       level.traced.assign(nbins, 0);
       level.bins.resize(nbins);
+      level.hint.assign(nbins, -1.0);
+      level.pieceTraced.assign(nbins, 0);
+      level.pieces.resize(nbins);
     }
     // Samples: centres of a grid of rectangles of half-diagonal <= epsilon
     // on the top face (proof, step 4).
