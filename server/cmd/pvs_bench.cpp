@@ -427,21 +427,29 @@ int runPvsBench(const PvsBenchOptions& options) {
         gt.probeSamples = std::max(1, options.groundTruthProbes);
         truths.push_back(sampleVisibleFaces(*w.oracleRays, *w.statics.triangles, cell, gt).faces);
       }
+      // Occluders are shrunk by epsilon + bin margin, rounded up to whole
+      // columns: the last rows shrink less (one column fewer on a 0.5 m
+      // grid) at the price of more samples or more bins.
       struct Knob {
-        double epsilon;
-        int refinements;
+        double epsilon, binMargin;
+        int azimuthBins, refinements;
       };
-      const Knob knobs[] = {{2.0, 1}, {1.0, 0}, {1.0, 1}, {1.0, 2}, {0.5, 1}};
+      const Knob knobs[] = {{2.0, 0.5, 1024, 1},  {1.0, 0.5, 1024, 0}, {1.0, 0.5, 1024, 1},
+                            {1.0, 0.5, 1024, 2},  {0.5, 0.5, 1024, 1}, {0.74, 0.25, 2048, 1},
+                            {0.74, 0.25, 1024, 2}};
       if (human)
         fmt::print(
             "\nOcclusion horizons' knobs ({}, the 4 m cells above; after the single occluders "
             "with back faces; default epsilon {} m, {} refinement)\n"
-            "  {:>11} {:>11} {:>10} {:>12} {:>12} {:>10} {:>8}\n",
+            "  {:>11} {:>10} {:>6} {:>11} {:>10} {:>12} {:>12} {:>10} {:>8}\n",
             spec, HorizonFusionOptions{}.epsilon, HorizonFusionOptions{}.refinements, "epsilon (m)",
-            "refinements", "reach (m)", "median ratio", "fusion ms", "build s", "missing");
+            "margin (m)", "bins", "refinements", "reach (m)", "median ratio", "fusion ms",
+            "build s", "missing");
       for (const Knob& k : knobs) {
         HorizonFusionOptions ho;
         ho.epsilon = k.epsilon;
+        ho.binMargin = k.binMargin;
+        ho.azimuthBins = k.azimuthBins;
         ho.refinements = k.refinements;
         const HorizonFusion fusion(w.scene, w.statics, ho);
         std::vector<double> ratio, ms;
@@ -458,6 +466,8 @@ int runPvsBench(const PvsBenchOptions& options) {
                              std::pow(double(HorizonFusion::kRefine), ho.refinements);
         out["horizon_knobs"].push_back({{"scene", spec},
                                         {"epsilon_m", k.epsilon},
+                                        {"bin_margin_m", k.binMargin},
+                                        {"azimuth_bins", k.azimuthBins},
                                         {"refinements", k.refinements},
                                         {"reach_m", reach},
                                         {"median_pvs_over_seen", median(ratio)},
@@ -465,9 +475,10 @@ int runPvsBench(const PvsBenchOptions& options) {
                                         {"build_s", fusion.prepareMs() / 1000.0},
                                         {"missing_faces", missing}});
         if (human)
-          fmt::print("  {:>11.2f} {:>11} {:>10.0f} {:>12.2f} {:>12.2f} {:>10.1f} {:>8}\n",
-                     k.epsilon, k.refinements, reach, median(ratio), median(ms),
-                     fusion.prepareMs() / 1000.0, missing);
+          fmt::print(
+              "  {:>11.2f} {:>10.2f} {:>6} {:>11} {:>10.0f} {:>12.2f} {:>12.2f} {:>10.1f} {:>8}\n",
+              k.epsilon, k.binMargin, k.azimuthBins, k.refinements, reach, median(ratio),
+              median(ms), fusion.prepareMs() / 1000.0, missing);
       }
     }
 
