@@ -127,19 +127,16 @@
 // face still needs it, and each bin only as far as the faces asking need
 // (their R_min), stopping at the first step that hides the face; a later
 // face resumes the walk where it stopped. A bin skips regions whose
-// highest top cannot raise it (skipping changes no step): first
-// super-blocks of 64 x 64 columns, then blocks of 8 x 8 within the rest,
-// where an empty block passes at once every block nearer than the nearest
-// one with a top (on city2 all but 0.3% of the skipped blocks were empty,
-// one at a time), and stops once no column of the scene can raise it, or
-// at the reach.
-// A bin remembers the distance of the step that last hid a face in it; at
-// the next sample it first reads only the columns from 4 m before to 2 m
-// after that distance (a piece of walk: step 5 holds for every column the
-// central ray crosses, wherever the reading starts), and walks from the
-// sample only for a face that piece does not hide (city2 4 m cells: 11.6 k
-// bins walked a cell -> 4.3 k, columns read 228 k -> 158 k).
-// Faces seen from one sample are not tested from the next.
+// highest top cannot raise it (skipping changes no step but the last bits of the distances after a
+// jump, each still a distance within its square by step 5): first super-blocks of 64 x 64 columns,
+// then blocks of 8 x 8 within the rest, where an empty block passes at once every block nearer than
+// the nearest one with a top (on city2 all but 0.3% of the skipped blocks were empty, one at a
+// time), and stops once no column of the scene can raise it, or at the reach. A bin remembers the
+// distance of the step that last hid a face in it; at the next sample it first reads only the
+// columns from 4 m before to 2 m after that distance (a piece of walk: step 5 holds for every
+// column the central ray crosses, wherever the reading starts), and walks from the sample only for
+// a face that piece does not hide (city2 4 m cells: 11.6 k bins walked a cell -> 4.3 k, columns
+// read 228 k -> 158 k). Faces seen from one sample are not tested from the next.
 #include "server/visibility/horizon_fusion.h"
 
 #include <spdlog/spdlog.h>
@@ -743,8 +740,8 @@ struct HorizonQuery {
   // A bin's walk along its central ray, resumed where a face needs it to
   // reach farther: `steps` are those of the columns entered before `tin`.
   // Everything the walk carries from column to column is kept, so a walk
-  // made in several pieces takes the same steps, bit for bit, as one made
-  // at once.
+  // resumed several times takes the same steps, bit for bit, as one made at
+  // once.
   struct Walk {
     std::vector<Step> steps;
     glm::dvec2 dir{1.0, 0.0};    // the bin's central direction (x, z)
@@ -794,14 +791,16 @@ struct HorizonQuery {
 
   // Proof, step 5: starts the walk of bin k along the bin's central ray
   // over the shrunk columns (Amanatides and Woo's grid walk).
-  // The same from distance `from` to `to` only (a piece of the walk).
-  void start(const Level& level, size_t k, Walk& walk, double from = 0.0, double to = kInf) {
+  // A piece of walk (`from` > 0 or `to` finite: the columns between those
+  // distances only) is not counted as a bin traced.
+  void start(const Level& level, size_t k, Walk& walk, double from = 0.0, double to = kInf,
+             bool piece = false) {
     walk.steps.clear();
     walk.best = -kInf;
     walk.block = -1;
     walk.super = -1;
     walk.done = true;
-    if (from == 0.0) ++stats.horizonBins;
+    if (!piece) ++stats.horizonBins;
     const glm::dvec2 dir = level.table->centre[k];
     walk.dir = dir;
     const glm::dvec2 org(s.x, s.z);
@@ -1021,7 +1020,7 @@ struct HorizonQuery {
       if (level.pieceTraced[k] != generation) {
         level.pieceTraced[k] = generation;
         const double d = level.hint[k];
-        start(level, k, piece, std::max(0.0, d - kHintBefore), d + kHintAfter);
+        start(level, k, piece, std::max(0.0, d - kHintBefore), d + kHintAfter, true);
         advance(level, piece, kInf, [](const Step&) { return false; });
       }
       if (hidingStep(piece.steps, rmin, slope, minY)) return true;

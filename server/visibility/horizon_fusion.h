@@ -75,8 +75,10 @@ struct HorizonFusionOptions {
   int refinements = 1;
   // Walks pass blocks and super-blocks of columns that cannot raise their
   // horizon, and runs of empty blocks, without reading their columns. The
-  // steps and the culled faces are the same either way; false reads every
-  // column (for tests and as the benchmark's baseline).
+  // steps are the same either way up to the last bits of their distances (a
+  // jump recomputes the distance to the next column sides where the walk
+  // adds them up); false reads every column (for tests and as the
+  // benchmark's baseline).
   bool skipBlocks = true;
 };
 
