@@ -127,16 +127,20 @@
 // face still needs it, and each bin only as far as the faces asking need
 // (their R_min), stopping at the first step that hides the face; a later
 // face resumes the walk where it stopped. A bin skips regions whose
-// highest top cannot raise it (skipping changes no step but the last bits of the distances after a
-// jump, each still a distance within its square by step 5): first super-blocks of 64 x 64 columns,
-// then blocks of 8 x 8 within the rest, where an empty block passes at once every block nearer than
-// the nearest one with a top (on city2 all but 0.3% of the skipped blocks were empty, one at a
-// time), and stops once no column of the scene can raise it, or at the reach. A bin remembers the
-// distance of the step that last hid a face in it; at the next sample it first reads only the
-// columns from 4 m before to 2 m after that distance (a piece of walk: step 5 holds for every
-// column the central ray crosses, wherever the reading starts), and walks from the sample only for
-// a face that piece does not hide (city2 4 m cells: 11.6 k bins walked a cell -> 4.3 k, columns
-// read 228 k -> 158 k). Faces seen from one sample are not tested from the next.
+// highest top cannot raise it (skipping changes no step, except for the
+// last bits of a distance recomputed after a jump, far below the margin of
+// step 1): first super-blocks of 64 x 64 columns, then blocks of 8 x 8
+// within the rest, where an empty block passes at once every block nearer
+// than the nearest one with a top (on city2 all but 0.3% of the skipped
+// blocks were empty, one at a time), and stops once no column of the scene
+// can raise it, or at the reach.
+// A bin remembers the distance of the step that last hid a face in it; at
+// the next sample it first reads only the columns from 4 m before to 2 m
+// after that distance (a piece of walk: step 5 holds for every column the
+// central ray crosses, wherever the reading starts), and walks from the
+// sample only for a face that piece does not hide (city2 4 m cells: 11.6 k
+// bins walked a cell -> 4.3 k, columns read 228 k -> 158 k).
+// Faces seen from one sample are not tested from the next.
 #include "server/visibility/horizon_fusion.h"
 
 #include <spdlog/spdlog.h>
