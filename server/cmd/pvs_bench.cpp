@@ -430,13 +430,18 @@ int runPvsBench(const PvsBenchOptions& options) {
       // Occluders are shrunk by epsilon + bin margin, rounded up to whole
       // columns: the last rows shrink less (one column fewer on a 0.5 m
       // grid) at the price of more samples or more bins.
-      struct Knob {
-        double epsilon, binMargin;
-        int azimuthBins, refinements;
+      auto knob = [](double epsilon, double binMargin, int azimuthBins, int refinements) {
+        HorizonFusionOptions o;
+        o.epsilon = epsilon;
+        o.binMargin = binMargin;
+        o.azimuthBins = azimuthBins;
+        o.refinements = refinements;
+        return o;
       };
-      const Knob knobs[] = {{2.0, 0.5, 1024, 1},  {1.0, 0.5, 1024, 0}, {1.0, 0.5, 1024, 1},
-                            {1.0, 0.5, 1024, 2},  {0.5, 0.5, 1024, 1}, {0.74, 0.25, 2048, 1},
-                            {0.74, 0.25, 1024, 2}};
+      const HorizonFusionOptions knobs[] = {knob(2.0, 0.5, 1024, 1),  knob(1.0, 0.5, 1024, 0),
+                                            knob(1.0, 0.5, 1024, 1),  knob(1.0, 0.5, 1024, 2),
+                                            knob(0.5, 0.5, 1024, 1),  knob(0.74, 0.25, 2048, 1),
+                                            knob(0.74, 0.25, 1024, 2)};
       if (human)
         fmt::print(
             "\nOcclusion horizons' knobs ({}, the 4 m cells above; after the single occluders "
@@ -445,13 +450,8 @@ int runPvsBench(const PvsBenchOptions& options) {
             spec, HorizonFusionOptions{}.epsilon, HorizonFusionOptions{}.refinements, "epsilon (m)",
             "margin (m)", "bins", "refinements", "reach (m)", "median ratio", "fusion ms",
             "build s", "missing");
-      for (const Knob& k : knobs) {
-        HorizonFusionOptions ho;
-        ho.epsilon = k.epsilon;
-        ho.binMargin = k.binMargin;
-        ho.azimuthBins = k.azimuthBins;
-        ho.refinements = k.refinements;
-        const HorizonFusion fusion(w.scene, w.statics, ho);
+      for (const HorizonFusionOptions& k : knobs) {
+        const HorizonFusion fusion(w.scene, w.statics, k);
         std::vector<double> ratio, ms;
         size_t missing = 0;
         for (size_t ci = 0; ci < cells.size(); ++ci) {
@@ -462,8 +462,8 @@ int runPvsBench(const PvsBenchOptions& options) {
           if (!truths[ci].empty())
             ratio.push_back(double(r.faces.size()) / double(truths[ci].size()));
         }
-        const double reach = 2.0 * ho.binMargin / (2.0 * std::numbers::pi / ho.azimuthBins) *
-                             std::pow(double(HorizonFusion::kRefine), ho.refinements);
+        const double reach = 2.0 * k.binMargin / (2.0 * std::numbers::pi / k.azimuthBins) *
+                             std::pow(double(HorizonFusion::kRefine), k.refinements);
         out["horizon_knobs"].push_back({{"scene", spec},
                                         {"epsilon_m", k.epsilon},
                                         {"bin_margin_m", k.binMargin},

@@ -759,7 +759,7 @@ struct HorizonQuery {
   };
   struct Level {
     const HorizonFusion::Impl::BinTable* table = nullptr;
-    double binWidth = 0.0, reach = 0.0;
+    double reach = 0.0;
     std::vector<uint32_t> traced;  // generation that started each bin's walk
     std::vector<Walk> bins;
     // Per bin, the distance of the step that last hid a face in it (from
@@ -855,7 +855,6 @@ struct HorizonQuery {
     const double y = s.y, lowest = double(cell.lo.y) - w.margin;
     int block = walk.block, super = walk.super;
     bool done = false, found = false;
-    const bool skip = skipBlocks;
     // Into the next column along the ray; false once it leaves the grid.
     auto stepToNextColumn = [&] {
       if (tx < tz) {
@@ -916,7 +915,7 @@ struct HorizonQuery {
       }
       if (tin >= until || found) break;
       const int b = (j / kB) * w.bx + i / kB;
-      if (b != block && skip) {
+      if (b != block && skipBlocks) {
         block = b;
         bool again = false;
         const int c = (j / kS) * w.sx + i / kS;
@@ -1125,7 +1124,7 @@ struct HorizonQuery {
       }
     }
     if (first || amax - amin >= std::numbers::pi - 1e-6 || !(rmin > 1e-6)) return false;
-    const double binWidth = levels[0].binWidth;
+    const double binWidth = levels[0].table->binWidth;
     const long b0 = long(std::floor((a0 + amin - 1e-9) / binWidth));
     const long b1 = long(std::floor((a0 + amax + 1e-9) / binWidth));
     for (long b = b0; b <= b1; ++b)
@@ -1152,13 +1151,11 @@ HorizonFusionResult HorizonFusion::cull(const Box3f& cell,
     if (f < w.scene.faceCount && w.faceStart[f] < w.faceStart[f + 1]) hidden.push_back(f);
   if (w.nx > 0 && !hidden.empty()) {
     q.excludeSolidsBelowTheCell();
-    size_t nbins = size_t(options_.azimuthBins);
-    for (int l = 0; l <= options_.refinements; ++l, nbins *= size_t(kRefine)) {
+    for (const HorizonFusion::Impl::BinTable& table : w.binTables) {
+      const size_t nbins = table.centre.size();
       HorizonQuery::Level& level = q.levels.emplace_back();
-      level.table = &w.binTables[size_t(l)];
-      VS_CHECK(level.table->centre.size() == nbins);
-      level.binWidth = level.table->binWidth;
-      level.reach = 2.0 * options_.binMargin / level.binWidth;
+      level.table = &table;
+      level.reach = 2.0 * options_.binMargin / table.binWidth;
       level.traced.assign(nbins, 0);
       level.bins.resize(nbins);
       level.hint.assign(nbins, -1.0);
