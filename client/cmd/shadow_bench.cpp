@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <numbers>
 #include <vector>
 
 #include "client/farfield/pipeline.h"
@@ -177,7 +178,6 @@ json runJson(const Run& r) {
 ImageRgb8 renderTransfer(const PosedMesh& pose, const std::vector<glm::uvec3>& triangles,
                          const std::vector<float>& transfer, int orders,
                          const EnvironmentLight& light, const glm::vec3& albedo, float exposure) {
-  constexpr float kPi = 3.14159265358979f;
   const int terms = shTerms(orders);
   RenderGeometry g;
   g.sky = {40, 40, 48};
@@ -190,7 +190,7 @@ ImageRgb8 renderTransfer(const PosedMesh& pose, const std::vector<glm::uvec3>& t
       const uint32_t v = triangles[t][k];
       const glm::vec3 radiance =
           light.transferred(transfer.data() + size_t(v) * size_t(terms), orders);
-      corners[k] = encodeColour(albedo / kPi * radiance * exposure);
+      corners[k] = encodeColour(albedo / std::numbers::pi_v<float> * radiance * exposure);
     }
     g.lighting.append(1, corners, 3);
   }

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 
 namespace vistream {
 namespace {
@@ -17,9 +18,8 @@ float azimuthOf(const glm::vec3& d) {
 }
 
 float wrapAngle(float a) {
-  constexpr float kPi = 3.14159265358979f;
-  while (a > kPi) a -= 2.0f * kPi;
-  while (a < -kPi) a += 2.0f * kPi;
+  while (a > std::numbers::pi_v<float>) a -= 2.0f * std::numbers::pi_v<float>;
+  while (a < -std::numbers::pi_v<float>) a += 2.0f * std::numbers::pi_v<float>;
   return a;
 }
 

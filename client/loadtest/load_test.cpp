@@ -358,7 +358,7 @@ class SimClient : public PeerHandler, public std::enable_shared_from_this<SimCli
 
   void onAvatar(const Avatar& a) {
     if (const auto* avatars = a.avatars())
-      for (const AvatarState* s : *avatars) {
+      for (const wire::AvatarState* s : *avatars) {
         avatarsSeen.insert(s->session_id());
         if ((s->session_id() >> 24) != (lastSession >> 24))
           avatarsSeenOtherReplica.insert(s->session_id());

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <glm/gtc/matrix_transform.hpp>
+#include <numbers>
 
 #include "common/core/check.h"
 #include "common/core/error.h"
@@ -310,7 +311,6 @@ void AvatarShader::shade(Gait g, float t, const AvatarLight& light, float sunVis
     // the lobe's radiance to the same scale.
     highlight.assign(vertices, glm::vec3(0.0f));
     const auto start = std::chrono::steady_clock::now();
-    constexpr float kPi = 3.14159265358979f;
     const size_t words = size_t(shadowing_.maskWords());
     VisibilityMask mask(options_.shadows.maskSide);
     float glossy[kTerms];
@@ -322,7 +322,8 @@ void AvatarShader::shade(Gait g, float t, const AvatarLight& light, float sunVis
       std::copy_n(s.masks.data() + v * words, words, mask.data());
       glossy_.glossy(mask, TangentFrame::around(n), 2.0f * facing * n - toEye,
                      options_.glossExponent, glossy);
-      highlight[v] = kPi * options_.specular * light.apply(glossy, sunVisible);
+      highlight[v] =
+          std::numbers::pi_v<float> * options_.specular * light.apply(glossy, sunVisible);
     }
     stats_.glossyMs +=
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();

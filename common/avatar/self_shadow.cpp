@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <numbers>
 
 #include "common/core/check.h"
 #include "common/core/random.h"
@@ -18,8 +19,6 @@
 
 namespace vistream {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 float meshSize(const std::vector<glm::vec3>& positions) {
   glm::vec3 lo(INFINITY), hi(-INFINITY);
@@ -557,14 +556,14 @@ void traceTransfer(const std::vector<glm::vec3>& positions, const std::vector<gl
         s1 = std::fmod(s1 + r1, 1.0);
         s2 = std::fmod(s2 + r2, 1.0);
         // Malley: a uniform point on the disk lifted to the hemisphere.
-        const double radius = std::sqrt(s1), phi = 2.0 * kPi * s2;
+        const double radius = std::sqrt(s1), phi = 2.0 * std::numbers::pi * s2;
         const glm::vec3 local(float(radius * std::cos(phi)), float(radius * std::sin(phi)),
                               float(std::sqrt(std::max(0.0, 1.0 - s1))));
         batch[k] = Ray{org, frame.toWorld(local), 0.0f, INFINITY};
       }
       query->occludedMany(batch, hit);
       float* t = out.data() + v * size_t(terms);
-      const float scale = float(kPi / rays);
+      const float scale = float(std::numbers::pi / rays);
       for (uint32_t k = 0; k < rays; ++k) {
         if (hit[k]) continue;
         const float w = scale * weight(v, batch[k].dir);
@@ -592,7 +591,7 @@ void monteCarloGlossyTransfer(const std::vector<glm::vec3>& positions,
                               uint32_t rays, int orders, std::vector<float>& out, uint64_t seed,
                               const std::vector<uint8_t>* only) {
   VS_CHECK_EQ(reflected.size(), positions.size());
-  const float norm = float((exponent + 1.0) / (2.0 * kPi));
+  const float norm = float((exponent + 1.0) / (2.0 * std::numbers::pi));
   traceTransfer(positions, normals, triangles, rays, orders, out, seed, only,
                 [&](size_t v, const glm::vec3& d) {
                   return norm * std::pow(std::max(0.0f, glm::dot(d, reflected[v])), exponent);

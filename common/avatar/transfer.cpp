@@ -3,14 +3,13 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <numbers>
 
 #include "common/core/check.h"
 #include "common/light/spherical_harmonics.h"
 
 namespace vistream {
-namespace {
-constexpr float kPi = 3.14159265358979f;
-}  // namespace
+namespace {}  // namespace
 
 TransferIntegrator::TransferIntegrator(int maskSide, const TransferOptions& options)
     : side_(maskSide), orders_(options.orders), terms_(shTerms(options.orders)) {
@@ -48,7 +47,7 @@ TransferIntegrator::TransferIntegrator(int maskSide, const TransferOptions& opti
       for (int k = 0; k < terms_; ++k) basis_.push_back(float(sum[size_t(k)]));  // count x mean
     }
   // Each pixel's share of the projected solid angle pi.
-  const float area = kPi / float(disk);
+  const float area = std::numbers::pi_v<float> / float(disk);
   for (float& b : basis_) b *= area;
   if (block == 1) {
     pixelSample_.assign(size_t(maskSide) * size_t(maskSide), -1);
@@ -125,7 +124,7 @@ void TransferIntegrator::diffuse(const VisibilityMask& mask, const TangentFrame&
 
 void TransferIntegrator::glossy(const VisibilityMask& mask, const TangentFrame& frame,
                                 const glm::vec3& reflected, float exponent, float* out) const {
-  const float norm = (exponent + 1.0f) / (2.0f * kPi);
+  const float norm = (exponent + 1.0f) / (2.0f * std::numbers::pi_v<float>);
   const glm::vec3 r = frame.toLocal(reflected);
   integrate(
       mask, frame,

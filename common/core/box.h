@@ -42,6 +42,11 @@ struct BasicBox3 {
     return lo.x <= b.hi.x && b.lo.x <= hi.x && lo.y <= b.hi.y && b.lo.y <= hi.y && lo.z <= b.hi.z &&
            b.lo.z <= hi.z;
   }
+  // Euclidean distance to box b: the shortest segment between them, 0 when
+  // they overlap or touch.
+  T distanceTo(const BasicBox3& b) const {
+    return glm::length(glm::max(Vec(0), glm::max(lo - b.hi, b.lo - hi)));
+  }
   BasicBox3 intersection(const BasicBox3& b) const {
     BasicBox3 r;
     r.lo = glm::max(lo, b.lo);

@@ -57,12 +57,9 @@ constexpr double kBuildingGap = 1.5;  // between neighbouring buildings
 constexpr double kGroundFloor = 4.2;  // metres, shop floor
 constexpr double kFloor = 3.2;        // metres, upper floors
 
-enum BigCityMaterial : uint32_t {
-  kAsphalt,
-  kPavement,
-  kGlass,
-  kStone,
-  kFirstFacade,
+// Material indices, scoped so that no other generator's names meet them.
+struct BigCityMaterial {
+  enum : uint32_t { kAsphalt, kPavement, kGlass, kStone, kFirstFacade };
 };
 
 std::vector<Material> bigCityMaterials() {
@@ -181,9 +178,11 @@ void addBuilding(PolygonScene& scene, SceneRandom& random, int number, glm::dvec
   style.sills = random.chance(0.2);
   const double height = kGroundFloor + (style.floors - 1) * kFloor;
 
-  PolygonObject body = makeObject(fmt::format("building_{:04d}", number),
-                                  kFirstFacade + uint32_t(random.below(kFacadeMaterials)));
-  PolygonObject windows = makeObject(fmt::format("windows_{:04d}", number), kGlass);
+  PolygonObject body =
+      makeObject(fmt::format("building_{:04d}", number),
+                 BigCityMaterial::kFirstFacade + uint32_t(random.below(kFacadeMaterials)));
+  PolygonObject windows =
+      makeObject(fmt::format("windows_{:04d}", number), BigCityMaterial::kGlass);
   addBox(body, {lo.x, 0.0, lo.y}, {hi.x, height, hi.y});
 
   for (const glm::dvec3& side : streetSides) {
@@ -260,7 +259,7 @@ PolygonScene generateBigCity(uint64_t seed) {
   auto groundQuad = [](PolygonObject& o, Interval x, Interval z) {
     addQuad(o, {x.lo, 0.0, z.lo}, {x.lo, 0.0, z.hi}, {x.hi, 0.0, z.hi}, {x.hi, 0.0, z.lo});
   };
-  PolygonObject streets = makeObject("streets", kAsphalt);
+  PolygonObject streets = makeObject("streets", BigCityMaterial::kAsphalt);
   for (int i = 0; i <= kBlocksPerSide; ++i) {
     for (int j = 0; j <= kBlocksPerSide; ++j) {
       groundQuad(streets, gx.streets[size_t(i)], gz.streets[size_t(j)]);  // crossing
@@ -268,7 +267,7 @@ PolygonScene generateBigCity(uint64_t seed) {
       if (i < kBlocksPerSide) groundQuad(streets, gx.blocks[size_t(i)], gz.streets[size_t(j)]);
     }
   }
-  PolygonObject blockGround = makeObject("block_ground", kPavement);
+  PolygonObject blockGround = makeObject("block_ground", BigCityMaterial::kPavement);
   for (int j = 0; j < kBlocksPerSide; ++j)
     for (int i = 0; i < kBlocksPerSide; ++i)
       groundQuad(blockGround, gx.blocks[size_t(i)], gz.blocks[size_t(j)]);
@@ -316,7 +315,8 @@ PolygonScene generateBigCity(uint64_t seed) {
   for (size_t s = 0; s < squares.size(); ++s) {
     const Interval x = gx.blocks[size_t(squares[s].x)], z = gz.blocks[size_t(squares[s].y)];
     const glm::dvec2 c(0.5 * (x.lo + x.hi), 0.5 * (z.lo + z.hi));
-    PolygonObject monument = makeObject(fmt::format("monument_{:02d}", s + 1), kStone);
+    PolygonObject monument =
+        makeObject(fmt::format("monument_{:02d}", s + 1), BigCityMaterial::kStone);
     addBox(monument, {c.x - 4.0, 0.0, c.y - 4.0}, {c.x + 4.0, 1.5, c.y + 4.0});
     addBox(monument, {c.x - 1.0, 1.5, c.y - 1.0},
            {c.x + 1.0, random.uniform(10.0, 18.0), c.y + 1.0});

@@ -58,7 +58,10 @@ constexpr CityLayout kDense{24.0, 8.0, 0.7 * 24.0, 24.0};
 // Sparse: the same buildings, smaller, scattered over wider lots.
 constexpr CityLayout kSparse{38.0, 10.0, 14.0, 22.0};
 
-enum CityMaterial : uint32_t { kGround, kFirstFacade };
+// Material indices, scoped so that no other generator's names meet them.
+struct CityMaterial {
+  enum : uint32_t { kGround, kFirstFacade };
+};
 
 std::vector<Material> cityMaterials() {
   const auto material = &Material::diffuseColour;
@@ -86,7 +89,7 @@ PolygonScene generateCity(bool dense, uint64_t seed) {
   const double pitch = layout.lot + layout.street;
   const double x0 = -0.5 * kLotColumns * pitch, z0 = -0.5 * kLotRows * pitch;
 
-  PolygonObject ground = makeObject("ground", kGround);
+  PolygonObject ground = makeObject("ground", CityMaterial::kGround);
   ground.vertices.reserve(4 * kBuildings);
   ground.faces.reserve(kBuildings);
   scene.objects.reserve(kBuildings + 1);
@@ -111,8 +114,9 @@ PolygonScene generateCity(bool dense, uint64_t seed) {
                     lotZ + random.uniform(0.0, layout.lot - depth)};
       glm::dvec2 hi = lo + glm::dvec2(width, depth);
 
-      PolygonObject building = makeObject(fmt::format("building_{:04d}", index + 1),
-                                          kFirstFacade + uint32_t(random.below(kFacadeMaterials)));
+      PolygonObject building =
+          makeObject(fmt::format("building_{:04d}", index + 1),
+                     CityMaterial::kFirstFacade + uint32_t(random.below(kFacadeMaterials)));
       if (!stacked[size_t(index)]) {
         addBox(building, {lo.x, 0.0, lo.y}, {hi.x, random.uniform(8.0, 40.0), hi.y});
       } else {

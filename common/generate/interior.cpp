@@ -64,7 +64,10 @@ constexpr double kDoorHeight = 2.1;
 constexpr double kCrossCorridor = 1.0;  // cross corridor wall centre lines at +-1 m
 constexpr int kTilesPerSide = 20;
 
-enum InteriorMaterial : uint32_t { kFloor, kCeiling, kWall, kWood, kFabric, kShelf };
+// Material indices, scoped so that no other generator's names meet them.
+struct InteriorMaterial {
+  enum : uint32_t { kFloor, kCeiling, kWall, kWood, kFabric, kShelf };
+};
 
 std::vector<Material> interiorMaterials() {
   const auto material = &Material::diffuseColour;
@@ -98,7 +101,8 @@ class FloorBuilder {
     for (double c : doorCentres) {
       const double gap0 = c - 0.5 * kDoorWidth, gap1 = c + 0.5 * kDoorWidth;
       wallBox({from, 0.0, z - kHalfWall}, {gap0, kStorey, z + kHalfWall});
-      PolygonObject lintel = makeObject(fmt::format("lintel_{:03d}", ++lintels_), kWall);
+      PolygonObject lintel =
+          makeObject(fmt::format("lintel_{:03d}", ++lintels_), InteriorMaterial::kWall);
       addBox(lintel, {gap0, kDoorHeight, z - kHalfWall}, {gap1, kStorey, z + kHalfWall});
       scene_.objects.push_back(std::move(lintel));
       from = gap1;
@@ -143,7 +147,8 @@ class FloorBuilder {
       // Shared ends come from the same expression: no cracks between patches.
       a[axis] = k == 0 ? lo[axis] : lo[axis] + (hi[axis] - lo[axis]) * k / pieces;
       b[axis] = k + 1 == pieces ? hi[axis] : lo[axis] + (hi[axis] - lo[axis]) * (k + 1) / pieces;
-      PolygonObject wall = makeObject(fmt::format("wall_{:03d}", ++walls_), kWall);
+      PolygonObject wall =
+          makeObject(fmt::format("wall_{:03d}", ++walls_), InteriorMaterial::kWall);
       addBox(wall, a, b);
       scene_.objects.push_back(std::move(wall));
     }
@@ -168,7 +173,8 @@ class FloorBuilder {
       taken.push_back(footprint);
 
       const double tx = alongX ? halfLong : halfShort, tz = alongX ? halfShort : halfLong;
-      PolygonObject table = makeObject(fmt::format("table_{:03d}", ++tables_), kWood);
+      PolygonObject table =
+          makeObject(fmt::format("table_{:03d}", ++tables_), InteriorMaterial::kWood);
       addBox(table, {cx - tx, 0.71, cz - tz}, {cx + tx, 0.75, cz + tz});
       for (const double sx : {-1.0, 1.0})
         for (const double sz : {-1.0, 1.0}) {
@@ -194,7 +200,8 @@ class FloorBuilder {
 
   // Seat, four legs and a back on the side `away` from the table.
   void addChair(const glm::dvec2& seat, const glm::dvec2& away) {
-    PolygonObject chair = makeObject(fmt::format("chair_{:03d}", ++chairs_), kFabric);
+    PolygonObject chair =
+        makeObject(fmt::format("chair_{:03d}", ++chairs_), InteriorMaterial::kFabric);
     const double h = 0.22;  // half seat
     addBox(chair, {seat.x - h, 0.43, seat.y - h}, {seat.x + h, 0.47, seat.y + h});
     for (const double sx : {-1.0, 1.0})
@@ -281,7 +288,8 @@ class FloorBuilder {
     const double height = random_.uniform(1.8, 2.1);
     const std::optional<WallSpot> spot = findWallSpot(room, taken, width, depth, 0.0);
     if (!spot) return;
-    PolygonObject shelf = makeObject(fmt::format("shelf_{:03d}", ++shelves_), kShelf);
+    PolygonObject shelf =
+        makeObject(fmt::format("shelf_{:03d}", ++shelves_), InteriorMaterial::kShelf);
     const double side = 0.03, board = 0.03;
     addBox(shelf, spot->at(0.0, 0.0, 0.0), spot->at(side, height, depth));
     addBox(shelf, spot->at(width - side, 0.0, 0.0), spot->at(width, height, depth));
@@ -298,7 +306,7 @@ class FloorBuilder {
     const double width = random_.uniform(1.2, 1.6), depth = 0.7;
     const std::optional<WallSpot> spot = findWallSpot(room, taken, width, depth, 0.9);
     if (!spot) return;
-    PolygonObject desk = makeObject(fmt::format("desk_{:03d}", ++desks_), kWood);
+    PolygonObject desk = makeObject(fmt::format("desk_{:03d}", ++desks_), InteriorMaterial::kWood);
     addBox(desk, spot->at(0.0, 0.72, 0.0), spot->at(width, 0.75, depth));
     addBox(desk, spot->at(0.0, 0.0, 0.0), spot->at(0.03, 0.72, depth));
     addBox(desk, spot->at(width - 0.03, 0.0, 0.0), spot->at(width, 0.72, depth));
@@ -336,8 +344,8 @@ PolygonScene generateInterior(uint64_t seed, double wallPatch) {
 
   // Floor (facing up) and ceiling (facing down) tiles over the outer walls' extent.
   const double outer = kHalfSize + kHalfWall, tile = 2.0 * outer / kTilesPerSide;
-  PolygonObject floor = makeObject("floor", kFloor);
-  PolygonObject ceiling = makeObject("ceiling", kCeiling);
+  PolygonObject floor = makeObject("floor", InteriorMaterial::kFloor);
+  PolygonObject ceiling = makeObject("ceiling", InteriorMaterial::kCeiling);
   for (int j = 0; j < kTilesPerSide; ++j)
     for (int i = 0; i < kTilesPerSide; ++i) {
       // Shared edges come from the same expression: no cracks between tiles.

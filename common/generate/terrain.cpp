@@ -48,7 +48,10 @@ constexpr int kChunkCells = kCells / kChunks;
 constexpr int kTrees = 300;
 constexpr int kRocks = 80;
 
-enum TerrainMaterial : uint32_t { kGrass, kRock, kSnow, kFoliage, kStone };
+// Material indices, scoped so that no other generator's names meet them.
+struct TerrainMaterial {
+  enum : uint32_t { kGrass, kRock, kSnow, kFoliage, kStone };
+};
 
 std::vector<Material> terrainMaterials() {
   const auto material = &Material::diffuseColour;
@@ -146,7 +149,8 @@ PolygonScene generateTerrain(uint64_t seed) {
 
   for (int cj = 0; cj < kChunks; ++cj) {
     for (int ci = 0; ci < kChunks; ++ci) {
-      PolygonObject chunk = makeObject(fmt::format("terrain_{:02d}_{:02d}", cj, ci), kGrass);
+      PolygonObject chunk =
+          makeObject(fmt::format("terrain_{:02d}_{:02d}", cj, ci), TerrainMaterial::kGrass);
       const int i0 = ci * kChunkCells, j0 = cj * kChunkCells, m = kChunkCells + 1;
       double sum = 0.0;
       for (int j = 0; j < m; ++j)
@@ -163,7 +167,9 @@ PolygonScene generateTerrain(uint64_t seed) {
           chunk.faces.push_back({v00, v11, v10});
         }
       const double mean = sum / double(m * m);
-      chunk.material = mean < 60.0 ? kGrass : (mean < 300.0 ? kRock : kSnow);
+      chunk.material = mean < 60.0
+                           ? TerrainMaterial::kGrass
+                           : (mean < 300.0 ? TerrainMaterial::kRock : TerrainMaterial::kSnow);
       scene.objects.push_back(std::move(chunk));
     }
   }
@@ -206,7 +212,7 @@ PolygonScene generateTerrain(uint64_t seed) {
     const double base = lowestUnder(at.x, at.y, 0.3) - 0.5;
     const double trunk = random.uniform(2.5, 4.0) + 0.5, crown = random.uniform(4.0, 7.0);
     const double width = random.uniform(3.0, 5.0), yaw = random.uniform(0.0, std::numbers::pi);
-    PolygonObject tree = makeObject(fmt::format("tree_{:04d}", t + 1), kFoliage);
+    PolygonObject tree = makeObject(fmt::format("tree_{:04d}", t + 1), TerrainMaterial::kFoliage);
     addUprightBox(tree, {at.x, base, at.y}, {0.4, trunk, 0.4}, yaw);
     addUprightBox(tree, {at.x, base + trunk, at.y}, {width, crown, width}, yaw);
     scene.objects.push_back(std::move(tree));
@@ -219,7 +225,7 @@ PolygonScene generateTerrain(uint64_t seed) {
     const double sunk = 0.3 * size.y;
     const double base =
         lowestUnder(at.x, at.y, 0.5 * std::max(size.x, size.z) * std::sqrt(2.0)) - sunk;
-    PolygonObject rock = makeObject(fmt::format("rock_{:03d}", r + 1), kStone);
+    PolygonObject rock = makeObject(fmt::format("rock_{:03d}", r + 1), TerrainMaterial::kStone);
     addUprightBox(rock, {at.x, base, at.y}, size + glm::dvec3(0.0, sunk, 0.0),
                   random.uniform(0.0, std::numbers::pi));
     scene.objects.push_back(std::move(rock));

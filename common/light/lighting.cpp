@@ -11,6 +11,7 @@
 #include <cstring>
 #include <map>
 #include <memory>
+#include <numbers>
 
 #include "common/core/check.h"
 #include "common/core/progress.h"
@@ -20,8 +21,6 @@
 
 namespace vistream {
 namespace {
-
-constexpr float kPi = 3.14159265358979f;
 
 float luminance(const glm::vec3& c) {
   return glm::dot(c, glm::vec3(0.2126f, 0.7152f, 0.0722f));
@@ -212,7 +211,7 @@ double ambientOcclusion(const RayQuery& rays, const glm::vec3& p, const glm::vec
     }
     s1 = std::fmod(s1 + r1, 1.0);
     s2 = std::fmod(s2 + r2, 1.0);
-    const double r = std::sqrt(s1), phi = 2.0 * double(kPi) * s2;
+    const double r = std::sqrt(s1), phi = 2.0 * double(std::numbers::pi_v<float>) * s2;
     const float x = float(r * std::cos(phi)), y = float(r * std::sin(phi));
     const float z = float(std::sqrt(std::max(0.0, 1.0 - s1)));
     batch[k] = Ray{org, t * x + b * y + n * z, 0.0f, distance};
@@ -230,7 +229,8 @@ float skyExposure(const EnvironmentLight& environment, const LightingOptions& op
 }
 
 glm::u8vec3 horizonColour(const EnvironmentLight& environment, const LightingOptions& options) {
-  return encodeColour(environment.horizonRadiance() * (kPi * skyExposure(environment, options)));
+  return encodeColour(environment.horizonRadiance() *
+                      (std::numbers::pi_v<float> * skyExposure(environment, options)));
 }
 
 Backdrop backdropOf(const Scene& scene, const EnvironmentLight& environment,

@@ -3,13 +3,12 @@
 #include <array>
 #include <cmath>
 #include <cstdlib>
+#include <numbers>
 
 #include "common/core/check.h"
 
 namespace vistream {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 // K_l^m for l <= 4, with the sqrt(2) of m != 0 folded in.
 struct Normalization {
@@ -22,9 +21,9 @@ struct Normalization {
     };
     for (int l = 0; l <= kMaxShOrder; ++l)
       for (int m = 0; m <= l; ++m)
-        k[size_t(l)][size_t(m)] =
-            std::sqrt((2.0 * l + 1.0) / (4.0 * kPi) * factorial(l - m) / factorial(l + m)) *
-            (m == 0 ? 1.0 : std::sqrt(2.0));
+        k[size_t(l)][size_t(m)] = std::sqrt((2.0 * l + 1.0) / (4.0 * std::numbers::pi) *
+                                            factorial(l - m) / factorial(l + m)) *
+                                  (m == 0 ? 1.0 : std::sqrt(2.0));
   }
 };
 const Normalization kNormalization;
@@ -74,7 +73,8 @@ double clampedCosineZonal(int l) {
   VS_CHECK(l >= 0 && l <= kMaxShOrder);
   // 2 pi K_l^0 * integral_0^1 P_l(t) t dt; the integrals for l = 0..4.
   constexpr double integral[5] = {1.0 / 2.0, 1.0 / 3.0, 1.0 / 8.0, 0.0, -1.0 / 48.0};
-  return 2.0 * kPi * std::sqrt((2.0 * l + 1.0) / (4.0 * kPi)) * integral[l];
+  return 2.0 * std::numbers::pi * std::sqrt((2.0 * l + 1.0) / (4.0 * std::numbers::pi)) *
+         integral[l];
 }
 
 namespace {

@@ -12,17 +12,6 @@
 namespace vistream {
 namespace {
 
-// A ray the intersection test cannot answer (zero or non-finite direction,
-// non-finite origin, empty or NaN interval) misses everything.
-bool isFinite(const glm::vec3& v) {
-  return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
-}
-
-bool isTraceable(const Ray& ray) {
-  return isFinite(ray.org) && isFinite(ray.dir) && ray.dir != glm::vec3(0.0f) &&
-         ray.tnear <= ray.tfar;
-}
-
 class BruteForceRayQuery final : public RayQuery {
  public:
   explicit BruteForceRayQuery(const FlatTriangles& triangles) : triangles_(triangles) {}

@@ -133,18 +133,6 @@ std::shared_ptr<RTCDeviceTy> acquireDevice() {
   return device;
 }
 
-// A ray the intersection test cannot answer (zero or non-finite direction,
-// non-finite origin, empty or NaN interval) misses everything; Embree never
-// sees it.
-bool isFinite(const glm::vec3& v) {
-  return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
-}
-
-bool isTraceable(const Ray& ray) {
-  return isFinite(ray.org) && isFinite(ray.dir) && ray.dir != glm::vec3(0.0f) &&
-         ray.tnear <= ray.tfar;
-}
-
 bool hasZeroComponent(const glm::vec3& dir) {
   return dir.x == 0.0f || dir.y == 0.0f || dir.z == 0.0f;
 }

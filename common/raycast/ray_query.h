@@ -20,6 +20,7 @@
 // number of threads once the object is constructed.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <glm/glm.hpp>
 #include <limits>
@@ -38,6 +39,16 @@ struct Ray {
   float tnear = 0.0f;
   float tfar = std::numeric_limits<float>::infinity();
 };
+
+// A ray the intersection tests can answer: finite origin and direction, a
+// non-zero direction and a non-empty interval (NaN bounds make it empty).
+// Every back end treats any other ray as missing everything.
+inline bool isTraceable(const Ray& ray) {
+  const auto finite = [](const glm::vec3& v) {
+    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+  };
+  return finite(ray.org) && finite(ray.dir) && ray.dir != glm::vec3(0.0f) && ray.tnear <= ray.tfar;
+}
 
 inline constexpr uint32_t kNoHit = 0xffffffffu;
 

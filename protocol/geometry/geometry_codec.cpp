@@ -30,7 +30,7 @@ static_assert(sizeof(GridVertex) == 12);
 // Tuned on batches of 30 to 1000 faces of city1 and delfshaven: levels 6 and 9
 // saved at most 2% more than 3 for 1.3 to 15 times the time, level 19 3% to
 // 7% for 2 to 60 times.
-constexpr int kZstdLevel = 3;
+constexpr int kGeometryZstdLevel = 3;
 
 // A lighting grid of level n (common/light/lighting.h, LightingGrid): its
 // point count and the index of point (i, j).
@@ -200,7 +200,7 @@ std::vector<uint8_t> lightingSection(std::span<const FaceTriangles> input, const
       at += pointsOfLevel(n);
     }
   }
-  std::vector<uint8_t> z = zstdCompress(raw, kZstdLevel);
+  std::vector<uint8_t> z = zstdCompress(raw, kGeometryZstdLevel);
   std::vector<uint8_t> out;
   out.reserve(1 + std::min(z.size(), raw.size()));
   if (z.size() < raw.size()) {
@@ -325,7 +325,7 @@ GeometryT encodeGeometry(std::span<const FaceTriangles> faces, const Quantizatio
   auto consider = [&](GeometryCodec codec, std::vector<uint8_t> raw) {
     using Zstd = GeometryCodings::Zstd;
     if (codings.zstd != Zstd::Never) {
-      std::vector<uint8_t> z = zstdCompress(raw, kZstdLevel);
+      std::vector<uint8_t> z = zstdCompress(raw, kGeometryZstdLevel);
       if (codings.zstd == Zstd::Always || z.size() < raw.size())
         return offer(codec, GeometryCompression::Zstd, std::move(z));
     }

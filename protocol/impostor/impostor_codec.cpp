@@ -14,10 +14,10 @@ namespace vistream::wire {
 
 namespace {
 
-constexpr std::array<uint8_t, 4> kMagic = {'V', 'I', 'M', 'P'};
+constexpr std::array<uint8_t, 4> kImpostorMagic = {'V', 'I', 'M', 'P'};
 constexpr uint8_t kVersion = 1;
 constexpr uint8_t kZstdFlag = 1;
-constexpr int kZstdLevel = 6;
+constexpr int kImpostorZstdLevel = 6;
 constexpr size_t kFloats = 33;
 
 // 16 bits spread to every third bit of 48, and back.
@@ -105,9 +105,9 @@ std::vector<uint8_t> encodeImpostor(const Impostor& imp) {
       for (int c = 0; c < 3; ++c) body.push_back(uint8_t(t[i][c] - t[0][c]));
   }
 
-  std::vector<uint8_t> out(kMagic.begin(), kMagic.end());
+  std::vector<uint8_t> out(kImpostorMagic.begin(), kImpostorMagic.end());
   out.push_back(kVersion);
-  std::vector<uint8_t> z = zstdCompress(body, kZstdLevel);
+  std::vector<uint8_t> z = zstdCompress(body, kImpostorZstdLevel);
   if (z.size() < body.size()) {
     out.push_back(kZstdFlag);
     out.insert(out.end(), z.begin(), z.end());
@@ -123,7 +123,7 @@ bool decodeImpostor(std::span<const uint8_t> bytes, Impostor& out, std::string& 
     error = "impostor: " + std::move(text);
     return false;
   };
-  if (bytes.size() < 6 || !std::equal(kMagic.begin(), kMagic.end(), bytes.begin()))
+  if (bytes.size() < 6 || !std::equal(kImpostorMagic.begin(), kImpostorMagic.end(), bytes.begin()))
     return fail("does not start with VIMP");
   if (bytes[4] != kVersion) return fail(fmt::format("unknown version {}", unsigned(bytes[4])));
   if (bytes[5] & ~kZstdFlag) return fail(fmt::format("unknown flags {:#x}", unsigned(bytes[5])));

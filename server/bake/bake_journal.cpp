@@ -16,7 +16,7 @@
 namespace vistream {
 namespace {
 
-constexpr size_t kHeaderBytes = 16;  // magic, fingerprint
+constexpr size_t kJournalHeaderBytes = 16;  // magic, fingerprint
 constexpr size_t kRecordHeadBytes = 12, kRecordSumBytes = 8;
 constexpr uint32_t kMaxRecordPayload = 256u << 20;
 
@@ -72,7 +72,7 @@ BakeJournal::BakeJournal(const std::filesystem::path& path, const std::array<cha
   if (fd_ < 0)
     throwInputError("{}: cannot open bake journal: {}", path.string(), std::strerror(errno));
   if (::lseek(fd_, 0, SEEK_END) == 0) {
-    char header[kHeaderBytes];
+    char header[kJournalHeaderBytes];
     std::memcpy(header, magic.data(), 8);
     std::memcpy(header + 8, &fingerprint, 8);
     writeAll(header, sizeof header);
@@ -115,7 +115,7 @@ void BakeJournal::readExisting(const std::array<char, 8>& magic, uint64_t finger
   const size_t size = file.size();
   const uint8_t* data = file.data();
   size_t valid = 0;
-  if (size < kHeaderBytes) {
+  if (size < kJournalHeaderBytes) {
     spdlog::warn("{}: bake journal is only {} bytes, less than its header; starting over", name,
                  size);
   } else if (std::memcmp(data, magic.data(), 6) == 0 && std::memcmp(data, magic.data(), 8) != 0) {
@@ -127,7 +127,7 @@ void BakeJournal::readExisting(const std::array<char, 8>& magic, uint64_t finger
   } else if (std::memcmp(data + 8, &fingerprint, 8) != 0) {
     spdlog::warn("{}: journal is from a bake with other parameters; starting over", name);
   } else {
-    valid = kHeaderBytes;
+    valid = kJournalHeaderBytes;
     size_t records = 0;
     Record r;
     while (valid < size) {

@@ -53,7 +53,7 @@ std::pair<uint32_t, uint32_t> parseShard(const std::string& text, const char* op
   return {i, n};
 }
 
-int runMpiBake(const std::string& out, const char* what, bool json,
+int runMpiBake(const std::string& out, const char* what, bool asJson,
                const std::function<MpiShardCounts(const MpiShard&)>& bakeShard,
                const std::function<size_t(const std::vector<std::string>& shards)>& merge) {
   Stopwatch clock;
@@ -92,7 +92,7 @@ int runMpiBake(const std::string& out, const char* what, bool json,
     try {
       const size_t cells = merge(shards);
       for (const std::string& s : shards) std::filesystem::remove(s);
-      if (json)
+      if (asJson)
         std::cout << nlohmann::json{{"out", out},
                                     {"ranks", size},
                                     {"cells", cells},

@@ -43,9 +43,9 @@ struct MpiShardCounts {
 // Runs the MPI job described above: `bakeShard` bakes one shard (it may
 // throw), `merge` (rank 0 only) merges the shard files into `out` and
 // returns the cells it holds; rank 0 then prints the job's report (`what`
-// baked, cells, those resumed, time), as JSON with `json`. Returns the
+// baked, cells, those resumed, time), as JSON with `asJson`. Returns the
 // process's exit code. Initializes and finalizes MPI.
-int runMpiBake(const std::string& out, const char* what, bool json,
+int runMpiBake(const std::string& out, const char* what, bool asJson,
                const std::function<MpiShardCounts(const MpiShard&)>& bakeShard,
                const std::function<size_t(const std::vector<std::string>& shards)>& merge);
 

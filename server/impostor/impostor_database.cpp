@@ -19,8 +19,8 @@
 namespace vistream {
 namespace {
 
-constexpr std::array<char, 8> kMagic = {'V', 'S', 'I', 'M', 'P', 'D', 'B', '\0'};
-constexpr std::array<char, 8> kJournalMagic = {'V', 'S', 'I', 'J', 'R', 'N', '1', '\0'};
+constexpr std::array<char, 8> kImpostorDbMagic = {'V', 'S', 'I', 'M', 'P', 'D', 'B', '\0'};
+constexpr std::array<char, 8> kImpostorJournalMagic = {'V', 'S', 'I', 'J', 'R', 'N', '1', '\0'};
 constexpr uint64_t kMaxWhy = 4096, kMaxImpostorsPerCell = 4096;
 
 }  // namespace
@@ -100,13 +100,15 @@ void writeImpostorDatabase(const std::filesystem::path& path, const ImpostorData
       b, kImpostorDbVersion, h.sceneName.c_str(), h.sceneFingerprint, h.sceneFaces, &origin, &lo,
       &size, &dims, h.method.c_str(), header.settings.c_str(), header.settingsFingerprint, &cells);
   impdb::FinishDatabaseBuffer(b, root);
-  writeCheckedFile(path, kMagic, kImpostorDbVersion, std::span(b.GetBufferPointer(), b.GetSize()));
+  writeCheckedFile(path, kImpostorDbMagic, kImpostorDbVersion,
+                   std::span(b.GetBufferPointer(), b.GetSize()));
 }
 
 ImpostorDatabase ImpostorDatabase::open(const std::filesystem::path& path) {
   ImpostorDatabase db;
-  CheckedFile checked = openCheckedFile(path, kMagic, kImpostorDbVersion, "impostor database",
-                                        "; re-bake it with this build's vistream-pvs impostors");
+  CheckedFile checked =
+      openCheckedFile(path, kImpostorDbMagic, kImpostorDbVersion, "impostor database",
+                      "; re-bake it with this build's vistream-pvs impostors");
   const std::string name = path.string();
   if (!checked.checksumOk())
     throwInputError("{}: checksum mismatch: the database is corrupt", name);
@@ -197,7 +199,7 @@ ImpostorBakeReport bakeImpostorDatabase(const ImpostorWorld& world, const PvsDat
   report.cells = cells.size();
   std::map<uint32_t, std::vector<uint8_t>> done;
   std::mutex doneMutex;
-  BakeJournal journal(out.string() + ".journal", kJournalMagic, header.settingsFingerprint,
+  BakeJournal journal(out.string() + ".journal", kImpostorJournalMagic, header.settingsFingerprint,
                       [&](const JournalRecordView& r) -> std::string {
                         if (r.index >= grid.cellCount())
                           return fmt::format("cell index {} is outside the grid of {} cells",

@@ -81,12 +81,6 @@ float circumradius(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c) {
   return twiceArea > 0.0 ? float(ab * bc * ca / (2.0 * twiceArea)) : 0.0f;
 }
 
-// Distance from box a to box b (0 when they overlap).
-float boxDistance(const Box3f& a, const Box3f& b) {
-  const glm::vec3 gap = glm::max(glm::vec3(0.0f), glm::max(a.lo - b.hi, b.lo - a.hi));
-  return glm::length(gap);
-}
-
 }  // namespace
 
 ImpostorFrame frameImpostor(const Box3f& cell, const Box3f& box) {
@@ -173,7 +167,7 @@ ImpostorPlacement placeImpostors(const Box3f& cell, const FlatTriangles& triangl
   for (uint32_t t : pvsTriangles) {
     if (triangles.degenerate[t]) continue;
     const Box3f bounds = triangles.triangleBounds(t);
-    const float distance = boxDistance(cell, bounds);
+    const float distance = cell.distanceTo(bounds);
     if (!(distance >= options.nearDistance)) {
       ++out.nearTriangles;
       continue;

@@ -33,11 +33,6 @@ size_t faceListBytes(const FaceList& f) {
   return f.size() * sizeof(uint32_t) + 64;
 }
 
-float boxDistance(const Box3f& a, const Box3f& b) {
-  const glm::vec3 gap = glm::max(glm::vec3(0.0f), glm::max(a.lo - b.hi, b.lo - a.hi));
-  return glm::length(gap);
-}
-
 }  // namespace
 
 StreamWorld::StreamWorld(Scene scene, const StreamWorldOptions& options)
@@ -334,7 +329,7 @@ FaceList StreamWorld::facesWithin(const Box3f& box, float radius) const {
   FaceList out;
   for (uint32_t id : faceGrid_.itemsNear({box.lo.x - radius, box.lo.z - radius},
                                          {box.hi.x + radius, box.hi.z + radius}))
-    if (boxDistance(faceBoxes_[id], box) <= radius) out.push_back(id);
+    if (faceBoxes_[id].distanceTo(box) <= radius) out.push_back(id);
   return out;  // ascending: itemsNear lists each face once, in order
 }
 

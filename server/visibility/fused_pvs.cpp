@@ -13,18 +13,18 @@
 namespace vistream {
 namespace {
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kInfinity = std::numeric_limits<double>::infinity();
 
 // The parameter t at which the ray p + t*d, t > 0, enters the open convex
 // region, or +infinity if it misses the interior.
 double rayEntry(const std::vector<glm::dvec4>& planes, const glm::dvec3& p, const glm::dvec3& d) {
-  double t0 = 0.0, t1 = kInf;
+  double t0 = 0.0, t1 = kInfinity;
   for (const glm::dvec4& pl : planes) {
     const glm::dvec3 n(pl);
     const double num = pl.w - glm::dot(n, p);  // > 0: p inside this half-space
     const double den = glm::dot(n, d);
     if (den == 0.0) {
-      if (num <= 0.0) return kInf;
+      if (num <= 0.0) return kInfinity;
       continue;
     }
     const double t = num / den;
@@ -32,9 +32,9 @@ double rayEntry(const std::vector<glm::dvec4>& planes, const glm::dvec3& p, cons
       t1 = std::min(t1, t);
     else
       t0 = std::max(t0, t);
-    if (!(t0 < t1)) return kInf;
+    if (!(t0 < t1)) return kInfinity;
   }
-  return t0 < t1 ? t0 : kInf;
+  return t0 < t1 ? t0 : kInfinity;
 }
 
 // Vertices of {x : dot(n_i, x) <= d_i}: intersections of plane triples that
@@ -83,7 +83,7 @@ glm::dvec3 cornerDirection(const CubeFace& cf, int res, int i, int j) {
 // reaches behind the face's plane.
 bool footprint(const std::vector<glm::dvec3>& points, const glm::dvec3& p, const CubeFace& cf,
                int res, glm::ivec4& range, const std::vector<glm::dvec4>* clipPlanes = nullptr) {
-  double umin = kInf, umax = -kInf, vmin = kInf, vmax = -kInf;
+  double umin = kInfinity, umax = -kInfinity, vmin = kInfinity, vmax = -kInfinity;
   bool anyFront = false, anyBehind = false;
   for (const glm::dvec3& x : points) {
     const glm::dvec3 d = x - p;
@@ -158,7 +158,7 @@ bool pixelMayOverlap(const std::vector<glm::dvec2>& hull, double u0, double u1, 
 // Distance from p to the nearest point of a box: a lower bound of the
 // distance to anything inside it.
 double distanceToBox(const glm::dvec3& p, const std::vector<glm::dvec3>& pts) {
-  glm::dvec3 lo(kInf), hi(-kInf);
+  glm::dvec3 lo(kInfinity), hi(-kInfinity);
   for (const glm::dvec3& x : pts) {
     lo = glm::min(lo, x);
     hi = glm::max(hi, x);
@@ -231,7 +231,7 @@ PvsResult FusedPvs::compute(const Box3f& cell, const PvsOptions& baseOptions,
 
   for (const glm::dvec3& p : samples) {
     if (remaining == 0) break;
-    std::fill(depth.begin(), depth.end(), kInf);
+    std::fill(depth.begin(), depth.end(), kInfinity);
     // Draw every eroded occluder: covered pixels keep the smallest bound.
     for (const ErodedSolid& o : solids_) {
       bool inside = true;
@@ -258,7 +258,7 @@ PvsResult FusedPvs::compute(const Box3f& cell, const PvsOptions& baseOptions,
             const double t =
                 std::max({cornerEntry[c0], cornerEntry[c0 + 1], cornerEntry[c0 + size_t(w)],
                           cornerEntry[c0 + size_t(w) + 1]});
-            if (t == kInf) continue;
+            if (t == kInfinity) continue;
             double& d = face[size_t(j) * size_t(res) + size_t(i)];
             d = std::min(d, t * pixelReach[size_t(j) * size_t(res) + size_t(i)]);
           }

@@ -21,7 +21,7 @@ namespace {
 constexpr float kEyeLow = 0.2f, kEyeHigh = 2.0f;  // metres above the floor a viewer's eye can be
 // Journal format 2 (format 1 seeded its hashes with a wrong FNV offset
 // basis, and its fingerprint missed the coarse-to-fine switch).
-constexpr std::array<char, 8> kJournalMagic = {'V', 'S', 'J', 'R', 'N', 'L', '2', '\0'};
+constexpr std::array<char, 8> kPvsJournalMagic = {'V', 'S', 'J', 'R', 'N', 'L', '2', '\0'};
 
 // Everything that changes a bake's answer: a journal from other parameters
 // must not be resumed.
@@ -138,7 +138,7 @@ BakeReport bakePvs(const Scene& scene, const EpsilonPvs& pvs, const FreeSpace& f
 
   std::map<uint32_t, std::vector<uint32_t>> done;
   // A journal record: the cell's face count as `aux`, its face list as payload.
-  BakeJournal journal(out.string() + ".journal", kJournalMagic, bakeFingerprint(header, options),
+  BakeJournal journal(out.string() + ".journal", kPvsJournalMagic, bakeFingerprint(header, options),
                       [&](const JournalRecordView& r) -> std::string {
                         if (r.index >= grid.cellCount())
                           return fmt::format("cell index {} is outside the grid of {} cells",

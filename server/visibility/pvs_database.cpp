@@ -17,7 +17,7 @@
 namespace vistream {
 namespace {
 
-constexpr std::array<char, 8> kMagic = {'V', 'S', 'P', 'V', 'S', 'D', 'B', '\0'};
+constexpr std::array<char, 8> kPvsMagic = {'V', 'S', 'P', 'V', 'S', 'D', 'B', '\0'};
 constexpr size_t kHeaderBytes = kCheckedFileHeaderBytes;
 
 template <typename T>
@@ -164,13 +164,13 @@ void writePvsDatabase(const std::filesystem::path& path, const PvsDatabaseHeader
                                                 &size, &dims, h.method.c_str(), &cellOffsets);
   pvsdb::FinishDatabaseBuffer(b, root);
 
-  writeCheckedFile(path, kMagic, kPvsDbVersion, std::span(b.GetBufferPointer(), b.GetSize()));
+  writeCheckedFile(path, kPvsMagic, kPvsDbVersion, std::span(b.GetBufferPointer(), b.GetSize()));
 }
 
 PvsDatabase PvsDatabase::open(const std::filesystem::path& path) {
   PvsDatabase db;
   CheckedFile checked = openCheckedFile(
-      path, kMagic, kPvsDbVersion, "PVS database",
+      path, kPvsMagic, kPvsDbVersion, "PVS database",
       "; re-bake it with this build's vistream-pvs bake (version 1 seeded its checksum with a "
       "wrong FNV offset basis)");
   db.path_ = path;

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "common/raycast/ray_query.h"
+#include "tests/common/support/triangle_soups.h"
 
 // Oracles: brute-force ray casts through pixel centres, exact frustum and
 // distance geometry on points sampled from each triangle, and a brute force over
@@ -20,12 +21,7 @@ namespace {
 
 constexpr float kInf = std::numeric_limits<float>::infinity();
 
-void addTriangle(FlatTriangles& f, glm::vec3 a, glm::vec3 b, glm::vec3 c) {
-  f.faceIds.push_back(uint32_t(f.faceIds.size()));
-  f.positions.insert(f.positions.end(), {a, b, c});
-  f.objectIds.push_back(0);
-  f.degenerate.push_back(isDegenerateTriangle(a, b, c) ? 1 : 0);
-}
+using testing::addTriangle;
 
 // Random triangles of many sizes over a 500 m x 500 m area, up to 45 m high.
 RenderGeometry randomGeometry(uint32_t seed, int n) {

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <random>
 #include <set>
 #include <string>
@@ -17,8 +18,6 @@
 
 namespace vistream {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 Camera makeCamera(glm::vec3 eye, float yaw, float pitch, int width = 160, int height = 120) {
   return testing::cameraAt(eye, yaw, pitch, width, height);
@@ -110,7 +109,7 @@ TEST(PanoramicCache, GivesDirectionsMoreThanTwoTexelAnglesApartDifferentTexels) 
     auto U = [&](double a, double b) { return std::uniform_real_distribution<double>(a, b)(rng); };
     size_t pairs = 0, same = 0;
     for (int i = 0; i < 20000; ++i) {
-      const double a0 = U(-kPi, kPi), e0 = U(-maxElevation, maxElevation);
+      const double a0 = U(-std::numbers::pi, std::numbers::pi), e0 = U(-maxElevation, maxElevation);
       // A neighbour 2-4 texel angles away in azimuth or in elevation, or a random direction.
       double a1 = a0, e1 = e0;
       const int kind = i % 3;
@@ -118,8 +117,10 @@ TEST(PanoramicCache, GivesDirectionsMoreThanTwoTexelAnglesApartDifferentTexels) 
       if (kind == 1)
         e1 = std::clamp(e0 + (i % 2 ? 1 : -1) * U(2.05, 4.0) * texelAngle, -maxElevation,
                         maxElevation);
-      if (kind == 2) a1 = U(-kPi, kPi), e1 = U(-maxElevation, maxElevation);
-      const double da = std::abs(std::remainder(a1 - a0, 2.0 * kPi)), de = std::abs(e1 - e0);
+      if (kind == 2)
+        a1 = U(-std::numbers::pi, std::numbers::pi), e1 = U(-maxElevation, maxElevation);
+      const double da = std::abs(std::remainder(a1 - a0, 2.0 * std::numbers::pi)),
+                   de = std::abs(e1 - e0);
       if (!(da > 2.0 * texelAngle || de > 2.0 * texelAngle)) continue;
       ++pairs;
       const int64_t t0 = cache.texelOf(direction(a0, e0)), t1 = cache.texelOf(direction(a1, e1));

@@ -64,7 +64,7 @@ std::vector<uint32_t> faceIdsOf(const std::vector<size_t>& chosen) {
   return ids;
 }
 
-Camera cameraAt(glm::vec3 eye, float yaw, float pitch = 0.0f) {
+Camera smallCameraAt(glm::vec3 eye, float yaw, float pitch = 0.0f) {
   return testing::cameraAt(eye, yaw, pitch, 240, 180);
 }
 
@@ -91,9 +91,9 @@ TEST(IncrementalPipeline, DrawsWhatARendererBuiltFromScratchDrawsAfterAnyAddsAnd
   StreamedGeometry streamed;
   std::set<size_t> held;
   std::unique_ptr<FrameRenderer> pipeline, raycast;
-  const std::vector<Camera> cameras = {cameraAt({0.0f, 1.7f, -5.0f}, 0.0f),
-                                       cameraAt({0.0f, 1.7f, -120.0f}, 20.0f, 5.0f),
-                                       cameraAt({3.0f, 30.0f, -60.0f}, 180.0f, -10.0f)};
+  const std::vector<Camera> cameras = {smallCameraAt({0.0f, 1.7f, -5.0f}, 0.0f),
+                                       smallCameraAt({0.0f, 1.7f, -120.0f}, 20.0f, 5.0f),
+                                       smallCameraAt({3.0f, 30.0f, -60.0f}, 180.0f, -10.0f)};
   size_t farFieldFrames = 0;  // frames whose far field hit something
   for (int step = 0; step < 12; ++step) {
     SCOPED_TRACE(::testing::Message() << "step " << step);
@@ -172,8 +172,9 @@ TEST(IncrementalPipeline, TheCacheKeepsWhatNewFacesCannotChangeAndTheFrameStaysR
     EXPECT_LT(diff.differingFraction, 0.005);
     return report;
   };
-  for (int i = 0; i < 4; ++i) expectRight(cameraAt({0.0f, 1.7f, -5.0f - 0.002f * float(i)}, 0.0f));
-  const Camera still = cameraAt({0.0f, 1.7f, -5.01f}, 0.0f);
+  for (int i = 0; i < 4; ++i)
+    expectRight(smallCameraAt({0.0f, 1.7f, -5.0f - 0.002f * float(i)}, 0.0f));
+  const Camera still = smallCameraAt({0.0f, 1.7f, -5.01f}, 0.0f);
   const FrameReport before = expectRight(still);
   ASSERT_GT(before.pixels.cache, 1000u);
 

@@ -13,6 +13,7 @@
 
 #include "common/raycast/ray_query.h"
 #include "tests/common/support/camera_at.h"
+#include "tests/common/support/triangle_soups.h"
 
 // Oracles: a brute-force ray cast through each pixel centre (Camera::rayDirection
 // has a forward component of exactly 1, so the ray parameter t is view depth and
@@ -25,12 +26,7 @@
 namespace vistream {
 namespace {
 
-void addTriangle(FlatTriangles& f, glm::vec3 a, glm::vec3 b, glm::vec3 c) {
-  f.faceIds.push_back(uint32_t(f.faceIds.size()));
-  f.positions.insert(f.positions.end(), {a, b, c});
-  f.objectIds.push_back(0);
-  f.degenerate.push_back(isDegenerateTriangle(a, b, c) ? 1 : 0);
-}
+using testing::addTriangle;
 
 std::vector<uint32_t> allOf(const FlatTriangles& f) {
   std::vector<uint32_t> v(f.size());
@@ -43,7 +39,7 @@ glm::vec3 onPixelRay(const Camera& c, glm::dvec2 w, float depth) {
   return c.eye + depth * c.rayDirection(float(w.x), float(w.y));
 }
 
-Camera makeCamera(glm::vec3 eye, float yaw, float pitch) {
+Camera rasterCamera(glm::vec3 eye, float yaw, float pitch) {
   return testing::cameraAt(eye, yaw, pitch, 160, 120);
 }
 
@@ -154,7 +150,7 @@ FlatTriangles randomSoup(const Camera& cam, uint32_t seed, int n) {
 Camera randomCamera(uint32_t seed) {
   std::mt19937 rng(seed * 7919u + 1u);
   auto U = [&](float a, float b) { return std::uniform_real_distribution<float>(a, b)(rng); };
-  return makeCamera({U(-20, 20), U(0, 10), U(-20, 20)}, U(-180, 180), U(-30, 30));
+  return rasterCamera({U(-20, 20), U(0, 10), U(-20, 20)}, U(-180, 180), U(-30, 30));
 }
 
 // Triangles the rasterizer has drawn from one camera, with the brute-force
@@ -305,8 +301,8 @@ TEST(SoftwareRasterizer, DrawsEveryPixelOfAQuadSplitOnADiagonalExactlyOnce) {
   SoftwareRasterizer raster;
   std::mt19937 rng(7);
   auto U = [&](float a, float b) { return std::uniform_real_distribution<float>(a, b)(rng); };
-  const std::vector<Camera> cameras = {makeCamera({0, 0, 0}, 0, 0),
-                                       makeCamera({3, 1.5f, -2}, 37, 12)};
+  const std::vector<Camera> cameras = {rasterCamera({0, 0, 0}, 0, 0),
+                                       rasterCamera({3, 1.5f, -2}, 37, 12)};
   int caseNo = 0;
   for (const Camera& cam : cameras)
     for (const auto& w : quadCases())
@@ -340,7 +336,7 @@ TEST(SoftwareRasterizer, DrawsEveryPixelOfAQuadSplitOnADiagonalExactlyOnce) {
 
 TEST(SoftwareRasterizer, CoverageWithAnInsetCountsOnlyCentresThatFarInsideATriangle) {
   SoftwareRasterizer raster;
-  const Camera cam = makeCamera({1, 2, 3}, -20, 8);
+  const Camera cam = rasterCamera({1, 2, 3}, -20, 8);
   std::mt19937 rng(11);
   auto U = [&](double a, double b) { return std::uniform_real_distribution<double>(a, b)(rng); };
   for (int i = 0; i < 12; ++i) {
@@ -405,7 +401,7 @@ TEST(SoftwareRasterizer, DrawsAQuadFarFromTheOriginLikeTheExactProjection) {
   size_t band = 0;
   for (int far = 0; far < 2; ++far) {
     SCOPED_TRACE(far ? "at x = 1e5" : "at the origin");
-    const Camera cam = makeCamera({far ? 1.0e5f : 0.0f, 1.7f, 0.0f}, 30.0f, 5.0f);
+    const Camera cam = rasterCamera({far ? 1.0e5f : 0.0f, 1.7f, 0.0f}, 30.0f, 5.0f);
     const FlatTriangles quad = quadThrough(cam, w, z, false);
     IdBuffer ids;
     raster.draw(cam, quad, allOf(quad), ids);
@@ -441,7 +437,7 @@ TEST(SoftwareRasterizer, DrawsAQuadFarFromTheOriginLikeTheExactProjection) {
 }
 
 TEST(SoftwareRasterizer, DrawsNothingForTrianglesBehindTheCamera) {
-  const Camera cam = makeCamera({2, 1, -4}, 60, -10);
+  const Camera cam = rasterCamera({2, 1, -4}, 60, -10);
   std::mt19937 rng(5);
   auto U = [&](double a, double b) { return std::uniform_real_distribution<double>(a, b)(rng); };
   FlatTriangles behind;
@@ -465,7 +461,7 @@ TEST(SoftwareRasterizer, DrawsNothingForTrianglesBehindTheCamera) {
 }
 
 TEST(SoftwareRasterizer, DrawsThePixelsARayCastSeesOfATriangleCrossingTheNearPlane) {
-  const Camera cam = makeCamera({-1, 3, 2}, 15, 20);
+  const Camera cam = rasterCamera({-1, 3, 2}, 15, 20);
   // Corners: window point and view depth; one or two corners behind the eye.
   struct Corner {
     glm::dvec2 w;

@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <glm/gtc/matrix_transform.hpp>
+#include <numbers>
 
 #include "common/avatar/skinning.h"
 #include "common/light/environment_light.h"
@@ -11,8 +12,6 @@
 
 namespace vistream {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 struct Mesh {
   std::vector<glm::vec3> positions;
@@ -44,7 +43,7 @@ Mesh ballOverFloor() {
     return glm::vec3(float(-3 + 6 * u), 0.0f, float(-3 + 6 * v));
   });
   m.addGrid(16, 32, [](double u, double v) {
-    const double theta = kPi * u, phi = 2 * kPi * v;
+    const double theta = std::numbers::pi * u, phi = 2 * std::numbers::pi * v;
     return glm::vec3(float(std::sin(theta) * std::cos(phi)), float(2.0 + std::cos(theta)),
                      float(std::sin(theta) * std::sin(phi)));
   });
@@ -56,7 +55,8 @@ Mesh ballOverFloor() {
 Mesh bowl() {
   Mesh m;
   m.addGrid(12, 32, [](double u, double v) {
-    const double theta = 0.5 * kPi * u, phi = 2 * kPi * v;  // theta from the bottom
+    const double theta = 0.5 * std::numbers::pi * u,
+                 phi = 2 * std::numbers::pi * v;  // theta from the bottom
     return glm::vec3(float(2 * std::sin(theta) * std::cos(phi)), float(2 - 2 * std::cos(theta)),
                      float(2 * std::sin(theta) * std::sin(phi)));
   });

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <numbers>
 #include <random>
 
 #include "common/avatar/self_shadow.h"
@@ -12,8 +13,6 @@
 namespace vistream {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-
 // The clamped cosine about unit n, projected (the zonal rotation theorem):
 // T_lm = z_l sqrt(4 pi / (2l + 1)) Y_lm(n).
 std::vector<double> openTransfer(const glm::vec3& n) {
@@ -22,8 +21,9 @@ std::vector<double> openTransfer(const glm::vec3& n) {
   std::vector<double> t(25);
   for (int l = 0; l <= 4; ++l)
     for (int m = -l; m <= l; ++m)
-      t[size_t(l * (l + 1) + m)] =
-          clampedCosineZonal(l) * std::sqrt(4 * kPi / (2 * l + 1)) * y[l * (l + 1) + m];
+      t[size_t(l * (l + 1) + m)] = clampedCosineZonal(l) *
+                                   std::sqrt(4 * std::numbers::pi / (2 * l + 1)) *
+                                   y[l * (l + 1) + m];
   return t;
 }
 
@@ -80,16 +80,16 @@ TEST(Transfer, AFullyBlockedMaskTransfersNothing) {
 // symmetry. The mask's pixel quadrature errs by a few percent at 32 x 32
 // and converges with finer masks.
 TEST(Transfer, ASphereAboveTheVertexLeavesTheAnalyticRing) {
-  const double c30 = std::cos(kPi / 6);
-  const double want0 = 0.282095 * (kPi - kPi * 0.25),
-               want2 = 0.488603 * 2 * kPi * c30 * c30 * c30 / 3;
+  const double c30 = std::cos(std::numbers::pi / 6);
+  const double want0 = 0.282095 * (std::numbers::pi - std::numbers::pi * 0.25),
+               want2 = 0.488603 * 2 * std::numbers::pi * c30 * c30 * c30 / 3;
   double previous = 1.0;
   for (const int side : {32, 64}) {
     const PlaneMaskTable table(side, 128);
     VisibilityMask mask(side);
     const int rings = 48, segments = 96;
     auto at = [&](int i, int j) {
-      const double theta = kPi * i / rings, phi = 2 * kPi * j / segments;
+      const double theta = std::numbers::pi * i / rings, phi = 2 * std::numbers::pi * j / segments;
       return glm::vec3(float(std::sin(theta) * std::cos(phi)),
                        float(std::sin(theta) * std::sin(phi)), float(2.0 + std::cos(theta)));
     };
@@ -134,7 +134,7 @@ TEST(Transfer, AGlossyLobeOfExponentZeroIsTheDiffuseTransferOverTwoPi) {
       integrator.diffuse(mask, frame, d);
       integrator.glossy(mask, frame, glm::vec3(0, 1, 0), 0.0f, g);
       for (int i = 0; i < 25; ++i)
-        EXPECT_NEAR(g[i], d[i] / (2 * kPi), 2e-6)
+        EXPECT_NEAR(g[i], d[i] / (2 * std::numbers::pi), 2e-6)
             << i << " downsample " << downsample << " density " << density;
     }
   }
@@ -149,15 +149,16 @@ std::vector<double> glossyByQuadrature(const TangentFrame& frame, const glm::vec
   const int steps = 600;
   float y[25];
   for (int i = 0; i < steps; ++i) {
-    const double theta = (i + 0.5) * (kPi / 2) / steps;
+    const double theta = (i + 0.5) * (std::numbers::pi / 2) / steps;
     for (int j = 0; j < 2 * steps; ++j) {
-      const double phi = (j + 0.5) * kPi / steps;
+      const double phi = (j + 0.5) * std::numbers::pi / steps;
       const glm::vec3 local(float(std::sin(theta) * std::cos(phi)),
                             float(std::sin(theta) * std::sin(phi)), float(std::cos(theta)));
       const double cosine = local.z;
-      const double lobe = (exponent + 1) / (2 * kPi) *
+      const double lobe = (exponent + 1) / (2 * std::numbers::pi) *
                           std::pow(std::max(0.0, double(glm::dot(local, rLocal))), exponent);
-      const double area = std::sin(theta) * (kPi / 2 / steps) * (kPi / steps);
+      const double area =
+          std::sin(theta) * (std::numbers::pi / 2 / steps) * (std::numbers::pi / steps);
       shEvaluate(frame.toWorld(local), 5, y);
       for (int k = 0; k < 25; ++k) want[size_t(k)] += lobe * cosine * area * y[k];
     }

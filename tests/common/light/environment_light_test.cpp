@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <numbers>
 
 #include "common/core/error.h"
 #include "common/light/spherical_harmonics.h"
@@ -12,8 +13,6 @@
 namespace vistream {
 namespace {
 
-constexpr float kPi = 3.14159265358979f;
-
 const glm::vec3 kAxes[] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
 
 TEST(EnvironmentLight, AConstantSkyGivesPiTimesItsRadianceOnEveryNormal) {
@@ -21,9 +20,9 @@ TEST(EnvironmentLight, AConstantSkyGivesPiTimesItsRadianceOnEveryNormal) {
       [](const glm::vec3&) { return glm::vec3(0.5f, 1.0f, 2.0f); }, 512, "constant");
   for (const glm::vec3& n : kAxes) {
     const glm::vec3 e = env.irradiance(n);
-    EXPECT_NEAR(e.r, kPi * 0.5f, 2e-3f);
-    EXPECT_NEAR(e.g, kPi * 1.0f, 4e-3f);
-    EXPECT_NEAR(e.b, kPi * 2.0f, 8e-3f);
+    EXPECT_NEAR(e.r, std::numbers::pi_v<float> * 0.5f, 2e-3f);
+    EXPECT_NEAR(e.g, std::numbers::pi_v<float> * 1.0f, 4e-3f);
+    EXPECT_NEAR(e.b, std::numbers::pi_v<float> * 2.0f, 8e-3f);
   }
 }
 
@@ -34,9 +33,9 @@ TEST(EnvironmentLight, AConstantSkyGivesPiTimesItsRadianceOnEveryNormal) {
 TEST(EnvironmentLight, AHalfSkyGivesPiUpHalfPiSidewaysAndNothingDown) {
   const auto env = EnvironmentLight::project(
       [](const glm::vec3& d) { return glm::vec3(d.y > 0.0f ? 1.0f : 0.0f); }, 1024, "half");
-  EXPECT_NEAR(env.irradiance({0, 1, 0}).g, kPi, 5e-3f);
-  EXPECT_NEAR(env.irradiance({1, 0, 0}).g, kPi / 2.0f, 5e-3f);
-  EXPECT_NEAR(env.irradiance({0, 0, -1}).g, kPi / 2.0f, 5e-3f);
+  EXPECT_NEAR(env.irradiance({0, 1, 0}).g, std::numbers::pi_v<float>, 5e-3f);
+  EXPECT_NEAR(env.irradiance({1, 0, 0}).g, std::numbers::pi_v<float> / 2.0f, 5e-3f);
+  EXPECT_NEAR(env.irradiance({0, 0, -1}).g, std::numbers::pi_v<float> / 2.0f, 5e-3f);
   EXPECT_NEAR(env.irradiance({0, -1, 0}).g, 0.0f, 5e-3f);
   EXPECT_NEAR(env.horizonRadiance().g, 1.0f, 1e-5f);
 }
@@ -75,7 +74,8 @@ TEST(EnvironmentLight, ProjectsRadianceOntoTwentyFiveHarmonics) {
       },
       512, "two terms");
   for (int i = 0; i < 25; ++i) {
-    const float want = i == 0 ? 2.0f * std::sqrt(4.0f * kPi) : (i == 13 ? 1.0f : 0.0f);
+    const float want =
+        i == 0 ? 2.0f * std::sqrt(4.0f * std::numbers::pi_v<float>) : (i == 13 ? 1.0f : 0.0f);
     EXPECT_NEAR(env.radiance()[size_t(i)].g, want, 2e-3f) << i;
   }
 }
@@ -92,18 +92,19 @@ TEST(EnvironmentLight, TheOpenTransferOfANormalGivesItsIrradiance) {
     shEvaluate(n, 5, y);
     for (int l = 0; l <= 4; ++l)
       for (int m = -l; m <= l; ++m)
-        t[l * (l + 1) + m] =
-            float(clampedCosineZonal(l) * std::sqrt(4.0 * kPi / (2 * l + 1))) * y[l * (l + 1) + m];
+        t[l * (l + 1) + m] = float(clampedCosineZonal(l) *
+                                   std::sqrt(4.0 * std::numbers::pi_v<float> / (2 * l + 1))) *
+                             y[l * (l + 1) + m];
     double exact = 0.0;
     const int rows = 400, cols = 800;
     for (int r = 0; r < rows; ++r) {
-      const double theta = kPi * (r + 0.5) / rows;
+      const double theta = std::numbers::pi_v<float> * (r + 0.5) / rows;
       for (int c = 0; c < cols; ++c) {
-        const double phi = 2 * kPi * (c + 0.5) / cols;
+        const double phi = 2 * std::numbers::pi_v<float> * (c + 0.5) / cols;
         const glm::vec3 d(float(std::sin(theta) * std::cos(phi)), float(std::cos(theta)),
                           float(std::sin(theta) * std::sin(phi)));
-        exact += sky(d).g * std::max(0.0f, glm::dot(d, n)) * std::sin(theta) * (kPi / rows) *
-                 (2 * kPi / cols);
+        exact += sky(d).g * std::max(0.0f, glm::dot(d, n)) * std::sin(theta) *
+                 (std::numbers::pi_v<float> / rows) * (2 * std::numbers::pi_v<float> / cols);
       }
     }
     const double ours = env.transferred(t, 5).g, map = env.irradiance(n).g;

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <numbers>
 #include <random>
 #include <vector>
 
@@ -10,8 +11,6 @@
 
 namespace vistream {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 using testing::randomDirections;
 
@@ -48,10 +47,11 @@ TEST(SphericalHarmonics, AreOrthonormalAndProjectTheClampedCosineAsStated) {
   const int rows = 400, cols = 800;
   std::vector<double> gram(25 * 25, 0.0), cosine(25, 0.0);
   for (int r = 0; r < rows; ++r) {
-    const double theta = kPi * (r + 0.5) / rows;
-    const double dOmega = (kPi / rows) * (2 * kPi / cols) * std::sin(theta);
+    const double theta = std::numbers::pi * (r + 0.5) / rows;
+    const double dOmega =
+        (std::numbers::pi / rows) * (2 * std::numbers::pi / cols) * std::sin(theta);
     for (int c = 0; c < cols; ++c) {
-      const double phi = 2 * kPi * (c + 0.5) / cols;
+      const double phi = 2 * std::numbers::pi * (c + 0.5) / cols;
       const glm::vec3 d(float(std::sin(theta) * std::cos(phi)),
                         float(std::sin(theta) * std::sin(phi)), float(std::cos(theta)));
       float y[25];
@@ -70,9 +70,11 @@ TEST(SphericalHarmonics, AreOrthonormalAndProjectTheClampedCosineAsStated) {
       EXPECT_NEAR(cosine[size_t(l * (l + 1) + m)], m == 0 ? clampedCosineZonal(l) : 0.0, 2e-3)
           << "l " << l << " m " << m;
   // Ramamoorthi and Hanrahan's weights pi, 2 pi / 3, pi / 4.
-  EXPECT_NEAR(clampedCosineZonal(0) * std::sqrt(4 * kPi), kPi, 1e-9);
-  EXPECT_NEAR(clampedCosineZonal(1) * std::sqrt(4 * kPi / 3), 2 * kPi / 3, 1e-9);
-  EXPECT_NEAR(clampedCosineZonal(2) * std::sqrt(4 * kPi / 5), kPi / 4, 1e-9);
+  EXPECT_NEAR(clampedCosineZonal(0) * std::sqrt(4 * std::numbers::pi), std::numbers::pi, 1e-9);
+  EXPECT_NEAR(clampedCosineZonal(1) * std::sqrt(4 * std::numbers::pi / 3), 2 * std::numbers::pi / 3,
+              1e-9);
+  EXPECT_NEAR(clampedCosineZonal(2) * std::sqrt(4 * std::numbers::pi / 5), std::numbers::pi / 4,
+              1e-9);
 }
 
 TEST(SphericalHarmonics, FewerOrdersAreThePrefixOfMore) {

@@ -39,10 +39,7 @@ namespace fs = std::filesystem;
 
 const fs::path kFox = fs::path(VISTREAM_SHARED_DIR) / "data" / "Fox.glb";
 
-class TempDir : public testing::TempDir {
- public:
-  TempDir() : testing::TempDir("vistream_gltf") {}
-};
+using testing::TempDir;
 
 // Triangle t of an object, in file coordinates, in the stored vertex order.
 std::array<glm::dvec3, 3> fileTriangle(const Scene& scene, const Object& o, size_t t) {

@@ -21,6 +21,7 @@
 #include "common/core/error.h"
 #include "common/scene/scene_loader.h"
 #include "tests/common/support/scene_checks.h"
+#include "tests/common/support/shared_data.h"
 #include "tests/common/support/temp_dir.h"
 
 namespace vistream {
@@ -32,12 +33,9 @@ using testing::inputErrorOf;
 using ::testing::StartsWith;
 namespace fs = std::filesystem;
 
-const fs::path kSharedData = fs::path(VISTREAM_SHARED_DIR) / "data";
+using testing::kSharedData;
 
-class TempDir : public testing::TempDir {
- public:
-  TempDir() : testing::TempDir("vistream_manifest") {}
-};
+using testing::TempDir;
 
 // Two faces (a quad and a triangle, three triangles) in object "A" near the origin.
 const char* const kA = "o A\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\nf 1 2 3\n";
@@ -285,17 +283,17 @@ TEST(Manifest, AcceptsAnAbsoluteHdrPath) {
 
 // ---- errors: InputError naming the manifest and the key ----------------------------------
 
-// Writes `json` as a manifest beside a.obj and returns the loader's message.
-std::string manifestError(const TempDir& dir, const std::string& json) {
+// Writes `text` as a manifest beside a.obj and returns the loader's message.
+std::string manifestError(const TempDir& dir, const std::string& text) {
   dir.write("a.obj", kA);
-  const fs::path m = dir.write("bad.json", json);
+  const fs::path m = dir.write("bad.json", text);
   return inputErrorOf([&] { loadManifest(m); });
 }
 
-// Checks that the manifest `json` is rejected with a message naming each of `words`.
-void expectRejectedNaming(const TempDir& dir, const std::string& json,
+// Checks that the manifest `text` is rejected with a message naming each of `words`.
+void expectRejectedNaming(const TempDir& dir, const std::string& text,
                           std::initializer_list<const char*> words) {
-  const std::string msg = manifestError(dir, json);
+  const std::string msg = manifestError(dir, text);
   for (const char* word : words) EXPECT_THAT(msg, HasSubstr(word));
 }
 

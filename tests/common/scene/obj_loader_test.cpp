@@ -20,6 +20,7 @@
 #include "common/core/error.h"
 #include "common/scene/scene_loader.h"
 #include "tests/common/support/scene_checks.h"
+#include "tests/common/support/shared_data.h"
 #include "tests/common/support/temp_dir.h"
 
 namespace vistream {
@@ -29,13 +30,10 @@ using testing::expectNear;
 using ::testing::HasSubstr;
 using testing::inputErrorOf;
 
-class TempDir : public testing::TempDir {
- public:
-  TempDir() : testing::TempDir("vistream_obj") {}
-};
+using testing::TempDir;
 namespace fs = std::filesystem;
 
-const fs::path kSharedData = fs::path(VISTREAM_SHARED_DIR) / "data";
+using testing::kSharedData;
 
 // One triangle of a loaded scene, in file coordinates.
 struct FileTriangle {

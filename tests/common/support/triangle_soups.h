@@ -25,6 +25,14 @@ inline FlatTriangles makeTriangles(const std::vector<Triangle>& triangles) {
   return flat;
 }
 
+// Appends triangle (a, b, c) as the next face of f, in object 0.
+inline void addTriangle(FlatTriangles& f, glm::vec3 a, glm::vec3 b, glm::vec3 c) {
+  f.faceIds.push_back(uint32_t(f.faceIds.size()));
+  f.positions.insert(f.positions.end(), {a, b, c});
+  f.objectIds.push_back(0);
+  f.degenerate.push_back(isDegenerateTriangle(a, b, c) ? 1 : 0);
+}
+
 // The 12 triangles of an axis-aligned box, two per side in the order
 // -Z, +Z, -X, +X, +Y, -Y (triangles 2k and 2k + 1 make side k).
 inline std::vector<Triangle> boxTriangles(glm::vec3 lo, glm::vec3 hi) {

@@ -21,7 +21,7 @@ using testing::boxLoops;
 using testing::Loop;
 using testing::Winding;
 
-struct Built : testing::SolidsScene {
+struct BackFacesBuilt : testing::SolidsScene {
   BackFaceSolids behind;
   void build() {
     SolidsScene::build();
@@ -44,7 +44,7 @@ struct Built : testing::SolidsScene {
 constexpr uint32_t kMinusX = 0, kPlusX = 1, kMinusZ = 2, kPlusZ = 3, kTop = 4, kBottom = 5;
 
 TEST(Enclosures, ABoxOpenOnlyBelowEnclosesAboveAFloorAtItsBase) {
-  Built b;
+  BackFacesBuilt b;
   addWoundBox(b.scene, "house", {0, 2, 0}, {4, 5, 4}, Winding::Outward, /*bottom=*/false);
   b.build();
   ASSERT_EQ(b.solids.enclosureCount(), 1u);
@@ -53,7 +53,7 @@ TEST(Enclosures, ABoxOpenOnlyBelowEnclosesAboveAFloorAtItsBase) {
 }
 
 TEST(Enclosures, ABoxWithAMissingSideOrAHoleInItsRoofEnclosesNothing) {
-  Built side;
+  BackFacesBuilt side;
   std::vector<Loop> loops = boxLoops({0, 0, 0}, {4, 3, 4});
   loops.erase(loops.begin());  // no -x wall
   addFaces(side.scene, "shed", loops);
@@ -62,7 +62,7 @@ TEST(Enclosures, ABoxWithAMissingSideOrAHoleInItsRoofEnclosesNothing) {
   for (uint32_t f = 0; f < 5; ++f) EXPECT_FALSE(side.oneSided(f)) << f;
 
   // The roof as a frame round a square hole: the hole's edges are open above the base.
-  Built holed;
+  BackFacesBuilt holed;
   loops = boxLoops({0, 0, 0}, {4, 3, 4});
   loops[4] = {{0, 3, 0}, {0, 3, 4}, {1, 3, 3}, {1, 3, 1}};
   loops.push_back({{0, 3, 4}, {4, 3, 4}, {3, 3, 3}, {1, 3, 3}});
@@ -78,7 +78,7 @@ TEST(Enclosures, ABoxWithAMissingSideOrAHoleInItsRoofEnclosesNothing) {
 // one roof. Its top side is used once, so the shell with it is no cycle;
 // peeled off, the shell is sealed.
 TEST(Enclosures, APartyWallHangingUnderTheRoofIsPeeledAndTheShellStaysSealed) {
-  Built b;
+  BackFacesBuilt b;
   const std::vector<Loop> loops = {
       {{0, 0, 0}, {0, 0, 4}, {0, 4, 4}, {0, 4, 0}},  // -x
       {{8, 0, 0}, {8, 4, 0}, {8, 4, 4}, {8, 0, 4}},  // +x
@@ -104,7 +104,7 @@ TEST(Enclosures, APartyWallHangingUnderTheRoofIsPeeledAndTheShellStaysSealed) {
 }
 
 TEST(BackFaces, OnAnInconsistentBoxOnlyTheFacesWoundOutwardAreOneSided) {
-  Built b;
+  BackFacesBuilt b;
   addWoundBox(b.scene, "cube", {0, 0, 0}, {3, 3, 3}, Winding::SidesInward);
   b.build();
   EXPECT_EQ(b.behind.byOrientation, 0u) << "not consistently wound: no orientation proof";
@@ -114,7 +114,7 @@ TEST(BackFaces, OnAnInconsistentBoxOnlyTheFacesWoundOutwardAreOneSided) {
 }
 
 TEST(BackFaces, AnInwardBoxHasNoOneSidedFaceAndAnOutwardOneIsProvedByOrientation) {
-  Built inward, outward;
+  BackFacesBuilt inward, outward;
   addWoundBox(inward.scene, "room", {0, 0, 0}, {3, 3, 3}, Winding::Inward);
   addWoundBox(outward.scene, "cube", {0, 0, 0}, {3, 3, 3}, Winding::Outward);
   inward.build();
@@ -128,7 +128,7 @@ TEST(BackFaces, AnInwardBoxHasNoOneSidedFaceAndAnOutwardOneIsProvedByOrientation
 }
 
 TEST(BackFaces, TheCoincidentFacesOfTwoBoxesSharingAFaceStayTwoSided) {
-  Built b;
+  BackFacesBuilt b;
   addWoundBox(b.scene, "left", {0, 0, 0}, {2, 2, 2}, Winding::Outward, /*bottom=*/false);
   addWoundBox(b.scene, "right", {2, 0, 0}, {4, 2, 2}, Winding::Outward, /*bottom=*/false);
   b.build();
@@ -142,7 +142,7 @@ TEST(BackFaces, TheCoincidentFacesOfTwoBoxesSharingAFaceStayTwoSided) {
 TEST(BackFaces, FarFromTheOriginABoxOpenBelowIsStillProvedByParity) {
   for (const float offset : {0.0f, 1e5f}) {
     SCOPED_TRACE(offset);
-    Built b;
+    BackFacesBuilt b;
     const glm::vec3 o(offset, 0.0f, -offset);
     addWoundBox(b.scene, "house", o, o + glm::vec3(10, 6, 8), Winding::Outward, false);
     b.build();
@@ -155,7 +155,7 @@ TEST(BackFaces, FarFromTheOriginABoxOpenBelowIsStillProvedByParity) {
 // Half the bottom is there: it faces down with the inside above it, and
 // only its back lies above the open base.
 TEST(BackFaces, TheBottomHalfOfABoxOpenOnlyBelowIsOneSided) {
-  Built b;
+  BackFacesBuilt b;
   std::vector<Loop> loops = boxLoops({0, 0, 0}, {4, 3, 4});
   loops[kBottom] = {{0, 0, 0}, {2, 0, 0}, {2, 0, 4}, {0, 0, 4}};
   addFaces(b.scene, "house", loops);
@@ -167,8 +167,8 @@ TEST(BackFaces, TheBottomHalfOfABoxOpenOnlyBelowIsOneSided) {
 
 // The roof is two quads whose shared corners lie on the long top sides of
 // the front and back walls: in floats a crack runs along those sides.
-Built tJunctionBox() {
-  Built b;
+BackFacesBuilt tJunctionBox() {
+  BackFacesBuilt b;
   std::vector<Loop> loops = boxLoops({-3, 0, -15}, {3, 5, -9});
   loops[4] = {{-3, 5, -15}, {-3, 5, -9}, {0, 5, -9}, {0, 5, -15}};
   loops.push_back({{0, 5, -15}, {0, 5, -9}, {3, 5, -9}, {3, 5, -15}});
@@ -192,7 +192,7 @@ std::map<std::pair<std::array<float, 3>, std::array<float, 3>>, int> sideUses(
 }
 
 TEST(SealedSurface, CutsTheSidesAtTJunctionsSoEverySideIsSharedAndKeepsTheArea) {
-  const Built b = tJunctionBox();
+  const BackFacesBuilt b = tJunctionBox();
   int open = 0;
   for (const auto& [side, n] : sideUses(b.triangles)) open += n == 1;
   EXPECT_GT(open, 0) << "the raw box has sides used once (the T-junctions)";
@@ -215,7 +215,7 @@ TEST(SealedSurface, CutsTheSidesAtTJunctionsSoEverySideIsSharedAndKeepsTheArea) 
 }
 
 TEST(SealedSurface, HitsNameTheOriginalTriangleAtTheSamePointAsTheRawSurface) {
-  const Built b = tJunctionBox();
+  const BackFacesBuilt b = tJunctionBox();
   const std::unique_ptr<RayQuery> sealed = makeSealedRayQuery(b.triangles, 0.01);
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);

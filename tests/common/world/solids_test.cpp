@@ -16,7 +16,7 @@ using testing::addWoundBox;
 using testing::Loop;
 using testing::Winding;
 
-struct Built : testing::SolidsScene {
+struct SolidsBuilt : testing::SolidsScene {
   size_t count(SolidClass c) const { return solids.census().components[size_t(c)]; }
   bool inside(glm::vec3 p) const { return solids.inside(*rays, p); }
   bool insideClosed(glm::vec3 p) const { return solids.insideClosed(*rays, p); }
@@ -24,7 +24,7 @@ struct Built : testing::SolidsScene {
 
 TEST(Solids, AClosedCubeIsOutwardOrInwardBySignedVolume) {
   for (const Winding w : {Winding::Outward, Winding::Inward}) {
-    Built b;
+    SolidsBuilt b;
     addWoundBox(b.scene, "cube", {0, 0, 0}, {2, 3, 4}, w);
     b.build();
     ASSERT_EQ(b.solids.components().size(), 1u);
@@ -37,12 +37,12 @@ TEST(Solids, AClosedCubeIsOutwardOrInwardBySignedVolume) {
 }
 
 TEST(Solids, ABoxWithoutItsBottomIsOpenAndOneFlippedFaceMakesACubeInconsistent) {
-  Built open;
+  SolidsBuilt open;
   addWoundBox(open.scene, "wall", {0, 0, 0}, {4, 3, 0.2f}, Winding::Outward, /*bottom=*/false);
   open.build();
   EXPECT_EQ(open.count(SolidClass::Open), 1u);
 
-  Built mixed;
+  SolidsBuilt mixed;
   addWoundBox(mixed.scene, "cube", {0, 0, 0}, {2, 2, 2}, Winding::SidesInward);
   mixed.build();
   EXPECT_EQ(mixed.count(SolidClass::Inconsistent), 1u);
@@ -52,7 +52,7 @@ TEST(Solids, ABoxWithoutItsBottomIsOpenAndOneFlippedFaceMakesACubeInconsistent) 
 TEST(Solids, PointsInsideClosedOutwardOpenAndInconsistentMeshesAreInsideWhateverTheWinding) {
   for (const Winding w : {Winding::Outward, Winding::SidesInward}) {
     for (const bool bottom : {true, false}) {
-      Built b;
+      SolidsBuilt b;
       addWoundBox(b.scene, "block", {0, 0, 0}, {10, 6, 10}, w, bottom);
       b.build();
       EXPECT_TRUE(b.inside({5, 1, 5})) << int(w) << bottom;
@@ -65,7 +65,7 @@ TEST(Solids, PointsInsideClosedOutwardOpenAndInconsistentMeshesAreInsideWhatever
 }
 
 TEST(Solids, AClosedInwardCubeIsTheSameSolidAsAnOutwardOne) {
-  Built b;
+  SolidsBuilt b;
   addWoundBox(b.scene, "cube", {0, 0, 0}, {10, 3, 10}, Winding::Inward);
   b.build();
   EXPECT_EQ(b.count(SolidClass::ClosedInward), 1u);
@@ -76,7 +76,7 @@ TEST(Solids, AClosedInwardCubeIsTheSameSolidAsAnOutwardOne) {
 }
 
 TEST(Solids, TwoCubesSharingAFaceAreBothSolidAndTheirSharedEdgesNonManifold) {
-  Built b;
+  SolidsBuilt b;
   testing::addBox(b.scene, "a", {-2, 0, -1}, {0, 3, 1});
   testing::addBox(b.scene, "b", {0, 0, -1}, {2, 3, 1});
   b.build();
@@ -91,7 +91,7 @@ TEST(Solids, TwoCubesSharingAFaceAreBothSolidAndTheirSharedEdgesNonManifold) {
 }
 
 TEST(Solids, TwoBoxesMeetingAtANonManifoldEdgeStayTwoSolidsWithAnEmptyNotch) {
-  Built b;
+  SolidsBuilt b;
   testing::addBox(b.scene, "a", {-2, 0, -2}, {0, 3, 0});
   testing::addBox(b.scene, "b", {0, 0, 0}, {2, 3, 2});
   b.build();
@@ -104,7 +104,7 @@ TEST(Solids, TwoBoxesMeetingAtANonManifoldEdgeStayTwoSolidsWithAnEmptyNotch) {
 }
 
 TEST(Solids, ASheetBelowOrAboveAPointDoesNotContainIt) {
-  Built b;
+  SolidsBuilt b;
   testing::addGround(b.scene, -10, -10, 10, 10);
   testing::addGround(b.scene, -10, -10, 10, 10, 3.0f);  // a ceiling sheet, wound up
   b.build();
@@ -126,7 +126,7 @@ TEST(Solids, OnlyClosedConsistentlyWoundSolidsAreInsideClosedAndAnySolidHoldsUns
   for (const Case c :
        {Case{Winding::Outward, true, true}, Case{Winding::Inward, true, true},
         Case{Winding::SidesInward, true, false}, Case{Winding::Outward, false, false}}) {
-    Built b;
+    SolidsBuilt b;
     addWoundBox(b.scene, "block", {0, 0, 0}, {10, 6, 10}, c.winding, c.bottom);
     b.build();
     EXPECT_TRUE(b.inside({5, 1, 5}));
@@ -148,7 +148,7 @@ TEST(Solids, APointInsideAThinWallBetweenFloorAndCeilingIsInsideAClosedSolid) {
   // second wall: the floor, ceiling and crossing wall are hit on the way out
   // of the wall, but they belong to other parity groups.
   for (const Winding w : {Winding::Outward, Winding::Inward}) {
-    Built b;
+    SolidsBuilt b;
     addWoundBox(b.scene, "floor", {-10, -0.2f, -10}, {10, 0, 10}, w);
     addWoundBox(b.scene, "ceiling", {-10, 3, -10}, {10, 3.2f, 10}, w);
     addWoundBox(b.scene, "wall", {-5, 0, -0.1f}, {5, 3, 0.1f}, w);
@@ -164,7 +164,7 @@ TEST(Solids, APointInsideAThinWallBetweenFloorAndCeilingIsInsideAClosedSolid) {
 constexpr SolidsOptions kExactOnly{.weldTolerance = 0.0};
 
 // Every non-degenerate triangle of the scene lies in one sealed solid.
-bool allSealedAsOne(const Built& b) {
+bool allSealedAsOne(const SolidsBuilt& b) {
   if (b.solids.sealedCount() != 1) return false;
   for (uint32_t t = 0; t < b.triangles.size(); ++t)
     if (!b.triangles.degenerate[t] && b.solids.sealedOf(t) != 0) return false;
@@ -180,7 +180,7 @@ TEST(Solids, AWallCornerOnItsNeighboursLongSideSealsTheBoxWithinTheWeldTolerance
     loops.push_back({{2, 3, 0}, {2, 3, 2}, {4, 3, 2}, {4, 3, 0}});
     addFaces(scene, "block", loops);
   };
-  Built exact, welded;
+  SolidsBuilt exact, welded;
   addBlock(exact.scene);
   addBlock(welded.scene);
   exact.build(kExactOnly);
@@ -198,13 +198,13 @@ TEST(Solids, CornersAFewMillimetresApartWeldButAGapWiderThanTheToleranceStaysOpe
     addFaces(scene, "block", loops);
   };
   for (const float lift : {0.004f, 0.05f}) {
-    Built b;
+    SolidsBuilt b;
     addBlock(b.scene, lift);
     b.build();
     EXPECT_EQ(allSealedAsOne(b), lift < 0.01f) << lift;
     EXPECT_EQ(b.solids.sealedCount(), lift < 0.01f ? 1u : 0u) << lift;
   }
-  Built exact;
+  SolidsBuilt exact;
   addBlock(exact.scene, 0.004f);
   exact.build(kExactOnly);
   EXPECT_EQ(exact.solids.sealedCount(), 0u);
@@ -217,7 +217,7 @@ TEST(Solids, RowHousesWhosePartyWallIsLeftOutAreSealedTogether) {
   std::vector<Loop> b = testing::boxLoops({4, 0, 0}, {8, 7, 5});
   a.erase(a.begin() + 1);                               // +x
   b[0] = {{4, 6, 0}, {4, 6, 5}, {4, 7, 5}, {4, 7, 0}};  // -x: only the strip above A
-  Built alone;
+  SolidsBuilt alone;
   addFaces(alone.scene, "a", a);
   alone.build();
   EXPECT_EQ(alone.solids.sealedCount(), 0u);
@@ -225,7 +225,7 @@ TEST(Solids, RowHousesWhosePartyWallIsLeftOutAreSealedTogether) {
   // B's front and back walls are one quad each from 0 to 7 m high: the
   // corners where A's roof meets the strip lie on their side edges
   // (T-junctions).
-  Built row;
+  SolidsBuilt row;
   addFaces(row.scene, "a", a);
   addFaces(row.scene, "b", b);
   row.build();
@@ -233,7 +233,7 @@ TEST(Solids, RowHousesWhosePartyWallIsLeftOutAreSealedTogether) {
 }
 
 TEST(Solids, ATriangleThinnerThanTheToleranceBelongsToNoSealedSolid) {
-  Built b;
+  SolidsBuilt b;
   addWoundBox(b.scene, "cube", {0, 0, 0}, {2, 2, 2}, Winding::Outward);
   addFaces(b.scene, "sliver", {{{0, 5, 0}, {10, 5, 0}, {10, 5, 0.005f}}});
   b.build();
@@ -245,7 +245,7 @@ TEST(Solids, ATriangleThinnerThanTheToleranceBelongsToNoSealedSolid) {
 TEST(Solids, AnInteriorsRoomsAreNotInsideASolidWhenWeldingJoinsItsSheetsToItsWalls) {
   // Floor and ceiling sheets of 1 m tiles (their corners lie on the walls'
   // edges once welded) and two wall boxes: the room between is free.
-  Built b;
+  SolidsBuilt b;
   for (int i = 0; i < 6; ++i)
     for (int k = 0; k < 4; ++k) {
       const float x = float(i), z = float(k);
@@ -267,7 +267,7 @@ TEST(Solids, AnInteriorsRoomsAreNotInsideASolidWhenWeldingJoinsItsSheetsToItsWal
 // solid must vote unanimously (cracks narrower than the tolerance may let a
 // rare ray through: at most 1 point in 100 split).
 TEST(Solids, TheRealCityModelsSealedSolidsHaveTheSameParityAlongEveryRay) {
-  Built b;
+  SolidsBuilt b;
   b.scene = loadScene(std::string(VISTREAM_SHARED_DIR) + "/data/delfshaven.obj");
   b.build();
   const Solids exact = Solids::build(b.triangles, kExactOnly);
@@ -316,7 +316,7 @@ TEST(Solids, TheRealCityModelsSealedSolidsHaveTheSameParityAlongEveryRay) {
 // The parity every enclosure test is made of, on a scene whose answers are
 // known: a box, and a second box stacked above it with a gap.
 TEST(Solids, AnUpwardRayCrossesTheEnclosuresItStartsInOnceAndThoseAboveItTwice) {
-  Built b;
+  SolidsBuilt b;
   addWoundBox(b.scene, "low", {0, 0, 0}, {10, 6, 10}, Winding::Outward);
   addWoundBox(b.scene, "high", {0, 8, 0}, {10, 12, 10}, Winding::SidesInward);
   b.build();
@@ -355,7 +355,7 @@ TEST(Solids, AnUpwardRayCrossesTheEnclosuresItStartsInOnceAndThoseAboveItTwice) 
 // (closed, open and non-manifold buildings, party walls): random points in
 // its bounds, and points on its surfaces (triangle centroids).
 TEST(Solids, AnUnservedViewpointIsOneInsideAnySolidOrInsideOrOnAClosedOneOrAnEnclosure) {
-  Built b;
+  SolidsBuilt b;
   b.scene = loadScene(std::string(VISTREAM_SHARED_DIR) + "/data/delfshaven.obj");
   b.build();
   const Box3f box = b.scene.bounds();

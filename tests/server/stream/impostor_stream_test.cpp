@@ -48,7 +48,7 @@ struct BakedRow {
   }
 };
 
-struct Received {
+struct ImpostorsReceived {
   bool offered = false;
   std::set<uint32_t> geometryFaces;
   std::vector<wire::ImpostorMessage> impostors;  // in the order received
@@ -56,7 +56,7 @@ struct Received {
 
 // Joins (radius 400 m: every face of the row is within it), stands at the
 // origin and reads until the server has nothing more to send for 1.5 s.
-Received walkIn(uint16_t port, bool wantsImpostors) {
+ImpostorsReceived walkIn(uint16_t port, bool wantsImpostors) {
   TestClient c(port);
   wire::HelloT h;
   h.protocol_version = wire::kProtocolVersion;
@@ -65,7 +65,7 @@ Received walkIn(uint16_t port, bool wantsImpostors) {
   h.capabilities->wants_impostors = wantsImpostors;
   h.capabilities->wants_avatars = false;
   c.sendRaw(wire::encodeMessage(std::move(h)));
-  Received r;
+  ImpostorsReceived r;
   const auto welcome = c.nextOf(Payload::Welcome);
   EXPECT_TRUE(welcome);
   if (!welcome) return r;
@@ -106,7 +106,7 @@ TEST(ImpostorStream, AClientThatAsksGetsItsCellsImpostorsAndNotTheFacesTheyRepla
   std::set<uint32_t> replaced;
   for (const StoredImpostor& s : record->impostors) replaced.insert(s.faces.begin(), s.faces.end());
 
-  const Received with = walkIn(fx.port(), true);
+  const ImpostorsReceived with = walkIn(fx.port(), true);
   EXPECT_TRUE(with.offered);
   // The current cell's impostors, in order, byte for byte as stored.
   std::vector<const wire::ImpostorMessage*> ofCell;
@@ -126,7 +126,7 @@ TEST(ImpostorStream, AClientThatAsksGetsItsCellsImpostorsAndNotTheFacesTheyRepla
   EXPECT_FALSE(with.geometryFaces.empty());
   for (const uint32_t f : replaced) EXPECT_FALSE(with.geometryFaces.count(f)) << "face " << f;
 
-  const Received without = walkIn(fx.port(), false);
+  const ImpostorsReceived without = walkIn(fx.port(), false);
   EXPECT_FALSE(without.offered);
   EXPECT_TRUE(without.impostors.empty());
   for (const uint32_t f : replaced) EXPECT_TRUE(without.geometryFaces.count(f)) << "face " << f;
