@@ -55,7 +55,7 @@ constexpr double kAvenueWidth = 20.0;
 constexpr double kSetback = 1.0;      // body behind the block edge; details stay in the block
 constexpr double kBuildingGap = 1.5;  // between neighbouring buildings
 constexpr double kGroundFloor = 4.2;  // metres, shop floor
-constexpr double kFloor = 3.2;        // metres, upper floors
+constexpr double kUpperFloor = 3.2;   // metres, upper floors
 
 // Material indices, scoped so that no other generator's names meet them.
 struct BigCityMaterial {
@@ -145,7 +145,7 @@ void decorateFacade(PolygonObject& body, PolygonObject& windows, const Facade& f
     const double shop = 0.35 * style.bayWidth;
     addFacadeBox(windows, facade, centre - shop, centre + shop, 0.4, 3.0, 0.1);
     for (int f = 1; f < style.floors; ++f) {
-      const double floorBase = kGroundFloor + (f - 1) * kFloor;
+      const double floorBase = kGroundFloor + (f - 1) * kUpperFloor;
       const double u0 = centre - 0.5 * windowWidth, u1 = centre + 0.5 * windowWidth;
       addFacadeBox(windows, facade, u0, u1, floorBase + 0.9, floorBase + 2.4, 0.12);
       if (style.sills)
@@ -154,7 +154,7 @@ void decorateFacade(PolygonObject& body, PolygonObject& windows, const Facade& f
   }
   // Bands at the floor lines (between the windows), cornice at the roof line.
   for (int f = 1; f < style.floors; ++f) {
-    const double line = kGroundFloor + (f - 1) * kFloor;
+    const double line = kGroundFloor + (f - 1) * kUpperFloor;
     addFacadeBox(body, facade, 0.0, facade.width, line - 0.1, line + 0.15, 0.2);
   }
   addFacadeBox(body, facade, 0.0, facade.width, height - 0.7, height, 0.5);
@@ -176,7 +176,7 @@ void addBuilding(PolygonScene& scene, SceneRandom& random, int number, glm::dvec
   }
   style.bayWidth = random.uniform(3.6, 4.8);
   style.sills = random.chance(0.2);
-  const double height = kGroundFloor + (style.floors - 1) * kFloor;
+  const double height = kGroundFloor + (style.floors - 1) * kUpperFloor;
 
   PolygonObject body =
       makeObject(fmt::format("building_{:04d}", number),
