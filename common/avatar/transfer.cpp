@@ -9,7 +9,6 @@
 #include "common/light/spherical_harmonics.h"
 
 namespace vistream {
-namespace {}  // namespace
 
 TransferIntegrator::TransferIntegrator(int maskSide, const TransferOptions& options)
     : side_(maskSide), orders_(options.orders), terms_(shTerms(options.orders)) {

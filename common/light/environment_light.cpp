@@ -16,10 +16,13 @@ namespace {
 constexpr float kA0 = std::numbers::pi_v<float>, kA1 = 2.0f * std::numbers::pi_v<float> / 3.0f,
                 kA2 = std::numbers::pi_v<float> / 4.0f;
 
+// Pi as the equirectangular mapping has always taken it: the float's value.
+constexpr double kEquirectPi = double(std::numbers::pi_v<float>);
+
 // Unit direction of the centre of equirectangular texel (u, v) in [0, 1]^2.
 glm::vec3 equirectDirection(double u, double v) {
-  const double phi = 2.0 * double(std::numbers::pi_v<float>) * (u - 0.5);  // azimuth, 0 at -Z
-  const double theta = double(std::numbers::pi_v<float>) * v;              // polar angle from +Y
+  const double phi = 2.0 * kEquirectPi * (u - 0.5);  // azimuth, 0 at -Z
+  const double theta = kEquirectPi * v;              // polar angle from +Y
   return glm::vec3(float(std::sin(theta) * std::sin(phi)), float(std::cos(theta)),
                    float(-std::sin(theta) * std::cos(phi)));
 }
@@ -42,12 +45,10 @@ EnvironmentLight EnvironmentLight::project(
   double horizonWeight = 0.0;
   for (int row = 0; row < height; ++row) {
     const double v = (row + 0.5) / height;
-    const double theta = double(std::numbers::pi_v<float>) * v;
+    const double theta = kEquirectPi * v;
     // Solid angle of one texel of this row.
-    const double dOmega = (2.0 * double(std::numbers::pi_v<float>) / width) *
-                          (double(std::numbers::pi_v<float>) / height) * std::sin(theta);
-    const bool nearHorizon = theta < double(std::numbers::pi_v<float>) / 2.0 &&
-                             theta > double(std::numbers::pi_v<float>) * (80.0 / 180.0);
+    const double dOmega = (2.0 * kEquirectPi / width) * (kEquirectPi / height) * std::sin(theta);
+    const bool nearHorizon = theta < kEquirectPi / 2.0 && theta > kEquirectPi * (80.0 / 180.0);
     for (int col = 0; col < width; ++col) {
       const glm::vec3 d = equirectDirection((col + 0.5) / width, v);
       const glm::dvec3 l = glm::dvec3(radiance(d));
@@ -80,10 +81,8 @@ EnvironmentLight EnvironmentLight::fromHdr(const std::filesystem::path& file) {
   // Nearest texel: the projection visits each texel of a grid of the image's
   // own width once, so this is the image's own sampling.
   auto radiance = [&](const glm::vec3& d) {
-    const double u =
-        0.5 + std::atan2(double(d.x), -double(d.z)) / (2.0 * double(std::numbers::pi_v<float>));
-    const double v =
-        std::acos(std::clamp(double(d.y), -1.0, 1.0)) / double(std::numbers::pi_v<float>);
+    const double u = 0.5 + std::atan2(double(d.x), -double(d.z)) / (2.0 * kEquirectPi);
+    const double v = std::acos(std::clamp(double(d.y), -1.0, 1.0)) / kEquirectPi;
     const int x = std::clamp(int(u * w), 0, w - 1), y = std::clamp(int(v * h), 0, h - 1);
     const float* t = p + 3 * (size_t(y) * size_t(w) + size_t(x));
     glm::vec3 c(t[0], t[1], t[2]);
