@@ -19,9 +19,11 @@
 // OpenGL clips a point by its centre.
 //
 // Why a disc of 0.7 pixels and not the thesis's 2x2 square: the bake spaces
-// samples at most 1 / (1.17 sqrt 2) = 0.6 pixels apart for every viewer in
-// the cell (ScreenSpec::sampleAngle), so a pixel centre on a sampled surface
-// has a point within about that distance; the 2x2 square reaches up to a
+// samples at most 1 / (P sqrt 2) pixels apart for every viewer in the cell
+// (ScreenSpec::sampleAngle; the perspective factor P is 1.33 on the 60-degree
+// screen, 0.53 pixels, and 1.17 on the thesis's 45-degree one, 0.6), so a
+// pixel centre on a sampled surface has a point within half a pixel, plus
+// what the seams between cameras and layers add; the 2x2 square reaches up to a
 // pixel (a diagonal 1.4) beyond a silhouette and widens every building by a
 // pixel. Measured along walks through street cells (bench_impostor_image,
 // 640x480, 12 frames): radii of 0.6 and 0.65 pixels leave 2 to 4 footprint

@@ -79,12 +79,15 @@ int runImpostorBench(const ImpostorBenchOptions& options) {
       return placed.sites[a].triangles.size() > placed.sites[b].triangles.size();
     });
     order.resize(std::min<size_t>(3, order.size()));
-    json sceneOut = {{"scene", scene.name}, {"cell", options.cell}, {"why", placed.why}};
+    json sceneOut = {{"scene", scene.name},
+                     {"cell", options.cell},
+                     {"fov_deg", options.screen.vfovDeg},
+                     {"why", placed.why}};
     ImpostorOptions defaults;
     defaults.screen = options.screen;
     std::vector<std::pair<std::string, ImpostorOptions>> sweep;
     if (options.sweep && !order.empty()) {
-      for (float f : {0.5f, 0.7f, 1.0f, 1.4f}) {
+      for (float f : {0.5f, 0.7f, 0.8f, 1.0f, 1.4f}) {
         ImpostorOptions o = defaults;
         o.resolutionFactor = f;
         sweep.emplace_back(fmt::format("resolution {:.1f}", f), o);
@@ -139,8 +142,10 @@ int runImpostorBench(const ImpostorBenchOptions& options) {
     if (options.json) continue;
     fmt::print("\n{} cell {}: {}\n", scene.name, options.cell, placed.why);
     if (table.empty()) continue;
-    fmt::print("Table 5.1 (screen {}x{}; bake times are medians of {} runs)\n",
-               options.screen.width, options.screen.height, options.repeats);
+    fmt::print(
+        "Table 5.1 (screen {}x{}, vertical field of view {:g} degrees; bake times are "
+        "medians of {} runs)\n",
+        options.screen.width, options.screen.height, options.screen.vfovDeg, options.repeats);
     fmt::print("  {:<34}", "");
     for (size_t i = 0; i < table.size(); ++i)
       fmt::print(" {:>14}", fmt::format("impostor {} ({}/{})", i + 1, table[i]["sector"].get<int>(),

@@ -543,6 +543,11 @@ int runPvsTool(int argc, char** argv) {
   std::string benchScreen = "640x480";
   impostorBench->add_option("--screen", benchScreen, "the viewer's screen, WIDTHxHEIGHT")
       ->capture_default_str();
+  impostorBench
+      ->add_option("--fov", impostorBenchOptions.screen.vfovDeg,
+                   "the viewer's vertical field of view (degrees); the thesis's Table 5.1: 45")
+      ->capture_default_str()
+      ->check(between(1.0, 170.0));
   addLightingCacheOption(*impostorBench, impostorBenchOptions.lightingCache);
   impostorBench->add_flag(
       "--no-sweep", [&](int64_t) { impostorBenchOptions.sweep = false; }, "only Table 5.1");

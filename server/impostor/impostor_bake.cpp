@@ -341,7 +341,8 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
   // sufficiently.
   watch.reset();
   if (options.removePoints) {
-    const float sampleAngle = options.screen.sampleAngle();
+    // The spacing the LDIs were sized for: the resolution factor scales it.
+    const float sampleAngle = options.screen.sampleAngle() / options.resolutionFactor;
     // Each camera's samples by LDI pixel (CSR), to find a camera's samples
     // near a point.
     std::array<std::vector<uint32_t>, 3> first, index;

@@ -334,9 +334,13 @@ std::vector<SweepRow> sweepRows(const ImpostorOptions& base) {
     rows.push_back(std::move(r));
   };
   add("defaults", "-", [](ImpostorOptions&) {});
-  for (float f : {0.5f, 0.7f, 1.4f})
+  for (float f : {0.5f, 0.7f, 0.8f, 1.0f, 1.4f})
     add("resolution", fmt::format("{}", f), [f](ImpostorOptions& o) { o.resolutionFactor = f; });
   add("removal", "off", [](ImpostorOptions& o) { o.removePoints = false; });
+  // A coarser sampling with the splat widened to match (0.7 / 0.8 pixels):
+  // fewer points, wider silhouettes.
+  add("res+radius", "0.8/0.88", [](ImpostorOptions& o) { o.resolutionFactor = 0.8f; });
+  rows.back().splat.radius = 0.7f / 0.8f;
   for (const glm::uvec2 texture : {glm::uvec2(1, 1), glm::uvec2(4, 2), glm::uvec2(16, 4)})
     add("texture", fmt::format("{}x{}", texture.x, texture.y), [texture](ImpostorOptions& o) {
       o.textureWidth = texture.x;

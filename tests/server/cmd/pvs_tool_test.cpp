@@ -269,14 +269,20 @@ TEST(PvsTool, ImpostorBenchPrintsTable51AndEveryKnobOfTheSweep) {
   const auto& sweep = j[0]["sweep"];
   std::map<std::string, nlohmann::json> rows;
   for (const auto& row : sweep) rows[row["setting"].get<std::string>()] = row;
-  ASSERT_EQ(rows.size(), 14u);
+  ASSERT_EQ(rows.size(), 15u);
+  EXPECT_EQ(j[0]["fov_deg"].get<double>(), 60.0);  // the client's camera
   auto points = [&](const char* s) { return rows.at(s)["points"].get<uint64_t>(); };
   // The defaults are resolution 1, 8x2 texels and variance 4: those rows are
   // the table's impostor again.
   EXPECT_EQ(points("resolution 1.0"), table[0]["points"].get<uint64_t>());
   EXPECT_EQ(points("texture 8x2"), table[0]["points"].get<uint64_t>());
-  // Coarser LDIs sample fewer points; removal and hidden culling drop points.
-  EXPECT_LT(points("resolution 0.5"), points("resolution 1.4"));
+  // Coarser LDIs sample fewer points, at every step of the resolution (removal
+  // judges against the spacing they were sized for); removal and hidden
+  // culling drop points.
+  EXPECT_LT(points("resolution 0.5"), points("resolution 0.7"));
+  EXPECT_LT(points("resolution 0.7"), points("resolution 0.8"));
+  EXPECT_LT(points("resolution 0.8"), points("resolution 1.0"));
+  EXPECT_LT(points("resolution 1.0"), points("resolution 1.4"));
   EXPECT_GT(points("no point removal"), points("resolution 1.0"));
   EXPECT_GT(points("hidden points kept"), points("resolution 1.0"));
   // The pixel filter changes colours, not points.

@@ -302,6 +302,25 @@ TEST(ImpostorBake, PointRemovalDropsPointsAndKeepsTheCoverage) {
   EXPECT_EQ(holesFromCell(s, removed, 8, 5).uncovered, 0u);
 }
 
+TEST(ImpostorBake, ACoarserResolutionGivesFewerPointsInProportionToTheLdiPixels) {
+  // Removal judges "sufficient" against the spacing the LDIs were sized for,
+  // so at 0.7 of the heuristic's resolution the points fall with the LDI
+  // pixels' area (0.49), rather than every camera's points staying because
+  // none samples sufficiently any more.
+  const ColouredScene s = buildingBlock();
+  const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
+  const Box3f box = boundsOf(s.triangles);
+  ImpostorOptions coarse = quickOptions(320, 240);
+  coarse.resolutionFactor = 0.7f;
+  ImpostorStats full, reduced;
+  bakeImpostor(s.view(), cell, box, s.all, quickOptions(320, 240), &full);
+  bakeImpostor(s.view(), cell, box, s.all, coarse, &reduced);
+  EXPECT_GT(reduced.removed, (reduced.samples - reduced.hidden) * 2 / 5);
+  const double ratio = double(reduced.points) / double(full.points);
+  EXPECT_GT(ratio, 0.35);
+  EXPECT_LT(ratio, 0.65);
+}
+
 TEST(ImpostorBake, DropsPointsHiddenFromTheWholeCellAndLeavesNoHole) {
   // Every face of the boxes, back faces included: a face whose plane has the
   // whole sampling rectangle behind it is hidden from every viewpoint there
