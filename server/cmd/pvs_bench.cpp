@@ -430,26 +430,33 @@ int runPvsBench(const PvsBenchOptions& options) {
       // Occluders are shrunk by epsilon + bin margin, rounded up to whole
       // columns: the last rows shrink less (one column fewer on a 0.5 m
       // grid) at the price of more samples or more bins.
-      auto knob = [](double epsilon, double binMargin, int azimuthBins, int refinements) {
+      // The last two rows are the defaults without the walks' shortcuts
+      // (hiding hints, then block skipping too): the time they save.
+      auto knob = [](double epsilon, double binMargin, int azimuthBins, int refinements,
+                     bool shortcuts = true, bool hints = true) {
         HorizonFusionOptions o;
         o.epsilon = epsilon;
         o.binMargin = binMargin;
         o.azimuthBins = azimuthBins;
         o.refinements = refinements;
+        o.skipBlocks = shortcuts;
+        o.hidingHints = shortcuts && hints;
         return o;
       };
-      const HorizonFusionOptions knobs[] = {knob(2.0, 0.5, 1024, 1),  knob(1.0, 0.5, 1024, 0),
-                                            knob(1.0, 0.5, 1024, 1),  knob(1.0, 0.5, 1024, 2),
-                                            knob(0.5, 0.5, 1024, 1),  knob(0.74, 0.25, 2048, 1),
-                                            knob(0.74, 0.25, 1024, 2)};
+      const HorizonFusionOptions knobs[] = {
+          knob(2.0, 0.5, 1024, 1),       knob(1.0, 0.5, 1024, 0),
+          knob(1.0, 0.5, 1024, 1),       knob(1.0, 0.5, 1024, 2),
+          knob(0.5, 0.5, 1024, 1),       knob(0.74, 0.25, 2048, 1),
+          knob(0.74, 0.25, 1024, 2),     knob(1.0, 0.5, 1024, 1, true, false),
+          knob(1.0, 0.5, 1024, 1, false)};
       if (human)
         fmt::print(
             "\nOcclusion horizons' knobs ({}, the 4 m cells above; after the single occluders "
             "with back faces; default epsilon {} m, {} refinement)\n"
-            "  {:>11} {:>10} {:>6} {:>11} {:>10} {:>12} {:>12} {:>10} {:>8}\n",
+            "  {:>11} {:>10} {:>6} {:>11} {:>10} {:>12} {:>12} {:>10} {:>8} {:>6} {:>6}\n",
             spec, HorizonFusionOptions{}.epsilon, HorizonFusionOptions{}.refinements, "epsilon (m)",
             "margin (m)", "bins", "refinements", "reach (m)", "median ratio", "fusion ms",
-            "build s", "missing");
+            "build s", "missing", "hints", "skips");
       for (const HorizonFusionOptions& k : knobs) {
         const HorizonFusion fusion(w.scene, w.statics, k);
         std::vector<double> ratio, ms;
@@ -473,12 +480,16 @@ int runPvsBench(const PvsBenchOptions& options) {
                                         {"median_pvs_over_seen", median(ratio)},
                                         {"fusion_ms_per_cell", median(ms)},
                                         {"build_s", fusion.prepareMs() / 1000.0},
-                                        {"missing_faces", missing}});
+                                        {"missing_faces", missing},
+                                        {"hiding_hints", k.hidingHints},
+                                        {"skip_blocks", k.skipBlocks}});
         if (human)
           fmt::print(
-              "  {:>11.2f} {:>10.2f} {:>6} {:>11} {:>10.0f} {:>12.2f} {:>12.2f} {:>10.1f} {:>8}\n",
+              "  {:>11.2f} {:>10.2f} {:>6} {:>11} {:>10.0f} {:>12.2f} {:>12.2f} {:>10.1f} {:>8} "
+              "{:>6} {:>6}\n",
               k.epsilon, k.binMargin, k.azimuthBins, k.refinements, reach, median(ratio),
-              median(ms), fusion.prepareMs() / 1000.0, missing);
+              median(ms), fusion.prepareMs() / 1000.0, missing, k.hidingHints ? "on" : "off",
+              k.skipBlocks ? "on" : "off");
       }
     }
 

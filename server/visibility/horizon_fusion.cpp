@@ -773,6 +773,7 @@ struct HorizonQuery {
   uint32_t generation = 0;
   std::vector<glm::dvec3> poly, tmp;  // scratch for clipping faces to bins
   bool skipBlocks = true;             // HorizonFusionOptions::skipBlocks
+  bool hidingHints = true;            // HorizonFusionOptions::hidingHints
   // Metres before and after a bin's last hiding distance that its piece of
   // walk covers: samples of a cell are at most a few metres apart.
   static constexpr double kHintBefore = 4.0, kHintAfter = 2.0;
@@ -1018,7 +1019,7 @@ struct HorizonQuery {
   // stopping at the first step that hides.
   bool binHides(Level& level, size_t k, double rmin, double slope, double minY) {
     Walk& walk = level.bins[k];
-    if (level.traced[k] != generation && level.hint[k] >= 0.0) {
+    if (hidingHints && level.traced[k] != generation && level.hint[k] >= 0.0) {
       Walk& piece = level.pieces[k];
       if (level.pieceTraced[k] != generation) {
         level.pieceTraced[k] = generation;
@@ -1144,7 +1145,8 @@ HorizonFusionResult HorizonFusion::cull(const Box3f& cell,
   HorizonFusionResult r;
   r.stats.candidateFaces = candidates.size();
   const Impl& w = *impl_;
-  HorizonQuery q{w, cell, r.stats, {}, {}, {}, 0, {}, {}, options_.skipBlocks};
+  HorizonQuery q{
+      w, cell, r.stats, {}, {}, {}, 0, {}, {}, options_.skipBlocks, options_.hidingHints};
   // Faces that can be tested: static faces of this scene.
   std::vector<uint32_t> hidden;
   for (uint32_t f : candidates)

@@ -80,6 +80,13 @@ struct HorizonFusionOptions {
   // adds them up); false reads every column (for tests and as the
   // benchmark's baseline).
   bool skipBlocks = true;
+  // Before walking a bin from a sample, read only the piece of it around the
+  // distance where a step last hid a face in it (an earlier sample's walk):
+  // a hide found there is proven like any other (proof, step 6), and a face
+  // the piece does not hide gets the whole walk, so the hints only add
+  // culled faces. false: every query walks from the sample (for tests and as
+  // the benchmark's baseline).
+  bool hidingHints = true;
 };
 
 struct HorizonFusionStats {
