@@ -84,8 +84,10 @@ struct HorizonFusionOptions {
   // distance where a step last hid a face in it (an earlier sample's walk):
   // a hide found there is proven like any other (proof, step 6), and a face
   // the piece does not hide gets the whole walk, so the hints only add
-  // culled faces. false: every query walks from the sample (for tests and as
-  // the benchmark's baseline).
+  // culled faces. Which ones can depend on the order the candidates are
+  // tested in (cull() takes them in the order given; the PVS gives them
+  // sorted by face ID), never on threads. false: every query walks from the
+  // sample (for tests and as the benchmark's baseline).
   bool hidingHints = true;
 };
 
