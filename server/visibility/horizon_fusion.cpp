@@ -157,6 +157,7 @@
 #include "common/core/timer.h"
 #include "common/raycast/ray_query.h"
 #include "common/spatial/convex_polygon.h"
+#include "common/spatial/distance_transform.h"
 #include "common/world/solids.h"
 
 namespace vistream {
@@ -657,24 +658,10 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
       b = std::max(b, t);
       if (t != kNoTop) maxTop = std::max(maxTop, double(t));
     }
-  // Chessboard distance transform over the blocks (two passes).
-  emptyReach.assign(blockTop.size(), 0);
   {
-    std::vector<int> dist(blockTop.size());
-    const int big = 1 << 20;
-    for (size_t k = 0; k < blockTop.size(); ++k) dist[k] = blockTop[k] == kNoTop ? big : 0;
-    auto at = [&](int i, int j) -> int& { return dist[size_t(j) * size_t(bx) + size_t(i)]; };
-    for (int j = 0; j < bz; ++j)
-      for (int i = 0; i < bx; ++i)
-        for (const auto& [di, dj] : {std::pair{-1, 0}, {-1, -1}, {0, -1}, {1, -1}})
-          if (i + di >= 0 && i + di < bx && j + dj >= 0)
-            at(i, j) = std::min(at(i, j), at(i + di, j + dj) + 1);
-    for (int j = bz - 1; j >= 0; --j)
-      for (int i = bx - 1; i >= 0; --i)
-        for (const auto& [di, dj] : {std::pair{1, 0}, {1, 1}, {0, 1}, {-1, 1}})
-          if (i + di >= 0 && i + di < bx && j + dj < bz)
-            at(i, j) = std::min(at(i, j), at(i + di, j + dj) + 1);
-    for (size_t k = 0; k < dist.size(); ++k) emptyReach[k] = uint8_t(std::min(dist[k], 255));
+    std::vector<uint8_t> hasTop(blockTop.size());
+    for (size_t k = 0; k < blockTop.size(); ++k) hasTop[k] = blockTop[k] != kNoTop;
+    emptyReach = chessboardDistance(hasTop, bx, bz);
   }
   sx = (bx + kSuper - 1) / kSuper;
   sz = (bz + kSuper - 1) / kSuper;
