@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace vistream {
 
@@ -42,6 +43,90 @@ size_t Impostor::bytes() const {
 
 size_t Impostor::bytesUncompressed() const {
   return points.size() * (12 + 4 + size_t(textureTexels()) * 3);
+}
+
+std::array<uint32_t, 3> PointGrid::coordinates(const glm::vec3& p) const {
+  const glm::vec3 w = p - centre;
+  const float z = std::max(glm::dot(w, normal), 1e-30f);
+  const glm::vec3 g(glm::dot(w, e1) / z, glm::dot(w, e2) / z, std::log(z));
+  std::array<uint32_t, 3> q{};
+  for (int a = 0; a < 3; ++a) {
+    if (!(step[a] > 0.0f)) continue;
+    const float f = std::round((g[a] - lo[a]) / step[a]);
+    q[size_t(a)] = uint32_t(std::clamp(f, 0.0f, float(steps[size_t(a)])));
+  }
+  return q;
+}
+
+glm::vec3 PointGrid::point(const std::array<uint32_t, 3>& q) const {
+  const glm::vec3 g = lo + glm::vec3(float(q[0]), float(q[1]), float(q[2])) * step;
+  const float z = std::exp(g.z);
+  return centre + z * (normal + g.x * e1 + g.y * e2);
+}
+
+std::optional<PointGrid> Impostor::pointGrid() const {
+  PointGrid grid;
+  grid.centre = cell.center();
+  const float nn = glm::length(plane.normal);
+  if (!(nn > 0.0f) || !std::isfinite(nn)) return std::nullopt;
+  grid.normal = plane.normal / nn;
+  const glm::vec3 u = plane.uAxis - glm::dot(plane.uAxis, grid.normal) * grid.normal;
+  const float un = glm::length(u);
+  if (!(un > 1e-6f * glm::length(plane.uAxis)) || !std::isfinite(un)) return std::nullopt;
+  grid.e1 = u / un;
+  grid.e2 = glm::cross(grid.normal, grid.e1);
+  glm::vec3 lo(std::numeric_limits<float>::max()), hi(-std::numeric_limits<float>::max());
+  for (int corner = 0; corner < 8; ++corner) {
+    const glm::vec3 p((corner & 1) ? box.hi.x : box.lo.x, (corner & 2) ? box.hi.y : box.lo.y,
+                      (corner & 4) ? box.hi.z : box.lo.z);
+    const glm::vec3 w = p - grid.centre;
+    const float z = glm::dot(w, grid.normal);
+    // In front by more than float noise at the box's scale.
+    if (!(z > 1e-4f * glm::length(w))) return std::nullopt;
+    const glm::vec3 g(glm::dot(w, grid.e1) / z, glm::dot(w, grid.e2) / z, std::log(z));
+    lo = glm::min(lo, g);
+    hi = glm::max(hi, g);
+  }
+  grid.lo = lo;
+  const std::array<float, 3> wanted = {angleStep, angleStep, logDepthStep};
+  const float finest = 1.0f / float((1u << PointGrid::kMaxBits) - 1);
+  for (int a = 0; a < 3; ++a) {
+    const float range = hi[a] - lo[a];
+    if (!(range > 0.0f) || !std::isfinite(range)) continue;  // flat: one coordinate
+    const float s =
+        wanted[size_t(a)] > 0.0f ? std::max(wanted[size_t(a)], range * finest) : range / 65535.0f;
+    grid.step[a] = s;
+    grid.steps[size_t(a)] =
+        std::min((1u << PointGrid::kMaxBits) - 1, uint32_t(std::ceil(range / s)));
+  }
+  // Half a step of each coordinate at the farthest depth, along the longest
+  // ray, with a margin for rounding.
+  const float farthest = std::exp(hi.z);
+  const float longest =
+      std::sqrt(1.0f + std::max(lo.x * lo.x, hi.x * hi.x) + std::max(lo.y * lo.y, hi.y * hi.y));
+  grid.slack = 1.01f * (farthest * (std::exp(0.5f * grid.step.z) - 1.0f) * longest +
+                        farthest * 0.5f * (grid.step.x + grid.step.y)) +
+               1e-5f * glm::length(box.extent());
+  return grid;
+}
+
+uint8_t Impostor::snapLevel(uint8_t v, uint32_t step) {
+  if (step <= 1) return v;
+  const uint32_t k = (uint32_t(v) + step / 2) / step;
+  return uint8_t(std::min<uint32_t>(255, k * step));
+}
+
+void Impostor::quantize() {
+  if (const std::optional<PointGrid> grid = pointGrid())
+    for (glm::vec3& p : points) p = grid->point(grid->coordinates(p));
+  if (colourStep > 1)
+    for (size_t k = 0; k < points.size(); ++k) {
+      if (singleColour[k]) continue;
+      glm::u8vec3* t = texels.data() + firstTexel[k];
+      for (uint32_t i = 0; i < textureTexels(); ++i)
+        for (int c = 0; c < 3; ++c) t[i][c] = snapLevel(t[i][c], colourStep);
+    }
+  boundBlocks();
 }
 
 void Impostor::boundBlocks() {

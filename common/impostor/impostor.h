@@ -17,7 +17,13 @@
 //    colour seen from `eye` is its texture at the eye's coordinates, bilinear
 //    between texel centres and clamped at the edges (colourSeenFrom);
 //  - compression (section 5.4.3): a point whose texture varies little keeps
-//    one texel, used from everywhere.
+//    one texel, used from everywhere;
+//  - its precision: points on the cell's perspective grid (PointGrid,
+//    below: equal steps of angle and of inverse depth), the texels of textured points multiples of
+//    colourStep levels (single colours stay exact: they are most of the points and carry the
+//    facades' flat colours, where a step would show). The bake snaps both
+//    (quantize), so the encoding (protocol/impostor) gives back exactly the
+//    impostor the bake measured.
 // Colours are the ones the client shows (8-bit, the scene's baked lighting
 // with the haze of their distance from the sampling plane already applied),
 // so a renderer draws them as they are.
@@ -34,6 +40,7 @@
 #include <array>
 #include <cstdint>
 #include <glm/glm.hpp>
+#include <optional>
 #include <vector>
 
 #include "common/core/box.h"
@@ -54,11 +61,42 @@ struct SamplingPlane {
   glm::vec3 at(float s, float t) const { return origin + s * uAxis + t * vAxis; }
 };
 
+// Where an impostor's points may lie: a perspective grid seen from the
+// cell's centre c, along the sampling plane's normal n with e1 the plane's u
+// axis made orthogonal to n and e2 = n x e1. A point p = c + z (n + x e1 +
+// y e2) has coordinates (x, y, ln z), each on equal steps from its least
+// value over the box's corners (the box lies in front of c, so each range
+// holds the whole box). Equal steps of angle keep a point's displacement on
+// the screen the same at any depth. Equal steps of log depth keep its
+// relative depth error the same (what ordering the impostor's own surfaces
+// in the z-buffer asks for), and its parallax error for a viewer within r of
+// c falls with depth: with angle step a and log-depth step g, such a viewer
+// sees a point moved by at most a / 2 + r g / (2 z) radians (to first order
+// in r / z and g). A baked box's depth range is narrow in log depth, so
+// depth takes a fraction of the bits a Cartesian grid would.
+struct PointGrid {
+  static constexpr uint32_t kMaxBits = 21;  // per axis: a 63-bit Morton code
+  glm::vec3 centre{0.0f}, normal{0.0f}, e1{0.0f}, e2{0.0f};
+  glm::vec3 lo{0.0f}, step{0.0f};   // (x, y, ln z)
+  std::array<uint32_t, 3> steps{};  // the highest coordinate per axis
+  float slack = 0.0f;  // metres: how far a grid point may lie from the box's point it stands for
+
+  // Coordinates of a point (clamped into the grid's range) and back.
+  std::array<uint32_t, 3> coordinates(const glm::vec3& p) const;
+  glm::vec3 point(const std::array<uint32_t, 3>& q) const;
+};
+
 struct Impostor {
   Box3f cell, box;
   SamplingPlane plane;
   std::array<glm::vec3, 3> cameras{};  // the LDI cameras (corners of the triangle round the shaft)
   uint32_t textureWidth = 8, textureHeight = 2;
+  // Precision (see above): the perspective grid's steps (0: 16 bits per
+  // axis over the box's range) and the textures' colour step, 1, 2, 4, 8 or
+  // 16 (8-bit levels).
+  float angleStep = 0.0f;     // tangent units
+  float logDepthStep = 0.0f;  // natural log of metres
+  uint32_t colourStep = 1;
 
   std::vector<glm::vec3> points;  // local frame
   // Per point: its first texel in `texels`, which holds textureTexels()
@@ -80,6 +118,15 @@ struct Impostor {
   bool hasBlockBounds() const { return blockBounds.size() == blockCount(); }
   void boundBlocks();
   uint32_t textureTexels() const { return textureWidth * textureHeight; }
+  // The grid its points lie on; nothing when the box does not lie wholly in
+  // front of the cell's centre along the plane's normal, or the plane's axes
+  // are degenerate (never for a baked impostor: frameImpostor refuses it).
+  std::optional<PointGrid> pointGrid() const;
+  // Snaps every point to the grid and every texel of a textured point to a
+  // multiple of colourStep (the top step clamped to 255). Idempotent.
+  void quantize();
+  // A colour level snapped to `step` levels: min(255, round(v / step) step).
+  static uint8_t snapLevel(uint8_t v, uint32_t step);
   // The colour of point k seen from `eye` (0..255 per channel, unrounded).
   glm::vec3 colourSeenFrom(size_t k, const glm::vec3& eye) const;
   // The same at rectangle coordinates st (textureCoordinates of the eye).

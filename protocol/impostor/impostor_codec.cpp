@@ -7,7 +7,9 @@
 #include <cmath>
 #include <cstring>
 #include <numeric>
+#include <optional>
 
+#include "common/core/check.h"
 #include "protocol/geometry/byte_coding.h"
 
 namespace vistream::wire {
@@ -15,29 +17,33 @@ namespace vistream::wire {
 namespace {
 
 constexpr std::array<uint8_t, 4> kImpostorMagic = {'V', 'I', 'M', 'P'};
-constexpr uint8_t kVersion = 1;
-constexpr uint8_t kZstdFlag = 1;
-constexpr int kImpostorZstdLevel = 6;
+constexpr uint8_t kVersion = 2;
+constexpr int kImpostorZstdLevel = 19;
 constexpr size_t kFloats = 33;
+constexpr size_t kSections = 4;
+constexpr std::array<const char*, kSections> kSectionNames = {
+    "the positions", "the single-colour flags", "the single colours", "the textures"};
 
-// 16 bits spread to every third bit of 48, and back.
+// 21 bits spread to every third bit of 63, and back.
 uint64_t spread(uint64_t v) {
-  v &= 0xffff;
-  v = (v | (v << 16)) & 0x0000ff0000ffULL;
-  v = (v | (v << 8)) & 0x00f00f00f00fULL;
-  v = (v | (v << 4)) & 0x0c30c30c30c3ULL;
-  v = (v | (v << 2)) & 0x249249249249ULL;
+  v &= 0x1fffff;
+  v = (v | (v << 32)) & 0x1f00000000ffffULL;
+  v = (v | (v << 16)) & 0x1f0000ff0000ffULL;
+  v = (v | (v << 8)) & 0x100f00f00f00f00fULL;
+  v = (v | (v << 4)) & 0x10c30c30c30c30c3ULL;
+  v = (v | (v << 2)) & 0x1249249249249249ULL;
   return v;
 }
 uint64_t compact(uint64_t v) {
-  v &= 0x249249249249ULL;
-  v = (v | (v >> 2)) & 0x0c30c30c30c3ULL;
-  v = (v | (v >> 4)) & 0x00f00f00f00fULL;
-  v = (v | (v >> 8)) & 0x0000ff0000ffULL;
-  v = (v | (v >> 16)) & 0xffff;
+  v &= 0x1249249249249249ULL;
+  v = (v | (v >> 2)) & 0x10c30c30c30c30c3ULL;
+  v = (v | (v >> 4)) & 0x100f00f00f00f00fULL;
+  v = (v | (v >> 8)) & 0x1f0000ff0000ffULL;
+  v = (v | (v >> 16)) & 0x1f00000000ffffULL;
+  v = (v | (v >> 32)) & 0x1fffff;
   return v;
 }
-uint64_t morton(const std::array<uint16_t, 3>& q) {
+uint64_t morton(const std::array<uint32_t, 3>& q) {
   return spread(q[0]) | (spread(q[1]) << 1) | (spread(q[2]) << 2);
 }
 
@@ -50,71 +56,104 @@ void putVec(std::vector<uint8_t>& out, const glm::vec3& v) {
   for (int a = 0; a < 3; ++a) putFloat(out, v[a]);
 }
 
+// A section: its length, a mode byte (0 raw, 1 zstd) and its bytes.
+void putSection(std::vector<uint8_t>& out, const std::vector<uint8_t>& raw) {
+  std::vector<uint8_t> z =
+      raw.empty() ? std::vector<uint8_t>{} : zstdCompress(raw, kImpostorZstdLevel);
+  const bool packed = !raw.empty() && z.size() < raw.size();
+  const std::vector<uint8_t>& stored = packed ? z : raw;
+  putVarint(out, stored.size());
+  out.push_back(packed ? 1 : 0);
+  out.insert(out.end(), stored.begin(), stored.end());
+}
+
+// A colour level as its multiple of `step`.
+uint8_t levelIndex(uint8_t v, uint32_t step) {
+  return uint8_t((uint32_t(v) + step / 2) / step);
+}
+// The texel a texel is predicted from: the one to its left, or above it at
+// the start of a row (the first texel is predicted from the previous point's).
+uint32_t predictorOf(uint32_t i, uint32_t width) {
+  return i % width == 0 ? i - width : i - 1;
+}
+uint8_t levelOf(uint32_t index, uint32_t step) {
+  return uint8_t(std::min<uint32_t>(255, index * step));
+}
+
 }  // namespace
 
-std::vector<uint8_t> encodeImpostor(const Impostor& imp) {
-  std::vector<uint8_t> body;
-  putVec(body, imp.cell.lo);
-  putVec(body, imp.cell.hi);
-  putVec(body, imp.box.lo);
-  putVec(body, imp.box.hi);
-  putVec(body, imp.plane.origin);
-  putVec(body, imp.plane.uAxis);
-  putVec(body, imp.plane.vAxis);
-  putVec(body, imp.plane.normal);
-  for (const glm::vec3& c : imp.cameras) putVec(body, c);
-  body.push_back(uint8_t(imp.textureWidth));
-  body.push_back(uint8_t(imp.textureHeight));
+std::vector<uint8_t> encodeImpostor(const Impostor& imp, ImpostorSections* sizes) {
+  std::vector<uint8_t> out(kImpostorMagic.begin(), kImpostorMagic.end());
+  out.push_back(kVersion);
+  out.push_back(0);  // flags: none defined
+  putVec(out, imp.cell.lo);
+  putVec(out, imp.cell.hi);
+  putVec(out, imp.box.lo);
+  putVec(out, imp.box.hi);
+  putVec(out, imp.plane.origin);
+  putVec(out, imp.plane.uAxis);
+  putVec(out, imp.plane.vAxis);
+  putVec(out, imp.plane.normal);
+  for (const glm::vec3& c : imp.cameras) putVec(out, c);
+  putFloat(out, imp.angleStep);
+  putFloat(out, imp.logDepthStep);
+  out.push_back(uint8_t(imp.colourStep));
+  out.push_back(uint8_t(imp.textureWidth));
+  out.push_back(uint8_t(imp.textureHeight));
   const size_t n = imp.size();
-  putVarint(body, n);
+  putVarint(out, n);
+  const size_t headerBytes = out.size();
 
-  // Positions in Morton order of their quantized coordinates.
-  const glm::vec3 extent = imp.box.extent();
+  // Positions in Morton order of their grid coordinates, as varint deltas.
+  const std::optional<PointGrid> grid = imp.pointGrid();
+  VS_CHECK(grid.has_value());  // the contract: the box lies in front of the cell
   std::vector<uint64_t> codes(n);
-  for (size_t k = 0; k < n; ++k) {
-    std::array<uint16_t, 3> q;
-    for (int a = 0; a < 3; ++a) {
-      const float f = extent[a] > 0.0f ? (imp.points[k][a] - imp.box.lo[a]) / extent[a] : 0.0f;
-      q[size_t(a)] = uint16_t(std::lround(std::clamp(f, 0.0f, 1.0f) * 65535.0f));
-    }
-    codes[k] = morton(q);
-  }
+  for (size_t k = 0; k < n; ++k) codes[k] = morton(grid->coordinates(imp.points[k]));
   std::vector<uint32_t> order(n);
   std::iota(order.begin(), order.end(), 0u);
   std::stable_sort(order.begin(), order.end(),
                    [&](uint32_t a, uint32_t b) { return codes[a] < codes[b]; });
+  std::array<std::vector<uint8_t>, kSections> raw;
   uint64_t previous = 0;
   for (uint32_t k : order) {
-    putVarint(body, codes[k] - previous);
+    putVarint(raw[0], codes[k] - previous);
     previous = codes[k];
   }
-  // Single-colour flags.
-  for (size_t i = 0; i < n; i += 8) {
-    uint8_t bits = 0;
-    for (size_t j = i; j < std::min(n, i + 8); ++j)
-      bits |= uint8_t((imp.singleColour[order[j]] ? 1 : 0) << (j - i));
-    body.push_back(bits);
-  }
-  // Colours: the first texel, then the others as differences from it.
+  // Single-colour flags, a bit a point (LSB first).
+  raw[1].assign((n + 7) / 8, 0);
+  for (size_t j = 0; j < n; ++j)
+    raw[1][j / 8] |= uint8_t((imp.singleColour[order[j]] ? 1 : 0) << (j % 8));
+  // Colours, channel by channel: each single-colour point's colour as the
+  // difference from the previous single-colour point's (Morton neighbours
+  // share a surface); each textured point's texels as multiples of the
+  // colour step, its first as the difference from the previous textured
+  // point's first, the others from the texel before them.
+  const uint32_t step = std::max<uint32_t>(1, imp.colourStep);
   const uint32_t texels = imp.textureTexels();
-  for (uint32_t k : order) {
-    const glm::u8vec3* t = imp.texels.data() + imp.firstTexel[k];
-    for (int c = 0; c < 3; ++c) body.push_back(t[0][c]);
-    if (imp.singleColour[k]) continue;
-    for (uint32_t i = 1; i < texels; ++i)
-      for (int c = 0; c < 3; ++c) body.push_back(uint8_t(t[i][c] - t[0][c]));
+  for (int c = 0; c < 3; ++c) {
+    uint8_t lastSingle = 0, lastFirst = 0;
+    for (uint32_t k : order) {
+      const glm::u8vec3* t = imp.texels.data() + imp.firstTexel[k];
+      if (imp.singleColour[k]) {
+        raw[2].push_back(uint8_t(t[0][c] - lastSingle));
+        lastSingle = t[0][c];
+        continue;
+      }
+      for (uint32_t i = 0; i < texels; ++i) {
+        const uint8_t v = levelIndex(t[i][c], step);
+        const uint8_t predicted =
+            i == 0 ? lastFirst : levelIndex(t[predictorOf(i, imp.textureWidth)][c], step);
+        raw[3].push_back(uint8_t(v - predicted));
+        if (i == 0) lastFirst = v;
+      }
+    }
   }
-
-  std::vector<uint8_t> out(kImpostorMagic.begin(), kImpostorMagic.end());
-  out.push_back(kVersion);
-  std::vector<uint8_t> z = zstdCompress(body, kImpostorZstdLevel);
-  if (z.size() < body.size()) {
-    out.push_back(kZstdFlag);
-    out.insert(out.end(), z.begin(), z.end());
-  } else {
-    out.push_back(0);
-    out.insert(out.end(), body.begin(), body.end());
+  for (size_t i = 0; i < kSections; ++i) {
+    const size_t before = out.size();
+    putSection(out, raw[i]);
+    if (sizes) sizes->bytes[i] = out.size() - before;
   }
+  if (sizes) sizes->header = headerBytes;
   return out;
 }
 
@@ -126,21 +165,12 @@ bool decodeImpostor(std::span<const uint8_t> bytes, Impostor& out, std::string& 
   if (bytes.size() < 6 || !std::equal(kImpostorMagic.begin(), kImpostorMagic.end(), bytes.begin()))
     return fail("does not start with VIMP");
   if (bytes[4] != kVersion) return fail(fmt::format("unknown version {}", unsigned(bytes[4])));
-  if (bytes[5] & ~kZstdFlag) return fail(fmt::format("unknown flags {:#x}", unsigned(bytes[5])));
-  std::vector<uint8_t> decompressed;
-  std::span<const uint8_t> body = bytes.subspan(6);
-  if (bytes[5] & kZstdFlag) {
-    std::string why;
-    auto d = zstdDecompress(body, kMaxImpostorBodyBytes, why);
-    if (!d) return fail("the body " + why);
-    decompressed = std::move(*d);
-    body = decompressed;
-  }
-  PayloadReader r(body);
-  const auto head = r.bytes("the header", kFloats * 4 + 2);
+  if (bytes[5] != 0) return fail(fmt::format("unknown flags {:#x}", unsigned(bytes[5])));
+  PayloadReader r(bytes.subspan(6));
+  const auto head = r.bytes("the header", (kFloats + 2) * 4 + 3);
   if (!head) return fail(r.error());
-  std::array<float, kFloats> f;
-  std::memcpy(f.data(), head->data(), kFloats * 4);
+  std::array<float, kFloats + 2> f;
+  std::memcpy(f.data(), head->data(), (kFloats + 2) * 4);
   for (float v : f)
     if (!std::isfinite(v)) return fail("a non-finite number in the header");
   auto vec = [&](size_t i) { return glm::vec3(f[i], f[i + 1], f[i + 2]); };
@@ -157,50 +187,120 @@ bool decodeImpostor(std::span<const uint8_t> bytes, Impostor& out, std::string& 
   imp.plane.vAxis = vec(18);
   imp.plane.normal = vec(21);
   for (size_t k = 0; k < 3; ++k) imp.cameras[k] = vec(24 + 3 * k);
-  imp.textureWidth = (*head)[kFloats * 4];
-  imp.textureHeight = (*head)[kFloats * 4 + 1];
+  imp.angleStep = f[kFloats];
+  imp.logDepthStep = f[kFloats + 1];
+  if (imp.angleStep < 0.0f || imp.logDepthStep < 0.0f)
+    return fail(fmt::format("grid steps {} and {}", imp.angleStep, imp.logDepthStep));
+  const std::optional<PointGrid> grid = imp.pointGrid();
+  if (!grid) return fail("a box not wholly in front of the cell, or a degenerate sampling plane");
+  const uint8_t* tail = head->data() + (kFloats + 2) * 4;
+  imp.colourStep = tail[0];
+  if (imp.colourStep == 0 || imp.colourStep > 16 || (imp.colourStep & (imp.colourStep - 1)))
+    return fail(fmt::format("colour step {} (1, 2, 4, 8 or 16)", imp.colourStep));
+  imp.textureWidth = tail[1];
+  imp.textureHeight = tail[2];
   if (imp.textureWidth < 1 || imp.textureWidth > 64 || imp.textureHeight < 1 ||
       imp.textureHeight > 64)
     return fail(
         fmt::format("texture {}x{} (each side 1 to 64)", imp.textureWidth, imp.textureHeight));
-  // Each point takes at least a byte of position and three of colour.
-  const auto count =
-      r.varint("the point count", std::min<uint64_t>(kMaxImpostorPoints, r.remaining() / 4));
+  const auto count = r.varint("the point count", kMaxImpostorPoints);
   if (!count) return fail(r.error());
   const size_t n = size_t(*count);
+
+  // The sections, each within the most its content can take.
+  std::array<std::vector<uint8_t>, kSections> sections;
+  auto section = [&](size_t i, uint64_t maxBytes) {
+    const auto stored = r.varint(kSectionNames[i], kMaxImpostorBodyBytes);
+    if (!stored) return fail(r.error());
+    const auto mode = r.bytes(kSectionNames[i], 1);
+    if (!mode) return fail(r.error());
+    const auto payload = r.bytes(kSectionNames[i], *stored);
+    if (!payload) return fail(r.error());
+    if ((*mode)[0] == 0) {
+      if (payload->size() > maxBytes)
+        return fail(fmt::format("{} take {} bytes, more than {}", kSectionNames[i], payload->size(),
+                                maxBytes));
+      sections[i].assign(payload->begin(), payload->end());
+      return true;
+    }
+    if ((*mode)[0] != 1)
+      return fail(fmt::format("{} have mode {}", kSectionNames[i], unsigned((*mode)[0])));
+    std::string why;
+    auto d = zstdDecompress(*payload, maxBytes, why);
+    if (!d) return fail(fmt::format("{}: {}", kSectionNames[i], why));
+    sections[i] = std::move(*d);
+    return true;
+  };
+  const uint32_t texels = imp.textureTexels();
+  if (!section(0, uint64_t(n) * 10) || !section(1, (n + 7) / 8) || !section(2, uint64_t(n) * 3) ||
+      !section(3, uint64_t(n) * 3 * texels))
+    return false;
+  if (r.remaining() != 0) return fail(fmt::format("{} bytes after the textures", r.remaining()));
+
+  // Positions: each takes at least a byte.
+  if (sections[0].size() < n)
+    return fail(fmt::format("{} points in {} bytes of positions", n, sections[0].size()));
   imp.points.resize(n);
-  const glm::vec3 step = imp.box.extent() / 65535.0f;
-  uint64_t code = 0;
-  for (size_t k = 0; k < n; ++k) {
-    const auto delta = r.varint("a position", (uint64_t(1) << 48) - 1 - code);
-    if (!delta) return fail(r.error());
-    code += *delta;
-    const glm::vec3 q(float(compact(code)), float(compact(code >> 1)), float(compact(code >> 2)));
-    imp.points[k] = imp.box.lo + q * step;
+  {
+    PayloadReader p(sections[0]);
+    const Box3f grown(imp.box.lo - grid->slack, imp.box.hi + grid->slack);
+    uint64_t code = 0;
+    for (size_t k = 0; k < n; ++k) {
+      const auto delta = p.varint("a position", (uint64_t(1) << 63) - 1 - code);
+      if (!delta) return fail(p.error());
+      code += *delta;
+      const std::array<uint32_t, 3> q = {uint32_t(compact(code)), uint32_t(compact(code >> 1)),
+                                         uint32_t(compact(code >> 2))};
+      for (size_t a = 0; a < 3; ++a)
+        if (q[a] > grid->steps[a]) return fail("a position outside the grid");
+      imp.points[k] = grid->point(q);
+      if (!grown.contains(imp.points[k])) return fail("a position outside the box");
+    }
+    if (p.remaining() != 0) return fail(fmt::format("{} bytes after the positions", p.remaining()));
   }
-  const auto flags = r.bytes("the single-colour flags", (n + 7) / 8);
-  if (!flags) return fail(r.error());
+  // Flags.
+  if (sections[1].size() != (n + 7) / 8)
+    return fail(fmt::format("the single-colour flags take {} bytes, not {}", sections[1].size(),
+                            (n + 7) / 8));
   imp.singleColour.resize(n);
   imp.firstTexel.resize(n);
-  const uint32_t texels = imp.textureTexels();
-  size_t total = 0;
+  size_t total = 0, textured = 0;
   for (size_t k = 0; k < n; ++k) {
-    imp.singleColour[k] = ((*flags)[k / 8] >> (k % 8)) & 1;
+    imp.singleColour[k] = (sections[1][k / 8] >> (k % 8)) & 1;
     imp.firstTexel[k] = uint32_t(total);
     total += imp.singleColour[k] ? 1 : texels;
+    textured += imp.singleColour[k] ? 0 : 1;
   }
-  const auto colours = r.bytes("the colours", uint64_t(total) * 3);
-  if (!colours) return fail(r.error());
-  if (r.remaining() != 0) return fail(fmt::format("{} bytes after the colours", r.remaining()));
+  if (sections[2].size() != (n - textured) * 3)
+    return fail(fmt::format("the single colours take {} bytes, not {}", sections[2].size(),
+                            (n - textured) * 3));
+  if (sections[3].size() != textured * texels * 3)
+    return fail(fmt::format("the textures take {} bytes, not {}", sections[3].size(),
+                            textured * texels * 3));
+  // Colours.
+  const uint32_t step = imp.colourStep;
+  const uint32_t maxIndex = (255 + step / 2) / step;
   imp.texels.resize(total);
-  const uint8_t* c = colours->data();
-  for (size_t k = 0; k < n; ++k) {
-    glm::u8vec3* t = imp.texels.data() + imp.firstTexel[k];
-    t[0] = {c[0], c[1], c[2]};
-    c += 3;
-    if (imp.singleColour[k]) continue;
-    for (uint32_t i = 1; i < texels; ++i, c += 3)
-      t[i] = {uint8_t(t[0].x + c[0]), uint8_t(t[0].y + c[1]), uint8_t(t[0].z + c[2])};
+  const uint8_t* single = sections[2].data();
+  const uint8_t* texture = sections[3].data();
+  for (int c = 0; c < 3; ++c) {
+    uint8_t lastSingle = 0, lastFirst = 0;
+    for (size_t k = 0; k < n; ++k) {
+      glm::u8vec3* t = imp.texels.data() + imp.firstTexel[k];
+      if (imp.singleColour[k]) {
+        lastSingle = uint8_t(lastSingle + *single++);
+        t[0][c] = lastSingle;
+        continue;
+      }
+      for (uint32_t i = 0; i < texels; ++i) {
+        const uint8_t predicted =
+            i == 0 ? lastFirst : levelIndex(t[predictorOf(i, imp.textureWidth)][c], step);
+        const uint8_t v = uint8_t(predicted + *texture++);
+        if (v > maxIndex) return fail("a texel beyond 255");
+        t[i][c] = levelOf(v, step);
+        if (i == 0) lastFirst = v;
+      }
+    }
   }
   imp.boundBlocks();
   out = std::move(imp);

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <glm/gtc/constants.hpp>
 #include <limits>
 #include <unordered_set>
 
@@ -223,6 +224,12 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
       options.textureHeight > 64)
     throwInputError("impostor: texture size {}x{} (each side 1 to 64)", options.textureWidth,
                     options.textureHeight);
+  if (!(options.positionError >= 0.0f) || !std::isfinite(options.positionError))
+    throwInputError("impostor: the position error must be a non-negative number of pixels, got {}",
+                    options.positionError);
+  if (options.colourStep == 0 || options.colourStep > 16 ||
+      (options.colourStep & (options.colourStep - 1)))
+    throwInputError("impostor: colour step {} (1, 2, 4, 8 or 16)", options.colourStep);
   Stopwatch total;
   ImpostorStats stats;
   const ImpostorFrame frame = frameImpostor(cell, box);
@@ -555,7 +562,17 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
     imp.appendPoint(samples[i].position, colours.data() + i * texelCount, single[i] != 0);
     stats.singleColour += single[i];
   }
-  imp.boundBlocks();
+  // The precision kept (PointGrid): half the error budget to each of angle
+  // and parallax at the box's nearest depth (every viewer is at least that
+  // far), against the screen's smallest pixel angle (at its border, the
+  // perspective factor smaller than at its centre); r is the cell's half
+  // diagonal, the farthest a viewer stands from its centre.
+  const float smallestPixel = options.screen.sampleAngle() * glm::root_two<float>();
+  imp.angleStep = options.positionError * smallestPixel;
+  imp.logDepthStep = options.positionError * smallestPixel * frame.nearestDepth /
+                     (0.5f * glm::length(cell.extent()));
+  imp.colourStep = options.colourStep;
+  imp.quantize();
   stats.points = imp.size();
   const ScreenCoverage coverage =
       screenCoverage(imp.points, cell.center(), box.center(), options.screen);
@@ -565,7 +582,11 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
       coverage.boxPixels ? double(stats.points) / double(coverage.boxPixels) : 0.0;
   stats.pointsPerCoveredPixel =
       coverage.pixels ? double(stats.points) / double(coverage.pixels) : 0.0;
-  stats.bytes = wire::encodeImpostor(imp).size();
+  wire::ImpostorSections sections;
+  stats.bytes = wire::encodeImpostor(imp, &sections).size();
+  stats.positionBytes = sections.bytes[0];
+  stats.colourBytes = sections.bytes[1] + sections.bytes[2];
+  stats.textureBytes = sections.bytes[3];
   stats.memoryBytes = imp.bytes();
   stats.bytesUncompressed = imp.bytesUncompressed();
   stats.seconds = total.ms() / 1000.0;

@@ -20,7 +20,7 @@ namespace vistream {
 namespace {
 
 constexpr std::array<char, 8> kImpostorDbMagic = {'V', 'S', 'I', 'M', 'P', 'D', 'B', '\0'};
-constexpr std::array<char, 8> kImpostorJournalMagic = {'V', 'S', 'I', 'J', 'R', 'N', '1', '\0'};
+constexpr std::array<char, 8> kImpostorJournalMagic = {'V', 'S', 'I', 'J', 'R', 'N', '2', '\0'};
 constexpr uint64_t kMaxWhy = 4096, kMaxImpostorsPerCell = 4096;
 
 }  // namespace

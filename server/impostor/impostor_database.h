@@ -44,7 +44,7 @@
 
 namespace vistream {
 
-inline constexpr uint32_t kImpostorDbVersion = 1;
+inline constexpr uint32_t kImpostorDbVersion = 2;  // 2: impostor encoding version 2
 
 // One impostor of a cell as stored.
 struct StoredImpostor {

@@ -1,6 +1,7 @@
 // libFuzzer target: the impostor decoder (protocol/impostor) must refuse any
 // bytes with an error or decode them to an impostor that keeps its own
-// bounds (every point in its box, every texel offset inside the texels),
+// bounds (every point within its grid's slack of its box, every texel
+// offset inside the texels),
 // never crash, hang or allocate without bound.
 #include <cstddef>
 #include <cstdint>
@@ -19,8 +20,10 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     return 0;
   }
   if (out.firstTexel.size() != out.size() || out.singleColour.size() != out.size()) std::abort();
-  const vistream::Box3f grown(out.box.lo - out.box.extent() * 1e-3f - 1e-3f,
-                              out.box.hi + out.box.extent() * 1e-3f + 1e-3f);
+  const auto grid = out.pointGrid();
+  if (!grid) std::abort();  // a decoded impostor has a grid
+  const float slack = grid->slack * 1.001f + 1e-3f;
+  const vistream::Box3f grown(out.box.lo - slack, out.box.hi + slack);
   for (size_t k = 0; k < out.size(); ++k) {
     if (!grown.contains(out.points[k])) std::abort();
     const size_t texels = out.singleColour[k] ? 1 : out.textureTexels();

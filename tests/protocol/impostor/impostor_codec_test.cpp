@@ -1,11 +1,14 @@
-// The impostor encoding (protocol/impostor): what goes in comes back (points
-// within half a quantization step, texels exact), it is smaller than the
-// representation in memory, and cut, altered or hostile bytes are refused
-// with an error, never a crash.
+// The impostor encoding (protocol/impostor): a quantized impostor comes back
+// exactly, any other within half a step of its perspective grid (checked in
+// the test's own angles and depths), it is smaller than the representation
+// in memory, and cut, altered or hostile bytes are refused with an error,
+// never a crash.
 #include "protocol/impostor/impostor_codec.h"
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <cstring>
 #include <map>
 #include <random>
 
@@ -42,8 +45,23 @@ Impostor sampleImpostor(size_t n, uint32_t width = 8, uint32_t height = 2) {
   return imp;
 }
 
-TEST(ImpostorCodec, GivesBackEveryPointWithinHalfAStepAndEveryTexelExactly) {
-  const Impostor in = sampleImpostor(5000);
+// Decoded point k's index in `in`, by the ID in its first texel.
+std::vector<size_t> matchById(const Impostor& in, const Impostor& out) {
+  std::map<uint32_t, size_t> byId;
+  for (size_t k = 0; k < out.size(); ++k) {
+    const glm::u8vec3 c = out.texels[out.firstTexel[k]];
+    byId[uint32_t(c.x) | uint32_t(c.y) << 8 | uint32_t(c.z) << 16] = k;
+  }
+  std::vector<size_t> match(in.size());
+  EXPECT_EQ(byId.size(), in.size());
+  for (size_t k = 0; k < in.size(); ++k) match[k] = byId.at(uint32_t(k));
+  return match;
+}
+
+TEST(ImpostorCodec, GivesBackEveryPointWithinHalfAGridStepAndEveryTexelExactly) {
+  Impostor in = sampleImpostor(5000);
+  in.angleStep = 2e-4f;
+  in.logDepthStep = 1e-3f;
   const std::vector<uint8_t> bytes = encodeImpostor(in);
   Impostor out;
   std::string error;
@@ -52,18 +70,23 @@ TEST(ImpostorCodec, GivesBackEveryPointWithinHalfAStepAndEveryTexelExactly) {
   EXPECT_EQ(out.box.hi, in.box.hi);
   EXPECT_EQ(out.plane.vAxis, in.plane.vAxis);
   EXPECT_EQ(out.cameras[2], in.cameras[2]);
+  EXPECT_EQ(out.angleStep, in.angleStep);
+  EXPECT_EQ(out.logDepthStep, in.logDepthStep);
   ASSERT_EQ(out.size(), in.size());
-  const glm::vec3 halfStep = in.box.extent() / 131070.0f;
-  std::map<uint32_t, size_t> byId;
-  for (size_t k = 0; k < out.size(); ++k) {
-    const glm::u8vec3 c = out.texels[out.firstTexel[k]];
-    byId[uint32_t(c.x) | uint32_t(c.y) << 8 | uint32_t(c.z) << 16] = k;
-  }
-  ASSERT_EQ(byId.size(), in.size());
+  const std::vector<size_t> match = matchById(in, out);
+  // The sample's plane faces -z from the cell's centre, its u axis along x:
+  // a point's angles are x / depth and y / depth, its depth -z.
+  const glm::vec3 c = in.cell.center();
+  auto angles = [&](const glm::vec3& p) {
+    const float depth = c.z - p.z;
+    return glm::vec3((p.x - c.x) / depth, (p.y - c.y) / depth, std::log(depth));
+  };
   for (size_t k = 0; k < in.size(); ++k) {
-    const size_t d = byId.at(uint32_t(k));
-    for (int a = 0; a < 3; ++a)
-      ASSERT_LE(std::abs(out.points[d][a] - in.points[k][a]), halfStep[a] * 1.01f + 1e-5f);
+    const size_t d = match[k];
+    const glm::vec3 error3 = glm::abs(angles(out.points[d]) - angles(in.points[k]));
+    ASSERT_LE(error3.x, 0.5f * in.angleStep * 1.001f + 1e-6f) << k;
+    ASSERT_LE(error3.y, 0.5f * in.angleStep * 1.001f + 1e-6f) << k;
+    ASSERT_LE(error3.z, 0.5f * in.logDepthStep * 1.001f + 1e-6f) << k;
     ASSERT_EQ(out.singleColour[d], in.singleColour[k]);
     const uint32_t texels = in.singleColour[k] ? 1 : in.textureTexels();
     for (uint32_t i = 0; i < texels; ++i)
@@ -71,6 +94,60 @@ TEST(ImpostorCodec, GivesBackEveryPointWithinHalfAStepAndEveryTexelExactly) {
     // The colour seen from anywhere is the same function.
     ASSERT_EQ(out.colourAt(d, {0.3f, 0.8f}), in.colourAt(k, {0.3f, 0.8f}));
   }
+}
+
+TEST(ImpostorCodec, GivesBackAQuantizedImpostorExactlyWithTexturesOnItsColourStep) {
+  Impostor in = sampleImpostor(3000);
+  in.angleStep = 5e-4f;
+  in.logDepthStep = 2e-3f;
+  in.colourStep = 8;
+  const Impostor raw = in;
+  in.quantize();
+  Impostor again = in;
+  again.quantize();
+  EXPECT_EQ(again.points, in.points) << "quantize is idempotent";
+  EXPECT_EQ(again.texels, in.texels);
+  Impostor out;
+  std::string error;
+  ASSERT_TRUE(decodeImpostor(encodeImpostor(in), out, error)) << error;
+  ASSERT_EQ(out.size(), in.size());
+  EXPECT_EQ(out.colourStep, 8u);
+  // Points are distinct grid points: match them by position, exactly.
+  std::map<std::array<float, 3>, size_t> byPosition;
+  for (size_t k = 0; k < out.size(); ++k)
+    byPosition[{out.points[k].x, out.points[k].y, out.points[k].z}] = k;
+  ASSERT_EQ(byPosition.size(), in.size());
+  for (size_t k = 0; k < in.size(); ++k) {
+    const auto it = byPosition.find({in.points[k].x, in.points[k].y, in.points[k].z});
+    ASSERT_NE(it, byPosition.end()) << k;
+    const size_t d = it->second;
+    ASSERT_EQ(out.singleColour[d], in.singleColour[k]);
+    const uint32_t texels = in.singleColour[k] ? 1 : in.textureTexels();
+    for (uint32_t i = 0; i < texels; ++i) {
+      const glm::u8vec3 t = out.texels[out.firstTexel[d] + i];
+      ASSERT_EQ(t, in.texels[in.firstTexel[k] + i]);
+      const glm::u8vec3 before = raw.texels[raw.firstTexel[k] + i];
+      for (int ch = 0; ch < 3; ++ch) {
+        if (in.singleColour[k]) {
+          ASSERT_EQ(t[ch], before[ch]) << "single colours stay exact";
+        } else {
+          ASSERT_TRUE(t[ch] % 8 == 0 || t[ch] == 255) << int(t[ch]);
+          ASSERT_LE(std::abs(int(t[ch]) - int(before[ch])), 4);
+        }
+      }
+    }
+  }
+}
+
+TEST(ImpostorCodec, SnapsEveryLevelToTheNearestStepAndKeepsTheSnappedOnes) {
+  for (uint32_t step : {1u, 2u, 4u, 8u, 16u})
+    for (int v = 0; v < 256; ++v) {
+      const uint8_t snapped = Impostor::snapLevel(uint8_t(v), step);
+      EXPECT_TRUE(snapped % step == 0 || snapped == 255) << v << " " << step;
+      // The nearest multiple, or 255 for the top one past it.
+      EXPECT_LE(std::abs(int(snapped) - v), int(step / 2)) << v << " " << step;
+      EXPECT_EQ(Impostor::snapLevel(snapped, step), snapped) << v << " " << step;
+    }
 }
 
 TEST(ImpostorCodec, IsSmallerThanTheImpostorInMemory) {
@@ -109,34 +186,35 @@ TEST(ImpostorCodec, RefusesCutAlteredAndHostileBytesNamingWhatIsWrong) {
   b = bytes;
   b[5] = 0x80;
   refused(b, "flags");
-  // The same impostor with its body uncompressed (flags 0), to alter.
-  auto uncompressed = [](const Impostor& imp) {
-    std::vector<uint8_t> z = encodeImpostor(imp);
-    if (z[5] == 0) return z;
-    std::string why;
-    const auto body = zstdDecompress(std::span(z).subspan(6), 1u << 20, why);
-    EXPECT_TRUE(body.has_value()) << why;
-    std::vector<uint8_t> raw(z.begin(), z.begin() + 6);
-    raw[5] = 0;
-    raw.insert(raw.end(), body->begin(), body->end());
-    return raw;
-  };
+  // A tiny impostor's sections are stored raw: alter its header and body.
   const Impostor tiny = sampleImpostor(2);
-  std::vector<uint8_t> raw = uncompressed(tiny);
+  const std::vector<uint8_t> raw = encodeImpostor(tiny);
   ASSERT_TRUE(decodeImpostor(raw, out, error)) << error;
-  // A point count more than the body's bytes can hold.
-  const size_t countAt = 6 + 33 * 4 + 2;
-  raw[countAt] = 0xff;
-  raw.insert(raw.begin() + long(countAt) + 1, {0xff, 0x7f});
-  refused(raw, "point count");
-  // A texture size out of range.
-  raw = uncompressed(tiny);
-  raw[countAt - 2] = 0;
-  refused(raw, "texture 0x2");
-  // Bytes left over after the colours.
-  raw = uncompressed(tiny);
-  raw.push_back(7);
-  refused(raw, "after the colours");
+  const size_t countAt = 6 + 35 * 4 + 3;  // after the floats and the three bytes
+  // A point count more than the positions can hold.
+  b = raw;
+  b[countAt] = 0xff;
+  b.insert(b.begin() + long(countAt) + 1, {0xff, 0x7f});
+  refused(b, "points in");
+  // A texture size and a colour step out of range.
+  b = raw;
+  b[countAt - 2] = 0;
+  refused(b, "texture 0x2");
+  b = raw;
+  b[countAt - 3] = 3;
+  refused(b, "colour step 3");
+  // A box behind the cell's centre.
+  b = raw;
+  const float behind = 30.0f;  // the box's hi.z: the box now reaches behind the cell (z -2..2)
+  std::memcpy(b.data() + 6 + 11 * 4, &behind, 4);
+  refused(b, "in front of the cell");
+  // A section with an unknown mode, and bytes left over after the textures.
+  b = raw;
+  b[countAt + 2] = 7;  // the positions' mode, after their one-byte length
+  refused(b, "mode 7");
+  b = raw;
+  b.push_back(7);
+  refused(b, "after the textures");
 }
 
 }  // namespace

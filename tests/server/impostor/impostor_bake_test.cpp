@@ -25,6 +25,7 @@
 #include "common/generate/scene_spec.h"
 #include "common/raycast/ray_query.h"
 #include "common/scene/scene.h"
+#include "protocol/impostor/impostor_codec.h"
 #include "server/impostor/impostor_world.h"
 #include "tests/common/support/box_scenes.h"
 
@@ -181,6 +182,14 @@ ImpostorOptions quickOptions(int width, int height) {
   return o;
 }
 
+// The same with points kept where they were sampled (to a few micrometres
+// at these depths), for tests of where the sampling puts them.
+ImpostorOptions preciseOptions(int width, int height) {
+  ImpostorOptions o = quickOptions(width, height);
+  o.positionError = 1e-4f;
+  return o;
+}
+
 TEST(ImpostorFrame, EveryRayFromTheCellToTheBoxCrossesTheSamplingRectangle) {
   const Box3f cell({-4.0f, 0.0f, -3.0f}, {4.0f, 3.0f, 3.0f});
   const Box3f box({60.0f, 0.0f, -320.0f}, {180.0f, 45.0f, -200.0f});
@@ -329,11 +338,11 @@ TEST(ImpostorBake, DropsPointsHiddenFromTheWholeCellAndLeavesNoHole) {
   const ColouredScene s = buildingBlock();
   const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
   const Box3f box = boundsOf(s.triangles);
-  ImpostorOptions keep = quickOptions(320, 240);
+  ImpostorOptions keep = preciseOptions(320, 240);
   keep.cullHidden = false;
   ImpostorStats culledStats, keptStats;
   const Impostor culled =
-      bakeImpostor(s.view(), cell, box, s.all, quickOptions(320, 240), &culledStats);
+      bakeImpostor(s.view(), cell, box, s.all, preciseOptions(320, 240), &culledStats);
   const Impostor kept = bakeImpostor(s.view(), cell, box, s.all, keep, &keptStats);
   EXPECT_EQ(keptStats.hidden, 0u);
   EXPECT_GT(culledStats.hidden, keptStats.points / 4);
@@ -402,7 +411,7 @@ TEST(ImpostorBake, SamplesASurfaceInThePlaneOfTwoCamerasWithTheThird) {
   s.scene.faceCount = 1;
   s.finish([](size_t, const glm::vec3&) { return glm::u8vec3(200, 60, 60); });
   ImpostorStats stats;
-  const Impostor imp = bakeImpostor(s.view(), cell, box, s.all, quickOptions(320, 240), &stats);
+  const Impostor imp = bakeImpostor(s.view(), cell, box, s.all, preciseOptions(320, 240), &stats);
   ASSERT_GT(imp.size(), 100u);
   for (const glm::vec3& p : imp.points) ASSERT_NEAR(p.y, y, 1e-3f);
   const HoleCount h = holesFromCell(s, imp, 8, 3);
@@ -555,6 +564,79 @@ TEST(ImpostorBake, GivesTheSameBytesOnAnyThreadCount) {
   ASSERT_EQ(one.size(), many.size());
   EXPECT_EQ(one.points, many.points);
   EXPECT_EQ(one.texels, many.texels);
+}
+
+// The precision the bake keeps (what the encoding carries): against a bake
+// at a hundredth of the default position error and exact colours, every
+// point moves by at most 0.05 of the screen's smallest pixel angle seen
+// from the cell's corners and centre, single colours stay exact, textures
+// move by at most half the colour step; and the encoding gives back exactly
+// the impostor the bake measured.
+TEST(ImpostorBake, KeepsEveryPointWithinItsPixelFractionAndTheEncodingGivesItBackExactly) {
+  const ColouredScene s = buildingBlock();
+  const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
+  const Box3f box = boundsOf(s.triangles);
+  const ImpostorOptions o = quickOptions(320, 240);
+  ASSERT_EQ(o.positionError, 0.05f);
+  ImpostorOptions fine = o;
+  fine.positionError = 5e-4f;
+  fine.colourStep = 1;
+  const Impostor imp = bakeImpostor(s.view(), cell, box, s.all, o);
+  const Impostor exact = bakeImpostor(s.view(), cell, box, s.all, fine);
+  ASSERT_EQ(imp.size(), exact.size());
+  ASSERT_GT(imp.size(), 1000u);
+  // The smallest angle a pixel subtends: at the border of a 60-degree screen.
+  const float half = glm::radians(o.screen.vfovDeg) / 2.0f;
+  const float smallest =
+      2.0f * std::tan(half) / float(o.screen.height) * std::cos(half) * std::cos(half);
+  std::vector<glm::vec3> eyes = {cell.center()};
+  for (int k = 0; k < 8; ++k)
+    eyes.push_back({k & 1 ? cell.hi.x : cell.lo.x, k & 2 ? cell.hi.y : cell.lo.y,
+                    k & 4 ? cell.hi.z : cell.lo.z});
+  float worst = 0.0f;
+  size_t textured = 0;
+  for (size_t k = 0; k < imp.size(); ++k) {
+    for (const glm::vec3& eye : eyes) {
+      const glm::vec3 a = glm::normalize(imp.points[k] - eye),
+                      b = glm::normalize(exact.points[k] - eye);
+      worst = std::max(worst, 2.0f * std::asin(std::min(1.0f, 0.5f * glm::length(a - b))));
+    }
+    ASSERT_EQ(imp.singleColour[k], exact.singleColour[k]);
+    textured += !imp.singleColour[k];
+    const uint32_t texels = imp.singleColour[k] ? 1 : imp.textureTexels();
+    for (uint32_t i = 0; i < texels; ++i)
+      for (int c = 0; c < 3; ++c) {
+        const int got = imp.texels[imp.firstTexel[k] + i][c];
+        const int want = exact.texels[exact.firstTexel[k] + i][c];
+        if (imp.singleColour[k])
+          ASSERT_EQ(got, want);
+        else
+          ASSERT_LE(std::abs(got - want), int(o.colourStep / 2));
+      }
+  }
+  EXPECT_GT(textured, 0u);
+  EXPECT_LE(worst, 0.05f * smallest * 1.1f) << "in pixels: " << worst / smallest;
+  EXPECT_GT(worst, 0.005f * smallest) << "the default grid is coarser than the fine one";
+
+  Impostor decoded;
+  std::string error;
+  ASSERT_TRUE(wire::decodeImpostor(wire::encodeImpostor(imp), decoded, error)) << error;
+  // Points come back in another order: compare the sets.
+  auto sorted = [](const Impostor& x) {
+    std::vector<std::array<float, 7>> v;
+    for (size_t k = 0; k < x.size(); ++k) {
+      const glm::u8vec3 c = x.texels[x.firstTexel[k]];
+      v.push_back({x.points[k].x, x.points[k].y, x.points[k].z, float(c.x), float(c.y), float(c.z),
+                   float(x.singleColour[k])});
+    }
+    std::sort(v.begin(), v.end());
+    return v;
+  };
+  const auto want = sorted(imp), got = sorted(decoded);
+  ASSERT_EQ(got.size(), want.size());
+  size_t differ = 0;
+  for (size_t k = 0; k < got.size(); ++k) differ += got[k] != want[k];
+  EXPECT_EQ(differ, 0u);
 }
 
 TEST(ImpostorBake, RefusesAnImpostorTooLargeToSample) {

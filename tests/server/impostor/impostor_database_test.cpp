@@ -7,6 +7,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <fstream>
 #include <iterator>
 
@@ -124,12 +126,17 @@ TEST(ImpostorDatabase, AnImpostorCostlierThanItsGeometryByTheRatioStaysGeometry)
   std::vector<double> ratios;
   for (size_t i = 0; i < free.impostors.size(); ++i)
     ratios.push_back(double(free.stats[i].bytes) / double(free.geometryBytes[i]));
-  const double median = ratios[ratios.size() / 2];
-  o.placement.maxBytesRatio = float(median);
+  std::vector<double> ascending = ratios;
+  std::sort(ascending.begin(), ascending.end());
+  // Just below the lower middle ratio (as a float), so that it is refused.
+  float median = float(ascending[(ascending.size() - 1) / 2]);
+  if (double(median) >= ascending[(ascending.size() - 1) / 2])
+    median = std::nextafter(median, 0.0f);
+  o.placement.maxBytesRatio = median;
   const CellImpostors capped = b.world->bakeCell(cell, *pvs.cell(c), o.placement, o.impostor);
   size_t above = 0;
-  for (double r : ratios) above += r > double(float(median));
-  ASSERT_GT(above, 0u) << "impostors of one cost ratio: the test needs a spread";
+  for (double r : ratios) above += r > double(median);
+  ASSERT_GT(above, 0u);
   EXPECT_EQ(capped.refused.size(), above);
   EXPECT_EQ(capped.impostors.size(), free.impostors.size() - above);
   for (size_t i = 0; i < capped.impostors.size(); ++i)
