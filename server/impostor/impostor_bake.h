@@ -132,8 +132,9 @@ struct ImpostorOptions {
   // colourStep levels (1, 2, 4, 8 or 16; single colours stay exact). The
   // defaults cost nothing measurable: along walks through street cells of
   // bigcity and the real city model, the image error and the holes are
-  // those of the unquantized points within the walks' noise (README), and
-  // 0.05 keeps a pixel's worth of margin to the splat's 0.7.
+  // those of the unquantized points within the walks' noise (README); 0.05
+  // takes a quarter of the 0.2 pixels the splat's 0.7 leaves beyond the
+  // sampling's half pixel.
   float positionError = 0.05f;  // pixels
   uint32_t colourStep = 8;
   uint64_t seed = 1;

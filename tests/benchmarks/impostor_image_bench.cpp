@@ -18,8 +18,8 @@
 // Error is measured on the impostors' footprint (pixels where any reference
 // sample meets a replaced face) and over the whole frame. `--sweep` bakes the
 // heaviest impostor once per knob setting (LDI resolution, point removal,
-// texture size, variance threshold) and reports the same error against bake
-// time and bytes.
+// texture size, variance threshold, the precision kept: position error and
+// colour step) and reports the same error against bake time and bytes.
 //
 // It lives with the tests because it needs both sides: the server's bake
 // and the client's renderers (server/ and client/ never include each other).
@@ -349,6 +349,12 @@ std::vector<SweepRow> sweepRows(const ImpostorOptions& base) {
   for (float v : {2.0f, 8.0f})
     add("variance", fmt::format("{}", v), [v](ImpostorOptions& o) { o.varianceThreshold = v; });
   add("filter", "0.5", [](ImpostorOptions& o) { o.pixelFilterSigma = 0.5f; });  // the thesis's
+  // The precision the bake keeps (and the encoding carries): the points'
+  // grid in pixels, the textures' colour step in levels.
+  for (float e : {1e-4f, 0.2f})
+    add("position", fmt::format("{}", e), [e](ImpostorOptions& o) { o.positionError = e; });
+  for (uint32_t c : {1u, 16u})
+    add("colour", fmt::format("{}", c), [c](ImpostorOptions& o) { o.colourStep = c; });
   // The client's splat (the bake unchanged).
   for (float r : {0.5f, 0.75f, 0.95f}) {
     add("radius", fmt::format("{}", r), [](ImpostorOptions&) {});
