@@ -53,7 +53,8 @@ std::array<uint32_t, 3> PointGrid::coordinates(const glm::vec3& p) const {
   for (int a = 0; a < 3; ++a) {
     if (!(step[a] > 0.0f)) continue;
     const float f = std::round((g[a] - lo[a]) / step[a]);
-    q[size_t(a)] = uint32_t(std::clamp(f, 0.0f, float(steps[size_t(a)])));
+    // NaN (a point at infinity) to 0, like anything below the range.
+    q[size_t(a)] = f > 0.0f ? uint32_t(std::min(f, float(steps[size_t(a)]))) : 0u;
   }
   return q;
 }
@@ -81,23 +82,33 @@ std::optional<PointGrid> Impostor::pointGrid() const {
                       (corner & 4) ? box.hi.z : box.lo.z);
     const glm::vec3 w = p - grid.centre;
     const float z = glm::dot(w, grid.normal);
-    // In front by more than float noise at the box's scale.
-    if (!(z > 1e-4f * glm::length(w))) return std::nullopt;
+    // In front by more than float noise at the box's scale, and by a
+    // millimetre at least (no impostor stands closer to its cell).
+    if (!(z > 1e-4f * glm::length(w)) || !(z > 1e-3f)) return std::nullopt;
     const glm::vec3 g(glm::dot(w, grid.e1) / z, glm::dot(w, grid.e2) / z, std::log(z));
     lo = glm::min(lo, g);
     hi = glm::max(hi, g);
   }
+  const auto finite = [](const glm::vec3& v) {
+    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+  };
+  if (!finite(lo) || !finite(hi)) return std::nullopt;
+  // Beyond about 83 degrees off the normal, the angles lose the precision
+  // the grid promises (a float's error grows with the tangent's square).
+  if (std::max({-lo.x, hi.x, -lo.y, hi.y}) > PointGrid::kMaxTangent) return std::nullopt;
   grid.lo = lo;
   const std::array<float, 3> wanted = {angleStep, angleStep, logDepthStep};
   const float finest = 1.0f / float((1u << PointGrid::kMaxBits) - 1);
   for (int a = 0; a < 3; ++a) {
     const float range = hi[a] - lo[a];
-    if (!(range > 0.0f) || !std::isfinite(range)) continue;  // flat: one coordinate
+    if (!std::isfinite(range)) return std::nullopt;
+    if (!(range > 0.0f)) continue;  // flat: one coordinate
     const float s =
         wanted[size_t(a)] > 0.0f ? std::max(wanted[size_t(a)], range * finest) : range / 65535.0f;
+    const float count = std::ceil(range / s);
+    if (!(s > 0.0f) || !std::isfinite(count)) return std::nullopt;  // steps below float's reach
     grid.step[a] = s;
-    grid.steps[size_t(a)] =
-        std::min((1u << PointGrid::kMaxBits) - 1, uint32_t(std::ceil(range / s)));
+    grid.steps[size_t(a)] = uint32_t(std::min(count, float((1u << PointGrid::kMaxBits) - 1)));
   }
   // Half a step of each coordinate at the farthest depth, along the longest
   // ray, with a margin for rounding.
@@ -106,7 +117,9 @@ std::optional<PointGrid> Impostor::pointGrid() const {
       std::sqrt(1.0f + std::max(lo.x * lo.x, hi.x * hi.x) + std::max(lo.y * lo.y, hi.y * hi.y));
   grid.slack = 1.01f * (farthest * (std::exp(0.5f * grid.step.z) - 1.0f) * longest +
                         farthest * 0.5f * (grid.step.x + grid.step.y)) +
-               1e-5f * glm::length(box.extent());
+               1e-5f * glm::length(box.extent()) +
+               1e-6f * (glm::length(grid.centre) + glm::length(box.hi - grid.centre));
+  if (!std::isfinite(grid.slack)) return std::nullopt;
   return grid;
 }
 

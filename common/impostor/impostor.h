@@ -75,7 +75,8 @@ struct SamplingPlane {
 // in r / z and g). A baked box's depth range is narrow in log depth, so
 // depth takes a fraction of the bits a Cartesian grid would.
 struct PointGrid {
-  static constexpr uint32_t kMaxBits = 21;  // per axis: a 63-bit Morton code
+  static constexpr uint32_t kMaxBits = 21;    // per axis: a 63-bit Morton code
+  static constexpr float kMaxTangent = 8.0f;  // of the box's corners, off the normal
   glm::vec3 centre{0.0f}, normal{0.0f}, e1{0.0f}, e2{0.0f};
   glm::vec3 lo{0.0f}, step{0.0f};   // (x, y, ln z)
   std::array<uint32_t, 3> steps{};  // the highest coordinate per axis
@@ -119,8 +120,10 @@ struct Impostor {
   void boundBlocks();
   uint32_t textureTexels() const { return textureWidth * textureHeight; }
   // The grid its points lie on; nothing when the box does not lie wholly in
-  // front of the cell's centre along the plane's normal, or the plane's axes
-  // are degenerate (never for a baked impostor: frameImpostor refuses it).
+  // front of the cell's centre along the plane's normal within
+  // PointGrid::kMaxTangent, the plane's axes are degenerate, or the grid's
+  // steps or reach lie beyond float (never for a baked impostor: the bake
+  // refuses such a box before sampling it).
   std::optional<PointGrid> pointGrid() const;
   // Snaps every point to the grid and every texel of a textured point to a
   // multiple of colourStep (the top step clamped to 255). Idempotent.

@@ -192,7 +192,8 @@ bool decodeImpostor(std::span<const uint8_t> bytes, Impostor& out, std::string& 
   if (imp.angleStep < 0.0f || imp.logDepthStep < 0.0f)
     return fail(fmt::format("grid steps {} and {}", imp.angleStep, imp.logDepthStep));
   const std::optional<PointGrid> grid = imp.pointGrid();
-  if (!grid) return fail("a box not wholly in front of the cell, or a degenerate sampling plane");
+  if (!grid)
+    return fail("a box not wholly in front of the cell, or a degenerate sampling plane or grid");
   const uint8_t* tail = head->data() + (kFloats + 2) * 4;
   imp.colourStep = tail[0];
   if (imp.colourStep == 0 || imp.colourStep > 16 || (imp.colourStep & (imp.colourStep - 1)))
@@ -254,7 +255,10 @@ bool decodeImpostor(std::span<const uint8_t> bytes, Impostor& out, std::string& 
       for (size_t a = 0; a < 3; ++a)
         if (q[a] > grid->steps[a]) return fail("a position outside the grid");
       imp.points[k] = grid->point(q);
-      if (!grown.contains(imp.points[k])) return fail("a position outside the box");
+      const glm::vec3& p3 = imp.points[k];
+      if (!std::isfinite(p3.x) || !std::isfinite(p3.y) || !std::isfinite(p3.z) ||
+          !grown.contains(p3))
+        return fail("a position outside the box");
     }
     if (p.remaining() != 0) return fail(fmt::format("{} bytes after the positions", p.remaining()));
   }

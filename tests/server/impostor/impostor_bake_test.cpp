@@ -648,6 +648,15 @@ TEST(ImpostorBake, RefusesAnImpostorTooLargeToSample) {
   o = quickOptions(320, 240);
   o.resolutionFactor = 0.0f;
   EXPECT_THROW(bakeImpostor(s.view(), cell, boundsOf(s.triangles), s.all, o), InputError);
+  // A box reaching 84 degrees off the axis (tangent 10) at its near side:
+  // its points' grid would lose its precision there.
+  const Box3f wide({-600.0f, 0.0f, -80.0f}, {600.0f, 30.0f, -66.0f});
+  try {
+    bakeImpostor(s.view(), cell, wide, s.all, quickOptions(320, 240));
+    ADD_FAILURE() << "a box 84 degrees wide was baked";
+  } catch (const InputError& e) {
+    EXPECT_THAT(e.what(), ::testing::HasSubstr("degrees off")) << e.what();
+  }
 }
 
 // The splatter skips an impostor whose box is wholly out of view; a point
