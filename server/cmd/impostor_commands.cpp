@@ -116,6 +116,16 @@ ImpostorCommand::ImpostorCommand(CLI::App& app, SceneLimits& limits)
                    "(8-bit levels; 0: never)")
       ->capture_default_str()
       ->check(nonNegative());
+  sub_->add_option("--position-error", a.bake.positionError,
+                   "the most a point may move, in the screen's smallest pixel angle seen from "
+                   "anywhere in the cell (the precision the encoding carries)")
+      ->capture_default_str()
+      ->check(inRange<float>(0.0f, 0.5f));
+  sub_->add_option("--colour-step", a.bake.colourStep,
+                   "textured points' texels snap to multiples of this many 8-bit levels "
+                   "(single colours stay exact)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({1u, 2u, 4u, 8u, 16u}));
   sub_->add_option("--screen", a.screen, "the viewer's screen the samples are sized for, WxH")
       ->capture_default_str();
   sub_->add_option("--fov", a.bake.screen.vfovDeg, "the viewer's vertical field of view (degrees)")
@@ -164,6 +174,8 @@ std::string ImpostorCommand::settingsJson() const {
               {"min_rays", o.minRays},
               {"max_rays", o.maxRays},
               {"single_colour", o.singleColourTolerance},
+              {"position_error", o.positionError},
+              {"colour_step", o.colourStep},
               {"screen", {o.screen.width, o.screen.height}},
               {"fov", o.screen.vfovDeg},
               {"seed", o.seed}}

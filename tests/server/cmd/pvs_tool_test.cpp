@@ -212,6 +212,18 @@ TEST(PvsTool, ImpostorsPrintTheContractedJsonForEachImpostorOfTheCell) {
   EXPECT_EQ(stats["far_triangles"].get<size_t>() + stats["near_triangles"].get<size_t>(),
             stats["pvs_triangles"].get<size_t>());
   EXPECT_EQ(stats["points"], imp["points"]);
+  // Kept more precisely, the same points cost more bytes; a colour step the
+  // encoding has no code for is refused by name.
+  const ToolRun fine =
+      runPvs(common + "--json --min-triangles 20 --position-error 0.0001 --colour-step 1");
+  ASSERT_EQ(fine.status, 0) << fine.err;
+  const auto fj = nlohmann::json::parse(fine.out);
+  ASSERT_EQ(fj["impostors"].size(), 1u);
+  EXPECT_EQ(fj["impostors"][0]["points"], imp["points"]);
+  EXPECT_GT(fj["impostors"][0]["bytes"].get<uint64_t>(), imp["bytes"].get<uint64_t>());
+  const ToolRun badStep = runPvs(common + "--colour-step 3");
+  EXPECT_NE(badStep.status, 0);
+  EXPECT_NE(badStep.err.find("--colour-step"), std::string::npos) << badStep.err;
   // The same cell with a heavier threshold keeps its far field as geometry
   // and says so.
   const ToolRun light = runPvs(common + "--json --min-triangles 500");
