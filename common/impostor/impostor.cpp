@@ -66,6 +66,12 @@ glm::vec3 PointGrid::point(const std::array<uint32_t, 3>& q) const {
 }
 
 std::optional<PointGrid> Impostor::pointGrid() const {
+  return PointGrid::of(cell, box, plane, angleStep, logDepthStep);
+}
+
+std::optional<PointGrid> PointGrid::of(const Box3f& cell, const Box3f& box,
+                                       const SamplingPlane& plane, float angleStep,
+                                       float logDepthStep) {
   PointGrid grid;
   grid.centre = cell.center();
   const float nn = glm::length(plane.normal);
@@ -123,10 +129,16 @@ std::optional<PointGrid> Impostor::pointGrid() const {
   return grid;
 }
 
+uint8_t Impostor::levelIndex(uint8_t v, uint32_t step) {
+  return step <= 1 ? v : uint8_t((uint32_t(v) + step / 2) / step);
+}
+
+uint8_t Impostor::levelOf(uint32_t index, uint32_t step) {
+  return uint8_t(std::min<uint32_t>(255, index * std::max(step, 1u)));
+}
+
 uint8_t Impostor::snapLevel(uint8_t v, uint32_t step) {
-  if (step <= 1) return v;
-  const uint32_t k = (uint32_t(v) + step / 2) / step;
-  return uint8_t(std::min<uint32_t>(255, k * step));
+  return levelOf(levelIndex(v, step), step);
 }
 
 void Impostor::quantize() {

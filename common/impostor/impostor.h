@@ -82,6 +82,15 @@ struct PointGrid {
   std::array<uint32_t, 3> steps{};  // the highest coordinate per axis
   float slack = 0.0f;  // metres: how far a grid point may lie from the box's point it stands for
 
+  // The grid of a box seen from a cell through a sampling plane, with the
+  // given steps (0: 16 bits over the box's range on that axis); nothing
+  // when the box does not lie wholly in front of the cell's centre along the
+  // plane's normal within kMaxTangent, the plane's axes are degenerate, or
+  // the steps or reach lie beyond float.
+  static std::optional<PointGrid> of(const Box3f& cell, const Box3f& box,
+                                     const SamplingPlane& plane, float angleStep,
+                                     float logDepthStep);
+
   // Coordinates of a point (clamped into the grid's range) and back.
   std::array<uint32_t, 3> coordinates(const glm::vec3& p) const;
   glm::vec3 point(const std::array<uint32_t, 3>& q) const;
@@ -119,17 +128,18 @@ struct Impostor {
   bool hasBlockBounds() const { return blockBounds.size() == blockCount(); }
   void boundBlocks();
   uint32_t textureTexels() const { return textureWidth * textureHeight; }
-  // The grid its points lie on; nothing when the box does not lie wholly in
-  // front of the cell's centre along the plane's normal within
-  // PointGrid::kMaxTangent, the plane's axes are degenerate, or the grid's
-  // steps or reach lie beyond float (never for a baked impostor: the bake
-  // refuses such a box before sampling it).
+  // The grid its points lie on (PointGrid::of its cell, box, plane and
+  // steps); never nothing for a baked impostor: the bake refuses a box
+  // without a grid before sampling it.
   std::optional<PointGrid> pointGrid() const;
   // Snaps every point to the grid and every texel of a textured point to a
   // multiple of colourStep (the top step clamped to 255). Idempotent.
   void quantize();
-  // A colour level snapped to `step` levels: min(255, round(v / step) step).
+  // A colour level snapped to `step` levels: min(255, round(v / step) step),
+  // that is levelOf(levelIndex(v, step), step) (the codec stores the index).
   static uint8_t snapLevel(uint8_t v, uint32_t step);
+  static uint8_t levelIndex(uint8_t v, uint32_t step);
+  static uint8_t levelOf(uint32_t index, uint32_t step);
   // The colour of point k seen from `eye` (0..255 per channel, unrounded).
   glm::vec3 colourSeenFrom(size_t k, const glm::vec3& eye) const;
   // The same at rectangle coordinates st (textureCoordinates of the eye).

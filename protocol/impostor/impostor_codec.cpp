@@ -67,17 +67,10 @@ void putSection(std::vector<uint8_t>& out, const std::vector<uint8_t>& raw) {
   out.insert(out.end(), stored.begin(), stored.end());
 }
 
-// A colour level as its multiple of `step`.
-uint8_t levelIndex(uint8_t v, uint32_t step) {
-  return uint8_t((uint32_t(v) + step / 2) / step);
-}
 // The texel a texel is predicted from: the one to its left, or above it at
 // the start of a row (the first texel is predicted from the previous point's).
 uint32_t predictorOf(uint32_t i, uint32_t width) {
   return i % width == 0 ? i - width : i - 1;
-}
-uint8_t levelOf(uint32_t index, uint32_t step) {
-  return uint8_t(std::min<uint32_t>(255, index * step));
 }
 
 }  // namespace
@@ -140,9 +133,9 @@ std::vector<uint8_t> encodeImpostor(const Impostor& imp, ImpostorSections* sizes
         continue;
       }
       for (uint32_t i = 0; i < texels; ++i) {
-        const uint8_t v = levelIndex(t[i][c], step);
+        const uint8_t v = Impostor::levelIndex(t[i][c], step);
         const uint8_t predicted =
-            i == 0 ? lastFirst : levelIndex(t[predictorOf(i, imp.textureWidth)][c], step);
+            i == 0 ? lastFirst : Impostor::levelIndex(t[predictorOf(i, imp.textureWidth)][c], step);
         raw[3].push_back(uint8_t(v - predicted));
         if (i == 0) lastFirst = v;
       }
@@ -298,10 +291,10 @@ bool decodeImpostor(std::span<const uint8_t> bytes, Impostor& out, std::string& 
       }
       for (uint32_t i = 0; i < texels; ++i) {
         const uint8_t predicted =
-            i == 0 ? lastFirst : levelIndex(t[predictorOf(i, imp.textureWidth)][c], step);
+            i == 0 ? lastFirst : Impostor::levelIndex(t[predictorOf(i, imp.textureWidth)][c], step);
         const uint8_t v = uint8_t(predicted + *texture++);
         if (v > maxIndex) return fail("a texel beyond 255");
-        t[i][c] = levelOf(v, step);
+        t[i][c] = Impostor::levelOf(v, step);
         if (i == 0) lastFirst = v;
       }
     }

@@ -233,17 +233,11 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
   Stopwatch total;
   ImpostorStats stats;
   const ImpostorFrame frame = frameImpostor(cell, box);
-  {
-    Impostor framed;
-    framed.cell = cell;
-    framed.box = box;
-    framed.plane = frame.plane;
-    if (!framed.pointGrid())
-      throwInputError(
-          "impostor: the box reaches more than {:.0f} degrees off the sampling plane's normal seen "
-          "from the cell's centre (too wide for its points' grid)",
-          glm::degrees(std::atan(PointGrid::kMaxTangent)));
-  }
+  if (!PointGrid::of(cell, box, frame.plane, 0.0f, 0.0f))
+    throwInputError(
+        "impostor: the box reaches more than {:.0f} degrees off the sampling plane's normal seen "
+        "from the cell's centre (too wide for its points' grid)",
+        glm::degrees(std::atan(PointGrid::kMaxTangent)));
   const glm::vec3 axis = frame.plane.normal;
   const glm::vec3 uDir = glm::normalize(frame.plane.uAxis),
                   vDir = glm::normalize(frame.plane.vAxis);
