@@ -17,6 +17,12 @@
 namespace vistream {
 namespace {
 
+// How near another camera's sample must lie, in that camera's sample
+// spacings, for a point to be dropped in its favour (point removal): half a
+// grid step's diagonal and a margin for the grid's bending on a surface
+// seen in perspective.
+constexpr float kCoverReach = 0.75f;
+
 // One LDI hit: a candidate point.
 struct Sample {
   glm::vec3 position;
@@ -350,7 +356,7 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
   stats.hiddenSeconds = watch.ms() / 1000.0;
 
   // Point removal: drop a point that another camera samples better and
-  // sufficiently.
+  // sufficiently, and has a sample beside.
   watch.reset();
   if (options.removePoints) {
     // The spacing the LDIs were sized for: the resolution factor scales it.
@@ -430,10 +436,15 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
           if (!(spacing[j] < spacing[s.camera] ||
                 (spacing[j] == spacing[s.camera] && j < s.camera)))
             continue;
-          // Camera j must have a point of this surface beside p (after the
-          // hidden ones are gone): at an occluding edge its samples may lie
-          // on the hidden side, and p is then the only one there.
-          if (nearbySample(j, s.position, normal, 2.0f * spacing[j])) {
+          // Camera j must have a point of this surface covering p (after the
+          // hidden ones are gone). Its samples of a surface lie on a grid of
+          // steps at most spacing[j], so where it sampled, one lies within
+          // half the grid's diagonal (0.71 spacing[j]) of p. Where it did
+          // not, its nearest sample is a step or more away: at an occluding
+          // edge its samples there lie on the hidden side, and where its rays
+          // stopped at maxLayers (a facade behind rows of buildings, seen
+          // along a street) it has none. p is then the only point there.
+          if (nearbySample(j, s.position, normal, kCoverReach * spacing[j])) {
             keep[i] = 0;
             break;
           }

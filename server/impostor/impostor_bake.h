@@ -46,8 +46,11 @@
 // surface seen obliquely undersampled and keep all three cameras' points
 // there, three times what a street's side walls need. A point from camera k is
 // dropped when another camera samples its surface sufficiently and better
-// (smaller s, ties to the lower camera); the better camera's own samples of
-// that surface remain, so no region loses all its points.
+// (smaller s, ties to the lower camera) and has a sample of that surface
+// within 0.75 s_j of it (half its grid's diagonal, and a margin); the better
+// camera's own samples there remain, so no region loses all its points. A
+// camera may sample a surface better yet have no sample of it where its
+// rays met the surface's occluders or stopped at maxLayers: the point stays.
 //
 // Hidden points (optional, on by default). The LDIs keep every layer, and
 // most of those layers (the backs and insides of buildings, rows behind
