@@ -8,7 +8,8 @@
 // frame against a ray-cast reference with 4x4 samples a pixel (box filter)
 // over every triangle of the scene:
 //   impostors    the connected client: the PVS without the faces the
-//                impostors replace, plus the impostors (the pipeline);
+//                impostors replace, plus the impostors as the client decodes
+//                them (the pipeline);
 //   geometry     the replaced faces drawn as raw polygons, one sample a pixel
 //                (the aliasing of the thesis's Figures 5.13-5.15);
 //   ray-cast     today's far field: the PVS in the pipeline, far field ray
@@ -44,6 +45,7 @@
 #include "common/core/median.h"
 #include "common/core/progress.h"
 #include "common/generate/scene_spec.h"
+#include "protocol/impostor/impostor_codec.h"
 #include "server/cmd/scene_boxes.h"
 #include "server/impostor/impostor_world.h"
 
@@ -399,8 +401,18 @@ int run(const Args& a) {
   const RenderGeometry held = subset(view, without(pvs, replaced));
   auto set = std::make_shared<ImpostorSet>();
   set->cell = cell;
-  for (const Impostor& imp : baked.impostors)
-    set->impostors.push_back(std::make_shared<const Impostor>(imp));
+  // What a client draws: each impostor through the wire encoding (the same
+  // points, in the encoding's Morton order, which keeps a block of points
+  // together on the screen).
+  for (const Impostor& imp : baked.impostors) {
+    auto decoded = std::make_shared<Impostor>();
+    std::string error;
+    if (!wire::decodeImpostor(wire::encodeImpostor(imp), *decoded, error)) {
+      fmt::print(stderr, "bench_impostor_image: an impostor does not decode: {}\n", error);
+      return 1;
+    }
+    set->impostors.push_back(std::move(decoded));
+  }
   set->expected = uint32_t(baked.impostors.size());
 
   const std::vector<Camera> cameras = walk(cell, a.frames, width, height);
@@ -444,7 +456,7 @@ int run(const Args& a) {
       ImageRgb8 image(width, height);
       const auto start = std::chrono::steady_clock::now();
       s.begin(towards);
-      s.draw(baked.impostors[i], image);
+      s.draw(*set->impostors[i], image);
       ms.push_back(
           std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
               .count());
