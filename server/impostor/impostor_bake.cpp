@@ -393,7 +393,9 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
     }
     // Whether camera `cam` has a sample within `reach` of p on a surface
     // facing like `normal`, in the 3x3 LDI pixels round p's projection.
-    auto nearbySample = [&](size_t cam, const glm::vec3& p, const glm::vec3& normal, float reach) {
+    // `among` (when given) limits the samples to those it marks non-zero.
+    auto nearbySample = [&](size_t cam, const glm::vec3& p, const glm::vec3& normal, float reach,
+                            const std::vector<uint8_t>* among) {
       const glm::vec2 q = pixelOf(cam, p);
       const int64_t x = int64_t(std::floor(q.x)), y = int64_t(std::floor(q.y));
       for (int64_t dy = -1; dy <= 1; ++dy)
@@ -401,59 +403,86 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
           const int64_t at = linearPixel(cam, x + dx, y + dy);
           if (at < 0) continue;
           for (uint32_t k = first[cam][size_t(at)]; k < first[cam][size_t(at) + 1]; ++k) {
-            const Sample& o = samples[index[cam][k]];
-            if (glm::distance(o.position, p) <= reach &&
-                glm::dot(unitNormal(scene.triangles, o.triangle), normal) >= 0.9f)
+            const uint32_t o = index[cam][k];
+            if (among && !(*among)[o]) continue;
+            if (glm::distance(samples[o].position, p) <= reach &&
+                glm::dot(unitNormal(scene.triangles, samples[o].triangle), normal) >= 0.9f)
               return true;
           }
         }
       return false;
     };
+    // Per sample: 0 dropped, 1 kept, kKeptUnsampled kept though a camera
+    // samples its surface better (that camera has no sample beside it).
+    constexpr uint8_t kKeptUnsampled = 2;
+    // Whether sample i may go: another camera samples its surface
+    // sufficiently and better, and has a sample (among `among`) covering it.
+    // Sets `better` when such a camera exists, covering or not.
+    auto removable = [&](size_t i, const std::vector<uint8_t>* among, bool& better) {
+      const Sample& s = samples[i];
+      const glm::vec3 normal = unitNormal(scene.triangles, s.triangle);
+      // The largest foreshortened angle per metre of spacing any viewer
+      // sees: |n . w_v| / |p - v| over the cell's corners and centre.
+      float worst = 0.0f;
+      for (int c = 0; c < 9; ++c) {
+        const glm::vec3 v =
+            c == 8 ? cell.center()
+                   : glm::vec3{c & 1 ? cell.hi.x : cell.lo.x, c & 2 ? cell.hi.y : cell.lo.y,
+                               c & 4 ? cell.hi.z : cell.lo.z};
+        const glm::vec3 w = s.position - v;
+        const float d2 = glm::dot(w, w);
+        worst = std::max(worst, std::abs(glm::dot(normal, w)) / std::max(d2, 1e-12f));
+      }
+      // Spacing s_j is sufficient when s_j * worst <= sampleAngle.
+      const float enough = worst > 0.0f ? sampleAngle / worst : 1e30f;
+      std::array<float, 3> spacing;
+      for (size_t j = 0; j < 3; ++j)
+        spacing[j] = sampleSpacing(cameras[j], axis, s.position, normal);
+      better = false;
+      for (size_t j = 0; j < 3; ++j) {
+        if (j == s.camera || !(spacing[j] <= enough)) continue;
+        if (!(spacing[j] < spacing[s.camera] || (spacing[j] == spacing[s.camera] && j < s.camera)))
+          continue;
+        better = true;
+        // Camera j must have a point of this surface covering p (after the
+        // hidden ones are gone). Its samples of a surface lie on a grid of
+        // steps at most spacing[j], so where it sampled, one lies within
+        // half the grid's diagonal (0.71 spacing[j]) of p. Where it did not,
+        // its nearest sample is a step or more away: at an occluding edge its
+        // samples there lie on the hidden side, and where its rays stopped at
+        // maxLayers (a facade behind rows of buildings, seen along a street)
+        // it has none. p is then the only point there.
+        if (nearbySample(j, s.position, normal, kCoverReach * spacing[j], among)) return true;
+      }
+      return false;
+    };
+    // First every sample against all others; then each dropped one again
+    // against those that stay, since the sample it was dropped for may have
+    // gone too (for a third camera's, farther away). Keeping a sample there
+    // only adds points, so one more pass settles it.
     std::vector<uint8_t> keep(samples.size(), 1);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, samples.size()), [&](const auto& range) {
       for (size_t i = range.begin(); i != range.end(); ++i) {
-        const Sample& s = samples[i];
-        const glm::vec3 normal = unitNormal(scene.triangles, s.triangle);
-        // The largest foreshortened angle per metre of spacing any viewer
-        // sees: |n . w_v| / |p - v| over the cell's corners and centre.
-        float worst = 0.0f;
-        for (int c = 0; c < 9; ++c) {
-          const glm::vec3 v =
-              c == 8 ? cell.center()
-                     : glm::vec3{c & 1 ? cell.hi.x : cell.lo.x, c & 2 ? cell.hi.y : cell.lo.y,
-                                 c & 4 ? cell.hi.z : cell.lo.z};
-          const glm::vec3 w = s.position - v;
-          const float d2 = glm::dot(w, w);
-          worst = std::max(worst, std::abs(glm::dot(normal, w)) / std::max(d2, 1e-12f));
-        }
-        // Spacing s_j is sufficient when s_j * worst <= sampleAngle.
-        const float enough = worst > 0.0f ? sampleAngle / worst : 1e30f;
-        std::array<float, 3> spacing;
-        for (size_t j = 0; j < 3; ++j)
-          spacing[j] = sampleSpacing(cameras[j], axis, s.position, normal);
-        for (size_t j = 0; j < 3; ++j) {
-          if (j == s.camera || !(spacing[j] <= enough)) continue;
-          if (!(spacing[j] < spacing[s.camera] ||
-                (spacing[j] == spacing[s.camera] && j < s.camera)))
-            continue;
-          // Camera j must have a point of this surface covering p (after the
-          // hidden ones are gone). Its samples of a surface lie on a grid of
-          // steps at most spacing[j], so where it sampled, one lies within
-          // half the grid's diagonal (0.71 spacing[j]) of p. Where it did
-          // not, its nearest sample is a step or more away: at an occluding
-          // edge its samples there lie on the hidden side, and where its rays
-          // stopped at maxLayers (a facade behind rows of buildings, seen
-          // along a street) it has none. p is then the only point there.
-          if (nearbySample(j, s.position, normal, kCoverReach * spacing[j])) {
-            keep[i] = 0;
-            break;
-          }
-        }
+        bool better = false;
+        if (removable(i, nullptr, better))
+          keep[i] = 0;
+        else if (better)
+          keep[i] = kKeptUnsampled;
       }
     });
+    std::vector<uint8_t> settled = keep;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, samples.size()), [&](const auto& range) {
+      for (size_t i = range.begin(); i != range.end(); ++i) {
+        bool better = false;
+        if (!keep[i] && !removable(i, &keep, better)) settled[i] = kKeptUnsampled;
+      }
+    });
+    keep.swap(settled);
     size_t kept = 0;
-    for (size_t i = 0; i < samples.size(); ++i)
+    for (size_t i = 0; i < samples.size(); ++i) {
+      stats.keptUnsampled += keep[i] == kKeptUnsampled;
       if (keep[i]) samples[kept++] = samples[i];
+    }
     stats.removed = samples.size() - kept;
     samples.resize(kept);
   }

@@ -50,7 +50,11 @@
 // within 0.75 s_j of it (half its grid's diagonal, and a margin); the better
 // camera's own samples there remain, so no region loses all its points. A
 // camera may sample a surface better yet have no sample of it where its
-// rays met the surface's occluders or stopped at maxLayers: the point stays.
+// rays met the surface's occluders or stopped at maxLayers: the point stays
+// (ImpostorStats::keptUnsampled counts them). A second pass checks each
+// dropped point against the points that stay, since the one it was dropped
+// for may itself have gone for a third camera's, and keeps it if none covers
+// it any more.
 //
 // Hidden points (optional, on by default). The LDIs keep every layer, and
 // most of those layers (the backs and insides of buildings, rows behind
@@ -152,7 +156,11 @@ struct ImpostorStats {
   uint64_t samples = 0;        // LDI hits in the box (candidate points), thin ones included
   uint64_t thinSamples = 0;    // added for thin geometry between LDI rays
   uint64_t removed = 0;        // dropped by point removal
-  uint64_t hidden = 0;         // dropped as hidden from the whole cell
+  // Kept by point removal though another camera samples their surface
+  // better and sufficiently: it has no sample beside them (its rays met an
+  // occluder there or stopped at maxLayers).
+  uint64_t keptUnsampled = 0;
+  uint64_t hidden = 0;  // dropped as hidden from the whole cell
   uint64_t points = 0;
   uint64_t singleColour = 0;    // points keeping one colour
   uint64_t appearanceRays = 0;  // PIF rays
@@ -185,6 +193,8 @@ struct ImpostorStats {
     f(StatField{"samples", "samples", ""}, samples);
     f(StatField{"thin_samples", "of which for thin geometry", ""}, thinSamples);
     f(StatField{"removed", "removed", ""}, removed);
+    f(StatField{"kept_unsampled", "kept: the better camera has no sample there", ""},
+      keptUnsampled);
     f(StatField{"hidden", "hidden from the cell", ""}, hidden);
     f(StatField{"points", "points", ""}, points);
     f(StatField{"single_colour", "single-colour points", ""}, singleColour);

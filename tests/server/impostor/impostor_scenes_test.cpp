@@ -47,8 +47,10 @@ TEST(ImpostorBake, LeavesNoHoleOnBigcityWhereACameraRanOutOfLayers) {
   const auto site = std::find_if(placed.sites.begin(), placed.sites.end(),
                                  [&](const ImpostorSite& s) { return s.box.contains(facade); });
   ASSERT_NE(site, placed.sites.end()) << placed.why;
+  ImpostorStats stats;
   const Impostor imp =
-      bakeImpostor(world.view(), cell, site->box, site->triangles, options640x480());
+      bakeImpostor(world.view(), cell, site->box, site->triangles, options640x480(), &stats);
+  EXPECT_GT(stats.keptUnsampled, 0u);  // the facade's, among others
   std::vector<bool> mine(world.triangles().size(), false);
   for (uint32_t t : site->triangles) mine[t] = true;
   const auto rays = makeEmbreeRayQuery(world.triangles());
