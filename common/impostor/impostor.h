@@ -138,6 +138,11 @@ struct Impostor {
   // A colour level snapped to `step` levels: min(255, round(v / step) step),
   // that is levelOf(levelIndex(v, step), step) (the codec stores the index).
   static uint8_t snapLevel(uint8_t v, uint32_t step);
+  // Whether `step` is a colour step the encoding has a code for: 1, 2, 4, 8
+  // or 16.
+  static bool isColourStep(uint32_t step) {
+    return step != 0 && step <= 16 && !(step & (step - 1));
+  }
   static uint8_t levelIndex(uint8_t v, uint32_t step);
   static uint8_t levelOf(uint32_t index, uint32_t step);
   // The colour of point k seen from `eye` (0..255 per channel, unrounded).

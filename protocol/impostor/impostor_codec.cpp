@@ -189,7 +189,7 @@ bool decodeImpostor(std::span<const uint8_t> bytes, Impostor& out, std::string& 
     return fail("a box not wholly in front of the cell, or a degenerate sampling plane or grid");
   const uint8_t* tail = head->data() + (kFloats + 2) * 4;
   imp.colourStep = tail[0];
-  if (imp.colourStep == 0 || imp.colourStep > 16 || (imp.colourStep & (imp.colourStep - 1)))
+  if (!Impostor::isColourStep(imp.colourStep))
     return fail(fmt::format("colour step {} (1, 2, 4, 8 or 16)", imp.colourStep));
   imp.textureWidth = tail[1];
   imp.textureHeight = tail[2];

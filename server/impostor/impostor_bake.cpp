@@ -233,8 +233,7 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
   if (!(options.positionError >= 0.0f) || !std::isfinite(options.positionError))
     throwInputError("impostor: the position error must be a non-negative number of pixels, got {}",
                     options.positionError);
-  if (options.colourStep == 0 || options.colourStep > 16 ||
-      (options.colourStep & (options.colourStep - 1)))
+  if (!Impostor::isColourStep(options.colourStep))
     throwInputError("impostor: colour step {} (1, 2, 4, 8 or 16)", options.colourStep);
   Stopwatch total;
   ImpostorStats stats;
@@ -412,13 +411,14 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
         }
       return false;
     };
-    // Per sample: 0 dropped, 1 kept, kKeptUnsampled kept though a camera
-    // samples its surface better (that camera has no sample beside it).
-    constexpr uint8_t kKeptUnsampled = 2;
-    // Whether sample i may go: another camera samples its surface
-    // sufficiently and better, and has a sample (among `among`) covering it.
-    // Sets `better` when such a camera exists, covering or not.
-    auto removable = [&](size_t i, const std::vector<uint8_t>* among, bool& better) {
+    // Per sample (the values of `keep` below): dropped, kept, or kept though
+    // a camera samples its surface better (that camera has no sample beside
+    // it).
+    constexpr uint8_t kDropped = 0, kKept = 1, kKeptUnsampled = 2;
+    // What becomes of sample i: dropped when another camera samples its
+    // surface sufficiently and better and has a sample (among `among`)
+    // covering it.
+    auto removal = [&](size_t i, const std::vector<uint8_t>* among) -> uint8_t {
       const Sample& s = samples[i];
       const glm::vec3 normal = unitNormal(scene.triangles, s.triangle);
       // The largest foreshortened angle per metre of spacing any viewer
@@ -438,12 +438,12 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
       std::array<float, 3> spacing;
       for (size_t j = 0; j < 3; ++j)
         spacing[j] = sampleSpacing(cameras[j], axis, s.position, normal);
-      better = false;
+      uint8_t fate = kKept;
       for (size_t j = 0; j < 3; ++j) {
         if (j == s.camera || !(spacing[j] <= enough)) continue;
         if (!(spacing[j] < spacing[s.camera] || (spacing[j] == spacing[s.camera] && j < s.camera)))
           continue;
-        better = true;
+        fate = kKeptUnsampled;
         // Camera j must have a point of this surface covering p (after the
         // hidden ones are gone). Its samples of a surface lie on a grid of
         // steps at most spacing[j], so where it sampled, one lies within
@@ -452,30 +452,22 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
         // samples there lie on the hidden side, and where its rays stopped at
         // maxLayers (a facade behind rows of buildings, seen along a street)
         // it has none. p is then the only point there.
-        if (nearbySample(j, s.position, normal, kCoverReach * spacing[j], among)) return true;
+        if (nearbySample(j, s.position, normal, kCoverReach * spacing[j], among)) return kDropped;
       }
-      return false;
+      return fate;
     };
     // First every sample against all others; then each dropped one again
     // against those that stay, since the sample it was dropped for may have
     // gone too (for a third camera's, farther away). Keeping a sample there
     // only adds points, so one more pass settles it.
-    std::vector<uint8_t> keep(samples.size(), 1);
+    std::vector<uint8_t> keep(samples.size(), kKept);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, samples.size()), [&](const auto& range) {
-      for (size_t i = range.begin(); i != range.end(); ++i) {
-        bool better = false;
-        if (removable(i, nullptr, better))
-          keep[i] = 0;
-        else if (better)
-          keep[i] = kKeptUnsampled;
-      }
+      for (size_t i = range.begin(); i != range.end(); ++i) keep[i] = removal(i, nullptr);
     });
     std::vector<uint8_t> settled = keep;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, samples.size()), [&](const auto& range) {
-      for (size_t i = range.begin(); i != range.end(); ++i) {
-        bool better = false;
-        if (!keep[i] && !removable(i, &keep, better)) settled[i] = kKeptUnsampled;
-      }
+      for (size_t i = range.begin(); i != range.end(); ++i)
+        if (keep[i] == kDropped && removal(i, &keep) != kDropped) settled[i] = kKeptUnsampled;
     });
     keep.swap(settled);
     size_t kept = 0;
