@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <functional>
 #include <mutex>
 
@@ -126,14 +127,21 @@ void ScreenTiles::reset(int width, int height) {
 
 void ScreenTiles::markMask(const std::vector<uint8_t>& mask) {
   VS_CHECK(mask.size() == size_t(width_) * size_t(height_));
+  // Eight bytes at a time: a mask is mostly zeros (the far-field pixels of
+  // a frame), and a byte-wise scan of the screen cost more than the splat.
   for (int y = 0; y < height_; ++y) {
     const uint8_t* row = mask.data() + size_t(y) * size_t(width_);
     uint8_t* tiles = tiles_.data() + size_t(y / kTile) * size_t(tilesX_);
-    for (int tx = 0; tx < tilesX_; ++tx) {
-      if (tiles[tx]) continue;
-      const int x0 = tx * kTile, x1 = std::min(width_, x0 + kTile);
-      tiles[tx] = std::any_of(row + x0, row + x1, [](uint8_t m) { return m != 0; });
+    int x = 0;
+    for (; x + 8 <= width_; x += 8) {
+      uint64_t word;
+      std::memcpy(&word, row + x, sizeof word);
+      if (word == 0) continue;
+      for (int k = 0; k < 8; ++k)
+        if (row[x + k]) tiles[(x + k) / kTile] = 1;
     }
+    for (; x < width_; ++x)
+      if (row[x]) tiles[x / kTile] = 1;
   }
 }
 
@@ -199,7 +207,10 @@ size_t ImpostorSplatter::draw(std::span<const Impostor* const> impostors, ImageR
   // points' rows fall in (first > last: none).
   std::vector<size_t> landed(drawn_.size(), 0);
   std::mutex landedMutex;
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, blockCount, 8), [&](const auto& blocks) {
+  // A few thousand points: both passes on the calling thread (setSerialBelow).
+  const bool serial = firstPoint_.back() < serialBelow_;
+  const size_t grain = serial ? std::max<size_t>(1, blockCount) : 8;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, blockCount, grain), [&](const auto& blocks) {
     std::vector<std::pair<uint32_t, size_t>> counts;  // (drawn impostor, points landed)
     for (size_t b = blocks.begin(); b < blocks.end(); ++b) {
       const Block blk = blockAt(b);
@@ -235,12 +246,13 @@ size_t ImpostorSplatter::draw(std::span<const Impostor* const> impostors, ImageR
   // score and of equals the first, as one pass over them would. 3. Each
   // pixel a point won takes that point's colour seen from the eye.
   const float radius2 = splat_.radius * splat_.radius;
-  tbb::parallel_for(0, bands_, [&](int band) {
-    const int rowLo = band * height / bands_, rowHi = (band + 1) * height / bands_;
+  // Bands first to last as one (serially: each point visited once).
+  auto depthTest = [&](int first, int last) {
+    const int rowLo = first * height / bands_, rowHi = (last + 1) * height / bands_;
     std::vector<uint32_t>& won = wonScratch_.local();
     won.clear();
     for (size_t b = 0; b < blockCount; ++b) {
-      if (band < blockBands_[b].x || band > blockBands_[b].y) continue;
+      if (last < blockBands_[b].x || first > blockBands_[b].y) continue;
       const Block blk = blockAt(b);
       for (size_t k = blk.offset + blk.first; k < blk.offset + blk.last; ++k) {
         const Projected& pt = projected_[k];
@@ -269,9 +281,13 @@ size_t ImpostorSplatter::draw(std::span<const Impostor* const> impostors, ImageR
               toBytes(impostors[drawn_[d]]->colourSeenFrom(k - firstPoint_[d], camera_.eye)));
       winner_[p] = kNoWinner;
     }
-    std::vector<uint32_t>& touched = touched_[size_t(band)];
+    std::vector<uint32_t>& touched = touched_[size_t(first)];
     touched.insert(touched.end(), won.begin(), won.end());
-  });
+  };
+  if (serial)
+    depthTest(0, bands_ - 1);
+  else
+    tbb::parallel_for(0, bands_, [&](int band) { depthTest(band, band); });
   size_t total = 0;
   for (size_t d = 0; d < drawn_.size(); ++d) {
     total += landed[d];

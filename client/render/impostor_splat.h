@@ -127,6 +127,12 @@ class ImpostorSplatter {
   // (when given) those of each impostor.
   size_t draw(std::span<const Impostor* const> impostors, ImageRgb8& out,
               std::vector<size_t>* landedEach = nullptr);
+  // A draw of fewer points than this (in the impostors that may cover a
+  // pixel) runs on the calling thread: a few thousand points take less time
+  // than waking the worker threads. Both ways draw the same frame.
+  void setSerialBelow(size_t points) { serialBelow_ = points; }
+  static constexpr size_t kSerialBelow = 16384;
+
   // Per pixel, the depth of the point that won it (kEmpty: no point).
   const std::vector<float>& depth() const { return depth_; }
   // Per pixel, the winner's score (PointSplat::score; kEmpty: no point):
@@ -157,6 +163,7 @@ class ImpostorSplatter {
   const std::vector<uint8_t>* mask_ = nullptr;
   ScreenTiles maskTiles_;  // the tiles the mask lets a point into
   PointSplat splat_;
+  size_t serialBelow_ = kSerialBelow;
   std::vector<float> depth_, score_;
   // Scratch of draw(): per point its projection, per pixel the point that
   // won it in this draw, per band of rows the pixels won.

@@ -231,6 +231,7 @@ int ImpostorCommand::bakeDatabase(const Scene& scene, const PvsDatabase& pvs,
                       {"points", r.points},
                       {"bytes", r.bytes},
                       {"geometry_bytes", r.geometryBytes},
+                      {"geometry_faces", r.geometryFaces},
                       {"time_ms", r.timeMs}}
                      .dump(2)
               << "\n";
@@ -245,6 +246,7 @@ int ImpostorCommand::bakeDatabase(const Scene& scene, const PvsDatabase& pvs,
   fmt::print("  {:<28} {:>12}\n", "points", r.points);
   fmt::print("  {:<28} {:>12}\n", "bytes", r.bytes);
   fmt::print("  {:<28} {:>12}\n", "geometry bytes replaced", r.geometryBytes);
+  fmt::print("  {:<28} {:>12}\n", "faces left as geometry", r.geometryFaces);
   fmt::print("  {:<28} {:>12.1f}\n", "time (s)", r.timeMs / 1000.0);
   return 0;
 }
@@ -308,6 +310,8 @@ int ImpostorCommand::run() {
   const ImpostorWorld world(scene, {a.ground, LightingOptions{}, a.lightingCache});
   const CellImpostors r = world.bakeCell(cell, a.placement, a.bake);
 
+  // What the sites left as geometry cost streamed as faces.
+  const size_t leftBytes = world.geometryBytes(r.geometryFaces);
   size_t points = 0, bytes = 0, geometryBytes = 0;
   for (size_t i = 0; i < r.impostors.size(); ++i) {
     points += r.stats[i].points;
@@ -339,6 +343,8 @@ int ImpostorCommand::run() {
                         {"light_groups", r.placement.lightGroups},
                         {"impostors", r.impostors.size()},
                         {"refused", r.refused},
+                        {"geometry_faces", r.geometryFaces.size()},
+                        {"geometry_faces_bytes", leftBytes},
                         {"points", points},
                         {"bytes", bytes},
                         {"geometry_bytes", geometryBytes},
@@ -357,6 +363,9 @@ int ImpostorCommand::run() {
              r.pvsSeconds, r.placement.nearTriangles, a.placement.nearDistance,
              r.placement.farTriangles);
   for (const std::string& why : r.refused) fmt::print("  refused: {}\n", why);
+  if (!r.geometryFaces.empty())
+    fmt::print("  left as geometry: {} faces, {} bytes as a Geometry message\n",
+               r.geometryFaces.size(), leftBytes);
   if (r.impostors.empty()) return 0;
   fmt::print("\n  {:>6} {:>4} {:>9} {:>9} {:>9} {:>8} {:>9} {:>10} {:>10} {:>7}\n", "sector",
              "band", "triangles", "points", "screen px", "pts/px", "covered", "bytes", "geometry B",

@@ -45,6 +45,10 @@ std::vector<uint8_t> encodeCellRecord(const CellRecord& record) {
     wire::putVarint(out, s.coveredPixels);
     wire::putVarint(out, s.geometryBytes);
   }
+  const std::vector<uint8_t> geometry = encodeFaceList(record.geometryFaces);
+  wire::putVarint(out, record.geometryFaces.size());
+  wire::putVarint(out, geometry.size());
+  out.insert(out.end(), geometry.begin(), geometry.end());
   return out;
 }
 
@@ -79,6 +83,15 @@ CellRecord decodeCellRecord(std::span<const uint8_t> bytes, uint32_t faceLimit) 
     s.coveredPixels = check(r.varint("a pixel count", uint64_t(1) << 40));
     s.geometryBytes = check(r.varint("a byte count", uint64_t(1) << 48));
     out.impostors.push_back(std::move(s));
+  }
+  const uint64_t geometryCount = check(r.varint("the geometry's face count", faceLimit));
+  const uint64_t geometryBytes = check(r.varint("the geometry's length", r.remaining()));
+  const auto geometry = check(r.bytes("the geometry's face list", geometryBytes));
+  try {
+    out.geometryFaces =
+        decodeFaceList(geometry.data(), geometry.size(), uint32_t(geometryCount), faceLimit);
+  } catch (const InputError& e) {
+    throwInputError("cell record: the geometry's faces: {}", e.what());
   }
   if (r.remaining() != 0) throwInputError("cell record: {} bytes after its end", r.remaining());
   return out;
@@ -231,6 +244,7 @@ ImpostorBakeReport bakeImpostorDatabase(const ImpostorWorld& world, const PvsDat
         world.bakeCell(grid.cellBox(grid.cellAt(c)), *faces, options.placement, options.impostor);
     CellRecord record;
     record.why = r.placement.why;
+    record.geometryFaces = r.geometryFaces;
     for (size_t i = 0; i < r.impostors.size(); ++i) {
       const ImpostorSite& site = r.placement.sites[r.siteOf[i]];
       StoredImpostor s;
@@ -259,6 +273,7 @@ ImpostorBakeReport bakeImpostorDatabase(const ImpostorWorld& world, const PvsDat
     const CellRecord record = decodeCellRecord(done.at(c), ph.sceneFaces);
     report.cellsWithImpostors += !record.impostors.empty();
     report.impostors += record.impostors.size();
+    report.geometryFaces += record.geometryFaces.size();
     for (const StoredImpostor& s : record.impostors) {
       report.points += s.points;
       report.bytes += s.bytes.size();

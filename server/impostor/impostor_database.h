@@ -9,7 +9,8 @@
 // fingerprint), and per cell one record (CellRecord, below): why the cell
 // got impostors or none, and per impostor its sector and band, the faces it
 // replaces (face IDs: the geometry a client no longer needs beyond d), its
-// encoded bytes (protocol/impostor) and its figures. A cell the bake visited
+// encoded bytes (protocol/impostor) and its figures, then the faces of the
+// sites left as geometry (the far field the server streams as faces). A cell the bake visited
 // is present even with no impostor, so "not baked" and "nothing to replace"
 // stay apart.
 //
@@ -44,7 +45,8 @@
 
 namespace vistream {
 
-inline constexpr uint32_t kImpostorDbVersion = 2;  // 2: impostor encoding version 2
+// 2: impostor encoding version 2; 3: records hold the faces of sites left as geometry.
+inline constexpr uint32_t kImpostorDbVersion = 3;
 
 // One impostor of a cell as stored.
 struct StoredImpostor {
@@ -56,10 +58,13 @@ struct StoredImpostor {
   uint64_t points = 0, screenPixels = 0, coveredPixels = 0, geometryBytes = 0;
 };
 
-// A cell's record: why, and its impostors.
+// A cell's record: why, its impostors, and the faces of its sites left as
+// geometry (CellImpostors::geometryFaces), which a client that asks for
+// impostors receives whatever its near-field radius.
 struct CellRecord {
   std::string why;
   std::vector<StoredImpostor> impostors;
+  std::vector<uint32_t> geometryFaces;  // ascending
 };
 std::vector<uint8_t> encodeCellRecord(const CellRecord& record);
 // Throws InputError (starting "cell record") unless the bytes are one
@@ -114,6 +119,7 @@ struct ImpostorBakeReport {
   size_t cells = 0, resumedCells = 0, computedCells = 0;
   size_t cellsWithImpostors = 0, impostors = 0;
   uint64_t points = 0, bytes = 0, geometryBytes = 0;
+  uint64_t geometryFaces = 0;  // of the sites left as geometry, summed over cells
   double timeMs = 0.0;
 };
 

@@ -207,8 +207,8 @@ ImpostorPlacement placeImpostors(const Box3f& cell, const FlatTriangles& triangl
         out.farTriangles, options.nearDistance, options.minTriangles);
   else
     out.why = fmt::format(
-        "{} impostors: {} far-field triangles beyond d = {:.0f} m in {} sector-bands with {} or "
-        "more; {} lighter groups stay geometry",
+        "{} impostor sites: {} far-field triangles beyond d = {:.0f} m, {} sector-bands with {} "
+        "or more; {} lighter groups stay geometry",
         out.sites.size(), out.farTriangles, options.nearDistance, out.sites.size(),
         options.minTriangles, out.lightGroups);
   return out;

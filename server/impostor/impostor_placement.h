@@ -21,10 +21,15 @@
 // 8d would sample its far part far too densely. Why a threshold: simulate
 // only what the scene calls for; a light far field is cheaper as triangles
 // (or ray casting) than as points with textures. Bytes are weighed after the
-// bake (maxBytesRatio, off by default): on cities of plain boxes the Geometry
-// codec spends a few bytes a triangle and a near band's impostor costs more,
-// but beyond the server's stream radius the thin client's alternative is an
-// empty far field, so a deployment that streams far enough opts in.
+// bake (maxBytesRatio, 1 by default): an impostor that would cost more bytes
+// than the Geometry message of the faces it replaces is not made, and the
+// site stays geometry. On cities of plain boxes the codec spends a few bytes
+// a triangle, and the nearest band's impostors cost several times their
+// geometry (their points are densest per triangle replaced). A site left as
+// geometry is still part of the far field the cell needs, so its faces are
+// recorded (CellImpostors::geometryFaces) and the server streams them to a
+// client that asks for impostors whatever its near-field radius: the thin
+// client's far field is whole either way, in whichever form costs less.
 //
 // Framing (frameImpostor), as in the thesis: the sampling plane has its
 // normal from the cell's centre towards the box's centre and lies at the
@@ -94,10 +99,9 @@ struct ImpostorPlacementOptions {
   uint32_t bands = 3;           // [d, 2d), [2d, 4d), [4d, inf)
   size_t minTriangles = 2'000;  // a lighter group stays geometry
   // After the bake: an impostor whose encoded bytes exceed this many times
-  // the Geometry bytes of the faces it replaces stays geometry (0: no limit).
-  // Off by default: beyond the server's stream radius the alternative to an
-  // impostor is no far field at all, not the geometry.
-  float maxBytesRatio = 0.0f;
+  // the Geometry bytes of the faces it replaces stays geometry (0: no limit,
+  // the thesis's placement, which Table 5.1's benchmark uses).
+  float maxBytesRatio = 1.0f;
 };
 
 struct ImpostorSite {

@@ -75,6 +75,7 @@ CellImpostors bakeSites(const ImpostorWorld& world, const Box3f& cell,
   out.cell = cell;
   out.pvsTriangles = pvs.size();
   out.placement = placeImpostors(cell, world.triangles(), pvs, placement);
+  std::vector<uint32_t> geometry;  // refused sites
   for (uint32_t s = 0; s < out.placement.sites.size(); ++s) {
     const ImpostorSite& site = out.placement.sites[s];
     try {
@@ -90,6 +91,7 @@ CellImpostors bakeSites(const ImpostorWorld& world, const Box3f& cell,
             site.sector, site.band, stats.bytes, geometryBytes, placement.maxBytesRatio);
         spdlog::info("impostor left as geometry: {}", why);
         out.refused.push_back(why);
+        geometry.push_back(s);
         continue;
       }
       out.impostors.push_back(std::move(impostor));
@@ -101,11 +103,21 @@ CellImpostors bakeSites(const ImpostorWorld& world, const Box3f& cell,
       spdlog::warn("impostor of sector {} band {} left as geometry: {}", site.sector, site.band,
                    e.what());
       out.refused.push_back(e.what());
+      geometry.push_back(s);
     }
   }
-  if (!out.refused.empty())
-    out.placement.why +=
-        fmt::format("; {} left as geometry ({})", out.refused.size(), out.refused.front());
+  std::vector<uint32_t> refusedTriangles;
+  for (uint32_t s : geometry)
+    refusedTriangles.insert(refusedTriangles.end(), out.placement.sites[s].triangles.begin(),
+                            out.placement.sites[s].triangles.end());
+  out.geometryFaces = world.facesTouching(refusedTriangles);
+  if (!out.placement.sites.empty())
+    out.placement.why =
+        (out.refused.empty()
+             ? fmt::format("{} impostors", out.impostors.size())
+             : fmt::format("{} impostors, {} sites left as geometry ({})", out.impostors.size(),
+                           out.refused.size(), out.refused.front())) +
+        "; " + out.placement.why;
   out.seconds = watch.ms() / 1000.0 + out.pvsSeconds;
   return out;
 }
@@ -141,6 +153,17 @@ std::vector<uint32_t> ImpostorWorld::replacedFaces(const std::vector<uint32_t>& 
     i = j;
   }
   return out;
+}
+
+std::vector<uint32_t> ImpostorWorld::facesTouching(const std::vector<uint32_t>& triangles) const {
+  std::vector<uint32_t> faces;
+  faces.reserve(triangles.size());
+  for (uint32_t k : triangles)
+    if (world_.triangles->faceIds[k] < scene_.faceCount)
+      faces.push_back(world_.triangles->faceIds[k]);
+  std::sort(faces.begin(), faces.end());
+  faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
+  return faces;
 }
 
 size_t ImpostorWorld::geometryBytes(const std::vector<uint32_t>& faces) const {

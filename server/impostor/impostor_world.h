@@ -5,9 +5,10 @@
 // PVS the server would stream.
 //
 // bakeCell: the PVS of the cell, the placement (impostor_placement.h), then
-// one bake a site (impostor_bake.h). A site whose box reaches the cell is
-// refused and left to geometry (its reason in `refused`); every other
-// failure propagates.
+// one bake a site (impostor_bake.h). A site whose box reaches the cell, or
+// whose impostor would cost more than maxBytesRatio times its geometry, is
+// refused and left to geometry (its reason in `refused`, its faces in
+// `geometryFaces`); every other failure propagates.
 //
 // Thread safety: immutable after construction; bakeCell may run from several
 // threads (each bake uses TBB inside).
@@ -47,6 +48,9 @@ struct CellImpostors {
   std::vector<ImpostorStats> stats;
   std::vector<uint32_t> siteOf;      // per impostor: its index in placement.sites
   std::vector<std::string> refused;  // per refused site: why
+  // The faces of the refused sites (those with any triangle in one),
+  // ascending: far field the cell needs as geometry, since it has no impostor.
+  std::vector<uint32_t> geometryFaces;
   double pvsSeconds = 0.0, seconds = 0.0;
 };
 
@@ -74,6 +78,8 @@ class ImpostorWorld {
   // those whose every triangle is among them (a face reaching out of the
   // impostor stays geometry), ascending.
   std::vector<uint32_t> replacedFaces(const std::vector<uint32_t>& triangles) const;
+  // The faces with any triangle among `triangles`, ascending.
+  std::vector<uint32_t> facesTouching(const std::vector<uint32_t>& triangles) const;
   // What streaming those faces costs: one Geometry message as the server
   // encodes it (with their baked colours), framed.
   size_t geometryBytes(const std::vector<uint32_t>& faces) const;

@@ -204,6 +204,8 @@ bool StreamScheduler::onFaceSet(uint32_t cell, FaceListPtr faces, CellLevel leve
     if (uint8_t(looser) > uint8_t(level)) requested_.erase(requestKey(cell, looser));
   levels_[cell] = level;
   // Impostors stand in for the far faces they replace: those are not sent.
+  // The far field of the cell's sites without an impostor (cheaper as
+  // faces) is sent as geometry, within the radius or beyond it.
   if (config_.impostors) {
     const FaceListPtr replaced = world_.replacedFaces(cell);
     if (!replaced->empty()) {
@@ -211,6 +213,13 @@ bool StreamScheduler::onFaceSet(uint32_t cell, FaceListPtr faces, CellLevel leve
       std::set_difference(faces->begin(), faces->end(), replaced->begin(), replaced->end(),
                           std::back_inserter(*kept));
       faces = std::move(kept);
+    }
+    const FaceListPtr geometry = world_.impostorGeometry(cell);
+    if (!geometry->empty()) {
+      auto whole = std::make_shared<FaceList>();
+      std::set_union(faces->begin(), faces->end(), geometry->begin(), geometry->end(),
+                     std::back_inserter(*whole));
+      faces = std::move(whole);
     }
   }
   // Announced ready with a looser set: the client held a superset. Should

@@ -396,4 +396,10 @@ FaceListPtr StreamWorld::replacedFaces(uint32_t linearCell) const {
   return impostorEntry(linearCell).replaced;
 }
 
+FaceListPtr StreamWorld::impostorGeometry(uint32_t linearCell) const {
+  const std::shared_ptr<const CellRecord> record = impostorEntry(linearCell).record;
+  if (!record) return std::make_shared<const FaceList>();
+  return FaceListPtr(record, &record->geometryFaces);  // shares the record's lifetime
+}
+
 }  // namespace vistream

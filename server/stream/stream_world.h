@@ -212,6 +212,10 @@ class StreamWorld {
   // The faces the cell's impostors replace (sorted; empty without impostors):
   // what a client drawing those impostors is not sent as geometry.
   FaceListPtr replacedFaces(uint32_t linearCell) const;
+  // The faces of the cell's sites left as geometry (sorted; empty without
+  // impostors): far field a client drawing impostors is sent as faces
+  // whatever its near-field radius (impostor_placement.h says why).
+  FaceListPtr impostorGeometry(uint32_t linearCell) const;
 
  private:
   // PVS cache keys: a fine cell's linear index, or kCoarseKey | the linear

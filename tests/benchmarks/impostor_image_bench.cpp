@@ -58,6 +58,7 @@ struct Args {
   std::string scene = "bigcity";
   std::string cell = "0,1,0,4,3,4";
   size_t frames = 12;
+  size_t repeats = 1;  // walks of the same frames, for more time samples
   std::string size = "320x240";
   int supersample = 4;
   std::string png;
@@ -174,6 +175,7 @@ struct ModeResult {
   std::vector<double> ms;
   StageTimes stages;  // summed over the frames
   std::vector<StageTimes> perFrame;
+  std::vector<uint8_t> splatted;  // per frame: the impostor splat ran
   std::vector<ImageRgb8> frames;
 };
 
@@ -210,24 +212,70 @@ PipelineOptions pipelineOptions(RenderMode mode, float nearDistance) {
 }
 
 // Draws the walk with `renderer`, against the references.
+double medianOf(std::vector<double> v) {
+  return v.empty() ? 0.0 : median(v);
+}
+
+// One frame rendered and timed (wall clock; its stage times summed into m).
+double timedRender(FrameRenderer& renderer, const Camera& camera, ImageRgb8& image, ModeResult& m) {
+  const auto start = std::chrono::steady_clock::now();
+  const FrameReport rep = renderer.render(camera, image);
+  const double wall =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  m.stages += rep.ms;
+  m.perFrame.push_back(rep.ms);
+  m.splatted.push_back(rep.impostorsRan);
+  return wall;
+}
+
+// The same, its error against the reference counted and the frame kept if asked.
+void renderInto(ModeResult& m, FrameRenderer& renderer, const Camera& camera, const Reference& ref,
+                bool keepFrame) {
+  ImageRgb8 image;
+  m.ms.push_back(timedRender(renderer, camera, image, m));
+  m.error.add(image, ref);
+  if (keepFrame) m.frames.push_back(std::move(image));
+}
+
 ModeResult runMode(const std::string& name, FrameRenderer& renderer,
                    const std::vector<Camera>& cameras, const std::vector<Reference>& refs,
                    bool keepFrames) {
   ModeResult m;
   m.name = name;
-  for (size_t i = 0; i < cameras.size(); ++i) {
-    ImageRgb8 image;
-    const auto start = std::chrono::steady_clock::now();
-    const StageTimes ms = renderer.render(cameras[i], image).ms;
-    m.stages += ms;
-    m.perFrame.push_back(ms);
-    m.ms.push_back(
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-            .count());
-    m.error.add(image, refs[i]);
-    if (keepFrames) m.frames.push_back(std::move(image));
-  }
+  for (size_t i = 0; i < cameras.size(); ++i)
+    renderInto(m, renderer, cameras[i], refs[i], keepFrames);
   return m;
+}
+
+// Every mode along the walk, frame by frame: frame i in each mode (the
+// first mode rotating from frame to frame) before frame i + 1, so that the
+// machine's load falls on all modes alike and their times pair up frame by
+// frame. `out` (one a mode) gathers the times; the first walk (firstWalk)
+// also counts the error and keeps the frames if asked.
+void walkModes(const std::vector<FrameRenderer*>& modes, const std::vector<Camera>& cameras,
+               const std::vector<Reference>& refs, bool firstWalk, bool keepFrames,
+               std::vector<ModeResult>& out) {
+  for (size_t i = 0; i < cameras.size(); ++i)
+    for (size_t j = 0; j < modes.size(); ++j) {
+      const size_t k = (i + j) % modes.size();
+      if (firstWalk) {
+        renderInto(out[k], *modes[k], cameras[i], refs[i], keepFrames);
+      } else {
+        ImageRgb8 image;
+        out[k].ms.push_back(timedRender(*modes[k], cameras[i], image, out[k]));
+      }
+    }
+}
+
+// The median over frames of one mode's frame time over another's on the
+// same frame (both walked by walkModes); with `only`, over the frames where
+// that mode's impostor splat ran.
+double medianRatio(const ModeResult& of, const ModeResult& to, const ModeResult* only = nullptr) {
+  std::vector<double> r;
+  for (size_t i = 0; i < std::min(of.ms.size(), to.ms.size()); ++i)
+    if (to.ms[i] > 0.0 && (!only || (i < only->splatted.size() && only->splatted[i])))
+      r.push_back(of.ms[i] / to.ms[i]);
+  return medianOf(r);
 }
 
 // The crop (at most 120 x 90 pixels, where the footprint is densest) of
@@ -263,10 +311,6 @@ ImageRgb8 crops(const Reference& ref, const std::vector<const ImageRgb8*>& frame
     tiles.push_back(std::move(t));
   }
   return contactSheet(tiles, int(tiles.size()));
-}
-
-double medianOf(std::vector<double> v) {
-  return v.empty() ? 0.0 : median(v);
 }
 
 json errorJson(const ModeResult& m) {
@@ -428,24 +472,28 @@ int run(const Args& a) {
   }
   const float d = a.placement.nearDistance;
   const bool png = !a.png.empty();
-  std::vector<ModeResult> modes;
+  std::vector<ModeResult> modes(4);
+  modes[0].name = "impostors";
+  modes[1].name = "geometry";
+  modes[2].name = "ray-cast";
+  modes[3].name = "held-only";
   {
-    FrameRenderer r(held, pipelineOptions(RenderMode::Pipeline, d));
-    r.setImpostors(set);
-    modes.push_back(runMode("impostors", r, cameras, refs, png));
+    // Each walk with renderers of its own, so that every walk starts from
+    // an empty image cache, as the first does.
+    ProgressBar bar("walks", a.repeats);
+    for (size_t w = 0; w < a.repeats; ++w) {
+      FrameRenderer withImpostors(held, pipelineOptions(RenderMode::Pipeline, d));
+      withImpostors.setImpostors(set);
+      FrameRenderer geometryAll(pvsGeometry, pipelineOptions(RenderMode::GeometryAll, d));
+      FrameRenderer rayCast(pvsGeometry, pipelineOptions(RenderMode::ImpostorOff, d));
+      FrameRenderer heldOnly(held, pipelineOptions(RenderMode::ImpostorOff, d));
+      walkModes({&withImpostors, &geometryAll, &rayCast, &heldOnly}, cameras, refs, w == 0, png,
+                modes);
+      bar.advance();
+    }
+    bar.finish();
   }
-  {
-    FrameRenderer r(pvsGeometry, pipelineOptions(RenderMode::GeometryAll, d));
-    modes.push_back(runMode("geometry", r, cameras, refs, png));
-  }
-  {
-    FrameRenderer r(pvsGeometry, pipelineOptions(RenderMode::ImpostorOff, d));
-    modes.push_back(runMode("ray-cast", r, cameras, refs, png));
-  }
-  {
-    FrameRenderer r(held, pipelineOptions(RenderMode::ImpostorOff, d));
-    modes.push_back(runMode("held-only", r, cameras, refs, png));
-  }
+  constexpr size_t kRayCast = 2;  // the baseline of the frame-time ratios
   // The splat alone, per impostor: software points a second.
   std::vector<double> splatMs(baked.impostors.size());
   for (size_t i = 0; i < baked.impostors.size(); ++i) {
@@ -587,11 +635,18 @@ int run(const Args& a) {
   for (const Reference& r : refs) footprint += r.footprintPixels;
   const size_t footprintHoles = holes(set->impostors, cameras, refs, PointSplat{});
   json modesJson = json::array();
-  for (const ModeResult& m : modes) modesJson.push_back(errorJson(m));
+  for (const ModeResult& m : modes) {
+    modesJson.push_back(errorJson(m));
+    modesJson.back()["frame_ms_vs_ray_cast"] = medianRatio(m, modes[kRayCast]);
+    modesJson.back()["frame_ms_vs_ray_cast_splatted"] = medianRatio(m, modes[kRayCast], &modes[0]);
+    modesJson.back()["mean_frame_ms"] =
+        std::accumulate(m.ms.begin(), m.ms.end(), 0.0) / double(std::max<size_t>(1, m.ms.size()));
+  }
   if (a.json) {
     std::cout << json{{"scene", scene.name},
                       {"cell", a.cell},
                       {"frames", cameras.size()},
+                      {"repeats", a.repeats},
                       {"size", a.size},
                       {"supersample", a.supersample},
                       {"footprint_pixels", footprint},
@@ -610,13 +665,22 @@ int run(const Args& a) {
   fmt::print(
       "walk of {} frames at {}, reference {}x{} rays a pixel; footprint {} pixels, {} holes\n\n",
       cameras.size(), a.size, a.supersample, a.supersample, footprint, footprintHoles);
-  fmt::print("  {:<10} {:>13} {:>14} {:>16} {:>11} {:>10} {:>10} {:>9}\n", "far field",
-             "footprint MAE", "footprint RMSE", "off > 32 levels", "outline MAE", "inside MAE",
-             "frame MAE", "frame ms");
+  fmt::print("  {:<10} {:>13} {:>14} {:>16} {:>11} {:>10} {:>10} {:>9} {:>12} {:>12}\n",
+             "far field", "footprint MAE", "footprint RMSE", "off > 32 levels", "outline MAE",
+             "inside MAE", "frame MAE", "frame ms", "vs ray-cast", "(splatted)");
   for (const ModeResult& m : modes)
-    fmt::print("  {:<10} {:>13.2f} {:>14.2f} {:>15.1f}% {:>11.2f} {:>10.2f} {:>10.2f} {:>9.2f}\n",
-               m.name, m.error.footMae(), m.error.footRmse(), 100.0 * m.error.footWrongShare(),
-               m.error.outlineMae(), m.error.insideMae(), m.error.frameMae(), medianOf(m.ms));
+    fmt::print(
+        "  {:<10} {:>13.2f} {:>14.2f} {:>15.1f}% {:>11.2f} {:>10.2f} {:>10.2f} {:>9.2f} "
+        "{:>11.3f}x {:>11.3f}x\n",
+        m.name, m.error.footMae(), m.error.footRmse(), 100.0 * m.error.footWrongShare(),
+        m.error.outlineMae(), m.error.insideMae(), m.error.frameMae(), medianOf(m.ms),
+        medianRatio(m, modes[kRayCast]), medianRatio(m, modes[kRayCast], &modes[0]));
+  fmt::print(
+      "  (frame ms: median over {} frames x {} walks, the modes interleaved frame by frame; "
+      "vs ray-cast: median of the per-frame ratios, over every frame and over the {} where the "
+      "impostors were splatted)\n",
+      cameras.size(), a.repeats,
+      std::count(modes[0].splatted.begin(), modes[0].splatted.end(), uint8_t(1)));
   fmt::print("\n  {:>6} {:>4} {:>9} {:>9} {:>7} {:>9} {:>10} {:>8} {:>9} {:>9}{}\n", "sector",
              "band", "triangles", "points", "pts/px", "bytes", "geometry B", "bake s", "splat ms",
              "splat fps", a.gl ? fmt::format(" {:>8} {:>8}", "GL ms", "GL fps") : "");
@@ -661,6 +725,9 @@ int main(int argc, char** argv) {
   app.add_option("--scene", a.scene, "scene: a built-in name, a file or a manifest");
   app.add_option("--cell", a.cell, "the view cell x0,y0,z0,x1,y1,z1 (file coordinates)");
   app.add_option("--frames", a.frames, "frames of the walk")->check(inRange<size_t>(1, 1000));
+  app.add_option("--repeats", a.repeats,
+                 "walks of the same frames in every mode, for more frame-time samples")
+      ->check(inRange<size_t>(1, 100));
   app.add_option("--size", a.size, "frame size WxH");
   app.add_option("--supersample", a.supersample, "reference rays a pixel per axis")
       ->check(inRange(1, 8));

@@ -189,7 +189,8 @@ TEST(PvsTool, ImpostorsPrintTheContractedJsonForEachImpostorOfTheCell) {
   const std::string common = "impostors --scene " + scene.string() +
                              " --cell -2,1,-2,2,3,2 --near-distance 100 "
                              "--lighting-cache none --max-rays 8 --pixel-filter 0 ";
-  const ToolRun r = runPvs(common + "--json --min-triangles 20");
+  // The thesis's placement: every site heavy enough gets its impostor.
+  const ToolRun r = runPvs(common + "--json --min-triangles 20 --max-bytes-ratio 0");
   ASSERT_EQ(r.status, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);
   ASSERT_EQ(j["impostors"].size(), 1u) << r.out;
@@ -214,8 +215,9 @@ TEST(PvsTool, ImpostorsPrintTheContractedJsonForEachImpostorOfTheCell) {
   EXPECT_EQ(stats["points"], imp["points"]);
   // Kept more precisely, the same points cost more bytes; a colour step the
   // encoding has no code for is refused by name.
-  const ToolRun fine =
-      runPvs(common + "--json --min-triangles 20 --position-error 0.0001 --colour-step 1");
+  const ToolRun fine = runPvs(common +
+                              "--json --min-triangles 20 --max-bytes-ratio 0 "
+                              "--position-error 0.0001 --colour-step 1");
   ASSERT_EQ(fine.status, 0) << fine.err;
   const auto fj = nlohmann::json::parse(fine.out);
   ASSERT_EQ(fj["impostors"].size(), 1u);
@@ -232,8 +234,20 @@ TEST(PvsTool, ImpostorsPrintTheContractedJsonForEachImpostorOfTheCell) {
   EXPECT_TRUE(lj["impostors"].empty());
   EXPECT_NE(lj["stats"]["why"].get<std::string>().find("500"), std::string::npos)
       << lj["stats"]["why"];
+  // By default an impostor costing more bytes than the faces it replaces is
+  // not made: the row (at most 80 triangles) is cheaper as geometry, and its
+  // faces are recorded to be streamed as such.
+  ASSERT_GT(imp["bytes"].get<uint64_t>(), imp["geometry_bytes"].get<uint64_t>());
+  const ToolRun cheaper = runPvs(common + "--json --min-triangles 20");
+  ASSERT_EQ(cheaper.status, 0) << cheaper.err;
+  const auto cj = nlohmann::json::parse(cheaper.out);
+  EXPECT_TRUE(cj["impostors"].empty());
+  EXPECT_GE(cj["stats"]["geometry_faces"].get<size_t>(), imp["faces_replaced"].get<size_t>());
+  EXPECT_EQ(cj["stats"]["geometry_faces_bytes"], imp["geometry_bytes"]);
+  EXPECT_NE(cj["stats"]["why"].get<std::string>().find("left as geometry"), std::string::npos)
+      << cj["stats"]["why"];
   // People get a table with one row per impostor and a total.
-  const ToolRun table = runPvs(common + "--min-triangles 20");
+  const ToolRun table = runPvs(common + "--min-triangles 20 --max-bytes-ratio 0");
   ASSERT_EQ(table.status, 0) << table.err;
   EXPECT_NE(table.out.find("pts/px"), std::string::npos) << table.out;
   EXPECT_NE(table.out.find("total"), std::string::npos) << table.out;
@@ -249,7 +263,7 @@ TEST(PvsTool, ImpostorsBakeAPvsDatabasesCellsIntoAnImpostorDatabase) {
   const std::string common = "impostors --scene " + scene.string() + " --db " + pvsDb.string() +
                              " --out " + impDb.string() +
                              " --near-distance 100 --min-triangles 20 --lighting-cache none "
-                             "--max-rays 8 --screen 320x240";
+                             "--max-rays 8 --screen 320x240 --max-bytes-ratio 0";
   const ToolRun r = runPvs(common + " --json");
   ASSERT_EQ(r.status, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);

@@ -727,8 +727,17 @@ TEST(ImpostorSplat, SkipsOnlyBoxesWhollyOutOfView) {
 // oracle, that pass written out here (every pixel of the 3x3 round a point
 // tested against the disc, the least score kept), over two impostors sharing
 // a depth buffer, from views at, beside and inside the block's footprint,
-// with the default splat, a wide one and one that compares depth alone.
+// with the default splat, a wide one and one that compares depth alone;
+// drawn in parallel and on one thread (ImpostorSplatter::setSerialBelow).
+void drawsWhatOnePassDraws(size_t serialBelow);
 TEST(ImpostorSplat, DrawsWhatOnePassInThePointsOrderDraws) {
+  for (const size_t serialBelow : {size_t(0), std::numeric_limits<size_t>::max()}) {
+    SCOPED_TRACE(serialBelow ? "on one thread" : "in parallel");
+    drawsWhatOnePassDraws(serialBelow);
+  }
+}
+
+void drawsWhatOnePassDraws(size_t serialBelow) {
   const ColouredScene s = buildingBlock();
   const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
   const Impostor a = bakeImpostor(s.view(), cell, boundsOf(s.triangles), s.facingCell(cell),
@@ -739,6 +748,7 @@ TEST(ImpostorSplat, DrawsWhatOnePassInThePointsOrderDraws) {
   const std::array<PointSplat, 3> splats = {PointSplat{}, PointSplat{0.95f, 0.05f},
                                             PointSplat{0.6f, 0.0f}};
   ImpostorSplatter together;
+  together.setSerialBelow(serialBelow);
   for (int k = 0; k < 6; ++k) {
     const PointSplat& splat = splats[size_t(k) % splats.size()];
     Camera c;
@@ -748,6 +758,7 @@ TEST(ImpostorSplat, DrawsWhatOnePassInThePointsOrderDraws) {
     c.yawDeg = -20.0f + 8.0f * float(k);
     c.pitchDeg = float(k % 3) * 4.0f;
     ImpostorSplatter splatter;
+    splatter.setSerialBelow(serialBelow);
     splatter.begin(c, nullptr, splat);
     ImageRgb8 image(c.width, c.height);
     const size_t landed = splatter.draw(a, image) + splatter.draw(b, image);

@@ -52,6 +52,7 @@ struct Baked {
     ImpostorBakeOptions o;
     o.placement.nearDistance = 100.0f;
     o.placement.minTriangles = 20;
+    o.placement.maxBytesRatio = 0.0f;  // every site gets its impostor
     o.impostor.maxRays = 8;
     o.impostor.screen.width = 320;
     o.impostor.screen.height = 240;
@@ -121,6 +122,7 @@ TEST(ImpostorDatabase, AnImpostorCostlierThanItsGeometryByTheRatioStaysGeometry)
   const CellImpostors free = b.world->bakeCell(cell, *pvs.cell(c), o.placement, o.impostor);
   ASSERT_GT(free.impostors.size(), 0u);
   EXPECT_TRUE(free.refused.empty());
+  EXPECT_TRUE(free.geometryFaces.empty());
   // A ratio just below each impostor's own bytes / geometry bytes refuses
   // exactly the impostors above it.
   std::vector<double> ratios;
@@ -149,6 +151,23 @@ TEST(ImpostorDatabase, AnImpostorCostlierThanItsGeometryByTheRatioStaysGeometry)
   const CellImpostors none = b.world->bakeCell(cell, *pvs.cell(c), o.placement, o.impostor);
   EXPECT_TRUE(none.impostors.empty());
   EXPECT_EQ(none.refused.size(), free.impostors.size());
+  // Their far field stays in the cell's record as geometry: every face an
+  // impostor replaced, and only faces of the cell's PVS.
+  const std::vector<uint32_t> cellPvs = *pvs.cell(c);
+  for (const std::vector<uint32_t>& faces : free.replacedFaces)
+    for (uint32_t f : faces)
+      EXPECT_TRUE(std::binary_search(none.geometryFaces.begin(), none.geometryFaces.end(), f)) << f;
+  EXPECT_TRUE(std::is_sorted(none.geometryFaces.begin(), none.geometryFaces.end()));
+  for (uint32_t f : none.geometryFaces)
+    EXPECT_TRUE(std::binary_search(cellPvs.begin(), cellPvs.end(), f)) << f;
+  // The capped bake keeps as geometry exactly the faces of its refused sites.
+  std::vector<uint32_t> keptByImpostors;
+  for (const std::vector<uint32_t>& faces : capped.replacedFaces)
+    keptByImpostors.insert(keptByImpostors.end(), faces.begin(), faces.end());
+  for (uint32_t f : keptByImpostors)
+    EXPECT_FALSE(std::binary_search(capped.geometryFaces.begin(), capped.geometryFaces.end(), f))
+        << f;
+  EXPECT_FALSE(capped.geometryFaces.empty());
 }
 
 // Shards (every n-th cell) joined by mergeImpostorDatabases give the bytes
@@ -263,6 +282,7 @@ TEST(ImpostorDatabase, CellRecordsRefuseCutAndOutOfRangeBytes) {
   s.bytes = {1, 2, 3, 4, 5};
   s.points = 40;
   record.impostors.push_back(s);
+  record.geometryFaces = {2, 30};
   const std::vector<uint8_t> bytes = encodeCellRecord(record);
   const CellRecord back = decodeCellRecord(bytes, 100);
   ASSERT_EQ(back.impostors.size(), 1u);
@@ -270,9 +290,11 @@ TEST(ImpostorDatabase, CellRecordsRefuseCutAndOutOfRangeBytes) {
   EXPECT_EQ(back.impostors[0].faces, s.faces);
   EXPECT_EQ(back.impostors[0].bytes, s.bytes);
   EXPECT_EQ(back.impostors[0].points, 40u);
+  EXPECT_EQ(back.geometryFaces, record.geometryFaces);
   for (size_t n = 0; n < bytes.size(); ++n)
     EXPECT_THROW(decodeCellRecord(std::span(bytes.data(), n), 100), InputError) << n;
   EXPECT_THROW(decodeCellRecord(bytes, 10), InputError);  // face 17 is beyond the scene
+  EXPECT_THROW(decodeCellRecord(bytes, 20), InputError);  // geometry face 30 is beyond it
 }
 
 }  // namespace

@@ -1,8 +1,10 @@
 // Impostors over the wire (server/stream/session.h, --impostor-db): a client
 // whose Hello asks for impostors gets those of its cell, as the impostor
 // database holds them, and none of the faces they replace as geometry; a
-// client that does not ask gets those faces and no impostor. Oracle: the
-// impostor database's own record of the cell.
+// client that does not ask gets those faces and no impostor. A site left as
+// geometry (its impostor would cost more bytes) reaches a client that asks
+// as faces, even beyond its near-field radius. Oracle: the impostor
+// database's own record of the cell, and the row's known distance.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -25,10 +27,12 @@ using testing::ServerFixture;
 using testing::TestClient;
 using wire::Payload;
 
+// A row of boxes 120-170 m north of the origin, its cells' impostors baked
+// with `maxBytesRatio` (0: every site gets its impostor).
 struct BakedRow {
   testing::TempDir dir;
   fs::path obj, pvs, impostors;
-  BakedRow() {
+  explicit BakedRow(float maxBytesRatio = 0.0f) {
     obj = dir.write("row.obj", testing::farRowObj());
     const Scene scene = loadScene(obj);
     BakeOptions bake;
@@ -39,6 +43,7 @@ struct BakedRow {
     ImpostorBakeOptions o;
     o.placement.nearDistance = 100.0f;
     o.placement.minTriangles = 20;
+    o.placement.maxBytesRatio = maxBytesRatio;
     o.impostor.maxRays = 8;
     o.impostor.screen.width = 320;
     o.impostor.screen.height = 240;
@@ -48,20 +53,39 @@ struct BakedRow {
   }
 };
 
+// A server of the row with both databases, and the impostor record of the
+// cell the clients stand in (at the origin).
+struct RowServer {
+  ServerFixture fx;
+  glm::ivec3 cell{0};
+  std::optional<CellRecord> record;
+  explicit RowServer(const BakedRow& b) : fx({}, loadScene(b.obj), options(b)) {
+    cell = *fx.world().cellOf(glm::vec3(0.5f, 2.0f, 0.5f) - glm::vec3(fx.world().scene().origin));
+    record = ImpostorDatabase::open(b.impostors).cell(fx.world().grid().linearIndex(cell));
+  }
+  static StreamWorldOptions options(const BakedRow& b) {
+    StreamWorldOptions wo;
+    wo.pvsDatabase = b.pvs;
+    wo.impostorDatabase = b.impostors;
+    return wo;
+  }
+};
+
 struct ImpostorsReceived {
   bool offered = false;
   std::set<uint32_t> geometryFaces;
   std::vector<wire::ImpostorMessage> impostors;  // in the order received
 };
 
-// Joins (radius 400 m: every face of the row is within it), stands at the
-// origin and reads until the server has nothing more to send for 1.5 s.
-ImpostorsReceived walkIn(uint16_t port, bool wantsImpostors) {
+// Joins (by default with radius 400 m: every face of the row is within it),
+// stands at the origin and reads until the server has nothing more to send
+// for 1.5 s.
+ImpostorsReceived walkIn(uint16_t port, bool wantsImpostors, float radius = 400.0f) {
   TestClient c(port);
   wire::HelloT h;
   h.protocol_version = wire::kProtocolVersion;
   h.capabilities = std::make_unique<wire::CapabilitiesT>();
-  h.capabilities->near_field_radius_m = 400.0f;
+  h.capabilities->near_field_radius_m = radius;
   h.capabilities->wants_impostors = wantsImpostors;
   h.capabilities->wants_avatars = false;
   c.sendRaw(wire::encodeMessage(std::move(h)));
@@ -93,14 +117,10 @@ ImpostorsReceived walkIn(uint16_t port, bool wantsImpostors) {
 
 TEST(ImpostorStream, AClientThatAsksGetsItsCellsImpostorsAndNotTheFacesTheyReplace) {
   const BakedRow b;
-  StreamWorldOptions wo;
-  wo.pvsDatabase = b.pvs;
-  wo.impostorDatabase = b.impostors;
-  ServerFixture fx({}, loadScene(b.obj), wo);
-  const ImpostorDatabase db = ImpostorDatabase::open(b.impostors);
-  const glm::ivec3 cell =
-      *fx.world().cellOf(glm::vec3(0.5f, 2.0f, 0.5f) - glm::vec3(fx.world().scene().origin));
-  const auto record = db.cell(fx.world().grid().linearIndex(cell));
+  RowServer server(b);
+  ServerFixture& fx = server.fx;
+  const glm::ivec3 cell = server.cell;
+  const auto& record = server.record;
   ASSERT_TRUE(record);
   ASSERT_FALSE(record->impostors.empty()) << record->why;
   std::set<uint32_t> replaced;
@@ -130,6 +150,32 @@ TEST(ImpostorStream, AClientThatAsksGetsItsCellsImpostorsAndNotTheFacesTheyRepla
   EXPECT_FALSE(without.offered);
   EXPECT_TRUE(without.impostors.empty());
   for (const uint32_t f : replaced) EXPECT_TRUE(without.geometryFaces.count(f)) << "face " << f;
+}
+
+TEST(ImpostorStream, ASiteLeftAsGeometryIsSentAsFacesBeyondTheClientsRadius) {
+  // A ratio no impostor meets: every site of the row stays geometry.
+  const BakedRow b(1e-6f);
+  RowServer server(b);
+  ServerFixture& fx = server.fx;
+  const glm::ivec3 cell = server.cell;
+  const auto& record = server.record;
+  ASSERT_TRUE(record);
+  EXPECT_TRUE(record->impostors.empty());
+  ASSERT_FALSE(record->geometryFaces.empty()) << record->why;
+
+  // The row lies 120 m or more from the client, beyond a radius of 50 m.
+  const ImpostorsReceived with = walkIn(fx.port(), true, 50.0f);
+  for (const uint32_t f : record->geometryFaces)
+    EXPECT_TRUE(with.geometryFaces.count(f)) << "face " << f;
+  for (const auto& m : with.impostors) {
+    if (m.cell == cell) {
+      EXPECT_EQ(m.count, 0u);
+    }
+  }
+  // Without impostors the radius rules: none of them is sent.
+  const ImpostorsReceived without = walkIn(fx.port(), false, 50.0f);
+  for (const uint32_t f : record->geometryFaces)
+    EXPECT_FALSE(without.geometryFaces.count(f)) << "face " << f;
 }
 
 TEST(ImpostorStream, AnImpostorDatabaseWithoutItsPvsDatabaseIsRefused) {
