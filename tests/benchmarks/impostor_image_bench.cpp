@@ -211,7 +211,6 @@ PipelineOptions pipelineOptions(RenderMode mode, float nearDistance) {
   return o;
 }
 
-// Draws the walk with `renderer`, against the references.
 double medianOf(std::vector<double> v) {
   return v.empty() ? 0.0 : median(v);
 }
@@ -237,6 +236,7 @@ void renderInto(ModeResult& m, FrameRenderer& renderer, const Camera& camera, co
   if (keepFrame) m.frames.push_back(std::move(image));
 }
 
+// Draws the walk with `renderer`, against the references.
 ModeResult runMode(const std::string& name, FrameRenderer& renderer,
                    const std::vector<Camera>& cameras, const std::vector<Reference>& refs,
                    bool keepFrames) {
