@@ -737,9 +737,7 @@ void GlRenderer::draw(const Camera& camera, const ImageRgb8& farField,
     for (const auto& imp : impostors->impostors)
       if (imp)
         for (int k = 0; k < 8; ++k) {
-          const glm::vec3 corner{k & 1 ? imp->box.hi.x : imp->box.lo.x,
-                                 k & 2 ? imp->box.hi.y : imp->box.lo.y,
-                                 k & 4 ? imp->box.hi.z : imp->box.lo.z};
+          const glm::vec3 corner = imp->box.corner(k);
           range = std::max(
               range,
               (1.01f + impostors->splat.sameSurface) * glm::length(corner - camera.eye) + 1.0f);

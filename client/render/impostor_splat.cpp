@@ -63,8 +63,7 @@ std::optional<glm::ivec4> impostorFootprint(const Camera& camera, const Box3f& b
   int left = 0, right = 0, below = 0, above = 0, behind = 0;
   glm::vec2 lo(std::numeric_limits<float>::infinity()), hi(-lo);
   for (int k = 0; k < 8; ++k) {
-    const glm::vec3 corner{k & 1 ? box.hi.x : box.lo.x, k & 2 ? box.hi.y : box.lo.y,
-                           k & 4 ? box.hi.z : box.lo.z};
+    const glm::vec3 corner = box.corner(k);
     const glm::vec3 rel = corner - camera.eye;
     if (!(glm::dot(rel, forward) > camera.zNear)) {
       ++behind;

@@ -27,6 +27,10 @@ struct BasicBox3 {
   }
   Vec extent() const { return empty() ? Vec(0) : hi - lo; }
   Vec center() const { return (lo + hi) * T(0.5); }
+  // Corner k in 0..7: bit 0 picks hi.x over lo.x, bit 1 hi.y, bit 2 hi.z.
+  Vec corner(int k) const {
+    return {k & 1 ? hi.x : lo.x, k & 2 ? hi.y : lo.y, k & 4 ? hi.z : lo.z};
+  }
   T surfaceArea() const {
     const Vec d = extent();
     return T(2) * (d.x * d.y + d.y * d.z + d.z * d.x);

@@ -70,9 +70,7 @@ LdiCamera ldiCamera(const glm::vec3& eye, const ImpostorFrame& frame, const Box3
                   v = glm::normalize(frame.plane.vAxis);
   glm::vec2 lo(std::numeric_limits<float>::infinity()), hi(-std::numeric_limits<float>::infinity());
   for (int k = 0; k < 8; ++k) {
-    const glm::vec3 c{k & 1 ? box.hi.x : box.lo.x, k & 2 ? box.hi.y : box.lo.y,
-                      k & 4 ? box.hi.z : box.lo.z};
-    const glm::vec3 w = c - eye;
+    const glm::vec3 w = box.corner(k) - eye;
     const float z = glm::dot(w, n);  // > 0: the box lies beyond the plane
     const glm::vec2 xy(glm::dot(w, u) / z, glm::dot(w, v) / z);
     lo = glm::min(lo, xy);
@@ -425,10 +423,7 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
       // sees: |n . w_v| / |p - v| over the cell's corners and centre.
       float worst = 0.0f;
       for (int c = 0; c < 9; ++c) {
-        const glm::vec3 v =
-            c == 8 ? cell.center()
-                   : glm::vec3{c & 1 ? cell.hi.x : cell.lo.x, c & 2 ? cell.hi.y : cell.lo.y,
-                               c & 4 ? cell.hi.z : cell.lo.z};
+        const glm::vec3 v = c == 8 ? cell.center() : cell.corner(c);
         const glm::vec3 w = s.position - v;
         const float d2 = glm::dot(w, w);
         worst = std::max(worst, std::abs(glm::dot(normal, w)) / std::max(d2, 1e-12f));

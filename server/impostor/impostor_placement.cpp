@@ -14,8 +14,7 @@ namespace {
 
 std::array<glm::vec3, 8> cornersOf(const Box3f& b) {
   std::array<glm::vec3, 8> c;
-  for (int k = 0; k < 8; ++k)
-    c[size_t(k)] = {k & 1 ? b.hi.x : b.lo.x, k & 2 ? b.hi.y : b.lo.y, k & 4 ? b.hi.z : b.lo.z};
+  for (int k = 0; k < 8; ++k) c[size_t(k)] = b.corner(k);
   return c;
 }
 

@@ -104,8 +104,7 @@ struct Frustum {
     for (const glm::dvec3& n : normals) {
       int outside = 0;
       for (int k = 0; k < 8; ++k) {
-        const glm::dvec3 c((k & 1) ? b.hi.x : b.lo.x, (k & 2) ? b.hi.y : b.lo.y,
-                           (k & 4) ? b.hi.z : b.lo.z);
+        const glm::dvec3 c(b.corner(k));
         const double s = glm::dot(c - eye, n);
         if (s < -1e-6 * (1.0 + glm::length(c - eye)))
           ++outside;

@@ -222,9 +222,7 @@ bool PlanarFusion::hidden(const Box3f& cell, CellPlanes& cellPlanes,
   Box3f shaft = cell;
   for (const glm::dvec3& p : vertices) shaft.extend(glm::vec3(p));
   glm::dvec3 corners[8];
-  for (int k = 0; k < 8; ++k)
-    corners[k] = glm::dvec3((k & 1) ? cell.hi.x : cell.lo.x, (k & 2) ? cell.hi.y : cell.lo.y,
-                            (k & 4) ? cell.hi.z : cell.lo.z);
+  for (int k = 0; k < 8; ++k) corners[k] = glm::dvec3(cell.corner(k));
   thread_local std::vector<glm::dvec2> points;
   // Candidates: the planes of the grid cells the X/Z segment from the
   // cell's centre to the first vertex passes through (a 2D DDA), each once.

@@ -64,9 +64,7 @@ struct ColouredScene {
       const glm::vec3 n = glm::cross(triangles.vertex(t, 1) - a, triangles.vertex(t, 2) - a);
       bool front = false;
       for (int k = 0; k < 8; ++k) {
-        const glm::vec3 c{k & 1 ? cell.hi.x : cell.lo.x, k & 2 ? cell.hi.y : cell.lo.y,
-                          k & 4 ? cell.hi.z : cell.lo.z};
-        front = front || glm::dot(n, c - a) > 0.0f;
+        front = front || glm::dot(n, cell.corner(k) - a) > 0.0f;
       }
       if (front) out.push_back(t);
     }
@@ -208,9 +206,7 @@ TEST(ImpostorFrame, EveryRayFromTheCellToTheBoxCrossesTheSamplingRectangle) {
   }
   // The plane faces the box, with the whole cell behind it.
   for (int k = 0; k < 8; ++k) {
-    const glm::vec3 c{k & 1 ? cell.hi.x : cell.lo.x, k & 2 ? cell.hi.y : cell.lo.y,
-                      k & 4 ? cell.hi.z : cell.lo.z};
-    EXPECT_LE(glm::dot(f.plane.normal, c - f.plane.origin), 1e-3f);
+    EXPECT_LE(glm::dot(f.plane.normal, cell.corner(k) - f.plane.origin), 1e-3f);
   }
   EXPECT_GT(f.nearestDepth, 150.0f);
 }
@@ -620,9 +616,7 @@ TEST(ImpostorBake, KeepsEveryPointWithinItsPixelFractionAndTheEncodingGivesItBac
   const float smallest =
       2.0f * std::tan(half) / float(o.screen.height) * std::cos(half) * std::cos(half);
   std::vector<glm::vec3> eyes = {cell.center()};
-  for (int k = 0; k < 8; ++k)
-    eyes.push_back({k & 1 ? cell.hi.x : cell.lo.x, k & 2 ? cell.hi.y : cell.lo.y,
-                    k & 4 ? cell.hi.z : cell.lo.z});
+  for (int k = 0; k < 8; ++k) eyes.push_back(cell.corner(k));
   float worst = 0.0f;
   size_t textured = 0;
   for (size_t k = 0; k < imp.size(); ++k) {

@@ -701,9 +701,7 @@ TEST(EpsilonPvs, GrazingLineFromOneCellCornerPastASlantedEdgeKeepsTheFace) {
     ASSERT_EQ(occluders.size(), 1u);
     const glm::dvec3 tip(6, 3.75, c.cell.lo.z == kSlantCell.lo.z ? -5.0 : -4.75);
     for (int k = 0; k < 8; ++k) {
-      const glm::dvec3 corner((k & 1) ? c.cell.hi.x : c.cell.lo.x,
-                              (k & 2) ? c.cell.hi.y : c.cell.lo.y,
-                              (k & 4) ? c.cell.hi.z : c.cell.lo.z);
+      const glm::dvec3 corner(c.cell.corner(k));
       EXPECT_EQ(occluderBlocksSegment(occluders[0], corner, tip), k != 7) << "corner " << k;
     }
     // From c the hidden tip's segment crosses at x + y = 5.875 (inside), the
