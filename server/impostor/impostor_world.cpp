@@ -75,7 +75,6 @@ CellImpostors bakeSites(const ImpostorWorld& world, const Box3f& cell,
   out.cell = cell;
   out.pvsTriangles = pvs.size();
   out.placement = placeImpostors(cell, world.triangles(), pvs, placement);
-  std::vector<uint32_t> geometry;  // refused sites
   for (uint32_t s = 0; s < out.placement.sites.size(); ++s) {
     const ImpostorSite& site = out.placement.sites[s];
     try {
@@ -91,7 +90,6 @@ CellImpostors bakeSites(const ImpostorWorld& world, const Box3f& cell,
             site.sector, site.band, stats.bytes, geometryBytes, placement.maxBytesRatio);
         spdlog::info("impostor left as geometry: {}", why);
         out.refused.push_back(why);
-        geometry.push_back(s);
         continue;
       }
       out.impostors.push_back(std::move(impostor));
@@ -103,13 +101,16 @@ CellImpostors bakeSites(const ImpostorWorld& world, const Box3f& cell,
       spdlog::warn("impostor of sector {} band {} left as geometry: {}", site.sector, site.band,
                    e.what());
       out.refused.push_back(e.what());
-      geometry.push_back(s);
     }
   }
+  // The refused sites: those without an impostor.
+  std::vector<bool> baked(out.placement.sites.size(), false);
+  for (uint32_t s : out.siteOf) baked[s] = true;
   std::vector<uint32_t> refusedTriangles;
-  for (uint32_t s : geometry)
-    refusedTriangles.insert(refusedTriangles.end(), out.placement.sites[s].triangles.begin(),
-                            out.placement.sites[s].triangles.end());
+  for (size_t s = 0; s < out.placement.sites.size(); ++s)
+    if (!baked[s])
+      refusedTriangles.insert(refusedTriangles.end(), out.placement.sites[s].triangles.begin(),
+                              out.placement.sites[s].triangles.end());
   out.geometryFaces = world.facesTouching(refusedTriangles);
   if (!out.placement.sites.empty())
     out.placement.why =

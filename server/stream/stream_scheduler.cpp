@@ -203,25 +203,9 @@ bool StreamScheduler::onFaceSet(uint32_t cell, FaceListPtr faces, CellLevel leve
   for (CellLevel looser : {CellLevel::Coarse, CellLevel::Unculled})
     if (uint8_t(looser) > uint8_t(level)) requested_.erase(requestKey(cell, looser));
   levels_[cell] = level;
-  // Impostors stand in for the far faces they replace: those are not sent.
-  // The far field of the cell's sites without an impostor (cheaper as
-  // faces) is sent as geometry, within the radius or beyond it.
-  if (config_.impostors) {
-    const FaceListPtr replaced = world_.replacedFaces(cell);
-    if (!replaced->empty()) {
-      auto kept = std::make_shared<FaceList>();
-      std::set_difference(faces->begin(), faces->end(), replaced->begin(), replaced->end(),
-                          std::back_inserter(*kept));
-      faces = std::move(kept);
-    }
-    const FaceListPtr geometry = world_.impostorGeometry(cell);
-    if (!geometry->empty()) {
-      auto whole = std::make_shared<FaceList>();
-      std::set_union(faces->begin(), faces->end(), geometry->begin(), geometry->end(),
-                     std::back_inserter(*whole));
-      faces = std::move(whole);
-    }
-  }
+  // Impostors stand in for the far faces they replace; sites left as
+  // geometry come as faces (StreamWorld::withImpostors).
+  if (config_.impostors) faces = world_.withImpostors(cell, std::move(faces));
   // Announced ready with a looser set: the client held a superset. Should
   // the budget have kept some of the tighter set back, the cell is announced
   // again once whole.

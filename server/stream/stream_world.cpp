@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 
 #include "common/core/check.h"
 #include "common/core/error.h"
@@ -392,14 +393,19 @@ std::shared_ptr<const CellRecord> StreamWorld::impostorRecord(uint32_t linearCel
   return impostorEntry(linearCell).record;
 }
 
-FaceListPtr StreamWorld::replacedFaces(uint32_t linearCell) const {
-  return impostorEntry(linearCell).replaced;
-}
-
-FaceListPtr StreamWorld::impostorGeometry(uint32_t linearCell) const {
-  const std::shared_ptr<const CellRecord> record = impostorEntry(linearCell).record;
-  if (!record) return std::make_shared<const FaceList>();
-  return FaceListPtr(record, &record->geometryFaces);  // shares the record's lifetime
+FaceListPtr StreamWorld::withImpostors(uint32_t linearCell, FaceListPtr faces) const {
+  const ImpostorEntry entry = impostorEntry(linearCell);
+  const FaceList none;
+  const FaceList& replaced = *entry.replaced;
+  const FaceList& geometry = entry.record ? entry.record->geometryFaces : none;
+  if (replaced.empty() && geometry.empty()) return faces;
+  FaceList kept;
+  std::set_difference(faces->begin(), faces->end(), replaced.begin(), replaced.end(),
+                      std::back_inserter(kept));
+  auto out = std::make_shared<FaceList>();
+  std::set_union(kept.begin(), kept.end(), geometry.begin(), geometry.end(),
+                 std::back_inserter(*out));
+  return out;
 }
 
 }  // namespace vistream

@@ -209,13 +209,12 @@ class StreamWorld {
   // replace), or null when the bake did not visit the cell. Decoded once per
   // cell and kept (bounded); thread-safe.
   std::shared_ptr<const CellRecord> impostorRecord(uint32_t linearCell) const;
-  // The faces the cell's impostors replace (sorted; empty without impostors):
-  // what a client drawing those impostors is not sent as geometry.
-  FaceListPtr replacedFaces(uint32_t linearCell) const;
-  // The faces of the cell's sites left as geometry (sorted; empty without
-  // impostors): far field a client drawing impostors is sent as faces
-  // whatever its near-field radius (impostor_placement.h says why).
-  FaceListPtr impostorGeometry(uint32_t linearCell) const;
+  // What a client drawing the cell's impostors is sent of the face set
+  // `faces` (sorted): without the faces the impostors replace, and with the
+  // faces of the cell's sites left as geometry, whatever its near-field
+  // radius (impostor_placement.h says why). `faces` itself when the cell has
+  // neither.
+  FaceListPtr withImpostors(uint32_t linearCell, FaceListPtr faces) const;
 
  private:
   // PVS cache keys: a fine cell's linear index, or kCoarseKey | the linear
