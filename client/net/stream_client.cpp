@@ -452,6 +452,11 @@ struct StreamClient::Impl : PeerHandler {
     if (m.count > 0 && !decodeImpostor(m.data, impostor, error))
       return finish(fmt::format("bad impostor from the server: cell ({}, {}, {}) #{}: {}", m.cell.x,
                                 m.cell.y, m.cell.z, m.index, error));
+    if (glm::any(glm::greaterThanEqual(m.last(), grid.dims)) ||
+        glm::any(glm::lessThan(m.cell, glm::ivec3(0))))
+      return finish(fmt::format(
+          "bad impostor from the server: view cell ({}, {}, {})-({}, {}, {}) outside the grid",
+          m.cell.x, m.cell.y, m.cell.z, m.last().x, m.last().y, m.last().z));
     std::lock_guard lock(mutex);
     if (!impostorsOffered) return finish("impostors from a server that did not offer them");
     const size_t wireBytes = wire.data() ? wire.data()->size() : 0;
@@ -464,8 +469,9 @@ struct StreamClient::Impl : PeerHandler {
         }
       auto set = std::make_shared<ImpostorSet>();
       set->index = m.cell;
+      set->indexHi = m.last();
       set->cell = Box3f(grid.gridOrigin + glm::vec3(m.cell) * grid.cellSize,
-                        grid.gridOrigin + glm::vec3(m.cell + 1) * grid.cellSize);
+                        grid.gridOrigin + glm::vec3(m.last() + 1) * grid.cellSize);
       set->why = m.why;
       set->expected = m.count;
       impostorCells.push_back(std::move(set));
@@ -754,7 +760,7 @@ std::shared_ptr<const ImpostorSet> StreamClient::impostorsAt(const glm::vec3& ey
   if (!impl_->welcomed) return nullptr;
   const glm::ivec3 cell = impl_->grid.cellOf(eye);
   for (const auto& set : impl_->impostorCells)
-    if (set->index == cell) return set;
+    if (set->holds(cell)) return set;
   return nullptr;
 }
 

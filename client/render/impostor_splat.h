@@ -58,8 +58,14 @@ namespace vistream {
 // The impostors of one view cell, as received (connected) or baked: valid
 // for viewpoints inside `cell`.
 struct ImpostorSet {
-  glm::ivec3 index{0};
+  // The view cell: grid cells index..indexHi (inclusive; cells merged along
+  // a street share one set), and their box.
+  glm::ivec3 index{0}, indexHi{0};
   Box3f cell;
+  bool holds(const glm::ivec3& gridCell) const {
+    return glm::all(glm::greaterThanEqual(gridCell, index)) &&
+           glm::all(glm::lessThanEqual(gridCell, indexHi));
+  }
   std::vector<std::shared_ptr<const Impostor>> impostors;
   uint32_t expected = 0;  // impostors the cell has (received: as announced)
   std::string why;        // the bake's reason (why these, or why none)

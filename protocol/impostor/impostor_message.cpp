@@ -10,6 +10,7 @@ namespace vistream::wire {
 std::vector<uint8_t> encodeImpostorMessage(const ImpostorMessage& m) {
   ImpostorDataT t;
   t.cell = std::make_unique<CellIndex>(toWire(m.cell));
+  if (m.last() != m.cell) t.cell_hi = std::make_unique<CellIndex>(toWire(m.last()));
   t.index = uint16_t(m.index);
   t.count = uint16_t(m.count);
   t.why = m.why;
@@ -29,6 +30,11 @@ bool readImpostorMessage(const ImpostorData& wire, uint32_t faceLimit, ImpostorM
   };
   if (!wire.cell()) return fail("no cell");
   out.cell = fromWire(*wire.cell());
+  out.cellHi.reset();
+  if (wire.cell_hi()) out.cellHi = fromWire(*wire.cell_hi());
+  if (glm::any(glm::lessThan(out.last(), out.cell)))
+    return fail(fmt::format("cell_hi ({}, {}, {}) lies below cell ({}, {}, {})", out.last().x,
+                            out.last().y, out.last().z, out.cell.x, out.cell.y, out.cell.z));
   out.index = wire.index();
   out.count = wire.count();
   if (out.count > kMaxImpostorsPerCell)

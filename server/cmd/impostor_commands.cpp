@@ -27,6 +27,7 @@ using nlohmann::json;
 struct ImpostorCommand::Arguments {
   std::string scene, cell, texture = "8x2", screen = "640x480", db, out, cells, shard;
   unsigned threads = 0;
+  uint32_t mergeCells = ImpostorBakeOptions{}.mergeCells;
   bool json = false, noRemoval = false, keepHidden = false, mpi = false;
   GroundChoice ground;
   std::filesystem::path lightingCache;
@@ -80,6 +81,11 @@ ImpostorCommand::ImpostorCommand(CLI::App& app, SceneLimits& limits)
                    "faces it replaces stays geometry (0: no limit)")
       ->capture_default_str()
       ->check(nonNegative());
+  sub_->add_option("--merge-cells", a.mergeCells,
+                   "with --db: view cells of up to this many grid cells merged along a street "
+                   "share one set of impostors (1: every cell its own)")
+      ->capture_default_str()
+      ->check(inRange<uint32_t>(1, 64));
   // Sampling and appearance (impostor_bake.h).
   sub_->add_option("--resolution", a.bake.resolutionFactor,
                    "LDI resolution factor (1: the thesis's heuristic)")
@@ -163,6 +169,7 @@ std::string ImpostorCommand::settingsJson() const {
               {"bands", a.placement.bands},
               {"min_triangles", a.placement.minTriangles},
               {"max_bytes_ratio", a.placement.maxBytesRatio},
+              {"merge_cells", a.mergeCells},
               {"resolution", o.resolutionFactor},
               {"remove_points", o.removePoints},
               {"cull_hidden", o.cullHidden},
@@ -191,6 +198,7 @@ ImpostorBakeReport ImpostorCommand::bakeShardOf(const Scene& scene, const PvsDat
   options.placement = a.placement;
   options.impostor = a.bake;
   options.threads = a.threads;
+  options.mergeCells = a.mergeCells;
   options.settings = settingsJson();
   options.shardIndex = shardIndex;
   options.shardCount = shardCount;
@@ -226,7 +234,9 @@ int ImpostorCommand::bakeDatabase(const Scene& scene, const PvsDatabase& pvs,
                       {"cells", r.cells},
                       {"resumed_cells", r.resumedCells},
                       {"computed_cells", r.computedCells},
+                      {"view_cells", r.viewCells},
                       {"cells_with_impostors", r.cellsWithImpostors},
+                      {"view_cells_with_impostors", r.viewCellsWithImpostors},
                       {"impostors", r.impostors},
                       {"points", r.points},
                       {"bytes", r.bytes},
@@ -241,7 +251,9 @@ int ImpostorCommand::bakeDatabase(const Scene& scene, const PvsDatabase& pvs,
   fmt::print("  {:<28} {:>12}\n", "cells", r.cells);
   fmt::print("  {:<28} {:>12}\n", "resumed from journal", r.resumedCells);
   fmt::print("  {:<28} {:>12}\n", "computed", r.computedCells);
+  fmt::print("  {:<28} {:>12}\n", "view cells (merged)", r.viewCells);
   fmt::print("  {:<28} {:>12}\n", "cells with impostors", r.cellsWithImpostors);
+  fmt::print("  {:<28} {:>12}\n", "view cells with impostors", r.viewCellsWithImpostors);
   fmt::print("  {:<28} {:>12}\n", "impostors", r.impostors);
   fmt::print("  {:<28} {:>12}\n", "points", r.points);
   fmt::print("  {:<28} {:>12}\n", "bytes", r.bytes);

@@ -15,6 +15,7 @@
 #include "server/bake/bake_journal.h"
 #include "server/bake/checked_file.h"
 #include "server/bake/scene_grid_fields.h"
+#include "server/impostor/view_cell_groups.h"
 
 namespace vistream {
 namespace {
@@ -49,6 +50,8 @@ std::vector<uint8_t> encodeCellRecord(const CellRecord& record) {
   wire::putVarint(out, record.geometryFaces.size());
   wire::putVarint(out, geometry.size());
   out.insert(out.end(), geometry.begin(), geometry.end());
+  for (int a = 0; a < 3; ++a) wire::putVarint(out, uint64_t(std::max(0, record.viewLo[a])));
+  for (int a = 0; a < 3; ++a) wire::putVarint(out, uint64_t(std::max(0, record.viewHi[a])));
   return out;
 }
 
@@ -93,6 +96,10 @@ CellRecord decodeCellRecord(std::span<const uint8_t> bytes, uint32_t faceLimit) 
   } catch (const InputError& e) {
     throwInputError("cell record: the geometry's faces: {}", e.what());
   }
+  for (int a = 0; a < 3; ++a)
+    out.viewLo[a] = int(check(r.varint("the view cell's first cell", (1u << 31) - 1)));
+  for (int a = 0; a < 3; ++a)
+    out.viewHi[a] = int(check(r.varint("the view cell's last cell", (1u << 31) - 1)));
   if (r.remaining() != 0) throwInputError("cell record: {} bytes after its end", r.remaining());
   return out;
 }
@@ -140,6 +147,8 @@ ImpostorDatabase ImpostorDatabase::open(const std::filesystem::path& path) {
   db.header_.settings = root->settings() ? root->settings()->str() : "";
   db.header_.settingsFingerprint = root->settings_fingerprint();
   const uint64_t cellsTotal = uint64_t(h.dims.x) * uint64_t(h.dims.y) * uint64_t(h.dims.z);
+  const ViewCellGrid grid = h.grid();
+  std::map<uint32_t, std::pair<glm::ivec3, glm::ivec3>> ranges;  // cell -> its view cell
   if (const auto* cells = root->cells()) {
     int64_t previous = -1;
     for (flatbuffers::uoffset_t n = 0; n < cells->size(); ++n) {
@@ -153,15 +162,44 @@ ImpostorDatabase ImpostorDatabase::open(const std::filesystem::path& path) {
       const std::span<const uint8_t> record =
           c->record() ? std::span(c->record()->data(), c->record()->size())
                       : std::span<const uint8_t>();
+      CellRecord decoded;
       try {
-        decodeCellRecord(record, h.sceneFaces);
+        decoded = decodeCellRecord(record, h.sceneFaces);
       } catch (const InputError& e) {
         throwInputError("{}: cell {}: {}", name, c->index(), e.what());
       }
       db.index_[c->index()] = record;
+      ranges.emplace(c->index(), std::make_pair(decoded.viewLo, decoded.viewHi));
+      if (c->index() != grid.linearIndex(decoded.viewLo) &&
+          (!decoded.impostors.empty() || !decoded.geometryFaces.empty()))
+        throwInputError(
+            "{}: cell {}: holds impostors or faces, but its view cell's leader is another cell",
+            name, c->index());
     }
   }
+  // Each cell's view cell: inside the grid, holding the cell, its leader
+  // present with the same range.
+  for (const auto& [index, range] : ranges) {
+    const auto& [lo, hi] = range;
+    const glm::ivec3 cell = grid.cellAt(index);
+    if (!grid.contains(lo) || !grid.contains(hi) || glm::any(glm::greaterThan(lo, cell)) ||
+        glm::any(glm::lessThan(hi, cell)))
+      throwInputError("{}: cell {}: its view cell ({}, {}, {})-({}, {}, {}) does not hold it", name,
+                      index, lo.x, lo.y, lo.z, hi.x, hi.y, hi.z);
+    const uint32_t leader = uint32_t(grid.linearIndex(lo));
+    const auto it = ranges.find(leader);
+    if (it == ranges.end() || it->second != range)
+      throwInputError("{}: cell {}: its view cell's leader, cell {}, is {}", name, index, leader,
+                      it == ranges.end() ? "missing" : "of another view cell");
+    db.leaders_[index] = leader;
+  }
   return db;
+}
+
+std::optional<uint32_t> ImpostorDatabase::viewCellOf(uint32_t linearIndex) const {
+  const auto it = leaders_.find(linearIndex);
+  if (it == leaders_.end()) return std::nullopt;
+  return it->second;
 }
 
 std::vector<uint32_t> ImpostorDatabase::cellIndices() const {
@@ -202,14 +240,25 @@ ImpostorBakeReport bakeImpostorDatabase(const ImpostorWorld& world, const PvsDat
     throwInputError("shard {}/{} is not valid (expected i/n with 0 <= i < n)", options.shardIndex,
                     options.shardCount);
   const ViewCellGrid grid = ph.grid();
-  std::vector<uint32_t> cells;
-  size_t position = 0;
+  std::vector<uint32_t> regionCells;
   for (uint32_t c : pvs.cellIndices())
     if (!options.region || grid.cellBox(grid.cellAt(c)).overlaps(*options.region))
-      if (position++ % options.shardCount == options.shardIndex) cells.push_back(c);
+      regionCells.push_back(c);
+  // View cells first (so a shard bakes whole ones), then this shard's.
+  std::vector<ViewCellGroup> groups;
+  {
+    std::vector<ViewCellGroup> all = mergeViewCells(grid, regionCells, options.mergeCells);
+    for (size_t g = 0; g < all.size(); ++g)
+      if (g % options.shardCount == options.shardIndex) groups.push_back(std::move(all[g]));
+  }
+  std::vector<uint32_t> cells;
+  for (const ViewCellGroup& g : groups)
+    cells.insert(cells.end(), g.members.begin(), g.members.end());
+  std::sort(cells.begin(), cells.end());
 
   ImpostorBakeReport report;
   report.cells = cells.size();
+  report.viewCells = groups.size();
   std::map<uint32_t, std::vector<uint8_t>> done;
   std::mutex doneMutex;
   BakeJournal journal(out.string() + ".journal", kImpostorJournalMagic, header.settingsFingerprint,
@@ -225,26 +274,41 @@ ImpostorBakeReport bakeImpostorDatabase(const ImpostorWorld& world, const PvsDat
                         done[r.index].assign(r.payload.begin(), r.payload.end());
                         return {};
                       });
-  std::vector<uint32_t> pending;
-  for (uint32_t c : cells)
-    if (!done.count(c)) pending.push_back(c);
-  report.resumedCells = cells.size() - pending.size();
+  // A view cell is baked again unless every one of its cells was journalled.
+  std::vector<const ViewCellGroup*> pending;
+  for (const ViewCellGroup& g : groups)
+    if (!std::all_of(g.members.begin(), g.members.end(), [&](uint32_t c) { return done.count(c); }))
+      pending.push_back(&g);
+  size_t pendingCells = 0;
+  for (const ViewCellGroup* g : pending) pendingCells += g->members.size();
+  report.resumedCells = cells.size() - pendingCells;
   std::atomic<size_t> progress{report.resumedCells};
   if (options.progress) options.progress(progress.load(), cells.size());
 
   std::optional<tbb::global_control> limit;
   if (options.threads > 0)
     limit.emplace(tbb::global_control::max_allowed_parallelism, options.threads);
-  // Cells one after another, each bake parallel inside (its impostors are
-  // the work; a cell holds a few).
-  for (uint32_t c : pending) {
-    const std::optional<std::vector<uint32_t>> faces = pvs.cell(c);
-    if (!faces) throwInputError("{}: cell {} cannot be read", pvs.path().string(), c);
+  // View cells one after another, each bake parallel inside (its impostors
+  // are the work; a view cell holds a few).
+  for (const ViewCellGroup* g : pending) {
+    // The view cell's PVS: the union of its cells' (each is conservative
+    // for its cell, so the union is for theirs).
+    std::vector<uint32_t> faces;
+    for (uint32_t c : g->members) {
+      const std::optional<std::vector<uint32_t>> cellFaces = pvs.cell(c);
+      if (!cellFaces) throwInputError("{}: cell {} cannot be read", pvs.path().string(), c);
+      std::vector<uint32_t> merged;
+      std::set_union(faces.begin(), faces.end(), cellFaces->begin(), cellFaces->end(),
+                     std::back_inserter(merged));
+      faces = std::move(merged);
+    }
     const CellImpostors r =
-        world.bakeCell(grid.cellBox(grid.cellAt(c)), *faces, options.placement, options.impostor);
+        world.bakeCell(viewCellBox(grid, g->lo, g->hi), faces, options.placement, options.impostor);
     CellRecord record;
     record.why = r.placement.why;
     record.geometryFaces = r.geometryFaces;
+    record.viewLo = g->lo;
+    record.viewHi = g->hi;
     for (size_t i = 0; i < r.impostors.size(); ++i) {
       const ImpostorSite& site = r.placement.sites[r.siteOf[i]];
       StoredImpostor s;
@@ -258,20 +322,30 @@ ImpostorBakeReport bakeImpostorDatabase(const ImpostorWorld& world, const PvsDat
       s.geometryBytes = r.geometryBytes[i];
       record.impostors.push_back(std::move(s));
     }
-    std::vector<uint8_t> bytes = encodeCellRecord(record);
-    journal.append(c, uint32_t(record.impostors.size()), bytes);
-    {
+    // The leader's record, then one pointing at it for every other cell.
+    CellRecord member;
+    member.why =
+        fmt::format("part of the view cell of cells ({}, {}, {})-({}, {}, {}), stored with cell {}",
+                    g->lo.x, g->lo.y, g->lo.z, g->hi.x, g->hi.y, g->hi.z, g->leader());
+    member.viewLo = g->lo;
+    member.viewHi = g->hi;
+    for (uint32_t c : g->members) {
+      std::vector<uint8_t> bytes = encodeCellRecord(c == g->leader() ? record : member);
+      journal.append(c, uint32_t(c == g->leader() ? record.impostors.size() : 0), bytes);
       std::lock_guard lock(doneMutex);
       done[c] = std::move(bytes);
     }
-    ++report.computedCells;
-    const size_t p = ++progress;
+    report.computedCells += g->members.size();
+    const size_t p = progress += g->members.size();
     if (options.progress) options.progress(p, cells.size());
   }
   std::map<uint32_t, std::vector<uint8_t>> records;
-  for (uint32_t c : cells) {
-    const CellRecord record = decodeCellRecord(done.at(c), ph.sceneFaces);
-    report.cellsWithImpostors += !record.impostors.empty();
+  for (const ViewCellGroup& g : groups) {
+    const CellRecord record = decodeCellRecord(done.at(g.leader()), ph.sceneFaces);
+    if (!record.impostors.empty()) {
+      ++report.viewCellsWithImpostors;
+      report.cellsWithImpostors += g.members.size();
+    }
     report.impostors += record.impostors.size();
     report.geometryFaces += record.geometryFaces.size();
     for (const StoredImpostor& s : record.impostors) {
@@ -279,7 +353,7 @@ ImpostorBakeReport bakeImpostorDatabase(const ImpostorWorld& world, const PvsDat
       report.bytes += s.bytes.size();
       report.geometryBytes += s.geometryBytes;
     }
-    records[c] = std::move(done.at(c));
+    for (uint32_t c : g.members) records[c] = std::move(done.at(c));
   }
   writeImpostorDatabase(out, header, records);
   journal.remove();

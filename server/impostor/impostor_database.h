@@ -16,7 +16,9 @@
 //
 // Opening validates everything but the impostors' own bytes: envelope,
 // checksum, FlatBuffers verifier, grid, cell indices, and every record's
-// structure and face lists (InputError naming the file and cell). An
+// structure and face lists, and its view cell: inside the grid, holding the
+// cell, its leader present with the same range, and a non-leader's record
+// empty (InputError naming the file and cell). An
 // impostor's bytes are decoded when used; should that fail (the file changed
 // after it was opened), the cell is reported as not baked with an error logged.
 //
@@ -45,8 +47,9 @@
 
 namespace vistream {
 
-// 2: impostor encoding version 2; 3: records hold the faces of sites left as geometry.
-inline constexpr uint32_t kImpostorDbVersion = 3;
+// 2: impostor encoding version 2; 3: records hold the faces of sites left as
+// geometry; 4: records name their view cell (cells merged along streets).
+inline constexpr uint32_t kImpostorDbVersion = 4;
 
 // One impostor of a cell as stored.
 struct StoredImpostor {
@@ -60,11 +63,16 @@ struct StoredImpostor {
 
 // A cell's record: why, its impostors, and the faces of its sites left as
 // geometry (CellImpostors::geometryFaces), which a client that asks for
-// impostors receives whatever its near-field radius.
+// impostors receives whatever its near-field radius; and the view cell they
+// were baked for, the grid cells viewLo..viewHi (view_cell_groups.h). The
+// view cell's first cell (its leader, viewLo) holds the impostors and the
+// faces; every other cell of it holds only the range and a why naming the
+// leader (no impostors, no faces), and is served the leader's record.
 struct CellRecord {
   std::string why;
   std::vector<StoredImpostor> impostors;
   std::vector<uint32_t> geometryFaces;  // ascending
+  glm::ivec3 viewLo{0}, viewHi{0};      // grid indices, inclusive
 };
 std::vector<uint8_t> encodeCellRecord(const CellRecord& record);
 // Throws InputError (starting "cell record") unless the bytes are one
@@ -90,8 +98,11 @@ class ImpostorDatabase {
   const ImpostorDatabaseHeader& header() const { return header_; }
   size_t cellCount() const { return index_.size(); }
   std::vector<uint32_t> cellIndices() const;
-  // The cell's record, or nothing if the bake did not visit it.
+  // The cell's record as stored, or nothing if the bake did not visit it.
   std::optional<CellRecord> cell(uint32_t linearIndex) const;
+  // The leader of the view cell holding the cell (the cell itself when it
+  // is its own view cell), or nothing if the bake did not visit it.
+  std::optional<uint32_t> viewCellOf(uint32_t linearIndex) const;
   const std::filesystem::path& path() const { return path_; }
 
  private:
@@ -100,14 +111,19 @@ class ImpostorDatabase {
   MappedFile file_;
   ImpostorDatabaseHeader header_;
   std::map<uint32_t, std::span<const uint8_t>> index_;  // cell -> its record in the mapping
+  std::map<uint32_t, uint32_t> leaders_;                // cell -> its view cell's leader
 };
 
 struct ImpostorBakeOptions {
   ImpostorPlacementOptions placement;
   ImpostorOptions impostor;
   std::optional<Box3f> region;  // local frame: only cells overlapping it
-  // Bake only shard shardIndex of shardCount: the cells (of the region, in
-  // index order) at positions shardIndex, shardIndex + shardCount, ...;
+  // View cells: up to this many grid cells merged along a street
+  // (view_cell_groups.h); 1 bakes every grid cell on its own.
+  uint32_t mergeCells = 4;
+  // Bake only shard shardIndex of shardCount: the view cells (of the
+  // region's cells, in their leaders' order) at positions shardIndex,
+  // shardIndex + shardCount, ...;
   // mergeImpostorDatabases joins the shards into one-process bytes.
   uint32_t shardIndex = 0, shardCount = 1;
   unsigned threads = 0;  // 0: all cores
@@ -117,9 +133,12 @@ struct ImpostorBakeOptions {
 
 struct ImpostorBakeReport {
   size_t cells = 0, resumedCells = 0, computedCells = 0;
-  size_t cellsWithImpostors = 0, impostors = 0;
+  size_t viewCells = 0;  // the cells merged into view cells (mergeCells)
+  // Cells whose view cell has impostors, those view cells, and the sums
+  // over view cells (each counted once, however many cells it merges).
+  size_t cellsWithImpostors = 0, viewCellsWithImpostors = 0, impostors = 0;
   uint64_t points = 0, bytes = 0, geometryBytes = 0;
-  uint64_t geometryFaces = 0;  // of the sites left as geometry, summed over cells
+  uint64_t geometryFaces = 0;  // of the sites left as geometry
   double timeMs = 0.0;
 };
 

@@ -636,23 +636,27 @@ bool Session::sendImpostors() {
   }
   // The current cell's impostors after its first batch (the faces in view
   // go first); the cells ahead only when no geometry is due. Never more
-  // cells than the client keeps.
-  const size_t reach = std::min(needed.size(), wire::kImpostorCellsHeld);
-  for (size_t k = 0; k < reach; ++k) {
-    const uint32_t cell = needed[k];
-    if (std::find(impostorCells_.begin(), impostorCells_.end(), cell) != impostorCells_.end())
+  // view cells than the client keeps; cells merged into one view cell
+  // (impostor_database.h) share its impostors, sent once.
+  std::vector<uint32_t> views;
+  for (size_t k = 0; k < needed.size() && views.size() < wire::kImpostorCellsHeld; ++k) {
+    const uint32_t view = world_.impostorViewCell(needed[k]);
+    if (std::find(views.begin(), views.end(), view) != views.end()) continue;
+    views.push_back(view);
+    if (std::find(impostorCells_.begin(), impostorCells_.end(), view) != impostorCells_.end())
       continue;
-    const bool due =
-        k == 0 ? batchesInCell_ > 0 || !scheduler_->worthABatch() : !scheduler_->worthABatch();
+    const bool due = views.size() == 1 ? batchesInCell_ > 0 || !scheduler_->worthABatch()
+                                       : !scheduler_->worthABatch();
     if (!due) return false;
-    impostorCells_.push_back(cell);
+    impostorCells_.push_back(view);
     if (impostorCells_.size() > wire::kImpostorCellsHeld) impostorCells_.pop_front();
     produceInFlight_ = true;
-    runFirst([self = shared_from_this(), cell] {
+    runFirst([self = shared_from_this(), cell = view] {
       const std::shared_ptr<const CellRecord> record = self->world_.impostorRecord(cell);
       std::vector<std::shared_ptr<const std::vector<uint8_t>>> frames;
       wire::ImpostorMessage m;
       m.cell = self->world_.grid().cellAt(cell);
+      if (record) m.cellHi = record->viewHi;
       m.why = record ? record->why : std::string("the impostor bake did not visit this cell");
       if (!record || record->impostors.empty()) {
         frames.push_back(

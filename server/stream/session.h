@@ -137,7 +137,8 @@ class Session : public std::enable_shared_from_this<Session> {
   double statsIntervalS_ = 0.0;  // seconds between Stats frames (the client's, or the server's)
   uint64_t budget_ = 0;
   bool wantsGeometry_ = true, wantsAvatars_ = true;
-  // Impostors (the client asked, the server has them): the cells whose
+  // Impostors (the client asked, the server has them): the view cells (their
+  // leaders, StreamWorld::impostorViewCell) whose
   // impostors the client holds, oldest first, as the client keeps them
   // (at most wire::kImpostorCellsHeld); batches sent since the current cell
   // changed (its impostors go after its first batch).

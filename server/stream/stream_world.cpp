@@ -364,8 +364,15 @@ StreamWorld::CacheStats StreamWorld::cacheStats() const {
           unculledComputed_};
 }
 
-StreamWorld::ImpostorEntry StreamWorld::impostorEntry(uint32_t linearCell) const {
+uint32_t StreamWorld::impostorViewCell(uint32_t linearCell) const {
+  if (!impostors_) return linearCell;
+  return impostors_->viewCellOf(linearCell).value_or(linearCell);
+}
+
+StreamWorld::ImpostorEntry StreamWorld::impostorEntry(uint32_t cell) const {
   if (!impostors_) return {nullptr, std::make_shared<const FaceList>()};
+  // Every cell of a view cell is served its leader's record.
+  const uint32_t linearCell = impostorViewCell(cell);
   {
     std::lock_guard lock(impostorMutex_);
     if (auto it = impostorCells_.find(linearCell); it != impostorCells_.end()) return it->second;

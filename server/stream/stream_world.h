@@ -205,11 +205,15 @@ class StreamWorld {
 
   // ---- impostors (with an impostor database) ------------------------------------
   bool hasImpostors() const { return impostors_.has_value(); }
-  // A cell's impostor record (why, and its impostors with the faces they
-  // replace), or null when the bake did not visit the cell. Decoded once per
-  // cell and kept (bounded); thread-safe.
+  // The leader of the view cell holding a cell (cells merged along a
+  // street share one record, impostor_database.h); the cell itself when it
+  // is its own view cell or was not baked.
+  uint32_t impostorViewCell(uint32_t linearCell) const;
+  // The impostor record of the cell's view cell (why, its range, and its
+  // impostors with the faces they replace), or null when the bake did not
+  // visit the cell. Decoded once per view cell and kept (bounded); thread-safe.
   std::shared_ptr<const CellRecord> impostorRecord(uint32_t linearCell) const;
-  // What a client drawing the cell's impostors is sent of the face set
+  // What a client drawing the cell's (view cell's) impostors is sent of the face set
   // `faces` (sorted): without the faces the impostors replace, and with the
   // faces of the cell's sites left as geometry, whatever its near-field
   // radius (impostor_placement.h says why). `faces` itself when the cell has

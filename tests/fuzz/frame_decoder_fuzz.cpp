@@ -42,6 +42,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
           continue;
         }
         if (m.count > vistream::wire::kMaxImpostorsPerCell) std::abort();
+        if (glm::any(glm::lessThan(m.last(), m.cell))) std::abort();
         if (m.count == 0 ? (!m.data.empty() || m.index != 0) : m.index >= m.count) std::abort();
         for (size_t k = 0; k < m.replacedFaces.size(); ++k)
           if (m.replacedFaces[k] >= kFaces ||

@@ -1,6 +1,6 @@
 // The ImpostorData message (protocol/impostor/impostor_message.h): what is
 // encoded reads back field for field, and a receiver refuses values out of
-// range (index, count, replaced faces) naming the field.
+// range (index, count, replaced faces, the view cell's last cell) naming the field.
 #include "protocol/impostor/impostor_message.h"
 
 #include <gtest/gtest.h>
@@ -50,6 +50,18 @@ TEST(ImpostorMessage, ReadsBackEveryFieldAsEncoded) {
   EXPECT_EQ(out.band, 2u);
   EXPECT_EQ(out.replacedFaces, m.replacedFaces);
   EXPECT_EQ(out.data, m.data);
+  EXPECT_FALSE(out.cellHi.has_value());  // one grid cell
+  EXPECT_EQ(out.last(), m.cell);
+}
+
+TEST(ImpostorMessage, AViewCellOfMergedCellsReadsBackItsLastCell) {
+  ImpostorMessage m = sample();
+  m.cellHi = glm::ivec3(3, 0, 1);
+  ImpostorMessage out;
+  std::string error;
+  ASSERT_TRUE(roundTrip(m, 200'000, out, error)) << error;
+  EXPECT_EQ(out.cell, m.cell);
+  EXPECT_EQ(out.last(), glm::ivec3(3, 0, 1));
 }
 
 TEST(ImpostorMessage, ACellWithoutImpostorsCarriesOnlyItsReason) {
@@ -80,6 +92,8 @@ TEST(ImpostorMessage, RefusesValuesOutOfRangeNamingTheField) {
       {"impostor without data", [](ImpostorMessage& m) { m.data.clear(); }, 200'000,
        "without data"},
       {"a face beyond the scene", [](ImpostorMessage&) {}, 100'000, "replaced face"},
+      {"a view cell ending before it starts",
+       [](ImpostorMessage& m) { m.cellHi = m.cell - glm::ivec3(0, 0, 1); }, 200'000, "cell_hi"},
   };
   for (const Case& c : cases) {
     ImpostorMessage m = sample();

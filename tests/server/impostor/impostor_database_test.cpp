@@ -11,10 +11,12 @@
 #include <cmath>
 #include <fstream>
 #include <iterator>
+#include <map>
 
 #include "common/scene/scene_loader.h"
 #include "common/world/static_world.h"
 #include "protocol/impostor/impostor_codec.h"
+#include "server/impostor/view_cell_groups.h"
 #include "server/visibility/pvs_bake.h"
 #include "tests/common/support/box_scenes.h"
 #include "tests/common/support/temp_dir.h"
@@ -57,6 +59,7 @@ struct Baked {
     o.impostor.screen.width = 320;
     o.impostor.screen.height = 240;
     o.settings = "{\"test\":1}";
+    o.mergeCells = 1;  // every grid cell its own view cell (merged view cells: their own test)
     return o;
   }
 };
@@ -108,6 +111,80 @@ TEST(ImpostorDatabase, GivesEveryCellARecordWhoseImpostorsDecodeAndReplaceOnlyPv
   EXPECT_EQ(oneDb.cellIndices(), std::vector<uint32_t>{all.front()});
   EXPECT_TRUE(oneDb.cell(all.front()).has_value());
   EXPECT_FALSE(oneDb.cell(all.back()).has_value());
+}
+
+// Cells merged into view cells along a street: the leader's record holds
+// the impostors baked for the whole run, every other cell's points at it;
+// the impostors replace only faces of the union of the run's PVSs, each
+// wholly beyond d from every cell of the run; the run's far field is whole
+// (replaced or left as geometry).
+TEST(ImpostorDatabase, CellsMergedIntoAViewCellShareImpostorsBakedForTheWholeRun) {
+  Baked b;
+  const PvsDatabase pvs = PvsDatabase::open(b.pvsPath);
+  const ViewCellGrid grid = pvs.header().grid();
+  ImpostorBakeOptions o = Baked::options();
+  o.mergeCells = 3;
+  const ImpostorBakeReport report = bakeImpostorDatabase(*b.world, pvs, o, b.dir / "m.impdb");
+  EXPECT_EQ(report.cells, pvs.cellCount());
+  EXPECT_EQ(report.viewCells, mergeViewCells(grid, pvs.cellIndices(), 3).size());
+  ASSERT_LT(report.viewCells, report.cells);
+  EXPECT_GT(report.impostors, 0u);
+  const ImpostorDatabase db = ImpostorDatabase::open(b.dir / "m.impdb");
+  EXPECT_EQ(db.cellIndices(), pvs.cellIndices());
+  size_t merged = 0, impostors = 0;
+  for (uint32_t c : db.cellIndices()) {
+    const std::optional<uint32_t> leader = db.viewCellOf(c);
+    ASSERT_TRUE(leader.has_value());
+    const CellRecord own = *db.cell(c);
+    const CellRecord view = *db.cell(*leader);
+    EXPECT_EQ(own.viewLo, view.viewLo);
+    EXPECT_EQ(own.viewHi, view.viewHi);
+    EXPECT_EQ(*leader, grid.linearIndex(own.viewLo));
+    const glm::ivec3 cell = grid.cellAt(c);
+    EXPECT_TRUE(glm::all(glm::lessThanEqual(own.viewLo, cell)) &&
+                glm::all(glm::lessThanEqual(cell, own.viewHi)));
+    if (c != *leader) {
+      ++merged;
+      EXPECT_TRUE(own.impostors.empty());
+      EXPECT_TRUE(own.geometryFaces.empty());
+      EXPECT_NE(own.why.find(std::to_string(*leader)), std::string::npos) << own.why;
+      continue;
+    }
+    // The union of the run's PVSs.
+    std::vector<uint32_t> runPvs;
+    std::vector<Box3f> runCells;
+    for (int x = own.viewLo.x; x <= own.viewHi.x; ++x)
+      for (int z = own.viewLo.z; z <= own.viewHi.z; ++z) {
+        const glm::ivec3 m(x, own.viewLo.y, z);
+        const std::vector<uint32_t> f = *pvs.cell(uint32_t(grid.linearIndex(m)));
+        runPvs.insert(runPvs.end(), f.begin(), f.end());
+        runCells.push_back(grid.cellBox(m));
+      }
+    std::sort(runPvs.begin(), runPvs.end());
+    const Box3f viewBox = viewCellBox(grid, own.viewLo, own.viewHi);
+    for (const StoredImpostor& s : own.impostors) {
+      ++impostors;
+      Impostor imp;
+      std::string error;
+      ASSERT_TRUE(wire::decodeImpostor(s.bytes, imp, error)) << error;
+      EXPECT_EQ(imp.cell.lo, viewBox.lo);
+      EXPECT_EQ(imp.cell.hi, viewBox.hi);
+      for (uint32_t f : s.faces) {
+        EXPECT_TRUE(std::binary_search(runPvs.begin(), runPvs.end(), f)) << f;
+        // Beyond d from every cell of the run: far field for each of them.
+        for (const Box3f& cellBox : runCells)
+          for (uint32_t t : b.world->trianglesOfFaces({f}))
+            for (int k = 0; k < 3; ++k) {
+              const glm::vec3 v = b.world->triangles().vertex(t, k);
+              EXPECT_GE(glm::length(v - glm::clamp(v, cellBox.lo, cellBox.hi)),
+                        o.placement.nearDistance)
+                  << "face " << f;
+            }
+      }
+    }
+  }
+  EXPECT_GT(merged, 0u);
+  EXPECT_EQ(impostors, report.impostors);
 }
 
 // The bytes rule: an impostor costing more than the ratio times the
@@ -259,6 +336,46 @@ TEST(ImpostorDatabase, RefusesCorruptForeignAndMismatchedFilesNamingWhatIsWrong)
   // A PVS database is not an impostor database.
   EXPECT_NE(refusal("pvs.impdb", readAll(b.pvsPath)).find("not an impostor database"),
             std::string::npos);
+  // View cells that do not hold together: a cell pointing at a leader that
+  // is absent or of another view cell, or not holding the cell, and a
+  // non-leader holding impostors.
+  const ImpostorDatabase db = ImpostorDatabase::open(good);
+  const ViewCellGrid grid = pvs.header().grid();
+  const std::vector<uint32_t> cells = db.cellIndices();
+  ASSERT_GE(cells.size(), 2u);
+  auto viewRefusal = [&](const std::string& name,
+                         const std::map<uint32_t, CellRecord>& records) -> std::string {
+    std::map<uint32_t, std::vector<uint8_t>> encoded;
+    for (const auto& [c, r] : records) encoded[c] = encodeCellRecord(r);
+    writeImpostorDatabase(b.dir / name, db.header(), encoded);
+    try {
+      ImpostorDatabase::open(b.dir / name);
+    } catch (const InputError& e) {
+      return e.what();
+    }
+    return "opened";
+  };
+  const glm::ivec3 c0 = grid.cellAt(cells[0]), c1 = grid.cellAt(cells[1]);
+  CellRecord leaderless;
+  leaderless.viewLo = c0;
+  leaderless.viewHi = glm::max(c0, c1);
+  EXPECT_NE(viewRefusal("leaderless.impdb", {{cells[1], leaderless}}).find("missing"),
+            std::string::npos);
+  CellRecord elsewhere;
+  elsewhere.viewLo = elsewhere.viewHi = c1;
+  EXPECT_NE(viewRefusal("elsewhere.impdb", {{cells[0], elsewhere}}).find("does not hold it"),
+            std::string::npos);
+  CellRecord alone;
+  alone.viewLo = alone.viewHi = c0;
+  EXPECT_NE(viewRefusal("other.impdb", {{cells[0], alone}, {cells[1], leaderless}})
+                .find("of another view cell"),
+            std::string::npos);
+  CellRecord leader = leaderless, member = leaderless;
+  member.geometryFaces = {1};
+  EXPECT_NE(viewRefusal("member.impdb", {{cells[0], leader}, {cells[1], member}})
+                .find("leader is another cell"),
+            std::string::npos);
+  EXPECT_EQ(viewRefusal("fine.impdb", {{cells[0], leader}, {cells[1], leaderless}}), "opened");
   // Baking against another scene's PVS database is refused.
   testing::GroundAndBoxesObj other(-50, -50, 50, 50);
   other.box("lonely", 0, -30, 4, -26, 5);
@@ -283,6 +400,8 @@ TEST(ImpostorDatabase, CellRecordsRefuseCutAndOutOfRangeBytes) {
   s.points = 40;
   record.impostors.push_back(s);
   record.geometryFaces = {2, 30};
+  record.viewLo = {1, 0, 2};
+  record.viewHi = {1, 0, 5};
   const std::vector<uint8_t> bytes = encodeCellRecord(record);
   const CellRecord back = decodeCellRecord(bytes, 100);
   ASSERT_EQ(back.impostors.size(), 1u);
@@ -291,6 +410,8 @@ TEST(ImpostorDatabase, CellRecordsRefuseCutAndOutOfRangeBytes) {
   EXPECT_EQ(back.impostors[0].bytes, s.bytes);
   EXPECT_EQ(back.impostors[0].points, 40u);
   EXPECT_EQ(back.geometryFaces, record.geometryFaces);
+  EXPECT_EQ(back.viewLo, record.viewLo);
+  EXPECT_EQ(back.viewHi, record.viewHi);
   for (size_t n = 0; n < bytes.size(); ++n)
     EXPECT_THROW(decodeCellRecord(std::span(bytes.data(), n), 100), InputError) << n;
   EXPECT_THROW(decodeCellRecord(bytes, 10), InputError);  // face 17 is beyond the scene
