@@ -18,6 +18,7 @@
 #include "common/core/error.h"
 #include "protocol/geometry/byte_coding.h"
 #include "protocol/geometry/geometry_codec.h"
+#include "protocol/impostor/impostor_message.h"
 #include "protocol/wire/messages.h"
 
 namespace vistream {
@@ -128,6 +129,45 @@ TEST(StreamClient, HoldsWhatAWellBehavedServerSends) {
   const RenderGeometry g = client.snapshot();
   EXPECT_EQ(g.size(), 5u);
   EXPECT_TRUE(client.error().empty()) << client.error();
+}
+
+// A view cell of merged grid cells (ImpostorData.cell_hi): the client
+// keeps its impostors for every cell of the run and none beyond it, and
+// ends the session when the run leaves the grid.
+TEST(StreamClient, KeepsAViewCellsImpostorsForEveryCellOfItsRun) {
+  WelcomeT w = goodWelcome();
+  w.impostors = true;
+  ImpostorMessage m;
+  m.cell = {2, 0, 3};
+  m.cellHi = glm::ivec3(2, 0, 6);
+  m.why = "far field lighter than the threshold";
+  ScriptedServer server({encodeMessage(std::move(w)), encodeImpostorMessage(m)});
+  StreamClientOptions o = to(server);
+  o.wantsImpostors = true;
+  StreamClient client(o);
+  const glm::vec3 inFirst(10.0f, 1.0f, 14.0f), inLast(10.0f, 1.0f, 26.0f);
+  for (int i = 0; i < 200 && !client.impostorsAt(inFirst); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  const auto set = client.impostorsAt(inFirst);
+  ASSERT_TRUE(set) << client.error();
+  EXPECT_EQ(client.impostorsAt(inLast), set);
+  EXPECT_EQ(set->cell.lo, glm::vec3(8.0f, 0.0f, 12.0f));
+  EXPECT_EQ(set->cell.hi, glm::vec3(12.0f, 4.0f, 28.0f));
+  EXPECT_EQ(set->why, m.why);
+  EXPECT_FALSE(client.impostorsAt({10.0f, 1.0f, 30.0f}));  // cell (2, 0, 7)
+  EXPECT_FALSE(client.impostorsAt({14.0f, 1.0f, 14.0f}));  // cell (3, 0, 3)
+  EXPECT_TRUE(client.error().empty()) << client.error();
+
+  WelcomeT w2 = goodWelcome();
+  w2.impostors = true;
+  m.cellHi = glm::ivec3(2, 0, 10);  // the grid has 10 cells along z
+  ScriptedServer beyond({encodeMessage(std::move(w2)), encodeImpostorMessage(m)});
+  StreamClientOptions o2 = to(beyond);
+  o2.wantsImpostors = true;
+  StreamClient refused(o2);
+  for (int i = 0; i < 200 && refused.error().empty(); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  EXPECT_NE(refused.error().find("outside the grid"), std::string::npos) << refused.error();
 }
 
 }  // namespace
