@@ -9,6 +9,7 @@
 #include <limits>
 #include <unordered_set>
 
+#include "common/core/check.h"
 #include "common/core/error.h"
 #include "common/core/random.h"
 #include "common/core/timer.h"
@@ -219,6 +220,16 @@ ScreenCoverage screenCoverage(const std::vector<glm::vec3>& points, const glm::v
 Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f& box,
                       const std::vector<uint32_t>& triangles, const ImpostorOptions& options,
                       ImpostorStats* statsOut) {
+  std::optional<Impostor> imp =
+      bakeImpostorWithin(scene, cell, box, triangles, options, 0, statsOut);
+  VS_CHECK(imp.has_value());
+  return std::move(*imp);
+}
+
+std::optional<Impostor> bakeImpostorWithin(const ImpostorScene& scene, const Box3f& cell,
+                                           const Box3f& box, const std::vector<uint32_t>& triangles,
+                                           const ImpostorOptions& options, uint64_t maxBytes,
+                                           ImpostorStats* statsOut) {
   if (!(options.resolutionFactor > 0.0f))
     throwInputError("impostor: the resolution factor must be positive");
   if (!(options.pixelFilterSigma >= 0.0f) || !std::isfinite(options.pixelFilterSigma))
@@ -475,6 +486,44 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
   }
   stats.removeSeconds = watch.ms() / 1000.0;
 
+  // The precision kept (PointGrid): half the error budget to each of angle
+  // and parallax at the box's nearest depth (every viewer is at least that
+  // far), against the screen's smallest pixel angle (at its border, the
+  // perspective factor smaller than at its centre); r is the cell's half
+  // diagonal, the farthest a viewer stands from its centre.
+  Impostor imp;
+  imp.cell = cell;
+  imp.box = box;
+  imp.plane = frame.plane;
+  imp.cameras = frame.cameras;
+  imp.textureWidth = options.textureWidth;
+  imp.textureHeight = options.textureHeight;
+  const float smallestPixel = options.screen.sampleAngle() * glm::root_two<float>();
+  imp.angleStep = options.positionError * smallestPixel;
+  imp.logDepthStep = options.positionError * smallestPixel * frame.nearestDepth /
+                     (0.5f * glm::length(cell.extent()));
+  imp.colourStep = options.colourStep;
+
+  // A byte budget: the points' positions are known now, and their encoding
+  // does not depend on the colours, so if the positions alone exceed it the
+  // impostor would too, and the appearance (most of the bake) is not worked
+  // out for nothing.
+  if (maxBytes > 0) {
+    Impostor positions = imp;
+    const glm::u8vec3 black(0);
+    for (const Sample& sample : samples) positions.appendPoint(sample.position, &black, true);
+    positions.quantize();
+    wire::ImpostorSections sections;
+    wire::encodeImpostor(positions, &sections);
+    if (sections.bytes[0] > maxBytes) {
+      stats.points = positions.size();
+      stats.positionBytes = sections.bytes[0];
+      stats.seconds = total.ms() / 1000.0;
+      if (statsOut) *statsOut = stats;
+      return std::nullopt;
+    }
+  }
+
   // Appearance: Monte Carlo integration of the plenoptic image function.
   watch.reset();
   const uint32_t tw = options.textureWidth, th = options.textureHeight, texelCount = tw * th;
@@ -582,28 +631,11 @@ Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f
   stats.visibilityRays = visibilityRays;
   stats.unseenPoints = unseen;
 
-  Impostor imp;
-  imp.cell = cell;
-  imp.box = box;
-  imp.plane = frame.plane;
-  imp.cameras = frame.cameras;
-  imp.textureWidth = tw;
-  imp.textureHeight = th;
   imp.points.reserve(samples.size());
   for (size_t i = 0; i < samples.size(); ++i) {
     imp.appendPoint(samples[i].position, colours.data() + i * texelCount, single[i] != 0);
     stats.singleColour += single[i];
   }
-  // The precision kept (PointGrid): half the error budget to each of angle
-  // and parallax at the box's nearest depth (every viewer is at least that
-  // far), against the screen's smallest pixel angle (at its border, the
-  // perspective factor smaller than at its centre); r is the cell's half
-  // diagonal, the farthest a viewer stands from its centre.
-  const float smallestPixel = options.screen.sampleAngle() * glm::root_two<float>();
-  imp.angleStep = options.positionError * smallestPixel;
-  imp.logDepthStep = options.positionError * smallestPixel * frame.nearestDepth /
-                     (0.5f * glm::length(cell.extent()));
-  imp.colourStep = options.colourStep;
   imp.quantize();
   stats.points = imp.size();
   const ScreenCoverage coverage =

@@ -226,6 +226,14 @@ struct ImpostorStats {
 Impostor bakeImpostor(const ImpostorScene& scene, const Box3f& cell, const Box3f& box,
                       const std::vector<uint32_t>& triangles, const ImpostorOptions& options,
                       ImpostorStats* stats = nullptr);
+// The same within a byte budget (0: none): nothing when the points' encoded
+// positions alone (a part of the encoding that does not depend on their
+// colours) exceed maxBytes, found before the appearance is integrated;
+// `stats` then holds the sampling's figures, points and positionBytes.
+std::optional<Impostor> bakeImpostorWithin(const ImpostorScene& scene, const Box3f& cell,
+                                           const Box3f& box, const std::vector<uint32_t>& triangles,
+                                           const ImpostorOptions& options, uint64_t maxBytes,
+                                           ImpostorStats* stats = nullptr);
 
 // The screen pixels that impostor's points fall on for a viewer at `eye`
 // looking at `target` (a planar projection of the screen's pixel angle,

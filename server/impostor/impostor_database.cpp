@@ -304,6 +304,10 @@ ImpostorBakeReport bakeImpostorDatabase(const ImpostorWorld& world, const PvsDat
     }
     const CellImpostors r =
         world.bakeCell(viewCellBox(grid, g->lo, g->hi), faces, options.placement, options.impostor);
+    spdlog::debug(
+        "view cell ({}, {}, {})-({}, {}, {}): {} cells, {} PVS faces, {} impostors, {:.1f} s",
+        g->lo.x, g->lo.y, g->lo.z, g->hi.x, g->hi.y, g->hi.z, g->members.size(), faces.size(),
+        r.impostors.size(), r.seconds);
     CellRecord record;
     record.why = r.placement.why;
     record.geometryFaces = r.geometryFaces;

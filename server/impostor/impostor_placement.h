@@ -3,9 +3,11 @@
 //
 // Placement rule (placeImpostors). The thesis forms view cells from street
 // segments and places impostors at their ends, and leaves placement open
-// ("subject to ongoing research"). Here a view cell is a cell of the bake's
-// grid, and its far field is the part of its PVS that lies wholly beyond d
-// (the client's near-field distance) from the cell: triangles that reach
+// ("subject to ongoing research"). Here a view cell is a straight run of the
+// bake grid's cells along a street (view_cell_groups.h; the database bake
+// merges up to ImpostorBakeOptions::mergeCells), its PVS the union of theirs,
+// and its far field is the part of that PVS that lies wholly beyond d (the
+// client's near-field distance) from the whole run: triangles that reach
 // closer are near field, drawn as polygons. The far field is split by
 // azimuth around the cell's centre into `sectors` equal sectors (by the
 // triangle's centroid) and each sector into distance bands [d, 2d), [2d, 4d),

@@ -78,21 +78,33 @@ CellImpostors bakeSites(const ImpostorWorld& world, const Box3f& cell,
   for (uint32_t s = 0; s < out.placement.sites.size(); ++s) {
     const ImpostorSite& site = out.placement.sites[s];
     try {
-      ImpostorStats stats;
-      Impostor impostor =
-          bakeImpostor(world.view(), cell, site.box, site.triangles, options, &stats);
       std::vector<uint32_t> faces = world.replacedFaces(site.triangles);
       const size_t geometryBytes = world.geometryBytes(faces);
-      if (placement.maxBytesRatio > 0.0f &&
-          double(stats.bytes) > double(placement.maxBytesRatio) * double(geometryBytes)) {
-        const std::string why = fmt::format(
-            "sector {} band {}: {} bytes as an impostor against {} as geometry (more than {}x)",
-            site.sector, site.band, stats.bytes, geometryBytes, placement.maxBytesRatio);
+      const bool capped = placement.maxBytesRatio > 0.0f;
+      const double budget = double(placement.maxBytesRatio) * double(geometryBytes);
+      ImpostorStats stats;
+      // The budget stops a costly bake before its appearance, the most of
+      // its time; the whole encoding is weighed once made.
+      std::optional<Impostor> impostor =
+          bakeImpostorWithin(world.view(), cell, site.box, site.triangles, options,
+                             capped ? std::max<uint64_t>(1, uint64_t(budget)) : 0, &stats);
+      if (!impostor || (capped && double(stats.bytes) > budget)) {
+        const std::string why =
+            impostor
+                ? fmt::format(
+                      "sector {} band {}: {} bytes as an impostor against {} as "
+                      "geometry (more than {}x)",
+                      site.sector, site.band, stats.bytes, geometryBytes, placement.maxBytesRatio)
+                : fmt::format(
+                      "sector {} band {}: its points' positions alone take {} bytes "
+                      "against {} as geometry (more than {}x)",
+                      site.sector, site.band, stats.positionBytes, geometryBytes,
+                      placement.maxBytesRatio);
         spdlog::info("impostor left as geometry: {}", why);
         out.refused.push_back(why);
         continue;
       }
-      out.impostors.push_back(std::move(impostor));
+      out.impostors.push_back(std::move(*impostor));
       out.stats.push_back(stats);
       out.siteOf.push_back(s);
       out.replacedFaces.push_back(std::move(faces));

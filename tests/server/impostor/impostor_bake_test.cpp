@@ -308,6 +308,36 @@ TEST(ImpostorBake, PointRemovalDropsPointsAndKeepsTheCoverage) {
   EXPECT_EQ(holesFromCell(s, removed, 8, 5).uncovered, 0u);
 }
 
+// A byte budget stops the bake before the appearance exactly when the
+// points' encoded positions alone exceed it; within it the bake is the
+// unbounded one, byte for byte. Oracle: the unbounded bake's own sections.
+TEST(ImpostorBake, ABudgetBelowThePositionsBytesStopsTheBakeBeforeItsAppearance) {
+  const ColouredScene s = buildingBlock();
+  const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
+  const Box3f box = boundsOf(s.triangles);
+  const ImpostorOptions o = quickOptions(320, 240);
+  ImpostorStats full;
+  const Impostor whole = bakeImpostor(s.view(), cell, box, s.all, o, &full);
+  ASSERT_GT(full.positionBytes, 0u);
+  ASSERT_GT(full.appearanceRays, 0u);
+
+  ImpostorStats stopped;
+  EXPECT_FALSE(bakeImpostorWithin(s.view(), cell, box, s.all, o, full.positionBytes - 1, &stopped));
+  EXPECT_EQ(stopped.positionBytes, full.positionBytes);
+  EXPECT_EQ(stopped.points, full.points);
+  EXPECT_EQ(stopped.appearanceRays, 0u);  // the appearance never ran
+
+  // At the positions' bytes (or the whole's) the bake goes on to the end.
+  for (const uint64_t budget : {full.positionBytes, full.bytes}) {
+    ImpostorStats within;
+    const std::optional<Impostor> imp =
+        bakeImpostorWithin(s.view(), cell, box, s.all, o, budget, &within);
+    ASSERT_TRUE(imp.has_value()) << budget;
+    EXPECT_EQ(wire::encodeImpostor(*imp), wire::encodeImpostor(whole));
+    EXPECT_EQ(within.bytes, full.bytes);
+  }
+}
+
 TEST(ImpostorBake, ACoarserResolutionGivesFewerPointsInProportionToTheLdiPixels) {
   // Removal judges "sufficient" against the spacing the LDIs were sized for,
   // so at 0.7 of the heuristic's resolution the points fall with the LDI
