@@ -270,6 +270,10 @@ TEST(PvsTool, ImpostorsBakeAPvsDatabasesCellsIntoAnImpostorDatabase) {
   EXPECT_GT(j["cells"].get<size_t>(), 0u);
   EXPECT_EQ(j["computed_cells"], j["cells"]);
   EXPECT_EQ(j["cells_with_impostors"], j["cells"]);  // every cell sees the row beyond d
+  // Cells merged into view cells by default: fewer view cells, each with impostors.
+  EXPECT_GT(j["view_cells"].get<size_t>(), 0u);
+  EXPECT_LT(j["view_cells"].get<size_t>(), j["cells"].get<size_t>());
+  EXPECT_EQ(j["view_cells_with_impostors"], j["view_cells"]);
   EXPECT_GT(j["bytes"].get<uint64_t>(), 0u);
   EXPECT_TRUE(fs::exists(impDb));
   // Neither --cell nor --db, and --db without --out, are refused.
@@ -328,7 +332,8 @@ TEST(PvsTool, ImpostorArgumentsFailBeforeTheSceneLoadsNamingTheOption) {
   pvs.common = "impostors --scene " + missing + " --cell 0,0,0,1,1,1";
   expectEachOptionNamed(pvs, {"--texture 0x2", "--texture eight", "--screen 8x8", "--resolution 0",
                               "--sectors 0", "--near-distance -5", "--min-rays 10 --max-rays 5",
-                              "--visibility-views 0", "--pixel-filter -0.5", "--pixel-filter 5"});
+                              "--visibility-views 0", "--pixel-filter -0.5", "--pixel-filter 5",
+                              "--merge-cells 0", "--merge-cells 65"});
 }
 
 TEST(PvsTool, BenchPrintsOneRowPerSceneSizeAndMethodWithNoMissingFacesAndTheDistrictBakes) {
