@@ -330,10 +330,10 @@ TEST(PvsTool, ImpostorArgumentsFailBeforeTheSceneLoadsNamingTheOption) {
       .tool = "vistream-pvs", .common = "impostors --scene " + missing, .unopened = missing};
   expectEachOptionNamed(pvs, {"--cell 1,2,3"});
   pvs.common = "impostors --scene " + missing + " --cell 0,0,0,1,1,1";
-  expectEachOptionNamed(pvs, {"--texture 0x2", "--texture eight", "--screen 8x8", "--resolution 0",
-                              "--sectors 0", "--near-distance -5", "--min-rays 10 --max-rays 5",
-                              "--visibility-views 0", "--pixel-filter -0.5", "--pixel-filter 5",
-                              "--merge-cells 0", "--merge-cells 65"});
+  expectEachOptionNamed(
+      pvs, {"--texture 0x2", "--texture eight", "--screen 8x8", "--resolution 0", "--sectors 0",
+            "--near-distance -5", "--min-rays 10 --max-rays 5", "--visibility-views 0",
+            "--pixel-filter -0.5", "--pixel-filter 5", "--merge-cells 0", "--merge-cells 65"});
 }
 
 TEST(PvsTool, BenchPrintsOneRowPerSceneSizeAndMethodWithNoMissingFacesAndTheDistrictBakes) {
