@@ -51,6 +51,7 @@
 
 #include "client/render/camera.h"
 #include "client/render/image.h"
+#include "common/core/ivec_less.h"
 #include "common/impostor/impostor.h"
 
 namespace vistream {
@@ -62,10 +63,7 @@ struct ImpostorSet {
   // a street share one set), and their box.
   glm::ivec3 index{0}, indexHi{0};
   Box3f cell;
-  bool holds(const glm::ivec3& gridCell) const {
-    return glm::all(glm::greaterThanEqual(gridCell, index)) &&
-           glm::all(glm::lessThanEqual(gridCell, indexHi));
-  }
+  bool holds(const glm::ivec3& gridCell) const { return cellWithin(gridCell, index, indexHi); }
   std::vector<std::shared_ptr<const Impostor>> impostors;
   uint32_t expected = 0;  // impostors the cell has (received: as announced)
   std::string why;        // the bake's reason (why these, or why none)

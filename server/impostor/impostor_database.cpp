@@ -8,6 +8,7 @@
 #include <mutex>
 
 #include "common/core/error.h"
+#include "common/core/ivec_less.h"
 #include "common/core/timer.h"
 #include "impostor_database_generated.h"
 #include "protocol/geometry/byte_coding.h"
@@ -182,8 +183,7 @@ ImpostorDatabase ImpostorDatabase::open(const std::filesystem::path& path) {
   for (const auto& [index, range] : ranges) {
     const auto& [lo, hi] = range;
     const glm::ivec3 cell = grid.cellAt(index);
-    if (!grid.contains(lo) || !grid.contains(hi) || glm::any(glm::greaterThan(lo, cell)) ||
-        glm::any(glm::lessThan(hi, cell)))
+    if (!grid.contains(lo) || !grid.contains(hi) || !cellWithin(cell, lo, hi))
       throwInputError("{}: cell {}: its view cell ({}, {}, {})-({}, {}, {}) does not hold it", name,
                       index, lo.x, lo.y, lo.z, hi.x, hi.y, hi.z);
     const uint32_t leader = uint32_t(grid.linearIndex(lo));

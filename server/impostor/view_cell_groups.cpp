@@ -14,8 +14,11 @@ std::vector<ViewCellGroup> mergeViewCells(const ViewCellGrid& grid,
                                           const std::vector<uint32_t>& cells, uint32_t maxCells) {
   if (maxCells == 0) throwInputError("a view cell must merge at least 1 cell, got 0");
   const size_t count = grid.cellCount();
+  std::vector<uint32_t> sorted = cells;
+  std::sort(sorted.begin(), sorted.end());
+  sorted.erase(std::unique(sorted.begin(), sorted.end()), sorted.end());
   std::vector<uint8_t> given(count, 0);
-  for (uint32_t c : cells) {
+  for (uint32_t c : sorted) {
     if (c >= count)
       throwInputError("cell {} lies outside the grid of {} cells, cannot merge it", c, count);
     given[c] = 1;
@@ -30,7 +33,7 @@ std::vector<ViewCellGroup> mergeViewCells(const ViewCellGrid& grid,
   };
   // Per given cell: its street's axis (0: X, 2: Z).
   std::vector<uint8_t> axis(count, 0);
-  for (uint32_t c : cells) {
+  for (uint32_t c : sorted) {
     const glm::ivec3 p = grid.cellAt(c);
     axis[c] = lineLength(p, 2) > lineLength(p, 0) ? 2 : 0;
   }
@@ -40,9 +43,6 @@ std::vector<ViewCellGroup> mergeViewCells(const ViewCellGrid& grid,
     const size_t i = grid.linearIndex(p);
     return !taken[i] && axis[i] == a;
   };
-  std::vector<uint32_t> sorted = cells;
-  std::sort(sorted.begin(), sorted.end());
-  sorted.erase(std::unique(sorted.begin(), sorted.end()), sorted.end());
   std::vector<ViewCellGroup> groups;
   // Ascending linear index visits each line of one axis from its low end
   // (x varies fastest, then y, then z), so the first untaken cell met is
