@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 namespace vistream {
 
@@ -65,6 +66,19 @@ glm::vec3 PointGrid::point(const std::array<uint32_t, 3>& q) const {
   return centre + z * (normal + g.x * e1 + g.y * e2);
 }
 
+namespace {
+
+// v / |v|, computed on v scaled to its largest component; nothing when v is
+// zero or not finite.
+std::optional<glm::vec3> unitOf(const glm::vec3& v) {
+  const float largest = std::max({std::abs(v.x), std::abs(v.y), std::abs(v.z)});
+  if (!(largest > 0.0f) || !std::isfinite(largest)) return std::nullopt;
+  const glm::vec3 scaled = v / largest;
+  return scaled / glm::length(scaled);
+}
+
+}  // namespace
+
 std::optional<PointGrid> Impostor::pointGrid() const {
   return PointGrid::of(cell, box, plane, angleStep, logDepthStep);
 }
@@ -74,12 +88,17 @@ std::optional<PointGrid> PointGrid::of(const Box3f& cell, const Box3f& box,
                                        float logDepthStep) {
   PointGrid grid;
   grid.centre = cell.center();
-  const float nn = glm::length(plane.normal);
-  if (!(nn > 0.0f) || !std::isfinite(nn)) return std::nullopt;
-  grid.normal = plane.normal / nn;
-  const glm::vec3 u = plane.uAxis - glm::dot(plane.uAxis, grid.normal) * grid.normal;
-  const float un = glm::length(u);
-  if (!(un > 1e-6f * glm::length(plane.uAxis)) || !std::isfinite(un)) return std::nullopt;
+  // The frame must be orthonormal to float precision, or a point's
+  // coordinates would not give back the point: each axis is scaled to its
+  // largest component before it is normalised, so that tiny (subnormal)
+  // axes do not lose their length to underflow.
+  const std::optional<glm::vec3> n = unitOf(plane.normal);
+  const std::optional<glm::vec3> uScaled = unitOf(plane.uAxis);
+  if (!n || !uScaled) return std::nullopt;
+  grid.normal = *n;
+  const glm::vec3 u = *uScaled - glm::dot(*uScaled, grid.normal) * grid.normal;
+  const float un = glm::length(u);  // 0 to 1: the sine between the axis and the normal
+  if (!(un > 1e-6f)) return std::nullopt;
   grid.e1 = u / un;
   grid.e2 = glm::cross(grid.normal, grid.e1);
   glm::vec3 lo(std::numeric_limits<float>::max()), hi(-std::numeric_limits<float>::max());

@@ -21,6 +21,7 @@ constexpr uint8_t kVersion = 2;
 constexpr int kImpostorZstdLevel = 19;
 constexpr size_t kFloats = 33;
 constexpr size_t kSections = 4;
+constexpr float kNearSlacks = 4.0f;
 constexpr std::array<const char*, kSections> kSectionNames = {
     "the positions", "the single-colour flags", "the single colours", "the textures"};
 
@@ -237,7 +238,13 @@ bool decodeImpostor(std::span<const uint8_t> bytes, Impostor& out, std::string& 
   imp.points.resize(n);
   {
     PayloadReader p(sections[0]);
-    const Box3f grown(imp.box.lo - grid->slack, imp.box.hi + grid->slack);
+    // A grid point stands within the slack of its box; re-quantizing a
+    // decoded point can move it by float rounding a little past that, so a
+    // point within kNearSlacks slacks is pulled back to the slack and one
+    // farther out is refused.
+    const Box3f kept(imp.box.lo - grid->slack, imp.box.hi + grid->slack);
+    const Box3f near(imp.box.lo - kNearSlacks * grid->slack,
+                     imp.box.hi + kNearSlacks * grid->slack);
     uint64_t code = 0;
     for (size_t k = 0; k < n; ++k) {
       const auto delta = p.varint("a position", (uint64_t(1) << 63) - 1 - code);
@@ -247,11 +254,11 @@ bool decodeImpostor(std::span<const uint8_t> bytes, Impostor& out, std::string& 
                                          uint32_t(compact(code >> 2))};
       for (size_t a = 0; a < 3; ++a)
         if (q[a] > grid->steps[a]) return fail("a position outside the grid");
-      imp.points[k] = grid->point(q);
-      const glm::vec3& p3 = imp.points[k];
+      const glm::vec3 p3 = grid->point(q);
       if (!std::isfinite(p3.x) || !std::isfinite(p3.y) || !std::isfinite(p3.z) ||
-          !grown.contains(p3))
+          !near.contains(p3))
         return fail("a position outside the box");
+      imp.points[k] = glm::clamp(p3, kept.lo, kept.hi);
     }
     if (p.remaining() != 0) return fail(fmt::format("{} bytes after the positions", p.remaining()));
   }

@@ -7,9 +7,12 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <map>
+#include <optional>
 #include <random>
 
 #include "protocol/geometry/byte_coding.h"
@@ -160,6 +163,73 @@ TEST(ImpostorCodec, IsSmallerThanTheImpostorInMemory) {
     ASSERT_TRUE(decodeImpostor(encodeImpostor(edge), out, error)) << error;
     EXPECT_EQ(out.size(), edge.size());
   }
+}
+
+TEST(ImpostorCodec,
+     KeepsItsGridOrthonormalOnASubnormalSamplingPlaneSoWhatDecodesEncodesBackToItself) {
+  // A plane whose horizontal axis is subnormal (its squared length
+  // underflows) and whose normal leans a hair off -Z: the bytes a fuzzer found.
+  Impostor imp = sampleImpostor(300);
+  imp.plane.uAxis = {-7.94e-23f, 2.8e-45f, 0.0f};
+  imp.plane.normal = {-1.08e-19f, 4.88e-4f, -1.0f};
+  const std::optional<PointGrid> grid = imp.pointGrid();
+  ASSERT_TRUE(grid.has_value());
+  EXPECT_NEAR(glm::length(grid->e1), 1.0f, 1e-6f);
+  EXPECT_NEAR(glm::length(grid->e2), 1.0f, 1e-6f);
+  EXPECT_NEAR(glm::length(grid->normal), 1.0f, 1e-6f);
+  EXPECT_NEAR(glm::dot(grid->e1, grid->normal), 0.0f, 1e-6f);
+  EXPECT_NEAR(glm::dot(grid->e2, grid->normal), 0.0f, 1e-6f);
+  EXPECT_NEAR(glm::dot(grid->e1, grid->e2), 0.0f, 1e-6f);
+  // Every grid point's coordinates are its own.
+  std::mt19937 rng(11);
+  for (int i = 0; i < 1000; ++i) {
+    std::array<uint32_t, 3> q{};
+    for (size_t a = 0; a < 3; ++a) q[a] = uint32_t(rng() % (grid->steps[a] + 1));
+    const std::array<uint32_t, 3> back = grid->coordinates(grid->point(q));
+    for (size_t a = 0; a < 3; ++a)
+      EXPECT_LE(std::abs(int64_t(back[a]) - int64_t(q[a])), 1) << "axis " << a << " of " << q[a];
+  }
+  // Decoded once, the points lie on the grid: encoded and decoded again,
+  // they come back unchanged.
+  Impostor once, twice;
+  std::string error;
+  ASSERT_TRUE(decodeImpostor(encodeImpostor(imp), once, error)) << error;
+  ASSERT_TRUE(decodeImpostor(encodeImpostor(once), twice, error)) << error;
+  ASSERT_EQ(twice.size(), imp.size());
+  const std::vector<size_t> first = matchById(imp, once), second = matchById(imp, twice);
+  for (size_t k = 0; k < imp.size(); ++k) {
+    EXPECT_LE(glm::length(once.points[first[k]] - imp.points[k]), grid->slack) << k;
+    EXPECT_LE(glm::length(twice.points[second[k]] - once.points[first[k]]), grid->slack) << k;
+  }
+}
+
+TEST(ImpostorCodec, PullsAPointJustPastItsBoxBackWithinTheSlackAndRefusesOneFarOutside) {
+  // The sample's box spans x -75..75; its corners' directions from the cell
+  // span tangents up to 75/168, so points at x = 75 + a few slacks, 220 m
+  // away (tangent 0.34), still lie inside the grid.
+  Impostor imp = sampleImpostor(3);
+  const std::optional<PointGrid> grid = imp.pointGrid();
+  ASSERT_TRUE(grid.has_value());
+  const float slack = grid->slack;
+  ASSERT_GT(slack, 0.0f);
+  ASSERT_LT(slack, 0.1f);
+  imp.points[1] = {75.0f + 3.0f * slack, 20.0f, -220.0f};  // past the slack, within four
+  Impostor out, again;
+  std::string error;
+  ASSERT_TRUE(decodeImpostor(encodeImpostor(imp), out, error)) << error;
+  const std::vector<size_t> match = matchById(imp, out);
+  // Pulled back onto the slack's face; the other coordinates within a grid step.
+  EXPECT_FLOAT_EQ(out.points[match[1]].x, 75.0f + slack);
+  EXPECT_NEAR(out.points[match[1]].y, 20.0f, slack);
+  EXPECT_NEAR(out.points[match[1]].z, -220.0f, slack);
+  // Encoded again, it decodes again.
+  ASSERT_TRUE(decodeImpostor(encodeImpostor(out), again, error)) << error;
+  EXPECT_EQ(again.size(), imp.size());
+  // Ten slacks out is no rounding: refused.
+  imp.points[1].x = 75.0f + 10.0f * slack;
+  error.clear();
+  EXPECT_FALSE(decodeImpostor(encodeImpostor(imp), out, error));
+  EXPECT_NE(error.find("outside the box"), std::string::npos) << error;
 }
 
 TEST(ImpostorCodec, RefusesCutAlteredAndHostileBytesNamingWhatIsWrong) {
