@@ -23,9 +23,10 @@
 // way: points within half a grid step per axis, texels within half a colour
 // step. A decoded point lies within the grid's slack of the box (one that
 // float rounding put a little past it is pulled back; one beyond four slacks
-// is refused), so what decodes encodes again and decodes. Points come back in Morton order, not the
-// bake's: an impostor is a set. Version 1 (one zstd frame, 16 bits per axis, no steps) is no longer
-// read: databases are rebuilt by a bake.
+// is refused), so what decodes encodes again and decodes. Points come back
+// in Morton order, not the bake's: an impostor is a set. Version 1 (one zstd
+// frame, 16 bits per axis, no steps) is no longer read: databases are
+// rebuilt by a bake.
 //
 // Decoding is safe on untrusted bytes: sizes are bounded before anything is
 // allocated (kMaxImpostorPoints, kMaxImpostorBodyBytes), every read is
