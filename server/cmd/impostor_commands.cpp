@@ -28,7 +28,7 @@ struct ImpostorCommand::Arguments {
   std::string scene, cell, texture = "8x2", screen = "640x480", db, out, cells, shard;
   unsigned threads = 0;
   uint32_t mergeCells = ImpostorBakeOptions{}.mergeCells;
-  bool json = false, noRemoval = false, keepHidden = false, mpi = false;
+  bool json = false, noRemoval = false, noThinning = false, keepHidden = false, mpi = false;
   GroundChoice ground;
   std::filesystem::path lightingCache;
   ImpostorPlacementOptions placement;
@@ -92,6 +92,9 @@ ImpostorCommand::ImpostorCommand(CLI::App& app, SceneLimits& limits)
       ->capture_default_str()
       ->check(between(0.05, 8.0));
   sub_->add_flag("--no-removal", a.noRemoval, "keep points another camera samples better");
+  sub_->add_flag("--no-thinning", a.noThinning,
+                 "keep every point of a camera that samples its surface sqrt(2) times finer than "
+                 "sufficient (point removal's checkerboard thinning)");
   sub_->add_flag("--keep-hidden", a.keepHidden, "keep points that no viewpoint in the cell sees");
   sub_->add_option("--visibility-views", a.bake.visibilityViews,
                    "viewpoints tried per point before it counts as hidden")
@@ -172,6 +175,7 @@ std::string ImpostorCommand::settingsJson() const {
               {"merge_cells", a.mergeCells},
               {"resolution", o.resolutionFactor},
               {"remove_points", o.removePoints},
+              {"thin_points", o.thinOversampled},
               {"cull_hidden", o.cullHidden},
               {"visibility_views", o.visibilityViews},
               {"max_layers", o.maxLayers},
@@ -289,6 +293,7 @@ int ImpostorCommand::run() {
   if (a.bake.minRays > a.bake.maxRays)
     throwInputError("--min-rays {} exceeds --max-rays {}", a.bake.minRays, a.bake.maxRays);
   a.bake.removePoints = !a.noRemoval;
+  a.bake.thinOversampled = !a.noThinning;
   a.bake.cullHidden = !a.keepHidden;
   std::optional<tbb::global_control> threadLimit;
   if (a.threads > 0) threadLimit.emplace(tbb::global_control::max_allowed_parallelism, a.threads);

@@ -23,6 +23,13 @@ namespace {
 // grid step's diagonal and a margin for the grid's bending on a surface
 // seen in perspective.
 constexpr float kCoverReach = 0.75f;
+// Thinning a camera's own samples on a surface: it thins where its spacing
+// times kThinFactor (sqrt 2 and a margin for the spacing's change across a
+// surface seen in perspective) is still sufficient, and a neighbour in the
+// LDI counts when it lies within kThinReach of its spacing (a step, and the
+// same margin).
+constexpr float kThinFactor = 1.4142136f * 1.05f;
+constexpr float kThinReach = 1.25f;
 
 // One LDI hit: a candidate point.
 struct Sample {
@@ -427,20 +434,25 @@ std::optional<Impostor> bakeImpostorWithin(const ImpostorScene& scene, const Box
     // What becomes of sample i: dropped when another camera samples its
     // surface sufficiently and better and has a sample (among `among`)
     // covering it.
-    auto removal = [&](size_t i, const std::vector<uint8_t>* among) -> uint8_t {
-      const Sample& s = samples[i];
-      const glm::vec3 normal = unitNormal(scene.triangles, s.triangle);
-      // The largest foreshortened angle per metre of spacing any viewer
-      // sees: |n . w_v| / |p - v| over the cell's corners and centre.
+    // The largest sample spacing on the surface at p (unit normal `normal`)
+    // that every viewer sees within sampleAngle: sampleAngle over the
+    // largest foreshortened angle per metre of spacing any viewer sees,
+    // |n . w_v| / |p - v|, over the cell's corners and centre.
+    auto enoughSpacing = [&](const glm::vec3& p, const glm::vec3& normal) {
       float worst = 0.0f;
       for (int c = 0; c < 9; ++c) {
         const glm::vec3 v = c == 8 ? cell.center() : cell.corner(c);
-        const glm::vec3 w = s.position - v;
+        const glm::vec3 w = p - v;
         const float d2 = glm::dot(w, w);
         worst = std::max(worst, std::abs(glm::dot(normal, w)) / std::max(d2, 1e-12f));
       }
-      // Spacing s_j is sufficient when s_j * worst <= sampleAngle.
-      const float enough = worst > 0.0f ? sampleAngle / worst : 1e30f;
+      return worst > 0.0f ? sampleAngle / worst : 1e30f;
+    };
+    auto removal = [&](size_t i, const std::vector<uint8_t>* among) -> uint8_t {
+      const Sample& s = samples[i];
+      const glm::vec3 normal = unitNormal(scene.triangles, s.triangle);
+      // Spacing s_j is sufficient when s_j <= enough.
+      const float enough = enoughSpacing(s.position, normal);
       std::array<float, 3> spacing;
       for (size_t j = 0; j < 3; ++j)
         spacing[j] = sampleSpacing(cameras[j], axis, s.position, normal);
@@ -476,6 +488,53 @@ std::optional<Impostor> bakeImpostorWithin(const ImpostorScene& scene, const Box
         if (keep[i] == kDropped && removal(i, &keep) != kDropped) settled[i] = kKeptUnsampled;
     });
     keep.swap(settled);
+    // Thinning: where a sample's own camera samples its surface at least
+    // sqrt(2) times finer than sufficient, that camera's samples on the
+    // even squares of its LDI's checkerboard are enough there: they form a
+    // lattice of spacing sqrt(2) s_j, within the bound removal keeps, whose
+    // holes (the odd squares) lie within s_j of four of them, as a square
+    // lattice of that spacing would. A sample on an odd square goes when
+    // each of its four edge neighbours holds a kept sample of its surface
+    // (those lie on even squares, which thinning never drops), so nothing
+    // is thinned at a surface's edge or beside an occluder.
+    if (options.thinOversampled) {
+      std::vector<uint8_t> thin(samples.size(), 0);
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, samples.size()), [&](const auto& range) {
+        for (size_t i = range.begin(); i != range.end(); ++i) {
+          if (keep[i] == kDropped) continue;
+          const Sample& s = samples[i];
+          const glm::vec2 q = pixelOf(s.camera, s.position);
+          const int64_t x = int64_t(std::floor(q.x)), y = int64_t(std::floor(q.y));
+          if (((x + y) & 1) == 0) continue;
+          const glm::vec3 normal = unitNormal(scene.triangles, s.triangle);
+          const float ownSpacing = sampleSpacing(cameras[s.camera], axis, s.position, normal);
+          if (!(ownSpacing * kThinFactor <= enoughSpacing(s.position, normal))) continue;
+          bool surrounded = true;
+          for (const glm::ivec2 step :
+               {glm::ivec2(1, 0), glm::ivec2(-1, 0), glm::ivec2(0, 1), glm::ivec2(0, -1)}) {
+            const int64_t at = linearPixel(s.camera, x + step.x, y + step.y);
+            bool found = false;
+            for (uint32_t k = at < 0 ? 0 : first[s.camera][size_t(at)];
+                 at >= 0 && k < first[s.camera][size_t(at) + 1] && !found; ++k) {
+              const uint32_t o = index[s.camera][k];
+              found = keep[o] != kDropped &&
+                      glm::distance(samples[o].position, s.position) <= kThinReach * ownSpacing &&
+                      glm::dot(unitNormal(scene.triangles, samples[o].triangle), normal) >= 0.9f;
+            }
+            if (!found) {
+              surrounded = false;
+              break;
+            }
+          }
+          thin[i] = surrounded;
+        }
+      });
+      for (size_t i = 0; i < samples.size(); ++i)
+        if (thin[i]) {
+          keep[i] = kDropped;
+          ++stats.thinned;
+        }
+    }
     size_t kept = 0;
     for (size_t i = 0; i < samples.size(); ++i) {
       stats.keptUnsampled += keep[i] == kKeptUnsampled;

@@ -54,7 +54,15 @@
 // (ImpostorStats::keptUnsampled counts them). A second pass checks each
 // dropped point against the points that stay, since the one it was dropped
 // for may itself have gone for a third camera's, and keeps it if none covers
-// it any more.
+// it any more. Beyond the thesis, thinning (thinOversampled): where the
+// camera that kept a point samples its surface at least sqrt(2) times finer
+// than sufficient, its samples on the even squares of its LDI's checkerboard
+// form a lattice of spacing sqrt(2) s_j, still sufficient, and a point on an
+// odd square goes when all four of its edge neighbours in the LDI hold kept
+// points of its surface (none is thinned at an edge). Most points sit just
+// under the sufficient spacing (the LDI is sized for the worst viewer), so
+// this thins a few percent: surfaces a camera sees more squarely than any
+// viewer does.
 //
 // Hidden points (optional, on by default). The LDIs keep every layer, and
 // most of those layers (the backs and insides of buildings, rows behind
@@ -124,6 +132,9 @@ struct ImpostorOptions {
   ScreenSpec screen;
   float resolutionFactor = 1.0f;  // LDI pixels per heuristic pixel, per axis
   bool removePoints = true;
+  // With removePoints: thin a camera's samples to its LDI's even squares
+  // where it samples a surface sqrt(2) times finer than sufficient.
+  bool thinOversampled = true;
   bool cullHidden = true;         // drop points no viewpoint in the cell sees
   uint32_t visibilityViews = 64;  // viewpoints tried per point before it counts as hidden
   uint32_t maxLayers = 8;
@@ -160,6 +171,9 @@ struct ImpostorStats {
   // better and sufficiently: it has no sample beside them (its rays met an
   // occluder there or stopped at maxLayers).
   uint64_t keptUnsampled = 0;
+  // Dropped by thinning (of `removed`): their camera's neighbours on the
+  // LDI's even squares sample the surface sufficiently.
+  uint64_t thinned = 0;
   uint64_t hidden = 0;  // dropped as hidden from the whole cell
   uint64_t points = 0;
   uint64_t singleColour = 0;    // points keeping one colour
@@ -195,6 +209,7 @@ struct ImpostorStats {
     f(StatField{"removed", "removed", ""}, removed);
     f(StatField{"kept_unsampled", "kept: the better camera has no sample there", ""},
       keptUnsampled);
+    f(StatField{"thinned", "of those removed, thinned: their camera oversamples", ""}, thinned);
     f(StatField{"hidden", "hidden from the cell", ""}, hidden);
     f(StatField{"points", "points", ""}, points);
     f(StatField{"single_colour", "single-colour points", ""}, singleColour);

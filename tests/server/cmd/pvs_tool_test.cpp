@@ -223,6 +223,15 @@ TEST(PvsTool, ImpostorsPrintTheContractedJsonForEachImpostorOfTheCell) {
   ASSERT_EQ(fj["impostors"].size(), 1u);
   EXPECT_EQ(fj["impostors"][0]["points"], imp["points"]);
   EXPECT_GT(fj["impostors"][0]["bytes"].get<uint64_t>(), imp["bytes"].get<uint64_t>());
+  // Without thinning nothing is thinned, and the points thinned come back.
+  const ToolRun unthinned =
+      runPvs(common + "--json --min-triangles 20 --max-bytes-ratio 0 --no-thinning");
+  ASSERT_EQ(unthinned.status, 0) << unthinned.err;
+  const auto uj = nlohmann::json::parse(unthinned.out);
+  ASSERT_EQ(uj["impostors"].size(), 1u);
+  EXPECT_EQ(uj["impostors"][0]["stats"]["thinned"], 0);
+  EXPECT_EQ(uj["impostors"][0]["points"].get<uint64_t>(),
+            imp["points"].get<uint64_t>() + imp["stats"]["thinned"].get<uint64_t>());
   const ToolRun badStep = runPvs(common + "--colour-step 3");
   EXPECT_NE(badStep.status, 0);
   EXPECT_NE(badStep.err.find("--colour-step"), std::string::npos) << badStep.err;
