@@ -406,25 +406,31 @@ std::optional<Impostor> bakeImpostorWithin(const ImpostorScene& scene, const Box
       for (size_t i = 0; i < samples.size(); ++i)
         if (at[i] >= 0) index[cam][next[size_t(at[i])]++] = uint32_t(i);
     }
-    // Whether camera `cam` has a sample within `reach` of p on a surface
-    // facing like `normal`, in the 3x3 LDI pixels round p's projection.
-    // `among` (when given) limits the samples to those it marks non-zero.
+    // Whether camera `cam`'s LDI pixel (x, y) holds a sample within `reach`
+    // of p on a surface facing like `normal`. `among` (when given) limits
+    // the samples to those it marks non-zero.
+    auto sampleInPixel = [&](size_t cam, int64_t x, int64_t y, const glm::vec3& p,
+                             const glm::vec3& normal, float reach,
+                             const std::vector<uint8_t>* among) {
+      const int64_t at = linearPixel(cam, x, y);
+      if (at < 0) return false;
+      for (uint32_t k = first[cam][size_t(at)]; k < first[cam][size_t(at) + 1]; ++k) {
+        const uint32_t o = index[cam][k];
+        if (among && !(*among)[o]) continue;
+        if (glm::distance(samples[o].position, p) <= reach &&
+            glm::dot(unitNormal(scene.triangles, samples[o].triangle), normal) >= 0.9f)
+          return true;
+      }
+      return false;
+    };
+    // The same in the 3x3 LDI pixels round p's projection.
     auto nearbySample = [&](size_t cam, const glm::vec3& p, const glm::vec3& normal, float reach,
                             const std::vector<uint8_t>* among) {
       const glm::vec2 q = pixelOf(cam, p);
       const int64_t x = int64_t(std::floor(q.x)), y = int64_t(std::floor(q.y));
       for (int64_t dy = -1; dy <= 1; ++dy)
-        for (int64_t dx = -1; dx <= 1; ++dx) {
-          const int64_t at = linearPixel(cam, x + dx, y + dy);
-          if (at < 0) continue;
-          for (uint32_t k = first[cam][size_t(at)]; k < first[cam][size_t(at) + 1]; ++k) {
-            const uint32_t o = index[cam][k];
-            if (among && !(*among)[o]) continue;
-            if (glm::distance(samples[o].position, p) <= reach &&
-                glm::dot(unitNormal(scene.triangles, samples[o].triangle), normal) >= 0.9f)
-              return true;
-          }
-        }
+        for (int64_t dx = -1; dx <= 1; ++dx)
+          if (sampleInPixel(cam, x + dx, y + dy, p, normal, reach, among)) return true;
       return false;
     };
     // Per sample (the values of `keep` below): dropped, kept, or kept though
@@ -509,24 +515,12 @@ std::optional<Impostor> bakeImpostorWithin(const ImpostorScene& scene, const Box
           const glm::vec3 normal = unitNormal(scene.triangles, s.triangle);
           const float ownSpacing = sampleSpacing(cameras[s.camera], axis, s.position, normal);
           if (!(ownSpacing * kThinFactor <= enoughSpacing(s.position, normal))) continue;
-          bool surrounded = true;
-          for (const glm::ivec2 step :
-               {glm::ivec2(1, 0), glm::ivec2(-1, 0), glm::ivec2(0, 1), glm::ivec2(0, -1)}) {
-            const int64_t at = linearPixel(s.camera, x + step.x, y + step.y);
-            bool found = false;
-            for (uint32_t k = at < 0 ? 0 : first[s.camera][size_t(at)];
-                 at >= 0 && k < first[s.camera][size_t(at) + 1] && !found; ++k) {
-              const uint32_t o = index[s.camera][k];
-              found = keep[o] != kDropped &&
-                      glm::distance(samples[o].position, s.position) <= kThinReach * ownSpacing &&
-                      glm::dot(unitNormal(scene.triangles, samples[o].triangle), normal) >= 0.9f;
-            }
-            if (!found) {
-              surrounded = false;
-              break;
-            }
-          }
-          thin[i] = surrounded;
+          // keep marks dropped samples 0 (kDropped).
+          const float reach = kThinReach * ownSpacing;
+          thin[i] = sampleInPixel(s.camera, x + 1, y, s.position, normal, reach, &keep) &&
+                    sampleInPixel(s.camera, x - 1, y, s.position, normal, reach, &keep) &&
+                    sampleInPixel(s.camera, x, y + 1, s.position, normal, reach, &keep) &&
+                    sampleInPixel(s.camera, x, y - 1, s.position, normal, reach, &keep);
         }
       });
       for (size_t i = 0; i < samples.size(); ++i)
