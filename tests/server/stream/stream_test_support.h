@@ -83,8 +83,13 @@ class TestClient {
       socket_.set_option(boost::asio::socket_base::receive_buffer_size(receiveBuffer));
     socket_.connect({boost::asio::ip::make_address("127.0.0.1"), port});
   }
-  void sendRaw(const std::vector<uint8_t>& bytes) {
-    boost::asio::write(socket_, boost::asio::buffer(bytes));
+  // Writes the bytes: true if they were written, false if the server had
+  // already closed the connection (a test that floods a server which then
+  // refuses it sees a broken pipe, not an exception).
+  bool sendRaw(const std::vector<uint8_t>& bytes) {
+    boost::system::error_code ec;
+    boost::asio::write(socket_, boost::asio::buffer(bytes), ec);
+    return !ec;
   }
   void hello(const std::string& token = "", uint32_t version = wire::kProtocolVersion,
              float radius = 0.0f, uint64_t budget = 0, bool avatars = true) {
@@ -104,12 +109,13 @@ class TestClient {
     hello(token, version, radius, budget);
     return nextOf(wire::Payload::Welcome).has_value();
   }
-  void pose(const glm::dvec3& p, float yaw = 0.0f, glm::vec3 velocity = glm::vec3(0.0f)) {
+  // Sends a Pose: true if it was written (see sendRaw).
+  bool pose(const glm::dvec3& p, float yaw = 0.0f, glm::vec3 velocity = glm::vec3(0.0f)) {
     wire::PoseT m;
     m.position = std::make_unique<wire::Vec3d>(wire::toWire(p));
     m.yaw_deg = yaw;
     m.velocity = std::make_unique<wire::Vec3f>(wire::toWire(velocity));
-    sendRaw(wire::encodeMessage(std::move(m)));
+    return sendRaw(wire::encodeMessage(std::move(m)));
   }
   // The next frame within the timeout, or nothing (timeout or closed).
   std::optional<std::vector<uint8_t>> next(double timeoutS = 5.0) {
