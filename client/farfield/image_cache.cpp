@@ -231,7 +231,8 @@ struct Cone {
 
 }  // namespace
 
-size_t PanoramicCache::invalidate(std::span<const Box3f> added, std::span<const uint8_t> removed) {
+size_t PanoramicCache::invalidate(std::span<const Box3f> added, std::span<const uint8_t> removed,
+                                  bool forgetImpostors) {
   // Angular half-size of a texel: half an azimuth step plus half a slope
   // step (a slope step spans at most as much elevation angle), with margin.
   const float azStep = kTwoPi / float(columns_), slopeStep = 2.0f * maxSlope_ / float(rows_);
@@ -254,7 +255,8 @@ size_t PanoramicCache::invalidate(std::span<const Box3f> added, std::span<const 
           const uint32_t id = texelRecord_[t];
           if (id == 0) continue;
           const uint32_t hit = hitTriangle_[t];
-          if (hit != kNoTexelHit && hit < removed.size() && removed[hit]) {
+          if ((hit != kNoTexelHit && hit < removed.size() && removed[hit]) ||
+              (forgetImpostors && hit == kImpostorTexelHit)) {
             forget(t);
             ++forgotten;
             continue;

@@ -89,6 +89,10 @@ class PanoramicCache {
   // hitDistance (metres from the eye to the hit; infinity for a miss) and
   // the triangle hit (kNoTexelHit for none) decide what invalidate() keeps.
   static constexpr uint32_t kNoTexelHit = 0xffffffffu;
+  // The texel shows an impostor's point (the far field composited with the
+  // impostors, thesis chapter 5), stored with the point's distance: valid
+  // while the same impostors are drawn (invalidate(..., forgetImpostors)).
+  static constexpr uint32_t kImpostorTexelHit = 0xfffffffeu;
   void store(int64_t texel, glm::u8vec3 colour,
              float hitDistance = std::numeric_limits<float>::infinity(),
              uint32_t triangle = kNoTexelHit);
@@ -99,12 +103,19 @@ class PanoramicCache {
   // and texels whose ray may meet one of the `added` boxes before its hit
   // (conservatively: a cone over the texel's directions from a ball of radius
   // recordSpacing around the record's position). `added` must hold every
-  // added triangle; smaller boxes keep more texels. Returns the texels forgotten.
-  size_t invalidate(std::span<const Box3f> added, std::span<const uint8_t> removed);
+  // added triangle (or impostor); smaller boxes keep more texels. With
+  // `forgetImpostors`, every texel showing an impostor goes too (the
+  // impostors drawn changed). Returns the texels forgotten.
+  size_t invalidate(std::span<const Box3f> added, std::span<const uint8_t> removed,
+                    bool forgetImpostors = false);
   // Whether a texel holds a traced colour (not forgotten, never traced).
   bool traced(int64_t texel) const { return texelRecord_[size_t(texel)] != 0; }
   // Metres from the eye to the texel's stored hit (infinity for a miss).
   float hitDistance(int64_t texel) const { return hitDistance_[size_t(texel)]; }
+  // Whether the texel was stored as an impostor's point (kImpostorTexelHit).
+  bool showsImpostor(int64_t texel) const {
+    return hitTriangle_[size_t(texel)] == kImpostorTexelHit;
+  }
   // The unit direction through a texel's centre.
   glm::vec3 texelDirection(int64_t texel) const;
 

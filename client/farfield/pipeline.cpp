@@ -47,7 +47,10 @@ nlohmann::json FrameReport::toJson() const {
       {"stages",
        {{"far_field", {{"ran", farFieldRan}, {"why", farFieldWhy}}},
         {"horizon_tracing", {{"ran", horizonRan}, {"why", horizonWhy}}},
-        {"image_cache", {{"ran", cacheRan}, {"why", cacheWhy}}},
+        {"image_cache",
+         {{"ran", cacheRan},
+          {"why", cacheWhy},
+          {"impostor_texels_forgotten", impostorTexelsForgotten}}},
         {"impostors",
          {{"ran", impostorsRan},
           {"why", impostorsWhy},
@@ -149,6 +152,7 @@ FrameRenderer::~FrameRenderer() = default;
 
 void FrameRenderer::reset() {
   cache_.reset();
+  cachedImpostors_.reset();
   havePrevious_ = false;
 }
 
@@ -401,7 +405,9 @@ struct FrameRun {
     if (!r.cache_ || r.cachePixelAngle_ != camera.pixelAngle()) {
       r.cachePixelAngle_ = camera.pixelAngle();
       r.cache_ = std::make_unique<PanoramicCache>(r.cachePixelAngle_, options.cacheOptions);
+      r.cachedImpostors_.reset();
     }
+    syncCacheImpostors();
     texels.resize(candidates.size());
     for (size_t i = 0; i < candidates.size(); ++i) texels[i] = r.cache_->texelOf(dirs[i]);
     const float maxStale = options.maxStalePixels * camera.pixelAngle() * d;
@@ -415,9 +421,30 @@ struct FrameRun {
     rep.ms.cache = clock.ms();
   }
 
+  // The impostor set this frame splats in software (null: none): the
+  // conditions of splatImpostors() that do not depend on the pixels.
+  std::shared_ptr<const ImpostorSet> softwareImpostors() const {
+    const auto& set = r.impostors_;
+    if (gpu || !isPipeline(mode) || mode == RenderMode::ImpostorOff || !set ||
+        !set->cell.contains(camera.eye) || set->impostors.empty())
+      return nullptr;
+    return set;
+  }
+  // The cache holds the far field composited with the impostors drawn: when
+  // those change, it forgets the texels that showed the old ones and those
+  // the new ones may hide.
+  void syncCacheImpostors() {
+    std::shared_ptr<const ImpostorSet> now = softwareImpostors();
+    if (now == r.cachedImpostors_) return;
+    std::vector<Box3f> boxes;
+    if (now)
+      for (const auto& impostor : now->impostors) boxes.push_back(impostor->box);
+    rep.impostorTexelsForgotten = r.cache_->invalidate(boxes, {}, true);
+    r.cachedImpostors_ = std::move(now);
+  }
+
   // 7. Ray casting (after the impostors: a ray need not look beyond the
   // point a pixel already shows).
-  std::vector<uint8_t> shortened;  // per ray: stopped at an impostor's point
   void castFarRays() {
     Stopwatch clock;
     const bool splatted = impostorsOn && !gpu;
@@ -431,7 +458,6 @@ struct FrameRun {
         const float z = splatted ? r.splatter_.score()[candidates[i]] : ImpostorSplatter::kEmpty;
         if (z < ImpostorSplatter::kEmpty) tfar = std::max(camera.zNear, (z - 0.01f) / 1.001f);
         rays.push_back(Ray{camera.eye, dirs[i], camera.zNear, tfar});
-        shortened.push_back(z < ImpostorSplatter::kEmpty);
         rayOf.push_back(uint32_t(i));
       }
     castRays(*r.rays_, rays, hits);
@@ -475,10 +501,17 @@ struct FrameRun {
       rep.impostorsWhy = fmt::format("{} impostor{} of the viewer's cell ({}, {}, {}), by OpenGL",
                                      set->impostors.size(), set->impostors.size() == 1 ? "" : "s",
                                      set->index.x, set->index.y, set->index.z);
+    } else if (!anyToSplat()) {
+      rep.impostorsWhy =
+          "every far-field pixel reused from the image cache, which holds the impostors drawn";
     } else {
-      // Only pixels compose may give an impostor are drawn (and coloured).
+      // Only pixels compose may give an impostor are drawn (and coloured):
+      // those traced this frame, sky and background; the cache's texels hold
+      // the impostors already.
       r.splatMask_.assign(pixels, 0);
-      for (const std::vector<uint32_t>* list : {&candidates, &skyPixels, &backgroundPixels})
+      for (size_t i = 0; i < candidates.size(); ++i)
+        if (trace[i]) r.splatMask_[candidates[i]] = 1;
+      for (const std::vector<uint32_t>* list : {&skyPixels, &backgroundPixels})
         for (const uint32_t p : *list) r.splatMask_[p] = 1;
       r.splatter_.begin(camera, &r.splatMask_, r.options_.splat);
       if (r.impostorImage_.width != W || r.impostorImage_.height != H)
@@ -499,6 +532,10 @@ struct FrameRun {
     }
     rep.ms.impostors = clock.ms();
   }
+  bool anyToSplat() const {
+    return !skyPixels.empty() || !backgroundPixels.empty() ||
+           std::find(trace.begin(), trace.end(), uint8_t(1)) != trace.end();
+  }
   // Whether candidate i shows the impostor rather than the far field's hit
   // at view depth `farDepth` (infinity: a miss).
   bool impostorWins(size_t i, float farDepth) const {
@@ -516,8 +553,11 @@ struct FrameRun {
     return z < ImpostorSplatter::kEmpty && z <= impostorDepthLimit(farDepth);
   }
   void takeImpostor(size_t i) { takeImpostorPixel(candidates[i]); }
+  glm::u8vec3 impostorColour(size_t p) const {
+    return r.impostorImage_.at(int(p % size_t(W)), int(p / size_t(W)));
+  }
   void takeImpostorPixel(size_t p) {
-    setPixel(p, r.impostorImage_.at(int(p % size_t(W)), int(p / size_t(W))));
+    setPixel(p, impostorColour(p));
     ++rep.pixels.impostor;
   }
 
@@ -531,15 +571,25 @@ struct FrameRun {
       const glm::u8vec3 c =
           h.valid() ? r.geometry_.colourAt(h.triangle, h.u, h.v, h.t * glm::length(dirs[i]))
                     : r.geometry_.background(camera.eye, dirs[i]);
-      // A shortened ray that missed does not know the far field's colour:
-      // its texel stays due and is traced again.
-      if (useCache && texels[i] >= 0 && !(shortened[k] && !h.valid()))
-        r.cache_->store(texels[i], c,
-                        hits[k].valid() ? hits[k].t * glm::length(dirs[i])
-                                        : std::numeric_limits<float>::infinity(),
-                        hits[k].valid() ? hits[k].triangle : PanoramicCache::kNoTexelHit);
       // dirs[i] has unit view depth: the hit's t is its view depth.
-      if (impostorWins(i, h.valid() ? h.t : std::numeric_limits<float>::infinity())) {
+      const bool impostor =
+          impostorWins(i, h.valid() ? h.t : std::numeric_limits<float>::infinity());
+      // The cache keeps what the pixel shows: the impostor's point (at its
+      // score, a depth at most 2% beyond the point's: invalidate() then
+      // forgets a little more), or the far field's hit. A shortened ray
+      // that missed lost to its point (impostorCovers), so every ray stores.
+      if (useCache && texels[i] >= 0) {
+        if (impostor)
+          r.cache_->store(texels[i], impostorColour(candidates[i]),
+                          r.splatter_.score()[candidates[i]] * glm::length(dirs[i]),
+                          PanoramicCache::kImpostorTexelHit);
+        else
+          r.cache_->store(
+              texels[i], c,
+              h.valid() ? h.t * glm::length(dirs[i]) : std::numeric_limits<float>::infinity(),
+              h.valid() ? h.triangle : PanoramicCache::kNoTexelHit);
+      }
+      if (impostor) {
         takeImpostor(i);
         continue;
       }
@@ -549,11 +599,13 @@ struct FrameRun {
     if (useCache)
       for (size_t i = 0; i < candidates.size(); ++i)
         if (!trace[i]) {
+          // Software frames splat no cached pixel (the texel holds the
+          // composite); OpenGL frames need the depth limit of every one.
           if (impostorWins(i, r.cache_->hitDistance(texels[i]) / glm::length(dirs[i]))) {
             takeImpostor(i);
             continue;
           }
-          ++rep.pixels.cache;
+          r.cache_->showsImpostor(texels[i]) ? ++rep.pixels.impostor : ++rep.pixels.cache;
           setPixel(candidates[i], r.cache_->colour(texels[i]));
         }
     // Above the horizon of the geometry held there is none: an impostor's

@@ -21,13 +21,24 @@
 //
 // Impostors (setImpostors): the impostors of the view cell holding the
 // viewer, drawn by the software splatter (client/render/impostor_splat.h)
-// over the far-field pixels. A far-field pixel takes the impostor's colour
-// when an impostor point covers it and the far field's own first hit there
-// (ray cast this frame, or the cache's) is not nearer: geometry the client
-// holds beyond d that no impostor replaces (a lighter group, a nearer band)
-// still hides the impostor behind it. The far field's rays therefore still
-// run; what impostors add is the far geometry the client does not hold
-// (replaced faces are not streamed), prefiltered.
+// over the far-field pixels ray cast this frame. Such a pixel takes the
+// impostor's colour when an impostor point covers it and the ray's first
+// hit is not nearer: geometry the client holds beyond d that no impostor
+// replaces (a lighter group, a nearer band) still hides the impostor behind
+// it. The far field's rays therefore still run (stopping at the point the
+// pixel already shows); what impostors add is the far geometry the client
+// does not hold (replaced faces are not streamed), prefiltered.
+//
+// The image cache holds the far field composited with the impostors: a
+// texel where the impostor won keeps its colour and the point's distance
+// (PanoramicCache::kImpostorTexelHit), so a pixel the cache reuses needs
+// neither a ray nor the splat, whatever it shows. The splat covers only the
+// pixels traced this frame and the sky and background pixels (never
+// cached). When the impostors drawn change (another cell's set arrives, or
+// a frame draws none), the cache forgets the texels that showed the old
+// ones and those the new ones' boxes may hide (PanoramicCache::invalidate),
+// as it does for streamed geometry. OpenGL frames (renderFarField with
+// GpuImpostors) splat on the GPU over an impostor-free cache.
 //
 // Near field and far field meet at distance d along each pixel's ray, not at
 // a grid cell: polygons are drawn only up to d (fragments beyond are
@@ -170,6 +181,9 @@ struct FrameReport {
   bool farFieldRan = false, horizonRan = false, cacheRan = false, impostorsRan = false;
   std::string farFieldWhy, horizonWhy, cacheWhy, impostorsWhy;
   size_t impostorsDrawn = 0, impostorPoints = 0;  // impostors splatted, their points on screen
+  // Cache texels forgotten this frame because the impostors drawn changed
+  // (another view cell's set, or none).
+  size_t impostorTexelsForgotten = 0;
   CachePlanStats cachePlan;
   HorizonStats horizonStats;
   nlohmann::json toJson() const;
@@ -264,6 +278,8 @@ class FrameRenderer {
   IdBuffer ids_;
   bool idsDrawn_ = false;  // ids_ holds the last frame's near field (not an OpenGL frame)
   std::shared_ptr<const ImpostorSet> impostors_;
+  // The impostors the cache's texels were composited with (null: none).
+  std::shared_ptr<const ImpostorSet> cachedImpostors_;
   ImpostorSplatter splatter_;
   std::vector<uint8_t> splatMask_;  // per pixel: an impostor may fill it this frame
   ImageRgb8 impostorImage_;

@@ -144,5 +144,34 @@ TEST(CacheInvalidation, ForgetsExactlyTheTexelsThatHitARemovedTriangle) {
   c.expectKeptTexelsUnchanged(before, std::vector<uint8_t>(before.size(), 0));
 }
 
+TEST(CacheInvalidation, ForgetsExactlyTheTexelsThatShowedAnImpostorWhenTheImpostorsChange) {
+  std::mt19937 rng(4);
+  CacheUnderTest c;
+  addBox(c.scene, {-30, -3, -30}, {30, 12, 30});
+  c.fill({0, 1.7f, 0}, 20'000, rng);
+  // Texels looking up (slope above 1) show an impostor's point 20 m away
+  // instead of the ceiling: what the pipeline stores where a point won.
+  size_t impostorTexels = 0;
+  for (const auto& [texel, ray] : c.rayOf)
+    if (c.cache.traced(texel) && ray.dir.y > glm::length(glm::vec2(ray.dir.x, ray.dir.z))) {
+      c.cache.store(texel, glm::u8vec3(90), 20.0f, PanoramicCache::kImpostorTexelHit);
+      ++impostorTexels;
+    }
+  ASSERT_GT(impostorTexels, 100u);
+  const size_t traced = c.traced();
+  // The same geometry and impostors: nothing to forget.
+  EXPECT_EQ(c.cache.invalidate({}, {}), 0u);
+  EXPECT_EQ(c.traced(), traced);
+  // The impostors changed: exactly the impostor texels go.
+  EXPECT_EQ(c.cache.invalidate({}, {}, true), impostorTexels);
+  EXPECT_EQ(c.traced(), traced - impostorTexels);
+  size_t stillImpostor = 0;
+  for (const auto& [texel, ray] : c.rayOf)
+    stillImpostor += c.cache.traced(texel) && c.cache.showsImpostor(texel);
+  EXPECT_EQ(stillImpostor, 0u);
+  // What is left saw the room's walls, which are still there.
+  c.expectKeptTexelsUnchanged(c.scene, std::vector<uint8_t>(c.scene.size(), 0));
+}
+
 }  // namespace
 }  // namespace vistream

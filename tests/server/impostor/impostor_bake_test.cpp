@@ -1077,6 +1077,74 @@ TEST(ImpostorPipeline, HeldGeometryInFrontOfTheImpostorHidesIt) {
   EXPECT_GT(double(shown), 0.98 * double(blocker));
 }
 
+// Pixels more than 48 levels off in some channel.
+size_t pixelsOff(const ImageRgb8& a, const ImageRgb8& b) {
+  size_t n = 0;
+  for (int y = 0; y < a.height; ++y)
+    for (int x = 0; x < a.width; ++x) {
+      const glm::ivec3 d = glm::abs(glm::ivec3(a.at(x, y)) - glm::ivec3(b.at(x, y)));
+      n += std::max({d.x, d.y, d.z}) > 48;
+    }
+  return n;
+}
+
+PipelineOptions cachedOptions() {
+  PipelineOptions o = ClientView::options(RenderMode::Pipeline);
+  o.cache = true;
+  return o;
+}
+
+TEST(ImpostorPipeline, TheCacheKeepsTheImpostorsSoAStillViewerCastsNoRayForThem) {
+  const ClientView v;
+  const Camera c = towardsTheBlock({0.0f, 2.0f, 0.0f});
+  FrameRenderer r(v.held, cachedOptions());
+  r.setImpostors(v.set);
+  ImageRgb8 first, second;
+  const FrameReport one = r.render(c, first);
+  ASSERT_TRUE(one.impostorsRan) << one.impostorsWhy;
+  ASSERT_GT(one.pixels.impostor, 500u);
+  const FrameReport two = r.render(c, second);
+  // Nothing moved: every far-field pixel comes from the cache, impostors included.
+  EXPECT_EQ(two.pixels.rayHit + two.pixels.rayMiss, 0u);
+  EXPECT_EQ(two.pixels.impostor, one.pixels.impostor);
+  EXPECT_EQ(two.impostorTexelsForgotten, 0u);
+  // And it is as close to the reference as the frame that splatted them.
+  const ImageRgb8 reference = v.reference(c);
+  EXPECT_LE(pixelsOff(second, reference), pixelsOff(first, reference) + 20);
+}
+
+TEST(ImpostorPipeline, TheCacheForgetsTheImpostorsWhenTheyChangeAndShowsTheNewOnes) {
+  const ClientView v;
+  const Camera c = towardsTheBlock({0.0f, 2.0f, 0.0f});
+  FrameRenderer r(v.held, cachedOptions());
+  r.setImpostors(v.set);
+  ImageRgb8 with, image;
+  const FrameReport one = r.render(c, with);
+  ASSERT_GT(one.pixels.impostor, 500u);
+  // Without impostors the frame is the one a renderer that never had them draws.
+  FrameRenderer never(v.held, cachedOptions());
+  ImageRgb8 without;
+  never.render(c, without);
+  const size_t impostorShown = pixelsOff(with, without);
+  ASSERT_GT(impostorShown, 400u);
+  r.setImpostors(nullptr);
+  const FrameReport two = r.render(c, image);
+  // The texels that showed the impostor (a texel per pixel, a few shared),
+  // and only those: nothing was added.
+  EXPECT_LE(two.impostorTexelsForgotten, one.pixels.impostor);
+  EXPECT_GE(two.impostorTexelsForgotten * 10, one.pixels.impostor * 9);
+  EXPECT_EQ(two.pixels.impostor, 0u);
+  EXPECT_LT(pixelsOff(image, without), impostorShown / 20) << "the impostor's pixels are gone";
+  // The same impostors in a new set: the texels their boxes may hide go,
+  // and the frame shows them again as the first did.
+  auto again = std::make_shared<ImpostorSet>(*v.set);
+  r.setImpostors(again);
+  const FrameReport three = r.render(c, image);
+  EXPECT_GE(three.impostorTexelsForgotten, one.pixels.impostor);
+  EXPECT_EQ(three.pixels.impostor, one.pixels.impostor);
+  EXPECT_LT(pixelsOff(image, with), impostorShown / 20);
+}
+
 TEST(ImpostorPipeline, SaysWhyWhenTheViewerIsOutsideTheCellOfItsImpostors) {
   const ClientView v;
   const Camera c = towardsTheBlock({0.0f, 2.0f, 20.0f});
