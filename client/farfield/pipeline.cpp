@@ -508,11 +508,11 @@ struct FrameRun {
       // Only pixels compose may give an impostor are drawn (and coloured):
       // those traced this frame, sky and background; the cache's texels hold
       // the impostors already.
-      r.splatMask_.assign(pixels, 0);
+      r.splatMask_.reset(pixels);
       for (size_t i = 0; i < candidates.size(); ++i)
-        if (trace[i]) r.splatMask_[candidates[i]] = 1;
+        if (trace[i]) r.splatMask_.add(candidates[i]);
       for (const std::vector<uint32_t>* list : {&skyPixels, &backgroundPixels})
-        for (const uint32_t p : *list) r.splatMask_[p] = 1;
+        for (const uint32_t p : *list) r.splatMask_.add(p);
       r.splatter_.begin(camera, &r.splatMask_, r.options_.splat);
       if (r.impostorImage_.width != W || r.impostorImage_.height != H)
         r.impostorImage_ = ImageRgb8(W, H);

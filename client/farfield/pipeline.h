@@ -281,7 +281,7 @@ class FrameRenderer {
   // The impostors the cache's texels were composited with (null: none).
   std::shared_ptr<const ImpostorSet> cachedImpostors_;
   ImpostorSplatter splatter_;
-  std::vector<uint8_t> splatMask_;  // per pixel: an impostor may fill it this frame
+  PixelMask splatMask_;  // the pixels an impostor may fill this frame
   ImageRgb8 impostorImage_;
   SoftwareRasterizer dynamicRaster_;
   IdBuffer dynamicIds_;

@@ -7,7 +7,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <functional>
 #include <mutex>
 
@@ -17,8 +16,7 @@
 
 namespace vistream {
 
-void ImpostorSplatter::begin(const Camera& camera, const std::vector<uint8_t>* mask,
-                             const PointSplat& splat) {
+void ImpostorSplatter::begin(const Camera& camera, const PixelMask* mask, const PointSplat& splat) {
   if (!(splat.radius > 0.0f && splat.radius < 1.0f))
     throwInputError("impostor splat radius must lie between 0 and 1 pixel, got {}", splat.radius);
   if (!(splat.sameSurface >= 0.0f) || !std::isfinite(splat.sameSurface))
@@ -112,6 +110,13 @@ bool ImpostorSplatter::project(const glm::vec3& point, Projected& pr) const {
   return true;
 }
 
+bool ImpostorSplatter::overMask(const Projected& pr) const {
+  for (int y = std::max(pr.y0, 0); y <= std::min(pr.y0 + 1, camera_.height - 1); ++y)
+    for (int x = std::max(pr.x0, 0); x <= std::min(pr.x0 + 1, camera_.width - 1); ++x)
+      if (mask_->has(size_t(y) * size_t(camera_.width) + size_t(x))) return true;
+  return false;
+}
+
 bool ImpostorSplatter::mayCover(const Box3f& bounds) const {
   return mask_ ? maskTiles_.mayCover(camera_, bounds)
                : impostorFootprint(camera_, bounds).has_value();
@@ -124,23 +129,18 @@ void ScreenTiles::reset(int width, int height) {
   tiles_.assign(size_t(tilesX_) * size_t((height + kTile - 1) / kTile), 0);
 }
 
-void ScreenTiles::markMask(const std::vector<uint8_t>& mask) {
+void ScreenTiles::markMask(const PixelMask& mask) {
   VS_CHECK(mask.size() == size_t(width_) * size_t(height_));
-  // Eight bytes at a time: a mask is mostly zeros (the far-field pixels of
-  // a frame), and a byte-wise scan of the screen cost more than the splat.
-  for (int y = 0; y < height_; ++y) {
-    const uint8_t* row = mask.data() + size_t(y) * size_t(width_);
-    uint8_t* tiles = tiles_.data() + size_t(y / kTile) * size_t(tilesX_);
-    int x = 0;
-    for (; x + 8 <= width_; x += 8) {
-      uint64_t word;
-      std::memcpy(&word, row + x, sizeof word);
-      if (word == 0) continue;
-      for (int k = 0; k < 8; ++k)
-        if (row[x + k]) tiles[(x + k) / kTile] = 1;
+  // The row is found by a division only when it changes (the pipeline's
+  // lists run in rows).
+  const uint32_t width = uint32_t(width_);
+  uint32_t rowStart = 0, y = 0;
+  for (const uint32_t p : mask.pixels()) {
+    if (p - rowStart >= width) {  // another row (unsigned: also before rowStart)
+      y = p / width;
+      rowStart = y * width;
     }
-    for (; x < width_; ++x)
-      if (row[x]) tiles[x / kTile] = 1;
+    tiles_[size_t(y / kTile) * size_t(tilesX_) + size_t((p - rowStart) / kTile)] = 1;
   }
 }
 
@@ -220,6 +220,11 @@ size_t ImpostorSplatter::draw(std::span<const Impostor* const> impostors, ImageR
         for (size_t k = blk.first; k < blk.last; ++k) {
           Projected& pr = projected_[blk.offset + k];
           if (project(blk.imp->points[k], pr)) {
+            // Over no pixel the mask lets through: it would draw nothing.
+            if (mask_ && !overMask(pr)) {
+              pr.y0 = kSkipped;
+              continue;
+            }
             ++count;
             yLo = std::min(yLo, pr.y0);
             yHi = std::max(yHi, pr.y0);
@@ -263,7 +268,7 @@ size_t ImpostorSplatter::draw(std::span<const Impostor* const> impostors, ImageR
             if (d2 > radius2) continue;
             const size_t p = size_t(y) * size_t(width) + size_t(x);
             const float score = splat_.score(pt.z, d2);
-            if (!(score < score_[p]) || (mask_ && !(*mask_)[p])) continue;
+            if (!(score < score_[p]) || (mask_ && !mask_->has(p))) continue;
             if (winner_[p] == kNoWinner) won.push_back(uint32_t(p));
             score_[p] = score;
             depth_[p] = pt.z;

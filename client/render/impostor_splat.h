@@ -86,6 +86,35 @@ struct PointSplat {
   }
 };
 
+// A set of pixels (index y * width + x, row 0 at the top): a byte a pixel
+// and the list of those set, so that filling and clearing it cost as much
+// as the pixels set, not the screen.
+class PixelMask {
+ public:
+  // Nothing set, room for `pixels`.
+  void reset(size_t pixels) {
+    if (bytes_.size() == pixels) {
+      for (const uint32_t p : set_) bytes_[p] = 0;
+    } else {
+      bytes_.assign(pixels, 0);
+    }
+    set_.clear();
+  }
+  void add(uint32_t p) {
+    if (!bytes_[p]) {
+      bytes_[p] = 1;
+      set_.push_back(p);
+    }
+  }
+  bool has(size_t p) const { return bytes_[p] != 0; }
+  size_t size() const { return bytes_.size(); }
+  std::span<const uint32_t> pixels() const { return set_; }
+
+ private:
+  std::vector<uint8_t> bytes_;
+  std::vector<uint32_t> set_;
+};
+
 // Which tiles of kTile x kTile pixels hold a pixel an impostor may fill,
 // so that an impostor, or a block of its points, whose footprint meets none
 // is skipped whole (the software splatter with its mask, the pipeline for
@@ -96,8 +125,8 @@ class ScreenTiles {
   // No tile marked.
   void reset(int width, int height);
   void mark(uint32_t pixel) { tiles_[tileOf(pixel)] = 1; }
-  // Marks the tiles with a non-zero byte of `mask` (one a pixel, row 0 at the top).
-  void markMask(const std::vector<uint8_t>& mask);
+  // Marks the tiles holding a pixel of `mask`.
+  void markMask(const PixelMask& mask);
   // Whether a point inside `box` may land on a marked tile (impostorFootprint).
   bool mayCover(const Camera& camera, const Box3f& box) const;
 
@@ -113,17 +142,16 @@ class ScreenTiles {
 class ImpostorSplatter {
  public:
   // Starts a frame of the camera's size: every depth at infinity. With
-  // `mask` (one byte a pixel, row 0 at the top, kept alive until the frame's
-  // last draw), only pixels whose byte is non-zero are drawn: the others keep
-  // their depth at infinity and their colour.
+  // `mask` (of the camera's pixels, kept alive until the frame's last draw),
+  // only its pixels are drawn: the others keep their depth at infinity and
+  // their colour.
   // Throws InputError on a splat radius outside (0, 1) or a negative or
   // non-finite sameSurface.
-  void begin(const Camera& camera, const std::vector<uint8_t>* mask = nullptr,
-             const PointSplat& splat = {});
+  void begin(const Camera& camera, const PixelMask* mask = nullptr, const PointSplat& splat = {});
   // Draws an impostor's points into the frame's depth and `out` (which has
   // the camera's size). Returns the points that landed on the screen (with
-  // a mask, those of blocks over no pixel it lets through are not counted:
-  // they are skipped unprojected).
+  // a mask, those over a pixel it lets through: the others are skipped, a
+  // block of points over none of its tiles unprojected).
   size_t draw(const Impostor& impostor, ImageRgb8& out);
   // Draws several impostors in one pass, as draw() one after another would
   // (a pixel keeps the first of equal scores, in the impostors' order), at
@@ -158,13 +186,15 @@ class ImpostorSplatter {
   };
   // Projects a point (y0 kSkipped and false when it is not drawn).
   bool project(const glm::vec3& point, Projected& pr) const;
+  // Whether a projected point's 2x2 pixels hold one of the mask's.
+  bool overMask(const Projected& pr) const;
   // False when no point inside `bounds` can land on a pixel the mask lets through.
   bool mayCover(const Box3f& bounds) const;
 
   Camera camera_;
   glm::mat4 rotationProjection_{1.0f};
   glm::vec3 forward_{0.0f, 0.0f, -1.0f};
-  const std::vector<uint8_t>* mask_ = nullptr;
+  const PixelMask* mask_ = nullptr;
   ScreenTiles maskTiles_;  // the tiles the mask lets a point into
   PointSplat splat_;
   size_t serialBelow_ = kSerialBelow;

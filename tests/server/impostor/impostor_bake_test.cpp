@@ -894,6 +894,64 @@ void drawsWhatOnePassDraws(size_t serialBelow) {
   }
 }
 
+TEST(ImpostorSplat, WithAMaskDrawsTheUnmaskedFrameOnItsPixelsAndNothingElse) {
+  const ColouredScene s = buildingBlock();
+  const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
+  const Impostor a = bakeImpostor(s.view(), cell, boundsOf(s.triangles), s.facingCell(cell),
+                                  quickOptions(320, 240));
+  Camera c;
+  c.width = 320;
+  c.height = 240;
+  c.eye = glm::vec3(1.0f, 1.8f, 2.0f);
+  c.pitchDeg = 3.0f;
+  const size_t n = size_t(c.width) * size_t(c.height);
+  ImpostorSplatter whole;
+  whole.begin(c);
+  ImageRgb8 wholeImage(c.width, c.height);
+  whole.draw(a, wholeImage);
+  // The rows the block covers, for the band below.
+  int top = c.height, bottom = -1;
+  for (size_t p = 0; p < n; ++p)
+    if (whole.score()[p] < ImpostorSplatter::kEmpty) {
+      top = std::min(top, int(p / size_t(c.width)));
+      bottom = std::max(bottom, int(p / size_t(c.width)));
+    }
+  ASSERT_LT(top + 20, bottom);
+  // Masks as the pipeline makes them: scattered pixels (retraced ones) and
+  // a band of rows (sky), in rows, then again after a reset (as the next
+  // frame does with the same mask object).
+  std::mt19937 rng(7);
+  PixelMask mask;
+  ImpostorSplatter masked;
+  for (int frame = 0; frame < 2; ++frame) {
+    mask.reset(n);
+    for (uint32_t p = 0; p < n; ++p)
+      if (const int y = int(p / uint32_t(c.width));
+          std::uniform_int_distribution<int>(0, 9)(rng) == 0 ||
+          (y >= top + 10 * frame && y < top + 10 * frame + 10))
+        mask.add(p);
+    masked.begin(c, &mask);
+    const glm::u8vec3 untouched(1, 2, 3);
+    ImageRgb8 image(c.width, c.height, untouched);
+    masked.draw(a, image);
+    size_t maskedCovered = 0, wrong = 0, outside = 0;
+    for (size_t p = 0; p < n; ++p) {
+      const int x = int(p % size_t(c.width)), y = int(p / size_t(c.width));
+      if (mask.has(p)) {
+        maskedCovered += whole.score()[p] < ImpostorSplatter::kEmpty;
+        wrong +=
+            masked.score()[p] != whole.score()[p] ||
+            (whole.score()[p] < ImpostorSplatter::kEmpty && image.at(x, y) != wholeImage.at(x, y));
+      } else {
+        outside += masked.score()[p] != ImpostorSplatter::kEmpty || image.at(x, y) != untouched;
+      }
+    }
+    EXPECT_GT(maskedCovered, 150u) << "frame " << frame;
+    EXPECT_EQ(wrong, 0u) << "frame " << frame;
+    EXPECT_EQ(outside, 0u) << "frame " << frame;
+  }
+}
+
 TEST(ImpostorSplat, RefusesARadiusOutsideOnePixelAndANegativeSameSurfaceDepth) {
   Camera c;
   ImpostorSplatter splatter;
