@@ -501,18 +501,10 @@ struct FrameRun {
       rep.impostorsWhy = fmt::format("{} impostor{} of the viewer's cell ({}, {}, {}), by OpenGL",
                                      set->impostors.size(), set->impostors.size() == 1 ? "" : "s",
                                      set->index.x, set->index.y, set->index.z);
-    } else if (!anyToSplat()) {
+    } else if (!maskSplat(*set)) {
       rep.impostorsWhy =
-          "every far-field pixel reused from the image cache, which holds the impostors drawn";
+          "no pixel to splat: the image cache holds the impostors drawn, or none is in reach";
     } else {
-      // Only pixels compose may give an impostor are drawn (and coloured):
-      // those traced this frame, sky and background; the cache's texels hold
-      // the impostors already.
-      r.splatMask_.reset(pixels);
-      for (size_t i = 0; i < candidates.size(); ++i)
-        if (trace[i]) r.splatMask_.add(candidates[i]);
-      for (const std::vector<uint32_t>* list : {&skyPixels, &backgroundPixels})
-        for (const uint32_t p : *list) r.splatMask_.add(p);
       r.splatter_.begin(camera, &r.splatMask_, r.options_.splat);
       if (r.impostorImage_.width != W || r.impostorImage_.height != H)
         r.impostorImage_ = ImageRgb8(W, H);
@@ -532,9 +524,25 @@ struct FrameRun {
     }
     rep.ms.impostors = clock.ms();
   }
-  bool anyToSplat() const {
-    return !skyPixels.empty() || !backgroundPixels.empty() ||
-           std::find(trace.begin(), trace.end(), uint8_t(1)) != trace.end();
+  // The pixels compose may give an impostor (splatMask_): those traced this
+  // frame, sky and background (the cache's texels hold the impostors
+  // already), and of those only the ones a block of some impostor's points
+  // may reach. False when there are none.
+  bool maskSplat(const ImpostorSet& set) {
+    ScreenTiles& reach = r.splatReach_;
+    reach.reset(W, H);
+    for (const auto& impostor : set.impostors) reach.markReach(camera, *impostor);
+    r.splatMask_.reset(pixels);
+    if (!reach.any()) return false;
+    PixelRows rows(W);
+    for (size_t i = 0; i < candidates.size(); ++i)
+      if (trace[i] && reach.marked(rows.at(candidates[i]))) r.splatMask_.add(candidates[i]);
+    for (const std::vector<uint32_t>* list : {&skyPixels, &backgroundPixels}) {
+      PixelRows listRows(W);
+      for (const uint32_t p : *list)
+        if (reach.marked(listRows.at(p))) r.splatMask_.add(p);
+    }
+    return !r.splatMask_.pixels().empty();
   }
   // Whether candidate i shows the impostor rather than the far field's hit
   // at view depth `farDepth` (infinity: a miss).

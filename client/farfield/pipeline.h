@@ -281,7 +281,8 @@ class FrameRenderer {
   // The impostors the cache's texels were composited with (null: none).
   std::shared_ptr<const ImpostorSet> cachedImpostors_;
   ImpostorSplatter splatter_;
-  PixelMask splatMask_;  // the pixels an impostor may fill this frame
+  PixelMask splatMask_;     // the pixels an impostor may fill this frame
+  ScreenTiles splatReach_;  // the tiles a point of the viewer's impostors may reach
   ImageRgb8 impostorImage_;
   SoftwareRasterizer dynamicRaster_;
   IdBuffer dynamicIds_;

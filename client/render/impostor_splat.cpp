@@ -131,17 +131,33 @@ void ScreenTiles::reset(int width, int height) {
 
 void ScreenTiles::markMask(const PixelMask& mask) {
   VS_CHECK(mask.size() == size_t(width_) * size_t(height_));
-  // The row is found by a division only when it changes (the pipeline's
-  // lists run in rows).
-  const uint32_t width = uint32_t(width_);
-  uint32_t rowStart = 0, y = 0;
+  PixelRows rows(width_);
   for (const uint32_t p : mask.pixels()) {
-    if (p - rowStart >= width) {  // another row (unsigned: also before rowStart)
-      y = p / width;
-      rowStart = y * width;
-    }
-    tiles_[size_t(y / kTile) * size_t(tilesX_) + size_t((p - rowStart) / kTile)] = 1;
+    const glm::ivec2 xy = rows.at(p);
+    tiles_[size_t(xy.y / kTile) * size_t(tilesX_) + size_t(xy.x / kTile)] = 1;
   }
+}
+
+void ScreenTiles::markReach(const Camera& camera, const Impostor& impostor) {
+  VS_CHECK(camera.width == width_ && camera.height == height_);
+  auto mark = [&](const Box3f& box) {
+    const std::optional<glm::ivec4> rect = impostorFootprint(camera, box);
+    if (!rect) return;
+    for (int ty = rect->y / kTile; ty <= rect->w / kTile; ++ty)
+      std::fill_n(
+          tiles_.begin() + std::ptrdiff_t(size_t(ty) * size_t(tilesX_) + size_t(rect->x / kTile)),
+          rect->z / kTile - rect->x / kTile + 1, uint8_t(1));
+  };
+  if (impostor.size() == 0) return;
+  if (impostor.hasBlockBounds()) {
+    for (const Box3f& block : impostor.blockBounds) mark(block);
+  } else {
+    mark(impostor.box);
+  }
+}
+
+bool ScreenTiles::any() const {
+  return std::find(tiles_.begin(), tiles_.end(), uint8_t(1)) != tiles_.end();
 }
 
 bool ScreenTiles::mayCover(const Camera& camera, const Box3f& box) const {

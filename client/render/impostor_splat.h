@@ -86,6 +86,23 @@ struct PointSplat {
   }
 };
 
+// A pixel's column and row from its index y * width + x, the row found by a
+// division only when it changes: cheap over a list that runs in rows.
+class PixelRows {
+ public:
+  explicit PixelRows(int width) : width_(uint32_t(width)) {}
+  glm::ivec2 at(uint32_t p) {
+    if (p - rowStart_ >= width_) {  // another row (unsigned: also before rowStart_)
+      y_ = p / width_;
+      rowStart_ = y_ * width_;
+    }
+    return {int(p - rowStart_), int(y_)};
+  }
+
+ private:
+  uint32_t width_, rowStart_ = 0, y_ = 0;
+};
+
 // A set of pixels (index y * width + x, row 0 at the top): a byte a pixel
 // and the list of those set, so that filling and clearing it cost as much
 // as the pixels set, not the screen.
@@ -127,6 +144,13 @@ class ScreenTiles {
   void mark(uint32_t pixel) { tiles_[tileOf(pixel)] = 1; }
   // Marks the tiles holding a pixel of `mask`.
   void markMask(const PixelMask& mask);
+  // Marks the tiles where a point of the impostor may land: the footprint
+  // (impostorFootprint) of each block of its points, or of its box.
+  void markReach(const Camera& camera, const Impostor& impostor);
+  bool any() const;
+  bool marked(glm::ivec2 pixel) const {
+    return tiles_[size_t(pixel.y / kTile) * size_t(tilesX_) + size_t(pixel.x / kTile)] != 0;
+  }
   // Whether a point inside `box` may land on a marked tile (impostorFootprint).
   bool mayCover(const Camera& camera, const Box3f& box) const;
 

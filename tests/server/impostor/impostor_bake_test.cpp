@@ -952,6 +952,45 @@ TEST(ImpostorSplat, WithAMaskDrawsTheUnmaskedFrameOnItsPixelsAndNothingElse) {
   }
 }
 
+TEST(ImpostorSplat, TheReachOfAnImpostorHoldsEveryPixelItsPointsCoverAndLittleElse) {
+  const ColouredScene s = buildingBlock();
+  const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
+  const Impostor baked = bakeImpostor(s.view(), cell, boundsOf(s.triangles), s.facingCell(cell),
+                                      quickOptions(320, 240));
+  // As a client holds it: decoded, with the bounds of each block of points.
+  Impostor a;
+  std::string error;
+  ASSERT_TRUE(wire::decodeImpostor(wire::encodeImpostor(baked), a, error)) << error;
+  ASSERT_TRUE(a.hasBlockBounds());
+  for (int k = 0; k < 4; ++k) {
+    Camera c;
+    c.width = 320;
+    c.height = 240;
+    c.eye = glm::vec3(-3.0f + 2.0f * float(k), 1.5f, 3.0f);
+    c.yawDeg = -30.0f + 20.0f * float(k);
+    ImpostorSplatter whole;
+    whole.begin(c);
+    ImageRgb8 image(c.width, c.height);
+    whole.draw(a, image);
+    ScreenTiles reach;
+    reach.reset(c.width, c.height);
+    reach.markReach(c, a);
+    size_t covered = 0, outside = 0, markedPixels = 0;
+    for (int y = 0; y < c.height; ++y)
+      for (int x = 0; x < c.width; ++x) {
+        const bool point =
+            whole.score()[size_t(y) * size_t(c.width) + size_t(x)] < ImpostorSplatter::kEmpty;
+        covered += point;
+        outside += point && !reach.marked({x, y});
+        markedPixels += reach.marked({x, y});
+      }
+    EXPECT_GT(covered, 300u) << "view " << k;
+    EXPECT_EQ(outside, 0u) << "view " << k;
+    // The blocks' footprints, not the whole screen.
+    EXPECT_LT(markedPixels, size_t(c.width) * size_t(c.height) / 2) << "view " << k;
+  }
+}
+
 TEST(ImpostorSplat, RefusesARadiusOutsideOnePixelAndANegativeSameSurfaceDepth) {
   Camera c;
   ImpostorSplatter splatter;
