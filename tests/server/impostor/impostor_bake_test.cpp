@@ -800,6 +800,13 @@ TEST(ImpostorSplat, SkipsOnlyBoxesWhollyOutOfView) {
 // a depth buffer, from views at, beside and inside the block's footprint,
 // with the default splat, a wide one and one that compares depth alone;
 // drawn in parallel and on one thread (ImpostorSplatter::setSerialBelow).
+// The building block's impostor, baked for the 12 m cell around the origin.
+Impostor blockImpostor(const ImpostorOptions& options) {
+  const ColouredScene s = buildingBlock();
+  const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
+  return bakeImpostor(s.view(), cell, boundsOf(s.triangles), s.facingCell(cell), options);
+}
+
 void drawsWhatOnePassDraws(size_t serialBelow);
 TEST(ImpostorSplat, DrawsWhatOnePassInThePointsOrderDraws) {
   for (const size_t serialBelow : {size_t(0), std::numeric_limits<size_t>::max()}) {
@@ -809,13 +816,10 @@ TEST(ImpostorSplat, DrawsWhatOnePassInThePointsOrderDraws) {
 }
 
 void drawsWhatOnePassDraws(size_t serialBelow) {
-  const ColouredScene s = buildingBlock();
-  const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
-  const Impostor a = bakeImpostor(s.view(), cell, boundsOf(s.triangles), s.facingCell(cell),
-                                  quickOptions(320, 240));
+  const Impostor a = blockImpostor(quickOptions(320, 240));
   ImpostorOptions other = quickOptions(320, 240);
   other.resolutionFactor = 1.3f;  // another sampling of the same surfaces: depth ties and overlaps
-  const Impostor b = bakeImpostor(s.view(), cell, boundsOf(s.triangles), s.facingCell(cell), other);
+  const Impostor b = blockImpostor(other);
   const std::array<PointSplat, 3> splats = {PointSplat{}, PointSplat{0.95f, 0.05f},
                                             PointSplat{0.6f, 0.0f}};
   ImpostorSplatter together;
@@ -895,10 +899,7 @@ void drawsWhatOnePassDraws(size_t serialBelow) {
 }
 
 TEST(ImpostorSplat, WithAMaskDrawsTheUnmaskedFrameOnItsPixelsAndNothingElse) {
-  const ColouredScene s = buildingBlock();
-  const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
-  const Impostor a = bakeImpostor(s.view(), cell, boundsOf(s.triangles), s.facingCell(cell),
-                                  quickOptions(320, 240));
+  const Impostor a = blockImpostor(quickOptions(320, 240));
   Camera c;
   c.width = 320;
   c.height = 240;
@@ -953,10 +954,7 @@ TEST(ImpostorSplat, WithAMaskDrawsTheUnmaskedFrameOnItsPixelsAndNothingElse) {
 }
 
 TEST(ImpostorSplat, TheReachOfAnImpostorHoldsEveryPixelItsPointsCoverAndLittleElse) {
-  const ColouredScene s = buildingBlock();
-  const Box3f cell({-6.0f, 1.0f, -6.0f}, {6.0f, 3.0f, 6.0f});
-  const Impostor baked = bakeImpostor(s.view(), cell, boundsOf(s.triangles), s.facingCell(cell),
-                                      quickOptions(320, 240));
+  const Impostor baked = blockImpostor(quickOptions(320, 240));
   // As a client holds it: decoded, with the bounds of each block of points.
   Impostor a;
   std::string error;
