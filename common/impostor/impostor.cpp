@@ -92,15 +92,20 @@ std::optional<PointGrid> PointGrid::of(const Box3f& cell, const Box3f& box,
   // coordinates would not give back the point: each axis is scaled to its
   // largest component before it is normalised, so that tiny (subnormal)
   // axes do not lose their length to underflow.
+  // The frame is built in double: an axis that leans towards the normal
+  // loses most of its bits to the subtraction below, and in float the
+  // frame's error grows by the inverse of the sine between them.
   const std::optional<glm::vec3> n = unitOf(plane.normal);
   const std::optional<glm::vec3> uScaled = unitOf(plane.uAxis);
   if (!n || !uScaled) return std::nullopt;
-  grid.normal = *n;
-  const glm::vec3 u = *uScaled - glm::dot(*uScaled, grid.normal) * grid.normal;
-  const float un = glm::length(u);  // 0 to 1: the sine between the axis and the normal
-  if (!(un > 1e-6f)) return std::nullopt;
-  grid.e1 = u / un;
-  grid.e2 = glm::cross(grid.normal, grid.e1);
+  const glm::dvec3 nd = glm::normalize(glm::dvec3(*n));
+  const glm::dvec3 ud = glm::dvec3(*uScaled) - glm::dot(glm::dvec3(*uScaled), nd) * nd;
+  const double un = glm::length(ud);  // 0 to 1: the sine between the axis and the normal
+  if (!(un > 1e-6)) return std::nullopt;
+  const glm::dvec3 e1 = ud / un;
+  grid.normal = glm::vec3(nd);
+  grid.e1 = glm::vec3(e1);
+  grid.e2 = glm::vec3(glm::cross(nd, e1));
   glm::vec3 lo(std::numeric_limits<float>::max()), hi(-std::numeric_limits<float>::max());
   for (int corner = 0; corner < 8; ++corner) {
     const glm::vec3 p((corner & 1) ? box.hi.x : box.lo.x, (corner & 2) ? box.hi.y : box.lo.y,

@@ -203,6 +203,44 @@ TEST(ImpostorCodec,
   }
 }
 
+TEST(ImpostorCodec, KeepsItsGridOrthonormalWhenTheAxisLeansAlmostOntoTheNormal) {
+  // A horizontal axis less than a degree off the normal (the bytes a fuzzer
+  // found): in float, the axis left after taking out the normal lost most
+  // of its bits, the frame was off by 1e-5 and a decoded point, encoded
+  // again, landed outside its box.
+  for (const float lean : {0.0125f, 1e-3f, 2e-5f}) {
+    Impostor imp = sampleImpostor(300);
+    // A normal off every axis (so that adding the lean rounds), still
+    // facing the box.
+    const glm::vec3 axisNormal = glm::normalize(imp.plane.normal);
+    const glm::vec3 across = glm::normalize(glm::cross(axisNormal, glm::vec3(0.0f, 1.0f, 0.0f)));
+    const glm::vec3 n =
+        glm::normalize(axisNormal + 0.0173f * across + 0.0119f * glm::vec3(0.0f, 1.0f, 0.0f));
+    imp.plane.normal = n;
+    const glm::vec3 side = glm::normalize(glm::cross(n, glm::vec3(0.0f, 1.0f, 0.0f)));
+    imp.plane.uAxis = n + lean * side;
+    const std::optional<PointGrid> grid = imp.pointGrid();
+    ASSERT_TRUE(grid.has_value()) << lean;
+    EXPECT_NEAR(glm::length(grid->e1), 1.0f, 1e-6f) << lean;
+    EXPECT_NEAR(glm::length(grid->e2), 1.0f, 1e-6f) << lean;
+    EXPECT_NEAR(glm::dot(grid->e1, grid->normal), 0.0f, 1e-6f) << lean;
+    EXPECT_NEAR(glm::dot(grid->e2, grid->normal), 0.0f, 1e-6f) << lean;
+    EXPECT_NEAR(glm::dot(grid->e1, grid->e2), 0.0f, 1e-6f) << lean;
+    // The axis keeps its side of the normal.
+    EXPECT_GT(glm::dot(grid->e1, side), 0.999f) << lean;
+    Impostor once, twice;
+    std::string error;
+    ASSERT_TRUE(decodeImpostor(encodeImpostor(imp), once, error)) << lean << ": " << error;
+    ASSERT_TRUE(decodeImpostor(encodeImpostor(once), twice, error)) << lean << ": " << error;
+    ASSERT_EQ(twice.size(), imp.size());
+    const std::vector<size_t> first = matchById(imp, once), second = matchById(imp, twice);
+    for (size_t k = 0; k < imp.size(); ++k) {
+      EXPECT_LE(glm::length(once.points[first[k]] - imp.points[k]), grid->slack) << k;
+      EXPECT_LE(glm::length(twice.points[second[k]] - once.points[first[k]]), grid->slack) << k;
+    }
+  }
+}
+
 TEST(ImpostorCodec, PullsAPointJustPastItsBoxBackWithinTheSlackAndRefusesOneFarOutside) {
   // The sample's box spans x -75..75; its corners' directions from the cell
   // span tangents up to 75/168, so points at x = 75 + a few slacks, 220 m
