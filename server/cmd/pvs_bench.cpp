@@ -31,6 +31,7 @@
 #include "common/world/free_space.h"
 #include "common/world/sealed_surface.h"
 #include "common/world/static_world.h"
+#include "server/cmd/pvs_truth.h"
 #include "server/stream/stream_world.h"
 #include "server/visibility/epsilon_pvs.h"
 #include "server/visibility/horizon_fusion.h"
@@ -47,38 +48,9 @@ double mean(const std::vector<double>& v) {
   return v.empty() ? 0.0 : s / double(v.size());
 }
 
-struct World {
-  Scene scene;
-  StaticWorld statics;  // triangles, rays, solids, free space (static_world.h)
-  std::unique_ptr<EpsilonPvs> pvs;
-  // The oracle's rays: the surface with sub-tolerance cracks closed, as the
-  // solids behind back-face culling and fusion read it (sealed_surface.h).
-  std::unique_ptr<RayQuery> oracleRays;
-  double typicalBuilding = 16.0;  // metres: median horizontal size of objects
-};
-
-World makeWorld(const std::string& spec) {
-  World w;
-  w.scene = openScene(spec);
-  w.statics = buildStaticWorld(w.scene);
-  w.oracleRays = makeSealedRayQuery(*w.statics.triangles, SolidsOptions{}.weldTolerance);
-  Stopwatch sw;
-  w.pvs = std::make_unique<EpsilonPvs>(w.scene, OccluderOptions{}, &w.statics);
-  spdlog::info("{}: {} occluders ({} solids, {} polygons), prepared in {:.0f} ms", spec,
-               w.pvs->occluders().occluders.size(), w.pvs->occluders().stats.solids,
-               w.pvs->occluders().stats.polygons, sw.ms());
-  std::vector<double> sizes;
-  for (const Object& o : w.scene.objects) {
-    const glm::vec3 e = o.bounds.extent();
-    if (o.mesh.triangleCount() <= 200 && e.x < 200 && e.z < 200) sizes.push_back(0.5 * (e.x + e.z));
-  }
-  if (!sizes.empty()) w.typicalBuilding = median(sizes);
-  return w;
-}
-
 // Cells of the given horizontal size centred on random free-space columns,
 // from 0.2 m above the floor up to eye height or the cell size.
-std::vector<Box3f> streetCells(const World& w, float size, size_t count, uint64_t seed) {
+std::vector<Box3f> streetCells(const PvsWorld& w, float size, size_t count, uint64_t seed) {
   const auto columns = w.statics.freeSpace.walkableColumns();
   std::vector<Box3f> cells;
   if (columns.empty()) return cells;
@@ -92,18 +64,6 @@ std::vector<Box3f> streetCells(const World& w, float size, size_t count, uint64_
                        glm::vec3(xz.x + size / 2, y + height, xz.y + size / 2));
   }
   return cells;
-}
-
-// The sampled ground truth of a cell as the options ask, leaving out the
-// viewpoints the PVS contract does not serve.
-SampledVisibilityOptions groundTruthOptions(const World& w, const PvsBenchOptions& options) {
-  SampledVisibilityOptions gt;
-  gt.points = options.groundTruthPoints;
-  gt.resolution = options.groundTruthRes;
-  gt.skipViewpoint = [&w](const glm::vec3& p) {
-    return w.statics.solids.unservedViewpoint(*w.statics.rays, p);
-  };
-  return gt;
 }
 
 // A scene's name in the plot: a file's stem, without blanks (the .dat file
@@ -190,7 +150,7 @@ class ScratchDir {
 // The district a bench bakes: the bake's own region (the scene's bounds in X
 // and Z, its floors' eye range in Y; bakeGrid) cut to a square of `side`
 // metres around the centre of the scene's bounds.
-Box3f districtRegion(const World& w, const BakeOptions& bake, double side) {
+Box3f districtRegion(const PvsWorld& w, const BakeOptions& bake, double side) {
   const ViewCellGrid whole = bakeGrid(w.scene, w.statics.freeSpace, bake);
   Box3f region(whole.origin(), whole.origin() + glm::vec3(whole.dims()) * whole.cellSize());
   const glm::vec3 centre = w.scene.bounds().center();
@@ -214,7 +174,7 @@ int runPvsBench(const PvsBenchOptions& options) {
 
   // ---- Tables 1 and 2 ---------------------------------------------------------
   for (const std::string& spec : options.cells > 0 ? cities : std::vector<std::string>{}) {
-    World w = makeWorld(spec);
+    PvsWorld w = makePvsWorld(openScene(spec));
     const float cellSize = float(w.typicalBuilding / 4.0);
     const auto cells = streetCells(w, cellSize, options.cells, options.seed);
     const auto configs = table2Configs();
@@ -319,7 +279,7 @@ int runPvsBench(const PvsBenchOptions& options) {
       options.bakeCellSize > 0 ? options.bakeCellSize : StreamWorldOptions{}.cellSize;
   size_t bakes = 0;
   for (const std::string& spec : options.scenes) {
-    World w = makeWorld(spec);
+    PvsWorld w = makePvsWorld(openScene(spec));
     const bool indoor = spec.rfind("interior", 0) == 0;
     // The fused occlusion horizons (horizon_fusion.h) run where
     // `vistream-pvs cell --method auto` runs them: where the scene has solid
@@ -356,7 +316,8 @@ int runPvsBench(const PvsBenchOptions& options) {
       std::vector<double> seen, probeOnly;
       for (size_t ci = 0; ci < cells.size(); ++ci) {
         const Box3f& cell = cells[ci];
-        SampledVisibilityOptions gt = groundTruthOptions(w, options);
+        SampledVisibilityOptions gt =
+            groundTruthOptions(w, options.groundTruthPoints, options.groundTruthRes);
         std::vector<PvsResult> results;
         std::vector<uint32_t> probes;  // every method's PVS: the truth aims at each face
         for (const Measured& m : methods) {
@@ -422,7 +383,8 @@ int runPvsBench(const PvsBenchOptions& options) {
       single.fusion = false;
       for (const Box3f& cell : cells) {
         candidates.push_back(w.pvs->compute(cell, single).faces);
-        SampledVisibilityOptions gt = groundTruthOptions(w, options);
+        SampledVisibilityOptions gt =
+            groundTruthOptions(w, options.groundTruthPoints, options.groundTruthRes);
         gt.probeFaces = candidates.back();
         gt.probeSamples = std::max(1, options.groundTruthProbes);
         truths.push_back(sampleVisibleFaces(*w.oracleRays, *w.statics.triangles, cell, gt).faces);

@@ -30,6 +30,7 @@
 #include "server/cmd/impostor_commands.h"
 #include "server/cmd/mpi_bake.h"
 #include "server/cmd/pvs_bench.h"
+#include "server/cmd/pvs_truth.h"
 #include "server/cmd/scene_boxes.h"
 #include "server/cmd/walk_bench.h"
 #include "server/impostor/impostor_database.h"
@@ -48,15 +49,18 @@ using nlohmann::json;
 
 int cmdCell(const std::string& spec, const SceneLimits& limits, const std::string& cellText,
             const std::string& method, const PvsOptions& options,
-            const FusedPvsOptions& fusedOptions, bool asJson) {
+            const FusedPvsOptions& fusedOptions, const std::optional<TruthOptions>& truth,
+            bool asJson) {
   // --epsilon and --fused-res are range-checked at parse time.
   if (method != "auto" && method != "paper" && method != "fused" && method != "horizons")
     throwInputError("--method: expected 'auto', 'paper', 'fused' or 'horizons', got '{}'", method);
   const Box3d fileCell = parseFileBox(cellText, "--cell");
-  const Scene scene = openScene(spec, limits);
+  const PvsWorld world =
+      makePvsWorld(openScene(spec, limits), truth.has_value(), StaticWorldParts::Solids);
+  const Scene& scene = world.scene;
   warnIfOutsideScene(scene, fileCell, "--cell", cellText);
   const Box3f cell = toLocal(scene, fileCell);
-  EpsilonPvs pvs(scene);
+  EpsilonPvs& pvs = *world.pvs;
   const std::unique_ptr<HorizonFusion> horizons =
       makeHorizonFusion(scene, method == "auto"       ? FusionChoice::Auto
                                : method == "horizons" ? FusionChoice::Horizons
@@ -67,6 +71,8 @@ int cmdCell(const std::string& spec, const SceneLimits& limits, const std::strin
   const PvsResult r = method == "fused"
                           ? FusedPvs(pvs, fusedOptions).compute(cell, options, &fusedStats)
                           : pvs.compute(cell, options);
+  std::optional<PvsTruth> compared;
+  if (truth) compared = comparePvsWithTruth(world, cell, r.faces, *truth);
   if (asJson) {
     json objects = json::array();
     for (uint32_t o : r.objects) objects.push_back(scene.objects[o].name);
@@ -78,8 +84,10 @@ int cmdCell(const std::string& spec, const SceneLimits& limits, const std::strin
       fused["resolution"] = fusedOptions.resolution;
       stats["fused"] = fused;
     }
-    std::cout << json{{"faces", r.faces}, {"objects", objects}, {"stats", stats}}.dump() << "\n";
-    return 0;
+    json out{{"faces", r.faces}, {"objects", objects}, {"stats", stats}};
+    if (compared) out["ground_truth"] = compared->toJson();
+    std::cout << out.dump() << "\n";
+    return compared && !compared->missing.empty() ? 3 : 0;
   }
   const PvsStats& s = r.stats;
   fmt::print("PVS of cell {} ({}): {} of {} faces ({:.1f}% culled), {} objects\n", cellText, used,
@@ -90,6 +98,31 @@ int cmdCell(const std::string& spec, const SceneLimits& limits, const std::strin
   if (method == "fused")
     fmt::print("  fused occluders (eps {} m, {} pixels per cube side):\n{}", fusedOptions.epsilon,
                fusedOptions.resolution, statsTable(fusedStats, "    "));
+  if (!compared) return 0;
+  const PvsTruth& c = *compared;
+  fmt::print("sampled ground truth ({} viewpoints, {} inside solids left out, {} rays):\n",
+             c.truth.viewpoints, c.truth.insideSolid, c.truth.rays);
+  fmt::print("  {:<34} {:>10}\n", "faces seen", c.truth.faces.size());
+  fmt::print("  {:<34} {:>10}\n", "of them found by probes only", c.truth.probeOnly);
+  fmt::print("  {:<34} {:>10.2f}\n", "PVS / seen", c.pvsOverSeen());
+  fmt::print("  {:<34} {:>10}\n", "missing (seen, not in the PVS)", c.missing.size());
+  fmt::print("  {:<34} {:>10}\n", "unseen PVS faces", c.unseen());
+  float lo = 0.0f;
+  for (size_t b = 0; b < c.unseenByDistance.size(); ++b) {
+    const std::string band = b < PvsTruth::kDistanceBands.size()
+                                 ? fmt::format("{:.0f}-{:.0f} m", lo, PvsTruth::kDistanceBands[b])
+                                 : fmt::format("beyond {:.0f} m", lo);
+    fmt::print("    {:<32} {:>10}\n", band, c.unseenByDistance[b]);
+    if (b < PvsTruth::kDistanceBands.size()) lo = PvsTruth::kDistanceBands[b];
+  }
+  fmt::print("    {:<32} {:>10}\n", "facing up", c.unseenUp);
+  fmt::print("    {:<32} {:>10}\n", "facing sideways", c.unseenSide);
+  fmt::print("    {:<32} {:>10}\n", "facing down", c.unseenDown);
+  if (!c.missing.empty()) {
+    spdlog::error("the PVS misses {} faces seen from the cell (first: {})", c.missing.size(),
+                  c.missing.front());
+    return 3;
+  }
   return 0;
 }
 
@@ -374,7 +407,21 @@ int runPvsTool(int argc, char** argv) {
   cell->add_option("--large-occluders", largeOccluders,
                    "use only the K largest occluders by solid angle (0: all)")
       ->check(atLeast<size_t>(0));
-  cell->add_flag("--json", asJson, "one JSON object on stdout: faces, objects, stats");
+  cell->add_flag("--json", asJson,
+                 "one JSON object on stdout: faces, objects, stats (and ground_truth)");
+  bool groundTruth = false;
+  TruthOptions truthOptions;
+  cell->add_flag("--ground-truth", groundTruth,
+                 "also sample what is seen from the cell: PVS / seen, missing faces (exit 3 if "
+                 "any), the unseen PVS faces by distance and facing");
+  cell->add_option("--gt-points", truthOptions.points, "ground-truth viewpoints")
+      ->check(atLeast<size_t>(1));
+  cell->add_option("--gt-res", truthOptions.resolution, "ground-truth rays per cube face side")
+      ->check(inRange(1, 4096));
+  cell->add_option("--gt-probes", truthOptions.probes,
+                   "ground-truth rays aimed at each triangle of a PVS face from each viewpoint (0: "
+                   "the cube maps only)")
+      ->check(inRange(0, 256));
   FusedPvsOptions fusedOptions;
   cell->add_option("--epsilon", fusedOptions.epsilon,
                    "fused: occluder erosion and sample spacing bound (m)")
@@ -568,7 +615,9 @@ int runPvsTool(int argc, char** argv) {
     if (*cell) {
       PvsOptions options = pvsOptionsFromFlags();
       options.largeOccluders = largeOccluders;
-      return cmdCell(scene, limits, cellText, method, options, fusedOptions, asJson);
+      return cmdCell(scene, limits, cellText, method, options, fusedOptions,
+                     groundTruth ? std::optional<TruthOptions>(truthOptions) : std::nullopt,
+                     asJson);
     }
     if (*bake) {
       const PvsOptions options = pvsOptionsFromFlags();

@@ -70,6 +70,49 @@ TEST(PvsTool, CellPrintsTheContractedJsonAndCullsTheHiddenBox) {
   }
 }
 
+TEST(PvsTool, CellWithGroundTruthSaysWhatTheCellSeesAndWhichPvsFacesItDoesNot) {
+  vistream::testing::TempDir dir;
+  const fs::path scene = dir.write("wall.obj", wallScene());
+  const std::string args = "cell --scene " + scene.string() +
+                           " --cell -1,1,0,1,2,2 --method paper --ground-truth --gt-points 8 "
+                           "--gt-res 64";
+  const ToolRun r = runPvs(args + " --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  const auto faces = j["faces"].get<std::vector<uint32_t>>();
+  const auto& g = j["ground_truth"];
+  // From in front of the wall only the ground and the wall's front face
+  // (+z, face 6) can be seen.
+  EXPECT_EQ(g["seen_faces"], 2);
+  EXPECT_TRUE(g["missing_faces"].empty());
+  EXPECT_DOUBLE_EQ(g["pvs_over_seen"].get<double>(), double(faces.size()) / 2.0);
+  std::vector<uint32_t> unseen;
+  for (uint32_t f : faces)
+    if (f != 0 && f != 6) unseen.push_back(f);
+  EXPECT_EQ(g["unseen_face_ids"].get<std::vector<uint32_t>>(), unseen);
+  EXPECT_EQ(g["unseen_faces"], unseen.size());
+  size_t byDistance = 0;
+  for (const auto& band : g["unseen_by_distance"]) byDistance += band["faces"].get<size_t>();
+  EXPECT_EQ(byDistance, unseen.size());
+  const auto& facing = g["unseen_facing"];
+  EXPECT_EQ(
+      facing["up"].get<size_t>() + facing["side"].get<size_t>() + facing["down"].get<size_t>(),
+      unseen.size());
+  // The wall's top (face 4) and bottom (3) face up and down; its sides
+  // and back (1, 2, 5) sideways; all of the wall is within 25 m.
+  const auto has = [&](uint32_t f) { return std::binary_search(unseen.begin(), unseen.end(), f); };
+  EXPECT_EQ(facing["up"].get<size_t>(), size_t(has(4)));
+  EXPECT_EQ(facing["down"].get<size_t>(), size_t(has(3)));
+  EXPECT_EQ(facing["side"].get<size_t>(), size_t(has(1)) + has(2) + has(5));
+  EXPECT_EQ(g["unseen_by_distance"][0]["faces"].get<size_t>(), unseen.size());
+  EXPECT_GT(g["viewpoints"].get<size_t>(), 0u);
+  // The table says the same to a person.
+  const ToolRun table = runPvs(args);
+  ASSERT_EQ(table.status, 0) << table.err;
+  EXPECT_NE(table.out.find("faces seen"), std::string::npos) << table.out;
+  EXPECT_NE(table.out.find("missing (seen, not in the PVS)"), std::string::npos) << table.out;
+}
+
 TEST(PvsTool, BakesQueriesAndMergesAndRejectsACorruptDatabase) {
   vistream::testing::TempDir dir;
   const fs::path scene = dir.write("wall.obj", wallScene());
