@@ -197,10 +197,6 @@ struct FrameRun {
   bool useCache = false;
   std::vector<Ray> rays;
   std::vector<uint32_t> rayOf;  // per ray: its candidate
-  // Per candidate: above the horizon of the geometry held (sky an impostor
-  // may reach), so a ray would miss: traced without one.
-  std::vector<uint8_t> aboveHorizon;
-  std::vector<uint32_t> missedUnseen;  // traced candidates above the horizon
   std::vector<Hit> hits;
 
   FrameRun(FrameRenderer& renderer, const Camera& c, ImageRgb8& o, std::vector<uint32_t>* gl,
@@ -394,7 +390,6 @@ struct FrameRun {
         // field, and a pixel with a polygon beyond d sees at least that.
         // Sky an impostor's point may reach stays a candidate: the cache
         // then keeps the point, which would otherwise be splatted every frame.
-        bool aboveHeld = false;
         if (rep.horizonRan && covered[p] == kUncovered &&
             HorizonMap::raySlope(dir) > slopes[size_t(x)]) {
           if (!skyReach || !r.splatReach_.marked({x, y})) {
@@ -403,11 +398,9 @@ struct FrameRun {
             continue;
           }
           ++rep.skyUnderImpostors;
-          aboveHeld = true;
         }
         candidates.push_back(uint32_t(p));
         dirs.push_back(dir);
-        aboveHorizon.push_back(uint8_t(aboveHeld));
       }
     if (glNear)
       for (size_t p = 0; p < pixels; ++p)
@@ -471,15 +464,12 @@ struct FrameRun {
   }
 
   // 7. Ray casting (after the impostors: a ray need not look beyond the
-  // point a pixel already shows). A candidate above the horizon of the
-  // geometry held (sky an impostor may reach) misses without a ray.
+  // point a pixel already shows).
   void castFarRays() {
     Stopwatch clock;
     const bool splatted = impostorsOn && !gpu;
     for (size_t i = 0; i < candidates.size(); ++i)
-      if (trace[i] && aboveHorizon[i]) {
-        missedUnseen.push_back(uint32_t(i));
-      } else if (trace[i]) {
+      if (trace[i]) {
         // dirs[i] has a unit component along the view axis, so t is the view
         // depth: starting at zNear clips rays exactly where polygons are clipped.
         float tfar = std::numeric_limits<float>::infinity();
@@ -607,8 +597,37 @@ struct FrameRun {
   // impostors in front of either.
   void compose() {
     Stopwatch clock;
-    for (size_t k = 0; k < rays.size(); ++k) composeTraced(rayOf[k], hits[k]);
-    for (const uint32_t i : missedUnseen) composeTraced(i, Hit{});
+    for (size_t k = 0; k < rays.size(); ++k) {
+      const size_t i = rayOf[k];
+      const Hit& h = hits[k];
+      const glm::u8vec3 c =
+          h.valid() ? r.geometry_.colourAt(h.triangle, h.u, h.v, h.t * glm::length(dirs[i]))
+                    : r.geometry_.background(camera.eye, dirs[i]);
+      // dirs[i] has unit view depth: the hit's t is its view depth.
+      const bool impostor =
+          impostorWins(i, h.valid() ? h.t : std::numeric_limits<float>::infinity());
+      // The cache keeps what the pixel shows: the impostor's point (at its
+      // score, a depth at most 2% beyond the point's: invalidate() then
+      // forgets a little more), or the far field's hit. A shortened ray
+      // that missed lost to its point (impostorCovers), so every ray stores.
+      if (useCache && texels[i] >= 0) {
+        if (impostor)
+          r.cache_->store(texels[i], impostorColour(candidates[i]),
+                          r.splatter_.score()[candidates[i]] * glm::length(dirs[i]),
+                          PanoramicCache::kImpostorTexelHit);
+        else
+          r.cache_->store(
+              texels[i], c,
+              h.valid() ? h.t * glm::length(dirs[i]) : std::numeric_limits<float>::infinity(),
+              h.valid() ? h.triangle : PanoramicCache::kNoTexelHit);
+      }
+      if (impostor) {
+        takeImpostor(i);
+        continue;
+      }
+      hits[k].valid() ? ++rep.pixels.rayHit : ++rep.pixels.rayMiss;
+      setPixel(candidates[i], c);
+    }
     if (useCache)
       for (size_t i = 0; i < candidates.size(); ++i)
         if (!trace[i]) {
@@ -637,36 +656,6 @@ struct FrameRun {
           takeImpostorPixel(p);
         }
     rep.ms.compose = clock.ms();
-  }
-  // A traced candidate: the far field's hit `h` (or a miss) or the
-  // impostor's point in front of it, stored in the cache.
-  void composeTraced(size_t i, const Hit& h) {
-    const glm::u8vec3 c =
-        h.valid() ? r.geometry_.colourAt(h.triangle, h.u, h.v, h.t * glm::length(dirs[i]))
-                  : r.geometry_.background(camera.eye, dirs[i]);
-    // dirs[i] has unit view depth: the hit's t is its view depth.
-    const bool impostor = impostorWins(i, h.valid() ? h.t : std::numeric_limits<float>::infinity());
-    // The cache keeps what the pixel shows: the impostor's point (at its
-    // score, a depth at most 2% beyond the point's: invalidate() then
-    // forgets a little more), or the far field's hit. A shortened ray
-    // that missed lost to its point (impostorCovers), so every ray stores.
-    if (useCache && texels[i] >= 0) {
-      if (impostor)
-        r.cache_->store(texels[i], impostorColour(candidates[i]),
-                        r.splatter_.score()[candidates[i]] * glm::length(dirs[i]),
-                        PanoramicCache::kImpostorTexelHit);
-      else
-        r.cache_->store(
-            texels[i], c,
-            h.valid() ? h.t * glm::length(dirs[i]) : std::numeric_limits<float>::infinity(),
-            h.valid() ? h.triangle : PanoramicCache::kNoTexelHit);
-    }
-    if (impostor) {
-      takeImpostor(i);
-      return;
-    }
-    h.valid() ? ++rep.pixels.rayHit : ++rep.pixels.rayMiss;
-    setPixel(candidates[i], c);
   }
 };
 
