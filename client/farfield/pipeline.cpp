@@ -46,8 +46,7 @@ nlohmann::json FrameReport::toJson() const {
       {"moving", moving},
       {"stages",
        {{"far_field", {{"ran", farFieldRan}, {"why", farFieldWhy}}},
-        {"horizon_tracing",
-         {{"ran", horizonRan}, {"why", horizonWhy}, {"sky_under_impostors", skyUnderImpostors}}},
+        {"horizon_tracing", {{"ran", horizonRan}, {"why", horizonWhy}}},
         {"image_cache",
          {{"ran", cacheRan},
           {"why", cacheWhy},
@@ -314,24 +313,10 @@ struct FrameRun {
     rep.ms.horizon = clock.ms();
   }
 
-  // The tiles a point of the impostors splatted in software may reach
-  // (r.splatReach_), marked once a frame: by classifyPixels() to keep sky
-  // under the impostors in the cache, else by maskSplat().
-  bool reachMarked = false;
-  bool skyReach = false;  // sky pixels are outside the reach (the rest became candidates)
-  void markImpostorReach() {
-    const std::shared_ptr<const ImpostorSet> set = softwareImpostors();
-    if (!set) return;
-    r.splatReach_.reset(W, H);
-    for (const auto& impostor : set->impostors) r.splatReach_.markReach(camera, *impostor);
-    reachMarked = skyReach = true;
-  }
-
   // 4. Classify the uncovered pixels: polygon, background, sky above the
   // horizon, or far-field candidates.
   void classifyPixels() {
     const std::vector<uint8_t>& covered = r.covered_;
-    if (rep.horizonRan) markImpostorReach();
     const Camera::PixelRays pixelRays = camera.pixelRays();
     // Colours first, rows in parallel: polygon pixels look theirs up in
     // their triangle's grid, one span per triangle; every other pixel takes
@@ -388,16 +373,11 @@ struct FrameRun {
         }
         // Only pixels no polygon reaches can be sky: the horizon bounds the far
         // field, and a pixel with a polygon beyond d sees at least that.
-        // Sky an impostor's point may reach stays a candidate: the cache
-        // then keeps the point, which would otherwise be splatted every frame.
         if (rep.horizonRan && covered[p] == kUncovered &&
             HorizonMap::raySlope(dir) > slopes[size_t(x)]) {
-          if (!skyReach || !r.splatReach_.marked({x, y})) {
-            ++rep.pixels.horizon;
-            skyPixels.push_back(uint32_t(p));
-            continue;
-          }
-          ++rep.skyUnderImpostors;
+          ++rep.pixels.horizon;
+          skyPixels.push_back(uint32_t(p));
+          continue;
         }
         candidates.push_back(uint32_t(p));
         dirs.push_back(dir);
@@ -550,18 +530,14 @@ struct FrameRun {
   // may reach. False when there are none.
   bool maskSplat(const ImpostorSet& set) {
     ScreenTiles& reach = r.splatReach_;
-    if (!reachMarked) {
-      reach.reset(W, H);
-      for (const auto& impostor : set.impostors) reach.markReach(camera, *impostor);
-      reachMarked = true;
-    }
+    reach.reset(W, H);
+    for (const auto& impostor : set.impostors) reach.markReach(camera, *impostor);
     r.splatMask_.reset(pixels);
     if (!reach.any()) return false;
     PixelRows rows(W);
     for (size_t i = 0; i < candidates.size(); ++i)
       if (trace[i] && reach.marked(rows.at(candidates[i]))) r.splatMask_.add(candidates[i]);
     for (const std::vector<uint32_t>* list : {&skyPixels, &backgroundPixels}) {
-      if (list == &skyPixels && skyReach) continue;  // out of reach (classifyPixels)
       PixelRows listRows(W);
       for (const uint32_t p : *list)
         if (reach.marked(listRows.at(p))) r.splatMask_.add(p);
@@ -642,7 +618,7 @@ struct FrameRun {
         }
     // Above the horizon of the geometry held there is none: an impostor's
     // far geometry (which the client does not hold) may rise there.
-    if (impostorsOn && !skyReach)
+    if (impostorsOn)
       for (const uint32_t p : skyPixels)
         if (impostorCovers(p, std::numeric_limits<float>::infinity())) {
           --rep.pixels.horizon;

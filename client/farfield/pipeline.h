@@ -184,10 +184,6 @@ struct FrameReport {
   // Cache texels forgotten this frame because the impostors drawn changed
   // (another view cell's set, or none).
   size_t impostorTexelsForgotten = 0;
-  // Pixels above the horizon of the geometry held that a point of the
-  // viewer's impostors may reach: far-field candidates (ray cast, cached
-  // with the impostor's colour) rather than sky to splat every frame.
-  size_t skyUnderImpostors = 0;
   CachePlanStats cachePlan;
   HorizonStats horizonStats;
   nlohmann::json toJson() const;
