@@ -1208,6 +1208,36 @@ TEST(ImpostorPipeline, TheCacheKeepsTheImpostorsSoAStillViewerCastsNoRayForThem)
   EXPECT_LE(pixelsOff(second, reference), pixelsOff(first, reference) + 20);
 }
 
+TEST(ImpostorPipeline, SplattingTheSkyAboveTheHeldHorizonDrawsTheFrameThatTracesNoHorizon) {
+  // The block rises above the horizon of what the client holds: those
+  // pixels are sky to the horizon and the impostor's to the splat. Without
+  // a horizon every such pixel is ray cast (and missed) instead.
+  const ClientView v;
+  for (const bool cache : {false, true})
+    for (const glm::vec3& eye : {glm::vec3(0.0f, 2.0f, 0.0f), glm::vec3(-5.0f, 1.2f, 5.0f)}) {
+      const Camera c = towardsTheBlock(eye);
+      PipelineOptions o = ClientView::options(RenderMode::Pipeline);
+      o.cache = cache;
+      FrameRenderer withHorizon(v.held, o);
+      o.horizonAllowed = false;  // every pixel without a polygon is a candidate
+      FrameRenderer without(v.held, o);
+      withHorizon.setImpostors(v.set);
+      without.setImpostors(v.set);
+      ImageRgb8 a, b;
+      const FrameReport ra = withHorizon.render(c, a);
+      const FrameReport rb = without.render(c, b);
+      ASSERT_TRUE(ra.horizonRan) << ra.horizonWhy;
+      ASSERT_FALSE(rb.horizonRan);
+      EXPECT_GT(ra.pixels.horizon, 1000u) << "open sky stays culled";
+      EXPECT_GT(ra.pixels.impostor, 500u);
+      EXPECT_EQ(ra.pixels.impostor, rb.pixels.impostor) << "cache " << cache;
+      size_t differ = 0;
+      for (int y = 0; y < c.height; ++y)
+        for (int x = 0; x < c.width; ++x) differ += a.at(x, y) != b.at(x, y);
+      EXPECT_EQ(differ, 0u) << "cache " << cache;
+    }
+}
+
 TEST(ImpostorPipeline, TheCacheForgetsTheImpostorsWhenTheyChangeAndShowsTheNewOnes) {
   const ClientView v;
   const Camera c = towardsTheBlock({0.0f, 2.0f, 0.0f});
