@@ -490,7 +490,7 @@ struct FrameRun {
       ScreenTiles tiles;
       tiles.reset(W, H);
       for (const std::vector<uint32_t>* list : {&candidates, &skyPixels, &backgroundPixels})
-        for (const uint32_t p : *list) tiles.mark(p);
+        tiles.markList(*list);
       for (const auto& impostor : set->impostors)
         if (tiles.mayCover(camera, impostor->box)) gpu->impostors.push_back(impostor);
       gpu->depthLimit.assign(pixels, 0.0f);

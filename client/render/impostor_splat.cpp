@@ -129,13 +129,18 @@ void ScreenTiles::reset(int width, int height) {
   tiles_.assign(size_t(tilesX_) * size_t((height + kTile - 1) / kTile), 0);
 }
 
-void ScreenTiles::markMask(const PixelMask& mask) {
-  VS_CHECK(mask.size() == size_t(width_) * size_t(height_));
+void ScreenTiles::markList(std::span<const uint32_t> pixels) {
   PixelRows rows(width_);
-  for (const uint32_t p : mask.pixels()) {
+  for (const uint32_t p : pixels) {
+    VS_CHECK(p < uint32_t(width_) * uint32_t(height_));
     const glm::ivec2 xy = rows.at(p);
     tiles_[size_t(xy.y / kTile) * size_t(tilesX_) + size_t(xy.x / kTile)] = 1;
   }
+}
+
+void ScreenTiles::markMask(const PixelMask& mask) {
+  VS_CHECK(mask.size() == size_t(width_) * size_t(height_));
+  markList(mask.pixels());
 }
 
 void ScreenTiles::markReach(const Camera& camera, const Impostor& impostor) {

@@ -141,7 +141,9 @@ class ScreenTiles {
   static constexpr int kTile = 16;
   // No tile marked.
   void reset(int width, int height);
-  void mark(uint32_t pixel) { tiles_[tileOf(pixel)] = 1; }
+  // Marks the tiles holding a pixel of the list (of the camera's pixels; a
+  // list in ascending order costs no division a pixel: PixelRows).
+  void markList(std::span<const uint32_t> pixels);
   // Marks the tiles holding a pixel of `mask`.
   void markMask(const PixelMask& mask);
   // Marks the tiles where a point of the impostor may land: the footprint
@@ -155,10 +157,6 @@ class ScreenTiles {
   bool mayCover(const Camera& camera, const Box3f& box) const;
 
  private:
-  size_t tileOf(uint32_t pixel) const {
-    return size_t(int(pixel / uint32_t(width_)) / kTile) * size_t(tilesX_) +
-           size_t(int(pixel % uint32_t(width_)) / kTile);
-  }
   int width_ = 0, height_ = 0, tilesX_ = 0;
   std::vector<uint8_t> tiles_;
 };

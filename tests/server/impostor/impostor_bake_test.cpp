@@ -18,6 +18,7 @@
 #include <glm/gtc/constants.hpp>
 #include <optional>
 #include <random>
+#include <set>
 
 #include "client/farfield/pipeline.h"
 #include "client/render/camera.h"
@@ -986,6 +987,33 @@ TEST(ImpostorSplat, TheReachOfAnImpostorHoldsEveryPixelItsPointsCoverAndLittleEl
     EXPECT_EQ(outside, 0u) << "view " << k;
     // The blocks' footprints, not the whole screen.
     EXPECT_LT(markedPixels, size_t(c.width) * size_t(c.height) / 2) << "view " << k;
+  }
+}
+
+TEST(ScreenTilesTest, AListMarksExactlyTheTilesOfItsPixelsInAnyOrder) {
+  // A width that is no multiple of the tile, so the last column of tiles
+  // is narrow; pixels in ascending order, then the same shuffled.
+  const int w = 100, h = 37;
+  std::mt19937 rng(5);
+  std::vector<uint32_t> list;
+  for (uint32_t p = 0; p < uint32_t(w * h); ++p)
+    if (rng() % 97 == 0) list.push_back(p);
+  list.push_back(uint32_t(w * h - 1));  // the bottom right pixel
+  std::vector<uint32_t> shuffled = list;
+  std::shuffle(shuffled.begin(), shuffled.end(), rng);
+  for (const auto* pixels : {&list, &shuffled}) {
+    ScreenTiles tiles;
+    tiles.reset(w, h);
+    tiles.markList(*pixels);
+    // The oracle: a tile is marked when some listed pixel lies in it.
+    std::set<std::pair<int, int>> expected;
+    for (const uint32_t p : list)
+      expected.insert({int(p) % w / ScreenTiles::kTile, int(p) / w / ScreenTiles::kTile});
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        EXPECT_EQ(tiles.marked({x, y}),
+                  expected.count({x / ScreenTiles::kTile, y / ScreenTiles::kTile}) == 1)
+            << x << "," << y;
   }
 }
 
