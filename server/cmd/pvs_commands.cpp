@@ -107,13 +107,11 @@ int cmdCell(const std::string& spec, const SceneLimits& limits, const std::strin
   fmt::print("  {:<34} {:>10.2f}\n", "PVS / seen", c.pvsOverSeen());
   fmt::print("  {:<34} {:>10}\n", "missing (seen, not in the PVS)", c.missing.size());
   fmt::print("  {:<34} {:>10}\n", "unseen PVS faces", c.unseen());
-  float lo = 0.0f;
   for (size_t b = 0; b < c.unseenByDistance.size(); ++b) {
-    const std::string band = b < PvsTruth::kDistanceBands.size()
-                                 ? fmt::format("{:.0f}-{:.0f} m", lo, PvsTruth::kDistanceBands[b])
-                                 : fmt::format("beyond {:.0f} m", lo);
+    const auto [from, to] = PvsTruth::band(b);
+    const std::string band = std::isinf(to) ? fmt::format("beyond {:.0f} m", from)
+                                            : fmt::format("{:.0f}-{:.0f} m", from, to);
     fmt::print("    {:<32} {:>10}\n", band, c.unseenByDistance[b]);
-    if (b < PvsTruth::kDistanceBands.size()) lo = PvsTruth::kDistanceBands[b];
   }
   fmt::print("    {:<32} {:>10}\n", "facing up", c.unseenUp);
   fmt::print("    {:<32} {:>10}\n", "facing sideways", c.unseenSide);

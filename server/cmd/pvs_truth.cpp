@@ -3,7 +3,9 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cmath>
 #include <glm/geometric.hpp>
+#include <limits>
 
 #include "common/core/check.h"
 #include "common/core/median.h"
@@ -48,15 +50,18 @@ double PvsTruth::pvsOverSeen() const {
   return truth.faces.empty() ? 0.0 : double(pvsFaces) / double(truth.faces.size());
 }
 
+std::pair<float, float> PvsTruth::band(size_t b) {
+  return {b == 0 ? 0.0f : kDistanceBands[b - 1],
+          b < kDistanceBands.size() ? kDistanceBands[b] : std::numeric_limits<float>::infinity()};
+}
+
 nlohmann::json PvsTruth::toJson() const {
   nlohmann::json bands = nlohmann::json::array();
-  float lo = 0.0f;
   for (size_t b = 0; b < unseenByDistance.size(); ++b) {
-    const bool last = b == kDistanceBands.size();
-    bands.push_back({{"from_m", lo},
-                     {"to_m", last ? nlohmann::json(nullptr) : nlohmann::json(kDistanceBands[b])},
+    const auto [from, to] = band(b);
+    bands.push_back({{"from_m", from},
+                     {"to_m", std::isinf(to) ? nlohmann::json(nullptr) : nlohmann::json(to)},
                      {"faces", unseenByDistance[b]}});
-    if (!last) lo = kDistanceBands[b];
   }
   return {{"seen_faces", truth.faces.size()},
           {"seen_by_probes_only", truth.probeOnly},

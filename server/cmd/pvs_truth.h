@@ -10,6 +10,7 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "common/core/box.h"
@@ -56,6 +57,9 @@ struct PvsTruth {
   std::array<size_t, kDistanceBands.size() + 1> unseenByDistance{};
   size_t unseenUp = 0, unseenSide = 0, unseenDown = 0;
   size_t unseen() const { return unseenUp + unseenSide + unseenDown; }
+  // The limits of distance band b of unseenByDistance (metres; the last
+  // band's upper limit is infinity).
+  static std::pair<float, float> band(size_t b);
   double pvsOverSeen() const;  // 0 when nothing is seen
   nlohmann::json toJson() const;
 };
