@@ -283,10 +283,9 @@ int runPvsBench(const PvsBenchOptions& options) {
     const bool indoor = spec.rfind("interior", 0) == 0;
     // The fused occlusion horizons (horizon_fusion.h) run where
     // `vistream-pvs cell --method auto` runs them: where the scene has solid
-    // columns (cities and terrain; not the interiors, whose walls are
-    // thinner than a column).
+    // columns or walls to build them from.
     auto horizon = std::make_unique<HorizonFusion>(w.scene, w.statics);
-    if (horizon->solidColumns() == 0)
+    if (horizon->solidColumns() == 0 && horizon->wallLines() == 0)
       horizon.reset();
     else
       w.pvs->setFusion(horizon.get());
@@ -392,10 +391,11 @@ int runPvsBench(const PvsBenchOptions& options) {
       // Occluders are shrunk by epsilon + bin margin, rounded up to whole
       // columns: the last rows shrink less (one column fewer on a 0.5 m
       // grid) at the price of more samples or more bins.
-      // The last two rows are the defaults without the walks' shortcuts
+      // The last three rows are the defaults without walls (solid columns
+      // only), then without the walks' shortcuts
       // (hiding hints, then block skipping too): the time they save.
       auto knob = [](double epsilon, double binMargin, int azimuthBins, int refinements,
-                     bool shortcuts = true, bool hints = true) {
+                     bool shortcuts = true, bool hints = true, bool walls = true) {
         HorizonFusionOptions o;
         o.epsilon = epsilon;
         o.binMargin = binMargin;
@@ -403,22 +403,27 @@ int runPvsBench(const PvsBenchOptions& options) {
         o.refinements = refinements;
         o.skipBlocks = shortcuts;
         o.hidingHints = shortcuts && hints;
+        o.walls = walls;
         return o;
       };
-      const HorizonFusionOptions knobs[] = {
-          knob(2.0, 0.5, 1024, 1),       knob(1.0, 0.5, 1024, 0),
-          knob(1.0, 0.5, 1024, 1),       knob(1.0, 0.5, 1024, 2),
-          knob(0.5, 0.5, 1024, 1),       knob(0.74, 0.25, 2048, 1),
-          knob(0.74, 0.25, 1024, 2),     knob(1.0, 0.5, 1024, 1, true, false),
-          knob(1.0, 0.5, 1024, 1, false)};
+      const HorizonFusionOptions knobs[] = {knob(2.0, 0.5, 1024, 1),
+                                            knob(1.0, 0.5, 1024, 0),
+                                            knob(1.0, 0.5, 1024, 1),
+                                            knob(1.0, 0.5, 1024, 2),
+                                            knob(0.5, 0.5, 1024, 1),
+                                            knob(0.74, 0.25, 2048, 1),
+                                            knob(0.74, 0.25, 1024, 2),
+                                            knob(1.0, 0.5, 1024, 1, true, true, false),
+                                            knob(1.0, 0.5, 1024, 1, true, false),
+                                            knob(1.0, 0.5, 1024, 1, false)};
       if (human)
         fmt::print(
             "\nOcclusion horizons' knobs ({}, the 4 m cells above; after the single occluders "
             "with back faces; default epsilon {} m, {} refinement)\n"
-            "  {:>11} {:>10} {:>6} {:>11} {:>10} {:>12} {:>12} {:>10} {:>8} {:>6} {:>6}\n",
+            "  {:>11} {:>10} {:>6} {:>11} {:>10} {:>12} {:>12} {:>10} {:>8} {:>6} {:>6} {:>6}\n",
             spec, HorizonFusionOptions{}.epsilon, HorizonFusionOptions{}.refinements, "epsilon (m)",
             "margin (m)", "bins", "refinements", "reach (m)", "median ratio", "fusion ms",
-            "build s", "missing", "hints", "skips");
+            "build s", "missing", "walls", "hints", "skips");
       for (const HorizonFusionOptions& k : knobs) {
         const HorizonFusion fusion(w.scene, w.statics, k);
         std::vector<double> ratio, ms;
@@ -443,15 +448,16 @@ int runPvsBench(const PvsBenchOptions& options) {
                                         {"fusion_ms_per_cell", median(ms)},
                                         {"build_s", fusion.prepareMs() / 1000.0},
                                         {"missing_faces", missing},
+                                        {"walls", k.walls},
                                         {"hiding_hints", k.hidingHints},
                                         {"skip_blocks", k.skipBlocks}});
         if (human)
           fmt::print(
               "  {:>11.2f} {:>10.2f} {:>6} {:>11} {:>10.0f} {:>12.2f} {:>12.2f} {:>10.1f} {:>8} "
-              "{:>6} {:>6}\n",
+              "{:>6} {:>6} {:>6}\n",
               k.epsilon, k.binMargin, k.azimuthBins, k.refinements, reach, median(ratio),
-              median(ms), fusion.prepareMs() / 1000.0, missing, k.hidingHints ? "on" : "off",
-              k.skipBlocks ? "on" : "off");
+              median(ms), fusion.prepareMs() / 1000.0, missing, k.walls ? "on" : "off",
+              k.hidingHints ? "on" : "off", k.skipBlocks ? "on" : "off");
       }
     }
 

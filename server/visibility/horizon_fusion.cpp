@@ -159,6 +159,7 @@
 #include "common/spatial/convex_polygon.h"
 #include "common/spatial/distance_transform.h"
 #include "common/world/solids.h"
+#include "server/visibility/wall_occluders.h"
 
 namespace vistream {
 namespace {
@@ -273,6 +274,17 @@ struct HorizonFusion::Impl {
     std::vector<glm::dvec3> lowSide, highSide;
   };
   std::vector<BinTable> binTables;
+  // Vertical walls (proof, step 7) and, per column (in columnIndex order),
+  // the wall lines whose triangles meet its square grown by the margin.
+  WallOccluders walls;
+  std::vector<uint32_t> wallStart, wallLineIds;
+  double shrinkRadius = 0.0;  // epsilon + binMargin
+  // Smallest sine of the angle between a horizon's ray and a wall it
+  // crosses: grazier walls are eroded by more than 10 times the radius.
+  static constexpr double kMinWallSine = 0.1;
+  // Metres: wall triangles within this of their line, cracks between them
+  // narrower than it taken as closed (proof, step 7).
+  double wallTolerance() const { return margin; }
 
   Impl(const Scene& s, std::unique_ptr<const StaticWorld> own, const StaticWorld& world)
       : scene(s),
@@ -320,6 +332,33 @@ struct HorizonFusion::Impl {
   }
 
   void build(const HorizonFusionOptions& o);
+  void buildWalls(const HorizonFusionOptions& o);
+  // Calls f(i, j) for every column whose square, grown by `grow`, meets the
+  // segment a-b (X/Z); some columns near it twice at most per row, never
+  // one it meets left out.
+  template <class F>
+  void forEachColumnOfSegment(glm::dvec2 a, glm::dvec2 b, double grow, F&& f) const {
+    const int j0 = std::max(0, int(std::floor((std::min(a.y, b.y) - grow - lo.y) / g)));
+    const int j1 = std::min(nz - 1, int(std::floor((std::max(a.y, b.y) + grow - lo.y) / g)));
+    for (int j = j0; j <= j1; ++j) {
+      const double za = lo.y + j * g - grow, zb = za + g + 2.0 * grow;
+      double s0 = 0.0, s1 = 1.0;
+      if (b.y != a.y) {
+        double sa = (za - a.y) / (b.y - a.y), sb = (zb - a.y) / (b.y - a.y);
+        if (sa > sb) std::swap(sa, sb);
+        s0 = std::max(s0, sa);
+        s1 = std::min(s1, sb);
+      } else if (a.y < za || a.y > zb) {
+        continue;
+      }
+      if (s0 > s1) continue;
+      double xa = a.x + s0 * (b.x - a.x), xb = a.x + s1 * (b.x - a.x);
+      if (xa > xb) std::swap(xa, xb);
+      const int i0 = std::max(0, int(std::floor((xa - grow - lo.x) / g)));
+      const int i1 = std::min(nx - 1, int(std::floor((xb + grow - lo.x) / g)));
+      for (int i = i0; i <= i1; ++i) f(i, j);
+    }
+  }
   IRect rectOf(const Box3f& b, int grow) const {
     auto ix = [&](double x) { return int(std::floor((x - lo.x) / g)); };
     auto iz = [&](double z) { return int(std::floor((z - lo.y) / g)); };
@@ -658,6 +697,8 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
       b = std::max(b, t);
       if (t != kNoTop) maxTop = std::max(maxTop, double(t));
     }
+  shrinkRadius = o.epsilon + o.binMargin;
+  if (o.walls) buildWalls(o);
   {
     std::vector<uint8_t> hasTop(blockTop.size());
     for (size_t k = 0; k < blockTop.size(); ++k) hasTop[k] = blockTop[k] != kNoTop;
@@ -671,6 +712,43 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
       float& t = superTop[size_t(j / kSuper) * size_t(sx) + size_t(i / kSuper)];
       t = std::max(t, blockTop[size_t(j) * size_t(bx) + size_t(i)]);
     }
+}
+
+// Proof, step 7: the wall lines, entered in the columns their triangles
+// meet; a column's block (and so its super-block) and maxTop take the
+// line's highest top, so that a walk skipping a block skips no wall step.
+void HorizonFusion::Impl::buildWalls(const HorizonFusionOptions&) {
+  walls = WallOccluders(tris, wallTolerance(), 0.25);
+  std::vector<std::pair<uint32_t, uint32_t>> entries;  // (column index, line)
+  for (size_t k = 0; k < walls.size(); ++k)
+    for (uint32_t t : walls.triangles(k)) {
+      glm::dvec2 p[3];
+      for (int v = 0; v < 3; ++v) p[v] = {tris.vertex(t, v).x, tris.vertex(t, v).z};
+      glm::dvec2 a = p[0], b = p[1];
+      for (int v = 0; v < 3; ++v)
+        if (glm::length(p[(v + 1) % 3] - p[v]) > glm::length(b - a)) {
+          a = p[v];
+          b = p[(v + 1) % 3];
+        }
+      forEachColumnOfSegment(a, b, margin + wallTolerance(), [&](int i, int j) {
+        entries.push_back({uint32_t(columnIndex(i, j)), uint32_t(k)});
+      });
+    }
+  std::sort(entries.begin(), entries.end());
+  entries.erase(std::unique(entries.begin(), entries.end()), entries.end());
+  wallStart.assign(columns.size() + 1, 0);
+  for (const auto& [c, k] : entries) ++wallStart[c + 1];
+  for (size_t c = 0; c < columns.size(); ++c) wallStart[c + 1] += wallStart[c];
+  wallLineIds.resize(entries.size());
+  for (size_t n = 0; n < entries.size(); ++n) wallLineIds[n] = entries[n].second;
+  // Raise the bounds the walks skip by.
+  constexpr int kB2 = kBlock * kBlock;
+  for (const auto& [c, k] : entries) {
+    const float top = walls.line(k).maxTop;
+    float& b = blockTop[c / size_t(kB2)];
+    b = std::max(b, top);
+    maxTop = std::max(maxTop, double(top));
+  }
 }
 
 namespace {
@@ -716,6 +794,9 @@ double HorizonFusion::gridSize() const {
 size_t HorizonFusion::solidColumns() const {
   return impl_->solidColumns;
 }
+size_t HorizonFusion::wallLines() const {
+  return impl_->walls.size();
+}
 
 namespace {
 
@@ -743,6 +824,11 @@ struct HorizonQuery {
     int block = -1;              // the block whose bound the walk last took
     int super = -1;              // the super-block whose bound it last took
     bool done = false;           // nothing farther can add a step
+    // Wall steps (proof, step 7) not yet taken, by distance: a wall's step
+    // lies beyond the column it was found in, and joins `steps` once the
+    // walk has entered every column before its distance, so that it never
+    // stands in the way of a nearer, lower step.
+    std::vector<Step> pending;
   };
   struct Level {
     const HorizonFusion::Impl::BinTable* table = nullptr;
@@ -788,6 +874,7 @@ struct HorizonQuery {
   void start(const Level& level, size_t k, Walk& walk, double from = 0.0, double to = kInf,
              bool piece = false) {
     walk.steps.clear();
+    walk.pending.clear();
     walk.best = -kInf;
     walk.block = -1;
     walk.super = -1;
@@ -895,8 +982,21 @@ struct HorizonQuery {
     auto passRegion = [&](float top, int ri, int rj, int size, bool& again) {
       return passColumns(top, ri * size, rj * size, (ri + 1) * size, (rj + 1) * size, again);
     };
+    // Takes the pending wall steps up to distance `upTo`, in order.
+    auto takePending = [&](double upTo) {
+      size_t n = 0;
+      for (; n < walk.pending.size() && walk.pending[n].d <= upTo; ++n) {
+        const Step& st = walk.pending[n];
+        if (!(st.slope > best)) continue;
+        walk.steps.push_back(st);
+        best = st.slope;
+        if (!found) found = hides(st);
+      }
+      walk.pending.erase(walk.pending.begin(), walk.pending.begin() + long(n));
+    };
     constexpr int kB = HorizonFusion::Impl::kBlock, kS = kB * HorizonFusion::Impl::kSuper;
     for (;;) {
+      if (!walk.pending.empty()) takePending(tin);
       if (!(tin < t1)) {
         done = true;
         break;
@@ -951,6 +1051,11 @@ struct HorizonQuery {
           found = hides(st);
         }
       }
+      if (!w.wallStart.empty()) {
+        const size_t c = w.columnIndex(i, j);
+        for (uint32_t n = w.wallStart[c]; n < w.wallStart[c + 1]; ++n)
+          wallStep(w.wallLineIds[n], org, dir, tin, tout, reach, walk.pending);
+      }
       // Nothing farther can rise above `best`: every later square starts at
       // tout or beyond and no top exceeds maxTop.
       if (w.maxTop > y && best * tout >= w.maxTop - y) {
@@ -963,6 +1068,7 @@ struct HorizonQuery {
       }
       tin = tout;
     }
+    if (done) takePending(kInf);
     walk.i = i;
     walk.j = j;
     walk.tx = tx;
@@ -973,6 +1079,30 @@ struct HorizonQuery {
     walk.super = super;
     walk.done = done;
     return found;
+  }
+
+  // Proof, step 7: the step of wall line k if the central ray from org
+  // along dir crosses it between tin and tout, into `pending` (kept sorted
+  // by distance).
+  void wallStep(uint32_t k, glm::dvec2 org, glm::dvec2 dir, double tin, double tout, double reach,
+                std::vector<Step>& pending) {
+    const WallLine& line = w.walls.line(k);
+    const double den = glm::dot(line.n, dir);
+    const double sine = std::abs(den);
+    if (!(sine >= HorizonFusion::Impl::kMinWallSine)) return;
+    const double d0 = (line.c - glm::dot(line.n, org)) / den;
+    if (!(d0 >= tin - w.margin && d0 <= tout + w.margin)) return;
+    const double delta = (w.shrinkRadius + 2.0 * w.wallTolerance()) / sine;
+    if (!(d0 - delta > 1e-9) || !(d0 + delta <= reach)) return;
+    const double u = glm::dot(line.t, org + d0 * dir);
+    const std::optional<glm::dvec2> cover = w.walls.cover(k, u - delta, u + delta);
+    if (!cover || cover->x > double(cell.lo.y) - w.margin) return;
+    const double y = s.y, top = cover->y;
+    Step st{d0 + delta, top > y ? (top - y) / (d0 + delta) : (top - y) / (d0 - delta), cover->x};
+    ++stats.wallSteps;
+    auto at = std::upper_bound(pending.begin(), pending.end(), st.d,
+                               [](double d, const Step& p) { return d < p.d; });
+    pending.insert(at, st);
   }
 
   // Proof, step 6, for one step: does it hide points at horizontal
@@ -1198,10 +1328,11 @@ std::unique_ptr<HorizonFusion> makeHorizonFusion(const Scene& scene, FusionChoic
   Stopwatch clock;
   auto horizons = world ? std::make_unique<HorizonFusion>(scene, *world)
                         : std::make_unique<HorizonFusion>(scene);
-  spdlog::info("occlusion horizons: {} solid columns of {:.2f} m, built in {:.1f} s",
-               horizons->solidColumns(), horizons->gridSize(), clock.ms() / 1000.0);
-  if (choice == FusionChoice::Auto && horizons->solidColumns() == 0) {
-    spdlog::info("no solid columns: the PVS runs without occlusion horizons");
+  spdlog::info("occlusion horizons: {} solid columns of {:.2f} m, {} wall lines, built in {:.1f} s",
+               horizons->solidColumns(), horizons->gridSize(), horizons->wallLines(),
+               clock.ms() / 1000.0);
+  if (choice == FusionChoice::Auto && horizons->solidColumns() == 0 && horizons->wallLines() == 0) {
+    spdlog::info("no solid columns and no walls: the PVS runs without occlusion horizons");
     return nullptr;
   }
   return horizons;

@@ -89,6 +89,12 @@ struct HorizonFusionOptions {
   // sorted by face ID), never on threads. false: every query walks from the
   // sample (for tests and as the benchmark's baseline).
   bool hidingHints = true;
+  // Vertical walls occlude too, each eroded along its own line by the
+  // shrinking radius over the sine of the angle a horizon's ray meets it at
+  // (proof, step 7): the walls of open meshes (row blocks whose walls leave
+  // slits, facades without a back), which make no solid columns, and walls
+  // thinner than twice the shrinking. false: solid columns only.
+  bool walls = true;
 };
 
 struct HorizonFusionStats {
@@ -99,6 +105,7 @@ struct HorizonFusionStats {
   size_t excludedSolids = 0;  // enclosures whose floor the cell reaches: they occlude nothing
   uint64_t columnSteps = 0;   // height-field columns walked by the horizons
   uint64_t horizonBins = 0;   // azimuth bins traced (lazily, only where a face needs one)
+  uint64_t wallSteps = 0;     // horizon steps made by walls (proof, step 7)
 
   // Every field above, once (common/core/stats_fields.h).
   template <class F>
@@ -110,9 +117,10 @@ struct HorizonFusionStats {
     f(StatField{"excluded_solids", "enclosures reaching below the cell", ""}, excludedSolids);
     f(StatField{"column_steps", "columns walked", ""}, columnSteps);
     f(StatField{"horizon_bins", "azimuth bins traced", ""}, horizonBins);
+    f(StatField{"wall_steps", "horizon steps made by walls", ""}, wallSteps);
   }
 };
-static_assert(sizeof(HorizonFusionStats) == 7 * 8,
+static_assert(sizeof(HorizonFusionStats) == 8 * 8,
               "HorizonFusionStats changed: update HorizonFusionStats::forEachField");
 
 struct HorizonFusionResult {
@@ -146,6 +154,7 @@ class HorizonFusion {
   const HorizonFusionOptions& options() const { return options_; }
   double gridSize() const;      // metres, after the kMaxColumns rule
   size_t solidColumns() const;  // columns that occlude before shrinking
+  size_t wallLines() const;     // lines of vertical walls that occlude (0 without walls)
   double prepareMs() const { return prepareMs_; }
 
  public:
