@@ -283,9 +283,11 @@ int runPvsBench(const PvsBenchOptions& options) {
     const bool indoor = spec.rfind("interior", 0) == 0;
     // The fused occlusion horizons (horizon_fusion.h) run where
     // `vistream-pvs cell --method auto` runs them: where the scene has solid
-    // columns or walls to build them from.
+    // columns (cities and terrain; not the interiors, whose walls are
+    // thinner than a column and whose planar fusion leaves the horizons'
+    // walls nothing to cull).
     auto horizon = std::make_unique<HorizonFusion>(w.scene, w.statics);
-    if (horizon->solidColumns() == 0 && horizon->wallLines() == 0)
+    if (horizon->solidColumns() == 0)
       horizon.reset();
     else
       w.pvs->setFusion(horizon.get());

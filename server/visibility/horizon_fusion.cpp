@@ -123,6 +123,43 @@
 //    hidden from every viewpoint of the cell (step 4 maps each viewpoint to
 //    a sample), which is what is culled.
 //
+// 7. Walls (HorizonFusionOptions::walls). A wall line (wall_occluders.h) is
+//    a vertical plane, in X/Z the line n . x = c (n a horizontal unit
+//    normal, t its tangent, u = t . x), with heights [B(u), T(u)] that its
+//    triangles cover at every u of each of its bins. Its triangles lie
+//    within the tolerance tau (the margin) of the plane and cracks between
+//    them narrower than tau are taken as closed, as the welding of step 1
+//    does; the argument below is for the wall so read. Let bin k's central
+//    ray from s cross the line at distance d0 (in a column the walk reads)
+//    at an angle whose sine is sigma = |n . dir| >= 0.1, and let
+//    delta = (r + 2 tau) / sigma with r = epsilon + binMargin. Take the line
+//    of sight of step 4 from v to a point p of the bin at distance R, and
+//    write its horizontal position at fraction lam as c(lam) + e(lam), c the
+//    central ray's point at distance lam R; by steps 4 and 5, |e| <= r
+//    wherever lam R <= reach. Its signed distance to the line,
+//    f(lam) = (lam R - d0) sigma + n . e(lam) (the sign taken so that the
+//    central ray goes from negative to positive), is <= 0 at lam R = d0 - delta
+//    and >= 0 at lam R = d0 + delta when d0 - delta > 0 and
+//    d0 + delta <= reach; f is affine in lam, so the line of sight meets the
+//    plane at some lam1 with lam1 R in [d0 - delta, d0 + delta]. There its
+//    offset along the line from the central crossing x0 is
+//    (lam1 R - d0) cos + t . e with (lam1 R - d0) sigma = -n . e, at most
+//    |e| / sigma <= delta. So the crossing lies over the window
+//    [u0 - delta, u0 + delta] of the line, u0 = t . x0, where the wall covers
+//    [B, T] = [max B(u), min T(u)] over the window's bins. Its height is
+//    (1 - lam1) v.y + lam1 p.y: at most T when (p.y - Y) / R <= (T - Y) / d
+//    for every d in [d0 - delta, d0 + delta], the hardest being
+//    d = d0 + delta when T > Y and d = d0 - delta otherwise; at least B by
+//    (b) of step 5 with d = d0 + delta (the bound grows with d) and L >= B.
+//    And lam1 < 1 when R > d0 + delta. So the wall gives the step
+//    (d0 + delta, (T - Y) / (d0 +- delta), B): the line of sight meets a
+//    triangle strictly before p, and p is not seen from v (as in step 2, a
+//    point on a triangle blocks). A wall's step lies beyond the column it is
+//    found in: it waits (Walk::pending) until the walk has entered every
+//    column before its distance, so that the horizon's steps keep rising.
+//    Block bounds take the walls' tops: a wall step's slope is at most
+//    (T - Y) / tin when T > Y and (T - Y) / exit otherwise, as a column's.
+//
 // Cost: the horizon of a sample is traced lazily, bin by bin, only where a
 // face still needs it, and each bin only as far as the faces asking need
 // (their R_min), stopping at the first step that hides the face; a later
@@ -284,7 +321,7 @@ struct HorizonFusion::Impl {
   static constexpr double kMinWallSine = 0.1;
   // Metres: wall triangles within this of their line, cracks between them
   // narrower than it taken as closed (proof, step 7).
-  double wallTolerance() const { return margin; }
+  double wallTolerance() const { return std::max(margin, solids.weldTolerance()); }
 
   Impl(const Scene& s, std::unique_ptr<const StaticWorld> own, const StaticWorld& world)
       : scene(s),
@@ -1331,8 +1368,11 @@ std::unique_ptr<HorizonFusion> makeHorizonFusion(const Scene& scene, FusionChoic
   spdlog::info("occlusion horizons: {} solid columns of {:.2f} m, {} wall lines, built in {:.1f} s",
                horizons->solidColumns(), horizons->gridSize(), horizons->wallLines(),
                clock.ms() / 1000.0);
-  if (choice == FusionChoice::Auto && horizons->solidColumns() == 0 && horizons->wallLines() == 0) {
-    spdlog::info("no solid columns and no walls: the PVS runs without occlusion horizons");
+  // Walls alone (interiors: rooms are no solids) are left to the planar
+  // fusion of the face stage: on the interiors the horizons' walls culled
+  // nothing more, at twice the time of a cell.
+  if (choice == FusionChoice::Auto && horizons->solidColumns() == 0) {
+    spdlog::info("no solid columns: the PVS runs without occlusion horizons");
     return nullptr;
   }
   return horizons;

@@ -22,6 +22,12 @@
 // above the base (a missing wall or roof) never occlude here; they still
 // take part through the single-occluder PVS. An enclosure whose floor is
 // not below the cell does not occlude anything for that cell.
+// Vertical walls occlude too, solid or not (wall_occluders.h: upright
+// triangles grouped by plane, the heights their union covers along it),
+// each eroded along its own line by the shrinking radius over the sine of
+// the angle a horizon's ray crosses it at; the open meshes of real city
+// models (row blocks whose walls leave slits from the base up) occlude
+// only this way.
 //
 // Frames and units: the scene's local frame, metres, Y up. The cell is a
 // closed axis-aligned box; the result is valid for every viewpoint in it
