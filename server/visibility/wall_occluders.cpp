@@ -237,12 +237,12 @@ WallOccluders::WallOccluders(const FlatTriangles& tris, double tolerance, double
           // The top is linear over the sub-span: its lowest over the part
           // inside the bin is at one end of that part.
           const double p = breaks[k], q = breaks[k + 1];
-          const double a = std::max(p, x0), b = std::min(q, x1);
+          const double inA = std::max(p, x0), inB = std::min(q, x1);
           auto topAt = [&](double u) {
             return spanCover[k].y + (u - p) / (q - p) * (spanCover[k].z - spanCover[k].y);
           };
           base = std::max(base, spanCover[k].x);
-          top = std::min({top, topAt(a), topAt(b)});
+          top = std::min({top, topAt(inA), topAt(inB)});
         }
         // Rounded inward: a millionth of a metre, then to float.
         base += 1e-6;
