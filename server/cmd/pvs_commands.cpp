@@ -62,9 +62,11 @@ int cmdCell(const std::string& spec, const SceneLimits& limits, const std::strin
   const Box3f cell = toLocal(scene, fileCell);
   EpsilonPvs& pvs = *world.pvs;
   const std::unique_ptr<HorizonFusion> horizons =
-      makeHorizonFusion(scene, method == "auto"       ? FusionChoice::Auto
-                               : method == "horizons" ? FusionChoice::Horizons
-                                                      : FusionChoice::None);
+      makeHorizonFusion(scene,
+                        method == "auto"       ? FusionChoice::Auto
+                        : method == "horizons" ? FusionChoice::Horizons
+                                               : FusionChoice::None,
+                        &world.statics);  // its triangles, rays and solids: built once
   pvs.setFusion(horizons.get());
   const std::string used = method == "auto" ? (horizons ? "horizons" : "paper") : method;
   FusedPvsStats fusedStats;
