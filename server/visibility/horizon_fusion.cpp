@@ -127,7 +127,7 @@
 //    a vertical plane, in X/Z the line n . x = c (n a horizontal unit
 //    normal, t its tangent, u = t . x), with heights [B(u), T(u)] that its
 //    triangles cover at every u of each of its bins. Its triangles lie
-//    within the tolerance tau (the margin) of the plane and cracks between
+//    within tau (the weld tolerance of step 1, 1 cm) of the plane and cracks between
 //    them narrower than tau are taken as closed, as the welding of step 1
 //    does; the argument below is for the wall so read. Let bin k's central
 //    ray from s cross the line at distance d0 (in a column the walk reads)
