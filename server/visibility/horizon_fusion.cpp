@@ -126,10 +126,13 @@
 // 7. Walls (HorizonFusionOptions::walls). A wall line (wall_occluders.h) is
 //    a vertical plane, in X/Z the line n . x = c (n a horizontal unit
 //    normal, t its tangent, u = t . x), with heights [B(u), T(u)] that its
-//    triangles cover at every u of each of its bins. Its triangles lie
-//    within tau (the weld tolerance of step 1, 1 cm) of the plane and cracks between
-//    them narrower than tau are taken as closed, as the welding of step 1
-//    does; the argument below is for the wall so read. Let bin k's central
+//    triangles cover at every u of each of its bins. With tau the larger of
+//    the weld tolerance of step 1 (1 cm) and the margin, its triangles lie
+//    within tau / 3 of the plane and the cover joins them across gaps of at
+//    most tau / 3 along the plane, so every crack it closes is narrower
+//    than tau (at most 2 tau / 3 across the plane, tau / 3 along it); such
+//    cracks are taken as closed, as the welding of step 1 does, and the
+//    argument below is for the wall so read. Let bin k's central
 //    ray from s cross the line at distance d0 (in a column the walk reads)
 //    at an angle whose sine is sigma = |n . dir| >= 0.1, and let
 //    delta = (r + 2 tau) / sigma with r = epsilon + binMargin. Take the line
@@ -755,7 +758,10 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
 // meet; a column's block (and so its super-block) and maxTop take the
 // line's highest top, so that a walk skipping a block skips no wall step.
 void HorizonFusion::Impl::buildWalls(const HorizonFusionOptions&) {
-  walls = WallOccluders(tris, wallTolerance(), 0.25);
+  // A third of the tolerance for the plane and for the gaps the chains
+  // close: two members lie at most 2 tau / 3 apart across the plane, so a
+  // crack closed between them is narrower than tau (proof, step 7).
+  walls = WallOccluders(tris, wallTolerance() / 3.0, 0.25);
   std::vector<std::pair<uint32_t, uint32_t>> entries;  // (column index, line)
   for (size_t k = 0; k < walls.size(); ++k)
     for (uint32_t t : walls.triangles(k)) {
@@ -951,7 +957,22 @@ struct HorizonQuery {
   // walking a prefix changes none.
   template <class Hides>
   bool advance(const Level& level, Walk& walk, double until, Hides&& hides) {
-    if (walk.done || walk.tin >= until) return false;
+    if (walk.done) {
+      // Wall steps a finished walk left waiting after the step that hid a
+      // face: taken now, in order, up to the next that hides.
+      bool hid = false;
+      size_t n = 0;
+      for (; n < walk.pending.size() && !hid; ++n) {
+        const Step& st = walk.pending[n];
+        if (!(st.slope > walk.best)) continue;
+        walk.steps.push_back(st);
+        walk.best = st.slope;
+        hid = hides(st);
+      }
+      walk.pending.erase(walk.pending.begin(), walk.pending.begin() + long(n));
+      return hid;
+    }
+    if (walk.tin >= until) return false;
     const glm::dvec2 dir = walk.dir;
     const glm::dvec2 org(s.x, s.z);
     const glm::dvec2 glo = w.lo;
@@ -1019,20 +1040,23 @@ struct HorizonQuery {
     auto passRegion = [&](float top, int ri, int rj, int size, bool& again) {
       return passColumns(top, ri * size, rj * size, (ri + 1) * size, (rj + 1) * size, again);
     };
-    // Takes the pending wall steps up to distance `upTo`, in order.
+    // Takes the pending wall steps up to distance `upTo`, in order, up to
+    // the first that hides (the last step taken is then the hiding one,
+    // which binHides remembers as the bin's hint).
     auto takePending = [&](double upTo) {
       size_t n = 0;
-      for (; n < walk.pending.size() && walk.pending[n].d <= upTo; ++n) {
+      for (; n < walk.pending.size() && walk.pending[n].d <= upTo && !found; ++n) {
         const Step& st = walk.pending[n];
         if (!(st.slope > best)) continue;
         walk.steps.push_back(st);
         best = st.slope;
-        if (!found) found = hides(st);
+        found = hides(st);
       }
       walk.pending.erase(walk.pending.begin(), walk.pending.begin() + long(n));
     };
     constexpr int kB = HorizonFusion::Impl::kBlock, kS = kB * HorizonFusion::Impl::kSuper;
     for (;;) {
+      if (found) break;
       if (!walk.pending.empty()) takePending(tin);
       if (!(tin < t1)) {
         done = true;
@@ -1105,7 +1129,7 @@ struct HorizonQuery {
       }
       tin = tout;
     }
-    if (done) takePending(kInf);
+    if (done && !found) takePending(kInf);
     walk.i = i;
     walk.j = j;
     walk.tx = tx;
