@@ -106,6 +106,32 @@ TEST(WallOccluders, StacksPanelsThatMeetAndLeavesOutTiltedOnes) {
   EXPECT_LE(cover->y, 8.6);
 }
 
+// Two panels stacked but 18 mm apart across their plane (a slit a line of
+// sight rising through y = 3 passes): no line covers both, although both lie
+// within 10 mm of a plane between them; the same panels 2 mm apart (a crack
+// read as closed) make one line covering [0, 6]. The horizons give the
+// class a third of their 1 cm tolerance (proof, step 7).
+TEST(WallOccluders, StacksPanelsOnlyWhenTheyAreCloserAcrossTheirPlaneThanTheTolerance) {
+  for (const float apart : {0.018f, 0.002f}) {
+    Walls w;
+    w.quad({0.0f, 0.0f}, {5.0f, 0.0f}, 0.0f, 3.0f);
+    w.quad({0.0f, apart}, {5.0f, apart}, 3.0f, 6.0f);
+    // A longer panel farther along, midway between their planes: the
+    // reference a group is measured against, each panel half the distance
+    // from it.
+    w.quad({10.0f, 0.5f * apart}, {30.0f, 0.5f * apart}, 0.0f, 6.0f);
+    const WallOccluders walls(flattenMesh(w.positions, w.triangles), 0.01 / 3.0, 0.25);
+    bool spansBoth = false;
+    for (size_t k = 0; k < walls.size(); ++k) {
+      const WallLine& line = walls.line(k);
+      const double a = tangential(line, {1.0f, 0.0f}), b = tangential(line, {4.0f, 0.0f});
+      const auto cover = walls.cover(k, std::min(a, b), std::max(a, b));
+      spansBoth |= cover && cover->x < 1.0 && cover->y > 5.0;
+    }
+    EXPECT_EQ(spansBoth, apart < 0.01f) << apart;
+  }
+}
+
 // Whether (u, y) lies in a projected triangle of line k (with a hair of
 // slack for rounding).
 bool inLineTriangles(const WallOccluders& walls, const FlatTriangles& tris, size_t k, double u,
