@@ -192,6 +192,7 @@
 #include <limits>
 #include <numbers>
 #include <optional>
+#include <tuple>
 
 #include "common/core/check.h"
 #include "common/core/timer.h"
@@ -372,7 +373,7 @@ struct HorizonFusion::Impl {
   }
 
   void build(const HorizonFusionOptions& o);
-  void buildWalls(const HorizonFusionOptions& o);
+  void buildWalls();
   // Calls f(i, j) for every column whose square, grown by `grow`, meets the
   // segment a-b (X/Z); some columns near it twice at most per row, never
   // one it meets left out.
@@ -496,14 +497,7 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
       // farthest-apart projected corners; it meets a square exactly when
       // that segment does (Liang and Barsky's clipping of the segment).
       glm::dvec2 sa(ta.x, ta.z), sb(tb.x, tb.z);
-      if (vertical[t]) {
-        const glm::dvec2 p[3] = {{ta.x, ta.z}, {tb.x, tb.z}, {tc.x, tc.z}};
-        for (int k = 0; k < 3; ++k)
-          if (glm::length(p[(k + 1) % 3] - p[k]) > glm::length(sb - sa)) {
-            sa = p[k];
-            sb = p[(k + 1) % 3];
-          }
-      }
+      if (vertical[t]) std::tie(sa, sb) = farthestXzCorners(tris, t);
       auto segmentMeetsSquare = [&](double xa, double xb, double za, double zb) {
         double u0 = 0.0, u1 = 1.0;
         const glm::dvec2 d = sb - sa;
@@ -589,14 +583,7 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
       lines.clear();
       bool tooMany = false;
       for (uint32_t t : cuts[size_t(i)]) {
-        glm::dvec2 p[3];
-        for (int k = 0; k < 3; ++k) p[k] = {tris.vertex(t, k).x, tris.vertex(t, k).z};
-        glm::dvec2 a = p[0], b = p[1];
-        for (int k = 0; k < 3; ++k)
-          if (glm::length(p[(k + 1) % 3] - p[k]) > glm::length(b - a)) {
-            a = p[k];
-            b = p[(k + 1) % 3];
-          }
+        const auto [a, b] = farthestXzCorners(tris, t);
         glm::dvec2 n(a.y - b.y, b.x - a.x);
         if (glm::length(n) == 0.0) continue;
         n /= glm::length(n);
@@ -738,7 +725,7 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
       if (t != kNoTop) maxTop = std::max(maxTop, double(t));
     }
   shrinkRadius = o.epsilon + o.binMargin;
-  if (o.walls) buildWalls(o);
+  if (o.walls) buildWalls();
   {
     std::vector<uint8_t> hasTop(blockTop.size());
     for (size_t k = 0; k < blockTop.size(); ++k) hasTop[k] = blockTop[k] != kNoTop;
@@ -757,7 +744,7 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
 // Proof, step 7: the wall lines, entered in the columns their triangles
 // meet; a column's block (and so its super-block) and maxTop take the
 // line's highest top, so that a walk skipping a block skips no wall step.
-void HorizonFusion::Impl::buildWalls(const HorizonFusionOptions&) {
+void HorizonFusion::Impl::buildWalls() {
   // A third of the tolerance for the plane and for the gaps the chains
   // close: two members lie at most 2 tau / 3 apart across the plane, so a
   // crack closed between them is narrower than tau (proof, step 7).
@@ -765,14 +752,7 @@ void HorizonFusion::Impl::buildWalls(const HorizonFusionOptions&) {
   std::vector<std::pair<uint32_t, uint32_t>> entries;  // (column index, line)
   for (size_t k = 0; k < walls.size(); ++k)
     for (uint32_t t : walls.triangles(k)) {
-      glm::dvec2 p[3];
-      for (int v = 0; v < 3; ++v) p[v] = {tris.vertex(t, v).x, tris.vertex(t, v).z};
-      glm::dvec2 a = p[0], b = p[1];
-      for (int v = 0; v < 3; ++v)
-        if (glm::length(p[(v + 1) % 3] - p[v]) > glm::length(b - a)) {
-          a = p[v];
-          b = p[(v + 1) % 3];
-        }
+      const auto [a, b] = farthestXzCorners(tris, t);
       forEachColumnOfSegment(a, b, margin + wallTolerance(), [&](int i, int j) {
         entries.push_back({uint32_t(columnIndex(i, j)), uint32_t(k)});
       });
@@ -951,27 +931,33 @@ struct HorizonQuery {
     walk.done = false;
   }
 
+  // Takes the walk's pending wall steps (proof, step 7) up to distance
+  // `upTo`, in order, each that rises above `best`, up to the first that
+  // hides (the last step taken is then the hiding one, which binHides
+  // remembers as the bin's hint); true if one hid.
+  template <class Hides>
+  static bool takePending(Walk& walk, double upTo, double& best, Hides& hides) {
+    bool found = false;
+    size_t n = 0;
+    for (; n < walk.pending.size() && walk.pending[n].d <= upTo && !found; ++n) {
+      const Step& st = walk.pending[n];
+      if (!(st.slope > best)) continue;
+      walk.steps.push_back(st);
+      best = st.slope;
+      found = hides(st);
+    }
+    walk.pending.erase(walk.pending.begin(), walk.pending.begin() + long(n));
+    return found;
+  }
+
   // Proof, step 5, lazily: walks a bin on until it has every step closer
   // than `until` (or the walk is done), or, earlier, until a new step
   // satisfies `hides`. The steps come out as the whole walk would make them:
   // walking a prefix changes none.
   template <class Hides>
   bool advance(const Level& level, Walk& walk, double until, Hides&& hides) {
-    if (walk.done) {
-      // Wall steps a finished walk left waiting after the step that hid a
-      // face: taken now, in order, up to the next that hides.
-      bool hid = false;
-      size_t n = 0;
-      for (; n < walk.pending.size() && !hid; ++n) {
-        const Step& st = walk.pending[n];
-        if (!(st.slope > walk.best)) continue;
-        walk.steps.push_back(st);
-        walk.best = st.slope;
-        hid = hides(st);
-      }
-      walk.pending.erase(walk.pending.begin(), walk.pending.begin() + long(n));
-      return hid;
-    }
+    // Wall steps a finished walk left waiting after the step that hid a face.
+    if (walk.done) return takePending(walk, kInf, walk.best, hides);
     if (walk.tin >= until) return false;
     const glm::dvec2 dir = walk.dir;
     const glm::dvec2 org(s.x, s.z);
@@ -1040,24 +1026,10 @@ struct HorizonQuery {
     auto passRegion = [&](float top, int ri, int rj, int size, bool& again) {
       return passColumns(top, ri * size, rj * size, (ri + 1) * size, (rj + 1) * size, again);
     };
-    // Takes the pending wall steps up to distance `upTo`, in order, up to
-    // the first that hides (the last step taken is then the hiding one,
-    // which binHides remembers as the bin's hint).
-    auto takePending = [&](double upTo) {
-      size_t n = 0;
-      for (; n < walk.pending.size() && walk.pending[n].d <= upTo && !found; ++n) {
-        const Step& st = walk.pending[n];
-        if (!(st.slope > best)) continue;
-        walk.steps.push_back(st);
-        best = st.slope;
-        found = hides(st);
-      }
-      walk.pending.erase(walk.pending.begin(), walk.pending.begin() + long(n));
-    };
     constexpr int kB = HorizonFusion::Impl::kBlock, kS = kB * HorizonFusion::Impl::kSuper;
     for (;;) {
       if (found) break;
-      if (!walk.pending.empty()) takePending(tin);
+      if (!walk.pending.empty()) found = takePending(walk, tin, best, hides);
       if (!(tin < t1)) {
         done = true;
         break;
@@ -1129,7 +1101,7 @@ struct HorizonQuery {
       }
       tin = tout;
     }
-    if (done && !found) takePending(kInf);
+    if (done && !found) found = takePending(walk, kInf, best, hides);
     walk.i = i;
     walk.j = j;
     walk.tx = tx;

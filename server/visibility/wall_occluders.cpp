@@ -105,6 +105,18 @@ glm::dvec3 chainCover(const std::vector<Projected>& all, const std::vector<uint3
 
 }  // namespace
 
+std::pair<glm::dvec2, glm::dvec2> farthestXzCorners(const FlatTriangles& tris, size_t t) {
+  glm::dvec2 p[3];
+  for (int k = 0; k < 3; ++k) p[k] = {tris.vertex(t, k).x, tris.vertex(t, k).z};
+  glm::dvec2 a = p[0], b = p[1];
+  for (int k = 0; k < 3; ++k)
+    if (glm::length(p[(k + 1) % 3] - p[k]) > glm::length(b - a)) {
+      a = p[k];
+      b = p[(k + 1) % 3];
+    }
+  return {a, b};
+}
+
 WallOccluders::WallOccluders(const FlatTriangles& tris, double tolerance, double binSize)
     : binSize_(binSize), tolerance_(tolerance) {
   VS_CHECK(std::isfinite(tolerance) && tolerance > 0.0);
@@ -118,14 +130,7 @@ WallOccluders::WallOccluders(const FlatTriangles& tris, double tolerance, double
   for (size_t t = 0; t < tris.size(); ++t) {
     if (tris.degenerate[t]) continue;
     const glm::dvec3 v[3] = {tris.vertex(t, 0), tris.vertex(t, 1), tris.vertex(t, 2)};
-    glm::dvec2 a(v[0].x, v[0].z), b(v[1].x, v[1].z);
-    for (int k = 0; k < 3; ++k) {
-      const glm::dvec2 p(v[k].x, v[k].z), q(v[(k + 1) % 3].x, v[(k + 1) % 3].z);
-      if (glm::length(q - p) > glm::length(b - a)) {
-        a = p;
-        b = q;
-      }
-    }
+    const auto [a, b] = farthestXzCorners(tris, t);
     const double length = glm::length(b - a);
     const double height = std::max({v[0].y, v[1].y, v[2].y}) - std::min({v[0].y, v[1].y, v[2].y});
     if (length < 10.0 * tol || height < 10.0 * tol) continue;

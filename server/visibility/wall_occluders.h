@@ -28,11 +28,17 @@
 #include <glm/glm.hpp>
 #include <optional>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include "common/scene/scene.h"
 
 namespace vistream {
+
+// The two corners of triangle t whose X/Z projections lie farthest apart
+// (in their order around the triangle; the first such edge on ties): for an
+// upright triangle, the ends of the segment its projection is.
+std::pair<glm::dvec2, glm::dvec2> farthestXzCorners(const FlatTriangles& tris, size_t t);
 
 struct WallLine {
   glm::dvec2 n{1.0, 0.0};  // unit horizontal normal (x, z)
