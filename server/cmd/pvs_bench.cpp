@@ -393,11 +393,13 @@ int runPvsBench(const PvsBenchOptions& options) {
       // Occluders are shrunk by epsilon + bin margin, rounded up to whole
       // columns: the last rows shrink less (one column fewer on a 0.5 m
       // grid) at the price of more samples or more bins.
-      // The last three rows are the defaults without walls (solid columns
-      // only), then without the walks' shortcuts
-      // (hiding hints, then block skipping too): the time they save.
+      // The last four rows are the defaults without chains of walls (each
+      // wall line alone), without walls (solid columns only), then without
+      // the walks' shortcuts (hiding hints, then block skipping too): the
+      // time they save.
       auto knob = [](double epsilon, double binMargin, int azimuthBins, int refinements,
-                     bool shortcuts = true, bool hints = true, bool walls = true) {
+                     bool shortcuts = true, bool hints = true, bool walls = true,
+                     bool chains = true) {
         HorizonFusionOptions o;
         o.epsilon = epsilon;
         o.binMargin = binMargin;
@@ -406,6 +408,7 @@ int runPvsBench(const PvsBenchOptions& options) {
         o.skipBlocks = shortcuts;
         o.hidingHints = shortcuts && hints;
         o.walls = walls;
+        o.wallChains = walls && chains;
         return o;
       };
       const HorizonFusionOptions knobs[] = {knob(2.0, 0.5, 1024, 1),
@@ -415,6 +418,7 @@ int runPvsBench(const PvsBenchOptions& options) {
                                             knob(0.5, 0.5, 1024, 1),
                                             knob(0.74, 0.25, 2048, 1),
                                             knob(0.74, 0.25, 1024, 2),
+                                            knob(1.0, 0.5, 1024, 1, true, true, true, false),
                                             knob(1.0, 0.5, 1024, 1, true, true, false),
                                             knob(1.0, 0.5, 1024, 1, true, false),
                                             knob(1.0, 0.5, 1024, 1, false)};
@@ -422,10 +426,11 @@ int runPvsBench(const PvsBenchOptions& options) {
         fmt::print(
             "\nOcclusion horizons' knobs ({}, the 4 m cells above; after the single occluders "
             "with back faces; default epsilon {} m, {} refinement)\n"
-            "  {:>11} {:>10} {:>6} {:>11} {:>10} {:>12} {:>12} {:>10} {:>8} {:>6} {:>6} {:>6}\n",
+            "  {:>11} {:>10} {:>6} {:>11} {:>10} {:>12} {:>12} {:>10} {:>8} {:>6} {:>6} {:>6} "
+            "{:>6}\n",
             spec, HorizonFusionOptions{}.epsilon, HorizonFusionOptions{}.refinements, "epsilon (m)",
             "margin (m)", "bins", "refinements", "reach (m)", "median ratio", "fusion ms",
-            "build s", "missing", "walls", "hints", "skips");
+            "build s", "missing", "walls", "chains", "hints", "skips");
       for (const HorizonFusionOptions& k : knobs) {
         const HorizonFusion fusion(w.scene, w.statics, k);
         std::vector<double> ratio, ms;
@@ -451,15 +456,17 @@ int runPvsBench(const PvsBenchOptions& options) {
                                         {"build_s", fusion.prepareMs() / 1000.0},
                                         {"missing_faces", missing},
                                         {"walls", k.walls},
+                                        {"wall_chains", k.wallChains},
                                         {"hiding_hints", k.hidingHints},
                                         {"skip_blocks", k.skipBlocks}});
         if (human)
           fmt::print(
               "  {:>11.2f} {:>10.2f} {:>6} {:>11} {:>10.0f} {:>12.2f} {:>12.2f} {:>10.1f} {:>8} "
-              "{:>6} {:>6} {:>6}\n",
+              "{:>6} {:>6} {:>6} {:>6}\n",
               k.epsilon, k.binMargin, k.azimuthBins, k.refinements, reach, median(ratio),
               median(ms), fusion.prepareMs() / 1000.0, missing, k.walls ? "on" : "off",
-              k.hidingHints ? "on" : "off", k.skipBlocks ? "on" : "off");
+              k.wallChains ? "on" : "off", k.hidingHints ? "on" : "off",
+              k.skipBlocks ? "on" : "off");
       }
     }
 

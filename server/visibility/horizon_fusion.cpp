@@ -163,6 +163,34 @@
 //    Block bounds take the walls' tops: a wall step's slope is at most
 //    (T - Y) / tin when T > Y and (T - Y) / exit otherwise, as a column's.
 //
+// 8. Chains of walls (HorizonFusionOptions::walls). Where the window of
+//    step 7 runs off the end of the covered run of the wall line the
+//    central ray crosses (a building's corner), the wall may go on in
+//    another line joined to it there (wall_occluders.h: the run's end within
+//    tau / 3 of the other's plane and of one of its runs, a crack narrower
+//    than tau, closed as in step 7). Put strip
+//    coordinates on the plane, a = dir . (x - s_h) along the central ray
+//    and b = perp . (x - s_h) across it, and let rp = r + 2 tau. From the
+//    crossing, follow the line both ways, turning at joints, until each
+//    way reaches the side |b| = rp of the strip; the ways must reach
+//    opposite sides, every piece followed must be covered by its line
+//    (heights [B, T] = the highest base and lowest top over all pieces,
+//    B below the cell), and the pieces' a lie in [amin, amax]. The chain
+//    so followed is a connected curve in the rectangle [amin, amax] x
+//    [-rp, rp] joining its two long sides. The line of sight of step 4 lies
+//    within r of the central ray's point at distance lam R (steps 4-5), so
+//    |b| <= r and |a - lam R| <= r: at lam R <= amin - rp it has a < amin,
+//    at lam R >= amax + rp it has a > amax (both within the reach), and in
+//    between it holds a path across the rectangle from the short side
+//    a = amin to a = amax. Two such paths in a rectangle meet, so the line
+//    of sight crosses the chain at some lam1 with lam1 R in
+//    [amin - rp, amax + rp], over a covered piece. As in step 7 (with
+//    d0 - delta and d0 + delta now amin - rp > 0 and amax + rp <= reach) the
+//    chain gives the step (amax + rp, (T - Y) / (amax + rp or amin - rp), B).
+//    It is found in the column where the central ray crosses the first
+//    line, which is before amax + rp, with T at most that line's top: the
+//    block bounds of step 7 hold for it.
+//
 // Cost: the horizon of a sample is traced lazily, bin by bin, only where a
 // face still needs it, and each bin only as far as the faces asking need
 // (their R_min), stopping at the first step that hides the face; a later
@@ -320,6 +348,7 @@ struct HorizonFusion::Impl {
   WallOccluders walls;
   std::vector<uint32_t> wallStart, wallLineIds;
   double shrinkRadius = 0.0;  // epsilon + binMargin
+  bool wallChains = true;     // HorizonFusionOptions::wallChains
   // Smallest sine of the angle between a horizon's ray and a wall it
   // crosses: grazier walls are eroded by more than 10 times the radius.
   static constexpr double kMinWallSine = 0.1;
@@ -725,6 +754,7 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
       if (t != kNoTop) maxTop = std::max(maxTop, double(t));
     }
   shrinkRadius = o.epsilon + o.binMargin;
+  wallChains = o.wallChains;
   if (o.walls) buildWalls();
   {
     std::vector<uint8_t> hasTop(blockTop.size());
@@ -1129,13 +1159,104 @@ struct HorizonQuery {
     if (!(d0 - delta > 1e-9) || !(d0 + delta <= reach)) return;
     const double u = glm::dot(line.t, org + d0 * dir);
     const std::optional<glm::dvec2> cover = w.walls.cover(k, u - delta, u + delta);
-    if (!cover || cover->x > double(cell.lo.y) - w.margin) return;
-    const double y = s.y, top = cover->y;
-    Step st{d0 + delta, top > y ? (top - y) / (d0 + delta) : (top - y) / (d0 - delta), cover->x};
-    ++stats.wallSteps;
-    auto at = std::upper_bound(pending.begin(), pending.end(), st.d,
+    std::optional<Step> st;
+    if (cover) {
+      if (cover->x > double(cell.lo.y) - w.margin) return;
+      const double y = s.y, top = cover->y;
+      st =
+          Step{d0 + delta, top > y ? (top - y) / (d0 + delta) : (top - y) / (d0 - delta), cover->x};
+      ++stats.wallSteps;
+    } else if (w.wallChains) {
+      st = chainStep(k, u, org, dir, reach);
+      if (!st) return;
+      ++stats.chainSteps;
+    } else {
+      return;
+    }
+    auto at = std::upper_bound(pending.begin(), pending.end(), st->d,
                                [](double d, const Step& p) { return d < p.d; });
-    pending.insert(at, st);
+    pending.insert(at, *st);
+  }
+
+  // Proof, step 8: what a chain of joined wall lines holds, from where the
+  // central ray crosses the first of them out to the sides of the strip.
+  struct Chain {
+    double base = -kInf, top = kInf;   // heights covered all along it
+    double amin = kInf, amax = -kInf;  // its extent along the central ray
+  };
+  static constexpr int kMaxJoints = 3;
+
+  // The step of a chain through the crossing (tangential coordinate u) of
+  // the central ray from org along dir with wall line k that leaves the
+  // strip of half-width r + 2 tau around the ray on both sides, one on
+  // each, in its heights and extent; nothing when there is none.
+  std::optional<Step> chainStep(uint32_t k, double u, glm::dvec2 org, glm::dvec2 dir,
+                                double reach) const {
+    const double rp = w.shrinkRadius + 2.0 * w.wallTolerance();
+    const std::optional<uint32_t> run = w.walls.runOf(k, u);
+    if (!run) return std::nullopt;
+    int side[2] = {0, 0};
+    Chain chain;
+    for (int e = 0; e < 2; ++e) {
+      const std::optional<Chain> found =
+          follow(k, *run, u, e == 0 ? 1 : -1, 0, chain, org, dir, rp, reach, side[e]);
+      if (!found) return std::nullopt;
+      chain = *found;
+    }
+    if (side[0] == 0 || side[0] != -side[1]) return std::nullopt;
+    const double near = chain.amin - rp, far = chain.amax + rp, y = s.y;
+    return Step{far, chain.top > y ? (chain.top - y) / far : (chain.top - y) / near, chain.base};
+  }
+
+  // Follows run `run` of line k from tangential coordinate u in direction
+  // sign (+1: the line's tangent), through at most kMaxJoints - joints more
+  // joints, until it leaves the strip |perp . (x - org)| <= rp; `acc` grown
+  // by the pieces followed, and `side` the sign of the strip's side left
+  // by. Nothing when a piece is not covered, its base is not below the
+  // cell, or the chain comes within rp of the sample or of the reach.
+  std::optional<Chain> follow(uint32_t k, uint32_t run, double u, int sign, int joints, Chain acc,
+                              glm::dvec2 org, glm::dvec2 dir, double rp, double reach,
+                              int& side) const {
+    const WallLine& line = w.walls.line(k);
+    const glm::dvec2 perp(-dir.y, dir.x), m = double(sign) * line.t;
+    const double b = glm::dot(perp, line.at(u) - org), rate = glm::dot(perp, m);
+    double length = kInf;
+    int leaves = 0;
+    if (rate > 1e-9) {
+      length = std::max(0.0, (rp - b) / rate);
+      leaves = 1;
+    } else if (rate < -1e-9) {
+      length = std::max(0.0, (-rp - b) / rate);
+      leaves = -1;
+    }
+    const double end = sign > 0 ? w.walls.run(run).ub : w.walls.run(run).ua;
+    const bool out = length <= double(sign) * (end - u);
+    const double u2 = out ? u + double(sign) * length : end;
+    const std::optional<glm::dvec2> cover = w.walls.cover(k, std::min(u, u2), std::max(u, u2));
+    if (!cover) return std::nullopt;
+    acc.base = std::max(acc.base, cover->x);
+    acc.top = std::min(acc.top, cover->y);
+    if (!(acc.base <= double(cell.lo.y) - w.margin) || !(acc.top > acc.base)) return std::nullopt;
+    for (double v : {u, u2}) {
+      const double a = glm::dot(dir, line.at(v) - org);
+      acc.amin = std::min(acc.amin, a);
+      acc.amax = std::max(acc.amax, a);
+    }
+    if (!(acc.amin - rp > 1e-9) || !(acc.amax + rp <= reach)) return std::nullopt;
+    if (out) {
+      side = leaves;
+      return acc;
+    }
+    if (joints == kMaxJoints) return std::nullopt;
+    for (const WallJoint& j : w.walls.joints(run, sign > 0 ? 1 : 0)) {
+      const WallRun& next = w.walls.run(j.run);
+      for (int s2 : {1, -1}) {
+        if (double(s2) * ((s2 > 0 ? next.ub : next.ua) - j.u) <= 1e-9) continue;
+        if (auto r = follow(j.line, j.run, j.u, s2, joints + 1, acc, org, dir, rp, reach, side))
+          return r;
+      }
+    }
+    return std::nullopt;
   }
 
   // Proof, step 6, for one step: does it hide points at horizontal

@@ -101,6 +101,11 @@ struct HorizonFusionOptions {
   // slits, facades without a back), which make no solid columns, and walls
   // thinner than twice the shrinking. false: solid columns only.
   bool walls = true;
+  // Where a wall's erosion runs off its end at a corner, the walls joined
+  // there go on as one chain that must cross the horizon's strip from side
+  // to side (proof, step 8): the corners of open buildings seen from the
+  // street. false: each wall line alone. Needs `walls`.
+  bool wallChains = true;
 };
 
 struct HorizonFusionStats {
@@ -112,6 +117,7 @@ struct HorizonFusionStats {
   uint64_t columnSteps = 0;   // height-field columns walked by the horizons
   uint64_t horizonBins = 0;   // azimuth bins traced (lazily, only where a face needs one)
   uint64_t wallSteps = 0;     // horizon steps made by walls (proof, step 7)
+  uint64_t chainSteps = 0;    // by chains of walls joined at corners (step 8)
 
   // Every field above, once (common/core/stats_fields.h).
   template <class F>
@@ -124,9 +130,10 @@ struct HorizonFusionStats {
     f(StatField{"column_steps", "columns walked", ""}, columnSteps);
     f(StatField{"horizon_bins", "azimuth bins traced", ""}, horizonBins);
     f(StatField{"wall_steps", "horizon steps made by walls", ""}, wallSteps);
+    f(StatField{"chain_steps", "horizon steps made by chains of walls", ""}, chainSteps);
   }
 };
-static_assert(sizeof(HorizonFusionStats) == 8 * 8,
+static_assert(sizeof(HorizonFusionStats) == 9 * 8,
               "HorizonFusionStats changed: update HorizonFusionStats::forEachField");
 
 struct HorizonFusionResult {

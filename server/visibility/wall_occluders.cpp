@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <unordered_map>
 
 #include "common/core/check.h"
 
@@ -222,64 +223,177 @@ WallOccluders::WallOccluders(const FlatTriangles& tris, double tolerance, double
     for (size_t s = 0; s < spans; ++s)
       if (!spanMembers[s].empty())
         spanCover[s] = chainCover(proj, spanMembers[s], breaks[s], breaks[s + 1], tol);
-    // Bins of binSize from the first corner; a bin takes the worst cover of
-    // the sub-spans it overlaps, and none past the last corner.
+    // Bins of binSize from the first corner to the last (the last bin
+    // takes the rest); a bin takes the worst cover of the sub-spans it
+    // overlaps, none if one is not covered.
     line.u0 = breaks.front();
-    line.binCount = uint32_t(std::ceil((breaks.back() - breaks.front()) / binSize));
+    line.u1 = breaks.back();
+    line.binCount =
+        uint32_t(std::max(1.0, std::ceil((breaks.back() - breaks.front()) / binSize - 1e-9)));
     line.firstBin = uint32_t(bins_.size());
     line.firstTriangle = uint32_t(members_.size());
     line.triangleCount = uint32_t(groups[g].size());
     members_.insert(members_.end(), groups[g].begin(), groups[g].end());
-    float maxTop = -std::numeric_limits<float>::infinity();
-    size_t s = 0;
-    for (uint32_t b = 0; b < line.binCount; ++b) {
-      const double x0 = line.u0 + double(b) * binSize, x1 = x0 + binSize;
-      glm::vec2 cover(0.0f, -1.0f);
-      if (x1 <= breaks.back()) {
-        while (s + 1 < spans && breaks[s + 1] <= x0) ++s;
-        double base = -std::numeric_limits<double>::infinity(), top = -base;
-        for (size_t k = s; k < spans && breaks[k] < x1; ++k) {
-          // The top is linear over the sub-span: its lowest over the part
-          // inside the bin is at one end of that part.
-          const double p = breaks[k], q = breaks[k + 1];
-          const double inA = std::max(p, x0), inB = std::min(q, x1);
-          auto topAt = [&](double u) {
-            return spanCover[k].y + (u - p) / (q - p) * (spanCover[k].z - spanCover[k].y);
-          };
-          base = std::max(base, spanCover[k].x);
-          top = std::min({top, topAt(inA), topAt(inB)});
-        }
-        // Rounded inward: a millionth of a metre, then to float.
-        base += 1e-6;
-        top -= 1e-6;
-        if (top > base) {
-          cover = {std::nextafter(float(base), std::numeric_limits<float>::infinity()),
-                   std::nextafter(float(top), -std::numeric_limits<float>::infinity())};
-          if (cover.y < cover.x) cover = {0.0f, -1.0f};
-        }
+    // The worst cover over [x0, x1] (x0 < x1), rounded inward by a
+    // millionth of a metre and then to float; (0, -1): not covered.
+    auto worstCover = [&](double x0, double x1) {
+      const size_t s0 = size_t(std::upper_bound(breaks.begin(), breaks.end(), x0) -
+                               breaks.begin());  // sub-span s0 - 1 holds x0
+      double base = -std::numeric_limits<double>::infinity(), top = -base;
+      for (size_t k = s0 == 0 ? 0 : s0 - 1; k < spans && breaks[k] < x1; ++k) {
+        // The top is linear over the sub-span: its lowest over the part
+        // inside [x0, x1] is at one end of that part.
+        const double p = breaks[k], q = breaks[k + 1];
+        const double inA = std::max(p, x0), inB = std::min(q, x1);
+        auto topAt = [&](double u) {
+          return spanCover[k].y + (u - p) / (q - p) * (spanCover[k].z - spanCover[k].y);
+        };
+        base = std::max(base, spanCover[k].x);
+        top = std::min({top, topAt(inA), topAt(inB)});
       }
+      base += 1e-6;
+      top -= 1e-6;
+      glm::vec2 cover(0.0f, -1.0f);
+      if (top > base) {
+        cover = {std::nextafter(float(base), std::numeric_limits<float>::infinity()),
+                 std::nextafter(float(top), -std::numeric_limits<float>::infinity())};
+        if (cover.y < cover.x) cover = {0.0f, -1.0f};
+      }
+      return cover;
+    };
+    float maxTop = -std::numeric_limits<float>::infinity();
+    for (uint32_t b = 0; b < line.binCount; ++b) {
+      const double x0 = line.u0 + double(b) * binSize;
+      const double x1 = b + 1 == line.binCount ? breaks.back() : x0 + binSize;
+      const glm::vec2 cover = x1 > x0 ? worstCover(x0, x1) : glm::vec2(0.0f, -1.0f);
       if (cover.y >= cover.x) maxTop = std::max(maxTop, cover.y);
       bins_.push_back(cover);
     }
-    if (maxTop == -std::numeric_limits<float>::infinity()) {
+    // Runs: the maximal stretches of covered sub-spans, exact to their
+    // corners, with the covers of the parts of their first and last bins
+    // they hold.
+    line.firstRun = uint32_t(runs_.size());
+    for (size_t a = 0; a < spans;) {
+      if (!std::isfinite(spanCover[a].x)) {
+        ++a;
+        continue;
+      }
+      size_t b = a;
+      while (b + 1 < spans && std::isfinite(spanCover[b + 1].x)) ++b;
+      WallRun run;
+      run.ua = breaks[a];
+      run.ub = breaks[b + 1];
+      a = b + 1;
+      const uint32_t head = headBin(line, run.ua), tail = tailBin(line, run.ub);
+      const double headEnd = head + 1 == line.binCount ? line.u1 : line.u0 + (head + 1) * binSize;
+      run.head = worstCover(run.ua, std::min(run.ub, headEnd));
+      run.tail = worstCover(std::max(run.ua, line.u0 + double(tail) * binSize), run.ub);
+      if (head == tail) run.tail = run.head;
+      if (run.head.y < run.head.x && run.tail.y < run.tail.x && tail <= head + 1) continue;
+      runs_.push_back(run);
+    }
+    line.runCount = uint32_t(runs_.size()) - line.firstRun;
+    if (maxTop == -std::numeric_limits<float>::infinity() && line.runCount == 0) {
       // Nothing covered: the line is dropped.
       bins_.resize(line.firstBin);
       members_.resize(line.firstTriangle);
       continue;
     }
+    for (uint32_t r = line.firstRun; r < line.firstRun + line.runCount; ++r)
+      maxTop = std::max({maxTop, runs_[r].head.y, runs_[r].tail.y});
     line.maxTop = maxTop;
     lines_.push_back(line);
   }
+  buildJoints();
+}
+
+uint32_t WallOccluders::headBin(const WallLine& line, double u) const {
+  const double b = std::floor((u - line.u0) / binSize_);
+  return uint32_t(std::clamp(b, 0.0, double(line.binCount) - 1.0));
+}
+
+uint32_t WallOccluders::tailBin(const WallLine& line, double u) const {
+  const double b = std::ceil((u - line.u0) / binSize_) - 1.0;
+  return uint32_t(std::clamp(b, 0.0, double(line.binCount) - 1.0));
+}
+
+void WallOccluders::buildJoints() {
+  const double tol = tolerance_;
+  // Run ends hashed by cells of kCell metres; each run is sampled every
+  // half cell and the 3 x 3 cells around each sample read, which finds
+  // every end within tol (< kCell / 4) of it.
+  constexpr double kCell = 1.0;
+  auto cellOf = [](glm::dvec2 p) {
+    return std::pair{int64_t(std::floor(p.x / kCell)), int64_t(std::floor(p.y / kCell))};
+  };
+  auto cellKey = [](int64_t ix, int64_t iz) {
+    return (uint64_t(ix) << 32) ^ (uint64_t(iz) & 0xffffffffu);
+  };
+  std::vector<uint32_t> lineOfRun(runs_.size());
+  for (size_t k = 0; k < lines_.size(); ++k)
+    for (uint32_t r = 0; r < lines_[k].runCount; ++r)
+      lineOfRun[lines_[k].firstRun + r] = uint32_t(k);
+  auto endPoint = [&](size_t end) {
+    const WallRun& run = runs_[end / 2];
+    return lines_[lineOfRun[end / 2]].at(end % 2 == 0 ? run.ua : run.ub);
+  };
+  std::unordered_map<uint64_t, std::vector<uint32_t>> ends;  // cell -> 2 run + end
+  for (size_t e = 0; e < 2 * runs_.size(); ++e) {
+    const auto [ix, iz] = cellOf(endPoint(e));
+    ends[cellKey(ix, iz)].push_back(uint32_t(e));
+  }
+  std::vector<std::vector<WallJoint>> found(2 * runs_.size());
+  std::vector<uint32_t> seenBy(2 * runs_.size(), std::numeric_limits<uint32_t>::max());
+  for (uint32_t r = 0; r < runs_.size(); ++r) {
+    const WallLine& l = lines_[lineOfRun[r]];
+    const double ua = runs_[r].ua - tol, ub = runs_[r].ub + tol;
+    const size_t samples = size_t(std::ceil((ub - ua) / (0.5 * kCell))) + 1;
+    for (size_t n = 0; n < samples; ++n) {
+      const auto [ix, iz] = cellOf(l.at(std::min(ub, ua + 0.5 * kCell * double(n))));
+      for (int64_t dz = -1; dz <= 1; ++dz)
+        for (int64_t dx = -1; dx <= 1; ++dx) {
+          const auto it = ends.find(cellKey(ix + dx, iz + dz));
+          if (it == ends.end()) continue;
+          for (uint32_t end : it->second) {
+            if (lineOfRun[end / 2] == lineOfRun[r] || seenBy[end] == r) continue;
+            seenBy[end] = r;
+            const glm::dvec2 e = endPoint(end);
+            const double u = glm::dot(l.t, e);
+            if (std::abs(glm::dot(l.n, e) - l.c) > tol || u < ua || u > ub) continue;
+            found[end].push_back({lineOfRun[r], r, std::clamp(u, runs_[r].ua, runs_[r].ub)});
+          }
+        }
+    }
+  }
+  jointStart_.assign(found.size() + 1, 0);
+  for (size_t e = 0; e < found.size(); ++e) {
+    jointStart_[e + 1] = jointStart_[e] + uint32_t(found[e].size());
+    joints_.insert(joints_.end(), found[e].begin(), found[e].end());
+  }
+}
+
+std::optional<uint32_t> WallOccluders::runOf(size_t k, double u) const {
+  const WallLine& line = lines_[k];
+  const auto first = runs_.begin() + line.firstRun, last = first + line.runCount;
+  auto it = std::upper_bound(first, last, u, [](double x, const WallRun& r) { return x < r.ua; });
+  if (it == first) return std::nullopt;
+  --it;
+  if (!(u <= it->ub)) return std::nullopt;
+  return uint32_t(it - runs_.begin());
 }
 
 std::optional<glm::dvec2> WallOccluders::cover(size_t k, double ua, double ub) const {
+  if (!(ua <= ub)) return std::nullopt;
+  const std::optional<uint32_t> r = runOf(k, ua);
+  if (!r || !(ub <= runs_[*r].ub)) return std::nullopt;
   const WallLine& line = lines_[k];
-  const double b0 = std::floor((ua - line.u0) / binSize_);
-  const double b1 = std::floor((ub - line.u0) / binSize_);
-  if (!(b0 >= 0.0) || !(b1 < double(line.binCount))) return std::nullopt;
+  const WallRun& run = runs_[*r];
+  const uint32_t head = headBin(line, run.ua), tail = tailBin(line, run.ub);
+  const uint32_t b0 = std::max(head, headBin(line, ua)),
+                 b1 = std::min(tail, std::max(b0, tailBin(line, ub)));
   double base = -std::numeric_limits<double>::infinity(), top = -base;
-  for (uint32_t b = uint32_t(b0); b <= uint32_t(b1); ++b) {
-    const glm::vec2 c = bins_[line.firstBin + b];
+  for (uint32_t b = b0; b <= b1; ++b) {
+    const glm::vec2 c = b == head ? run.head : (b == tail ? run.tail : bins_[line.firstBin + b]);
     if (c.y < c.x) return std::nullopt;
     base = std::max(base, double(c.x));
     top = std::min(top, double(c.y));

@@ -13,6 +13,14 @@
 // line of sight crossing the line's plane at a tangential position in
 // [ua, ub] and a height in that interval meets a triangle there.
 //
+// Runs and joints: a line's cover is cut into runs, the stretches between
+// its gaps, each exact to the triangle corners it ends at. The end of a run
+// that lies within `tolerance` of another line's plane, at a tangential
+// coordinate within `tolerance` of one of that line's runs, is joined to
+// it there (a building's corner; a wall ending on another): a chain of
+// walls may turn from one to the other across a crack narrower than
+// 2 x `tolerance`.
+//
 // Frames and units: the scene's local frame, metres, Y up. The normal n of a
 // line is horizontal, of unit length, with n.x > 0 or (n.x == 0, n.y > 0)
 // (n.y standing for Z); the tangent is t = (-n.y, n.x); a point p lies on
@@ -44,10 +52,28 @@ struct WallLine {
   glm::dvec2 n{1.0, 0.0};  // unit horizontal normal (x, z)
   glm::dvec2 t{0.0, 1.0};  // tangent (-n.y, n.x)
   double c = 0.0;          // n . (x, z) on the line
-  double u0 = 0.0;         // tangential coordinate where bin 0 starts
+  double u0 = 0.0;         // tangential coordinate where bin 0 starts: the line's first corner
+  double u1 = 0.0;         // its last corner, where the last bin ends
   uint32_t firstBin = 0, binCount = 0;
+  uint32_t firstRun = 0, runCount = 0;            // in run(), by ua
   uint32_t firstTriangle = 0, triangleCount = 0;  // members, in triangles()
   float maxTop = 0.0f;                            // highest top of any bin
+  // The point of the plane at tangential coordinate u (X/Z).
+  glm::dvec2 at(double u) const { return c * n + u * t; }
+};
+
+// A stretch [ua, ub] of a line covered without a gap, and the covers of
+// the parts of its first and last bins it holds ((0, -1): none).
+struct WallRun {
+  double ua = 0.0, ub = 0.0;
+  glm::vec2 head{0.0f, -1.0f}, tail{0.0f, -1.0f};
+};
+
+// Run `run` of line `line`, at tangential coordinate u in it, is joined to
+// the end of another line's run.
+struct WallJoint {
+  uint32_t line = 0, run = 0;
+  double u = 0.0;
 };
 
 class WallOccluders {
@@ -69,13 +95,30 @@ class WallOccluders {
   // tangential coordinate in [ua, ub]; nothing when some u there is not
   // covered (off the line's bins, or a bin without cover).
   std::optional<glm::dvec2> cover(size_t k, double ua, double ub) const;
+  // The run of line k holding tangential coordinate u, if any.
+  std::optional<uint32_t> runOf(size_t k, double u) const;
+  const WallRun& run(uint32_t r) const { return runs_[r]; }
+  // The runs joined to run r at its end: end 0 at ua, end 1 at ub.
+  std::span<const WallJoint> joints(uint32_t r, int end) const {
+    const size_t e = 2 * size_t(r) + size_t(end != 0);
+    return {joints_.data() + jointStart_[e], jointStart_[e + 1] - jointStart_[e]};
+  }
   double binSize() const { return binSize_; }
   double tolerance() const { return tolerance_; }
 
  private:
+  void buildJoints();
+  // The bin holding u from the right (its first) and from the left (its
+  // last), clamped to the line's bins.
+  uint32_t headBin(const WallLine& line, double u) const;
+  uint32_t tailBin(const WallLine& line, double u) const;
+
   std::vector<WallLine> lines_;
   std::vector<uint32_t> members_;
   std::vector<glm::vec2> bins_;  // (base, top); top < base: not covered
+  std::vector<WallRun> runs_;
+  std::vector<uint32_t> jointStart_;  // CSR over run ends (2 r, 2 r + 1)
+  std::vector<WallJoint> joints_;
   double binSize_ = 0.25, tolerance_ = 1e-3;
 };
 

@@ -10,7 +10,9 @@
 // bottom keeps what is seen under it; a cell cutting into a box, closed or
 // open at the base, is served outside the box only, and keeps everything
 // seen from there; a cell reaching down to an open base gets no occlusion
-// from that box.
+// from that box. Open sheets hide what they hide together: a fence of
+// panels, a V of two sheets meeting at a corner (each sheet alone does
+// not), but not through an opening or a slit at the corner.
 //
 // Sampled ground truth: on street cells of the generated cities and of the
 // real city model (../shared/data/delfshaven.obj), no face seen by
@@ -245,12 +247,90 @@ TEST(HorizonFusion, KeepsWhatIsSeenThroughAnOpeningBetweenWalls) {
   }
 }
 
+// A V of two open sheets 8 m tall, its apex at (10, 10) pointing at the
+// cell (the corner of a building without a back, seen from the street),
+// and behind it a box whose two faces towards the cell are under test. The
+// sheets meet at the apex, or leave a hairline (1 mm) or a real (0.4 m)
+// slit there. `offset` moves everything.
+struct CornerScene {
+  Scene scene;
+  uint32_t hiddenFaces[2] = {0, 0};
+  Box3f cell{glm::vec3(-2.0f, 0.2f, -2.0f), glm::vec3(2.0f, 2.0f, 2.0f)};
+};
+
+CornerScene cornerScene(float slit, glm::vec3 offset = glm::vec3(0.0f)) {
+  CornerScene r;
+  const glm::vec3 o = offset;
+  testing::addGround(r.scene, o.x - 20.0f, o.z - 20.0f, o.x + 60.0f, o.z + 60.0f, o.y);
+  const float a = 10.0f + slit / std::sqrt(2.0f);
+  testing::addFaces(r.scene, "alongX",
+                    {{o + glm::vec3(a, 0.0f, 10.0f), o + glm::vec3(40.0f, 0.0f, 10.0f),
+                      o + glm::vec3(40.0f, 8.0f, 10.0f), o + glm::vec3(a, 8.0f, 10.0f)}});
+  testing::addFaces(r.scene, "alongZ",
+                    {{o + glm::vec3(10.0f, 0.0f, 40.0f), o + glm::vec3(10.0f, 0.0f, a),
+                      o + glm::vec3(10.0f, 8.0f, a), o + glm::vec3(10.0f, 8.0f, 40.0f)}});
+  const uint32_t first = testing::addBox(r.scene, "behind", o + glm::vec3(20.0f, 0.0f, 20.0f),
+                                         o + glm::vec3(24.0f, 4.0f, 24.0f));
+  r.hiddenFaces[0] = first + testing::kMinusX;
+  r.hiddenFaces[1] = first + testing::kMinusZ;
+  r.cell = Box3f(r.cell.lo + o, r.cell.hi + o);
+  finalizeScene(r.scene);
+  return r;
+}
+
+// The known answer: behind a closed corner the box is hidden, but each
+// sheet alone, eroded at the corner by the shrinking, leaves the lines of
+// sight near the apex open; the chain of the two (proof, step 8) closes
+// them, near the origin and 50 km from it. A 1 mm slit is a crack taken as
+// closed.
+TEST(HorizonFusion, ChainsOfWallsHideWhatACornerHidesAndNoWallAloneDoes) {
+  for (const float slit : {0.0f, 0.001f})
+    for (const glm::vec3 offset : {glm::vec3(0.0f), glm::vec3(-30000.0f, 50.0f, 40000.0f)}) {
+      const CornerScene r = cornerScene(slit, offset);
+      // The truth over the sealed surface: the 1 mm slit closed.
+      const StaticWorld world = buildStaticWorld(r.scene);
+      const auto sealed = makeSealedRayQuery(*world.triangles, world.solids.weldTolerance());
+      SampledVisibilityOptions sampling;
+      sampling.probeFaces = {r.hiddenFaces[0], r.hiddenFaces[1]};
+      const SampledVisibility seen =
+          sampleVisibleFaces(*sealed, *world.triangles, r.cell, sampling);
+      ASSERT_FALSE(has(seen.faces, r.hiddenFaces[0]) || has(seen.faces, r.hiddenFaces[1]))
+          << "slit " << slit << ", offset " << offset.x;
+      HorizonFusionOptions alone;
+      alone.wallChains = false;
+      const HorizonFusion byLines(r.scene, world, alone), byChains(r.scene, world);
+      const HorizonFusionResult lines = byLines.cull(r.cell, allFaces(r.scene));
+      const HorizonFusionResult chains = byChains.cull(r.cell, allFaces(r.scene));
+      for (const uint32_t f : r.hiddenFaces) {
+        EXPECT_TRUE(has(lines.faces, f)) << "slit " << slit << ", offset " << offset.x;
+        EXPECT_FALSE(has(chains.faces, f)) << "slit " << slit << ", offset " << offset.x;
+      }
+      EXPECT_GT(chains.stats.chainSteps, 0u);
+      EXPECT_EQ(lines.stats.chainSteps, 0u);
+    }
+}
+
+// A real slit at the apex: the box is seen through it, and kept.
+TEST(HorizonFusion, KeepsWhatIsSeenThroughASlitAtACorner) {
+  const CornerScene r = cornerScene(0.4f);
+  const FlatTriangles triangles = flattenScene(r.scene);
+  const auto rays = makeEmbreeRayQuery(triangles);
+  SampledVisibilityOptions sampling;
+  sampling.probeFaces = allFaces(r.scene);
+  const SampledVisibility seen = sampleVisibleFaces(*rays, triangles, r.cell, sampling);
+  ASSERT_TRUE(has(seen.faces, r.hiddenFaces[0]) || has(seen.faces, r.hiddenFaces[1]));
+  const HorizonFusion fusion(r.scene);
+  const HorizonFusionResult fused = fusion.cull(r.cell, allFaces(r.scene));
+  for (uint32_t f : seen.faces) EXPECT_TRUE(has(fused.faces, f)) << "face " << f;
+}
+
 // Random sheets at every angle, grazing ones included, some cut into
-// collinear pieces with hairline or real gaps between them, around street
-// cells: no face the sampled truth sees is culled, and walls cull
-// something.
+// collinear pieces with hairline or real gaps between them, and zigzags of
+// sheets turning at corners, around street cells: no face the sampled truth
+// sees is culled, and walls cull something, chains of walls among them.
 TEST(HorizonFusion, CullsNoSampledVisibleFaceAmongRandomWallsAtEveryAngle) {
   size_t culled = 0;
+  uint64_t chainSteps = 0;
   for (uint32_t seed = 1; seed <= 3; ++seed) {
     Scene scene;
     testing::addGround(scene, -120.0f, -120.0f, 120.0f, 120.0f);
@@ -279,6 +359,28 @@ TEST(HorizonFusion, CullsNoSampledVisibleFaceAmongRandomWallsAtEveryAngle) {
                             {a.x, base + height, a.y}}});
       }
     }
+    // Zigzags: 2 to 4 sheets turning at corners by any angle, meeting
+    // there or leaving a hairline (1 mm) or a real (0.3 m) slit.
+    for (int k = 0; k < 40; ++k) {
+      glm::vec2 at(uniform(-100.0f, 100.0f), uniform(-100.0f, 100.0f));
+      if (glm::length(at) < 14.0f) continue;
+      float angle = uniform(0.0f, 6.2831853f);
+      const float base = k % 6 == 0 ? uniform(0.5f, 2.0f) : 0.0f;
+      const int legs = 2 + k % 3;
+      for (int leg = 0; leg < legs; ++leg) {
+        const glm::vec2 dir(std::cos(angle), std::sin(angle));
+        const float slit = leg == 0 ? 0.0f : (k % 4 == 1 ? 0.001f : (k % 4 == 2 ? 0.3f : 0.0f));
+        const glm::vec2 a = at + slit * dir, b = at + uniform(2.0f, 12.0f) * dir;
+        const float height = uniform(2.0f, 12.0f);
+        testing::addFaces(scene, "zigzag" + std::to_string(k) + "_" + std::to_string(leg),
+                          {{{a.x, base, a.y},
+                            {b.x, base, b.y},
+                            {b.x, base + height, b.y},
+                            {a.x, base + height, a.y}}});
+        at = b;
+        angle += uniform(0.3f, 2.8f) * (uniform(0.0f, 1.0f) < 0.5f ? 1.0f : -1.0f);
+      }
+    }
     for (int k = 0; k < 30; ++k) {
       const glm::vec2 c(uniform(-100.0f, 100.0f), uniform(-100.0f, 100.0f));
       if (glm::length(c) < 12.0f) continue;
@@ -304,9 +406,11 @@ TEST(HorizonFusion, CullsNoSampledVisibleFaceAmongRandomWallsAtEveryAngle) {
       for (uint32_t f : seen.faces)
         EXPECT_TRUE(has(fused.faces, f)) << "seed " << seed << ": face " << f << " seen but culled";
       culled += fused.stats.culled;
+      chainSteps += fused.stats.chainSteps;
     }
   }
   EXPECT_GT(culled, 0u);
+  EXPECT_GT(chainSteps, 0u);
 }
 
 TEST(HorizonFusion, KeepsAFaceSeenUnderARowThatFloatsAboveTheCellsBottom) {
@@ -395,11 +499,12 @@ TEST(HorizonFusion, StatsListEveryFieldOnceWithItsKeyAndLabel) {
   });
   EXPECT_EQ(keys, (std::vector<std::string>{"time_ms", "candidate_faces", "culled", "samples",
                                             "excluded_solids", "column_steps", "horizon_bins",
-                                            "wall_steps"}));
-  EXPECT_EQ(labels, (std::vector<std::string>{"time", "candidate faces", "culled by fused horizons",
-                                              "samples", "enclosures reaching below the cell",
-                                              "columns walked", "azimuth bins traced",
-                                              "horizon steps made by walls"}));
+                                            "wall_steps", "chain_steps"}));
+  EXPECT_EQ(labels,
+            (std::vector<std::string>{
+                "time", "candidate faces", "culled by fused horizons", "samples",
+                "enclosures reaching below the cell", "columns walked", "azimuth bins traced",
+                "horizon steps made by walls", "horizon steps made by chains of walls"}));
 }
 
 // Street cells of 4 m, eye height, over walkable columns spread evenly.

@@ -6,7 +6,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <optional>
 #include <random>
+#include <span>
 #include <vector>
 
 namespace vistream {
@@ -132,6 +134,86 @@ TEST(WallOccluders, StacksPanelsOnlyWhenTheyAreCloserAcrossTheirPlaneThanTheTole
   }
 }
 
+// The line whose plane holds X/Z points a and b.
+size_t lineThrough(const WallOccluders& walls, glm::vec2 a, glm::vec2 b) {
+  for (size_t k = 0; k < walls.size(); ++k) {
+    const WallLine& l = walls.line(k);
+    if (std::abs(glm::dot(l.n, glm::dvec2(a)) - l.c) < 1e-4 &&
+        std::abs(glm::dot(l.n, glm::dvec2(b)) - l.c) < 1e-4)
+      return k;
+  }
+  return walls.size();
+}
+
+// The joints at the end nearest to X/Z point p of the run of line k that
+// holds p.
+std::span<const WallJoint> jointsAt(const WallOccluders& walls, size_t k, glm::vec2 p) {
+  const double u = glm::dot(walls.line(k).t, glm::dvec2(p));
+  const std::optional<uint32_t> r = walls.runOf(k, u);
+  if (!r) {
+    ADD_FAILURE() << "no run of line " << k << " at (" << p.x << ", " << p.y << ")";
+    return {};
+  }
+  const WallRun& run = walls.run(*r);
+  return walls.joints(*r, std::abs(u - run.ua) < std::abs(u - run.ub) ? 0 : 1);
+}
+
+// An L of two panels meeting at a corner (x = 6.1, not a whole number of
+// bins), a panel ending on the middle of another (a T) on the L's plane
+// farther along (one line with a gap), and a panel stopping 5 cm short of
+// another's plane: the L's run of that line covers up to its corner, the
+// L's run ends are joined to each other at the corner, the T's stem is
+// joined to the bar at the bar's middle (the bar's ends to nothing), and
+// the short panel to nothing.
+TEST(WallOccluders, CoversRunsUpToTheirCornersAndJoinsThoseThatMeet) {
+  Walls w;
+  w.quad({0.0f, 0.0f}, {6.1f, 0.0f}, 0.0f, 8.0f);    // L, along X
+  w.quad({6.1f, 0.0f}, {6.1f, 5.0f}, 0.0f, 6.0f);    // L, along Z
+  w.quad({20.0f, 0.0f}, {30.0f, 0.0f}, 0.0f, 5.0f);  // T's bar (z = 0 too, apart)
+  w.quad({25.0f, 0.0f}, {25.0f, 7.0f}, 0.0f, 5.0f);  // T's stem
+  w.quad({40.0f, 3.0f}, {50.0f, 3.0f}, 0.0f, 5.0f);
+  w.quad({45.0f, 3.05f}, {45.0f, 9.0f}, 0.0f, 5.0f);  // 5 cm short of it
+  const WallOccluders walls = w.build();
+  const size_t alongX = lineThrough(walls, {0.0f, 0.0f}, {6.1f, 0.0f});
+  const size_t alongZ = lineThrough(walls, {6.1f, 0.0f}, {6.1f, 5.0f});
+  const size_t stem = lineThrough(walls, {25.0f, 1.0f}, {25.0f, 7.0f});
+  const size_t shortOne = lineThrough(walls, {45.0f, 4.0f}, {45.0f, 9.0f});
+  const size_t far = lineThrough(walls, {40.0f, 3.0f}, {50.0f, 3.0f});
+  ASSERT_LT(std::max({alongX, alongZ, stem, shortOne, far}), walls.size());
+  // The X line holds the L's and the T's bars (one plane, z = 0): the L's
+  // run is covered right up to its corner, not past it.
+  const WallLine& lx = walls.line(alongX);
+  const double a = tangential(lx, {0.0f, 0.0f}), b = tangential(lx, {6.1f, 0.0f});
+  const auto whole = walls.cover(alongX, std::min(a, b), std::max(a, b));
+  ASSERT_TRUE(whole.has_value());
+  EXPECT_NEAR(whole->y, 8.0, 1e-5);
+  const double past = tangential(lx, {6.2f, 0.0f});
+  EXPECT_FALSE(walls.cover(alongX, std::min(a, past), std::max(a, past)).has_value());
+
+  const auto cornerOfX = jointsAt(walls, alongX, {6.1f, 0.0f});
+  ASSERT_EQ(cornerOfX.size(), 1u);
+  EXPECT_EQ(cornerOfX[0].line, alongZ);
+  EXPECT_NEAR(cornerOfX[0].u, tangential(walls.line(alongZ), {6.1f, 0.0f}), 1e-5);
+  EXPECT_TRUE(jointsAt(walls, alongX, {0.0f, 0.0f}).empty());
+  const auto cornerOfZ = jointsAt(walls, alongZ, {6.1f, 0.0f});
+  ASSERT_EQ(cornerOfZ.size(), 1u);
+  EXPECT_EQ(cornerOfZ[0].line, alongX);
+  EXPECT_NEAR(cornerOfZ[0].u, b, 1e-5);
+  EXPECT_TRUE(jointsAt(walls, alongZ, {6.1f, 5.0f}).empty());
+
+  const auto stemFoot = jointsAt(walls, stem, {25.0f, 0.0f});
+  ASSERT_EQ(stemFoot.size(), 1u);
+  EXPECT_EQ(stemFoot[0].line, alongX);
+  EXPECT_NEAR(stemFoot[0].u, tangential(lx, {25.0f, 0.0f}), 1e-5);
+  EXPECT_TRUE(jointsAt(walls, stem, {25.0f, 7.0f}).empty());
+  EXPECT_TRUE(jointsAt(walls, alongX, {20.0f, 0.0f}).empty());
+  EXPECT_TRUE(jointsAt(walls, alongX, {30.0f, 0.0f}).empty());
+
+  EXPECT_TRUE(jointsAt(walls, shortOne, {45.0f, 3.05f}).empty());
+  EXPECT_TRUE(jointsAt(walls, far, {40.0f, 3.0f}).empty());
+  EXPECT_TRUE(jointsAt(walls, far, {50.0f, 3.0f}).empty());
+}
+
 // Whether (u, y) lies in a projected triangle of line k (with a hair of
 // slack for rounding).
 bool inLineTriangles(const WallOccluders& walls, const FlatTriangles& tris, size_t k, double u,
@@ -180,7 +262,8 @@ TEST(WallOccluders, EveryCoverItReportsIsCoveredPointByPoint) {
     ASSERT_GE(walls.size(), 1u);
     for (size_t k = 0; k < walls.size(); ++k) {
       const WallLine& line = walls.line(k);
-      const double span = double(line.binCount) * walls.binSize();
+      // Windows may run past the line's last corner (nothing covered there).
+      const double span = line.u1 - line.u0 + 1.0;
       for (int q = 0; q < 40; ++q) {
         const double ua = line.u0 + span * double(unit(rng));
         const double ub = ua + 3.0 * double(unit(rng));
