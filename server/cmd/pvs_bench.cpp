@@ -100,10 +100,10 @@ std::vector<Config> table2Configs() {
 }
 
 // Every method and combination the accuracy table and the district bake
-// compare: the paper's single convex occluders, + back faces of solids,
-// + solids fused within a plane (planar_fusion.h), + fused occlusion
-// horizons (when the PVS has them: not indoors; the default of `vistream-pvs
-// cell` and the bake).
+// compare: the paper's single convex occluders, + back faces of solids (and
+// faces without area: PvsOptions::faceless), + solids fused within a plane (planar_fusion.h), +
+// fused occlusion horizons (when the PVS has them: not indoors; the default of `vistream-pvs cell`
+// and the bake).
 struct Method {
   const char* name;
   PvsOptions options;
@@ -112,10 +112,12 @@ struct Method {
 std::vector<Method> benchMethods(bool horizons) {
   PvsOptions paper;
   paper.backFaces = false;
+  paper.faceless = false;
   paper.fusion = false;
   paper.planarFusion = false;
   PvsOptions backFaces = paper;
   backFaces.backFaces = true;
+  backFaces.faceless = true;  // faces without area go with the back faces
   PvsOptions planar = backFaces;
   planar.planarFusion = true;
   std::vector<Method> methods{

@@ -381,7 +381,7 @@ int runPvsTool(int argc, char** argv) {
   auto* cell = app.add_subcommand("cell", "the PVS of one view cell");
   std::string scene, cellText, method = "auto", fusion = "auto";
   bool asJson = false, noBbox = false, noIncremental = false, noRedundantOccluders = false,
-       noRedundantRays = false, noBackFaces = false, noPlanarFusion = false;
+       noRedundantRays = false, noBackFaces = false, noPlanarFusion = false, keepFaceless = false;
   size_t largeOccluders = 0;
   // The PVS stages every subcommand that computes a PVS can switch off.
   auto addPvsStageFlags = [&](CLI::App* sub) {
@@ -392,6 +392,8 @@ int runPvsTool(int argc, char** argv) {
     sub->add_flag("--no-redundant-rays", noRedundantRays, "cast every corner-vertex line");
     sub->add_flag("--no-back-faces", noBackFaces,
                   "keep faces that face away from the whole cell with a solid behind them");
+    sub->add_flag("--keep-faces-without-area", keepFaceless,
+                  "keep faces whose every triangle is degenerate (they cover no pixel)");
     sub->add_flag("--no-planar-fusion", noPlanarFusion,
                   "keep faces that only solids fused within one plane hide (a wall of several "
                   "pieces)");
@@ -608,6 +610,7 @@ int runPvsTool(int argc, char** argv) {
     options.dropOccludedOccluders = !noRedundantOccluders;
     options.removeRedundantLines = !noRedundantRays;
     options.backFaces = !noBackFaces;
+    options.faceless = !keepFaceless;
     options.planarFusion = !noPlanarFusion;
     return options;
   };

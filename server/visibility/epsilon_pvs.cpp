@@ -47,6 +47,7 @@ struct EpsilonPvs::Face {
   };
   std::vector<FrontPlane> oneSided;
   uint32_t solid = kNoHit;  // one-sided faces: their solid (EpsilonPvs::solidFloor_)
+  bool hasArea = false;     // some triangle is not degenerate
 };
 
 // A spatially compact group of one object's faces with its bounding box:
@@ -213,6 +214,7 @@ EpsilonPvs::EpsilonPvs(const Scene& scene, const OccluderOptions& occluderOption
                             !isDegenerateTriangle(o.mesh.positions[o.mesh.triangles[t][0]],
                                                   o.mesh.positions[o.mesh.triangles[t][1]],
                                                   o.mesh.positions[o.mesh.triangles[t][2]]);
+      f.hasArea |= distinct;
       if (distinct && corner[0] < 255 && corner[1] < 255 && corner[2] < 255) {
         const glm::dvec3& a = f.vertices[corner[0]];
         const glm::dvec3 n = glm::cross(f.vertices[corner[1]] - a, f.vertices[corner[2]] - a);
@@ -607,6 +609,11 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
       for (uint32_t fi = g.firstFace; fi < g.firstFace + g.faceCount; ++fi) {
         const Face& f = e.faces[fi];
         if (!isCandidate(f.id)) {
+          ++stats.facesOccluded;
+          continue;
+        }
+        if (options.faceless && !f.hasArea) {
+          ++stats.facesWithoutArea;
           ++stats.facesOccluded;
           continue;
         }

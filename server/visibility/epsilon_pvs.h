@@ -69,6 +69,12 @@
 //  - coarse-to-fine cells: a fine cell inside a coarse one only tests the
 //    faces of the coarse cell's PVS (PvsOptions::candidateFaces).
 //
+// Faces without area (PvsOptions::faceless): a face whose every triangle is
+// degenerate (repeated corners, or zero area to 1e-12 of its longest edge
+// squared: common/scene/scene.h) covers no pixel from any viewpoint, under
+// a rasterizer or a ray caster, so it is in no PVS (the loader keeps such
+// faces and counts them).
+//
 // Dynamic objects are never culled and never occlude: their faces are always
 // in the PVS. Thread safety: compute() is const and may run concurrently.
 #pragma once
@@ -98,6 +104,9 @@ struct PvsOptions {
   size_t largeOccluders = 0;          // 0: every occluder; K: the K largest by solid angle
   bool backFaces = true;              // --no-back-faces: keep faces that face away from the cell
   bool fusion = true;                 // run the fused stage, when EpsilonPvs has one (setFusion)
+  // --keep-faces-without-area: faces all of whose triangles are degenerate
+  // stay in the PVS (the paper's method keeps every face it cannot cull).
+  bool faceless = true;
   bool planarFusion = true;  // --no-planar-fusion: solids fused within a plane (planar_fusion.h)
   // Coarse-to-fine: when non-null, only these faces (sorted) can be in the PVS.
   const std::vector<uint32_t>* candidateFaces = nullptr;
@@ -126,7 +135,8 @@ struct PvsStats {
   size_t facesBackFacing = 0;  // culled because they face away from the whole cell
   size_t facesFused = 0;       // culled by the fused stage (hidden by several occluders together)
   double fusionMs = 0.0;
-  size_t facesPlanar = 0;  // culled by solids fused within a plane (in the face stage)
+  size_t facesPlanar = 0;       // culled by solids fused within a plane (in the face stage)
+  size_t facesWithoutArea = 0;  // left out: every triangle degenerate, seen from nowhere
 
   // Every field above, once: `vistream-pvs cell` prints its JSON and its
   // table from this list (common/core/stats_output.h).
@@ -157,10 +167,11 @@ struct PvsStats {
     f(StatField{"faces_fused", "faces hidden by fused occluders", ""}, facesFused);
     f(StatField{"fusion_ms", "fusion stage", "ms"}, fusionMs);
     f(StatField{"faces_planar", "faces hidden by solids fused in a plane", ""}, facesPlanar);
+    f(StatField{"faces_without_area", "faces without area", ""}, facesWithoutArea);
   }
 };
-// 21 fields of 8 bytes: a field added above must be added to forEachField too.
-static_assert(sizeof(PvsStats) == 21 * 8, "PvsStats changed: update PvsStats::forEachField");
+// 22 fields of 8 bytes: a field added above must be added to forEachField too.
+static_assert(sizeof(PvsStats) == 22 * 8, "PvsStats changed: update PvsStats::forEachField");
 
 struct PvsResult {
   std::vector<uint32_t> faces;    // sorted face IDs of the PVS

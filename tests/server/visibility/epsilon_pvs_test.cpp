@@ -87,6 +87,7 @@ std::string list(const std::vector<uint32_t>& ids) {
 PvsOptions paper() {
   PvsOptions o;
   o.backFaces = false;
+  o.faceless = false;
   o.planarFusion = false;
   return o;
 }
@@ -630,6 +631,23 @@ TEST(EpsilonPvs, SliverTrianglesAreCulledBehindAWallAndKeptBesideIt) {
     EXPECT_TRUE(inPvs(r, id.at("across the silhouette")));
     EXPECT_TRUE(holdsGroundTruth(w, kCell, r));
   }
+}
+
+// A face of zero area covers no pixel: by default it is in no PVS, even in
+// plain view beside the wall, while a sliver 2^-12 m high beside it stays;
+// the paper's method keeps both. Nothing the sampled truth sees is left out.
+TEST(EpsilonPvs, LeavesOutFacesWithoutAreaAndKeepsSliversThatHaveSome) {
+  World w;
+  const Ids id = slivers(w.scene(), glm::vec3(0));
+  const PvsResult byDefault = w.compute(kCell, PvsOptions{});
+  EXPECT_FALSE(inPvs(byDefault, id.at("collinear beside")));
+  EXPECT_FALSE(inPvs(byDefault, id.at("collinear behind")));
+  EXPECT_TRUE(inPvs(byDefault, id.at("beside")));
+  EXPECT_GE(byDefault.stats.facesWithoutArea, 1u);
+  EXPECT_TRUE(holdsGroundTruth(w, kCell, byDefault));
+  const PvsResult kept = w.compute(kCell, paper());
+  EXPECT_TRUE(inPvs(kept, id.at("collinear beside")));
+  EXPECT_EQ(kept.stats.facesWithoutArea, 0u);
 }
 
 // The known answers of a grazing set-up (grazingPastASolidEdge and the

@@ -42,6 +42,7 @@ PvsStats distinctPvsStats() {
   s.facesFused = 119;
   s.fusionMs = 4.5;
   s.facesPlanar = 120;
+  s.facesWithoutArea = 121;
   return s;
 }
 
@@ -69,10 +70,11 @@ const std::map<std::string, std::pair<std::string, std::string>> kPvsFields = {
     {"faces_fused", {"faces hidden by fused occluders", "119"}},
     {"fusion_ms", {"fusion stage (ms)", "4.500"}},
     {"faces_planar", {"faces hidden by solids fused in a plane", "120"}},
+    {"faces_without_area", {"faces without area", "121"}},
 };
-// Four doubles and seventeen 8-byte counts: a member added to PvsStats
+// Four doubles and eighteen 8-byte counts: a member added to PvsStats
 // without a line above fails here.
-static_assert(sizeof(PvsStats) == 21 * 8);
+static_assert(sizeof(PvsStats) == 22 * 8);
 
 std::vector<std::string> linesOf(const std::string& text) {
   std::vector<std::string> lines;
