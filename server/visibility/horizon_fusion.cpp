@@ -159,7 +159,10 @@
 //    triangle strictly before p, and p is not seen from v (as in step 2, a
 //    point on a triangle blocks). A wall's step lies beyond the column it is
 //    found in: it waits (Walk::pending) until the walk has entered every
-//    column before its distance, so that the horizon's steps keep rising.
+//    column before its distance, so that the horizon's steps keep rising;
+//    taken after a column step that ends farther, it takes that distance
+//    (a step moved farther hides a subset: what lies beyond the new
+//    distance lies beyond the old), so distances never fall either.
 //    Block bounds take the walls' tops: a wall step's slope is at most
 //    (T - Y) / tin when T > Y and (T - Y) / exit otherwise, as a column's.
 //
@@ -970,8 +973,12 @@ struct HorizonQuery {
     bool found = false;
     size_t n = 0;
     for (; n < walk.pending.size() && walk.pending[n].d <= upTo && !found; ++n) {
-      const Step& st = walk.pending[n];
+      Step st = walk.pending[n];
       if (!(st.slope > best)) continue;
+      // Distances never fall along the steps (hidingStep searches them):
+      // a wall step taken after a column step that ends farther takes that
+      // distance, and hides less.
+      if (!walk.steps.empty()) st.d = std::max(st.d, walk.steps.back().d);
       walk.steps.push_back(st);
       best = st.slope;
       found = hides(st);
@@ -1274,7 +1281,18 @@ struct HorizonQuery {
   // minY high; null if none.
   const Step* hidingStep(const std::vector<Step>& steps, double rmin, double slope,
                          double minY) const {
-    for (size_t n = steps.size(); n-- > 0;) {
+    // Only the steps nearer than rmin can hide, and distances never fall
+    // along a horizon (takePending).
+    const double bound = rmin * (1.0 - 1e-9);
+    size_t lo = 0, hi = steps.size();
+    while (lo < hi) {
+      const size_t mid = (lo + hi) / 2;
+      if (steps[mid].d < bound)
+        lo = mid + 1;
+      else
+        hi = mid;
+    }
+    for (size_t n = lo; n-- > 0;) {
       const Step& st = steps[n];
       if (!(st.slope > slope)) break;  // earlier steps are lower still
       if (stepHides(st, rmin, slope, minY)) return &st;
