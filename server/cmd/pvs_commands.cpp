@@ -392,8 +392,9 @@ int runPvsTool(int argc, char** argv) {
     sub->add_flag("--no-redundant-rays", noRedundantRays, "cast every corner-vertex line");
     sub->add_flag("--no-back-faces", noBackFaces,
                   "keep faces that face away from the whole cell with a solid behind them");
-    sub->add_flag("--keep-faces-without-area", keepFaceless,
-                  "keep faces whose every triangle is degenerate (they cover no pixel)");
+    sub->add_flag(
+        "--keep-faces-without-area", keepFaceless,
+        "keep faces whose every triangle is degenerate (they have no area to be seen by)");
     sub->add_flag("--no-planar-fusion", noPlanarFusion,
                   "keep faces that only solids fused within one plane hide (a wall of several "
                   "pieces)");

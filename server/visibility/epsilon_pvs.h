@@ -71,9 +71,10 @@
 //
 // Faces without area (PvsOptions::faceless): a face whose every triangle is
 // degenerate (repeated corners, or zero area to 1e-12 of its longest edge
-// squared: common/scene/scene.h) covers no pixel from any viewpoint, under
-// a rasterizer or a ray caster, so it is in no PVS (the loader keeps such
-// faces and counts them).
+// squared: common/scene/scene.h) has no area to be seen by: no ray of the
+// ray casters or of the oracles hits it, the software rasterizer skips it,
+// and OpenGL lights at most stray pixels along its segment. It is in no PVS
+// (the loader keeps such faces and counts them).
 //
 // Dynamic objects are never culled and never occlude: their faces are always
 // in the PVS. Thread safety: compute() is const and may run concurrently.

@@ -128,9 +128,9 @@
 //    normal, t its tangent, u = t . x), with heights [B(u), T(u)] that its
 //    triangles cover at every u of each of its bins. With tau the larger of
 //    the weld tolerance of step 1 (1 cm) and the margin, its triangles lie
-//    within tau / 3 of the plane and the cover joins them across gaps of at
-//    most tau / 3 along the plane, so every crack it closes is narrower
-//    than tau (at most 2 tau / 3 across the plane, tau / 3 along it); such
+//    within tau / 4 of the plane and the cover joins them across gaps of at
+//    most tau / 4 along the plane, so every crack it closes is narrower
+//    than tau (at most tau / 2 across the plane, tau / 4 along it); such
 //    cracks are taken as closed, as the welding of step 1 does, and the
 //    argument below is for the wall so read. Let bin k's central
 //    ray from s cross the line at distance d0 (in a column the walk reads)
@@ -166,12 +166,17 @@
 //    Block bounds take the walls' tops: a wall step's slope is at most
 //    (T - Y) / tin when T > Y and (T - Y) / exit otherwise, as a column's.
 //
-// 8. Chains of walls (HorizonFusionOptions::walls). Where the window of
-//    step 7 runs off the end of the covered run of the wall line the
+// 8. Chains of walls (HorizonFusionOptions::wallChains). Where the window
+//    of step 7 runs off the end of the covered run of the wall line the
 //    central ray crosses (a building's corner), the wall may go on in
-//    another line joined to it there (wall_occluders.h: the run's end within
-//    tau / 3 of the other's plane and of one of its runs, a crack narrower
-//    than tau, closed as in step 7). Put strip
+//    another line joined to it there (wall_occluders.h: the run's end, a
+//    corner of one of its triangles projected on its plane, within tau / 8
+//    of the other's plane and of one of its runs). Between the triangles
+//    of the two lines the crack is then narrower than tau: at most tau / 4
+//    from the corner to its projection, tau / 8 across and along to the
+//    other line's run (sqrt(2) tau / 8), and tau / 4 across plus tau / 4
+//    along from there to that line's triangles, 0.93 tau in all; it is
+//    closed, as in step 7. Put strip
 //    coordinates on the plane, a = dir . (x - s_h) along the central ray
 //    and b = perp . (x - s_h) across it, and let rp = r + 2 tau. From the
 //    crossing, follow the line both ways, turning at joints, until each
@@ -180,12 +185,12 @@
 //    (heights [B, T] = the highest base and lowest top over all pieces,
 //    B below the cell), and the pieces' a lie in [amin, amax]. The chain
 //    so followed is a connected curve in the rectangle [amin, amax] x
-//    [-rp, rp] joining its two long sides. The line of sight of step 4 lies
+//    [-rp, rp] joining its sides b = -rp and b = rp. The line of sight of step 4 lies
 //    within r of the central ray's point at distance lam R (steps 4-5), so
 //    |b| <= r and |a - lam R| <= r: at lam R <= amin - rp it has a < amin,
 //    at lam R >= amax + rp it has a > amax (both within the reach), and in
-//    between it holds a path across the rectangle from the short side
-//    a = amin to a = amax. Two such paths in a rectangle meet, so the line
+//    between it holds a path across the rectangle from its side a = amin
+//    to its side a = amax. Two such paths in a rectangle meet, so the line
 //    of sight crosses the chain at some lam1 with lam1 R in
 //    [amin - rp, amax + rp], over a covered piece. As in step 7 (with
 //    d0 - delta and d0 + delta now amin - rp > 0 and amax + rp <= reach) the
@@ -310,10 +315,18 @@ struct HorizonFusion::Impl {
   double g = 1.0;
   int nx = 0, nz = 0;
   int window = 0;  // shrinking radius in columns
-  // Shrunk (top, base) per column, stored block by block (kBlock x kBlock
+  // Shrunk top and base per column, stored block by block (kBlock x kBlock
   // columns together) so that a horizon walking a block reads few cache
-  // lines; top == kNoTop: nothing occludes there.
-  std::vector<glm::vec2> columns;
+  // lines; top == kNoTop: nothing occludes there. With them, the column's
+  // first entry in wallLineIds (its last is the next column's first): one
+  // read gives a walk all it needs of a column. One more column at the end
+  // closes the last range.
+  struct Column {
+    float top = kNoTop;
+    float base = 0.0f;
+    uint32_t firstWall = 0;
+  };
+  std::vector<Column> columns;
   size_t columnIndex(int i, int j) const {
     return (size_t(j / kBlock) * size_t(bx) + size_t(i / kBlock)) * size_t(kBlock * kBlock) +
            size_t((j % kBlock) * kBlock + i % kBlock);
@@ -346,10 +359,11 @@ struct HorizonFusion::Impl {
     std::vector<glm::dvec3> lowSide, highSide;
   };
   std::vector<BinTable> binTables;
-  // Vertical walls (proof, step 7) and, per column (in columnIndex order),
-  // the wall lines whose triangles meet its square grown by the margin.
+  // Vertical walls (proof, step 7) and, per column (in columnIndex order,
+  // from Column::firstWall), the wall lines whose triangles meet its square
+  // grown by the margin.
   WallOccluders walls;
-  std::vector<uint32_t> wallStart, wallLineIds;
+  std::vector<uint32_t> wallLineIds;
   double shrinkRadius = 0.0;  // epsilon + binMargin
   bool wallChains = true;     // HorizonFusionOptions::wallChains
   // Smallest sine of the angle between a horizon's ray and a wall it
@@ -747,11 +761,13 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
   bx = (nx + kBlock - 1) / kBlock;
   bz = (nz + kBlock - 1) / kBlock;
   blockTop.assign(size_t(bx) * size_t(bz), kNoTop);
-  columns.assign(blockTop.size() * size_t(kBlock * kBlock), glm::vec2(kNoTop, 0.0f));
+  columns.assign(blockTop.size() * size_t(kBlock * kBlock) + 1, Column{});
   for (int j = 0; j < nz; ++j)
     for (int i = 0; i < nx; ++i) {
       const float t = rawTop[size_t(j) * size_t(nx) + size_t(i)];
-      columns[columnIndex(i, j)] = {t, rawBase[size_t(j) * size_t(nx) + size_t(i)]};
+      Column& c = columns[columnIndex(i, j)];
+      c.top = t;
+      c.base = rawBase[size_t(j) * size_t(nx) + size_t(i)];
       float& b = blockTop[size_t(j / kBlock) * size_t(bx) + size_t(i / kBlock)];
       b = std::max(b, t);
       if (t != kNoTop) maxTop = std::max(maxTop, double(t));
@@ -778,10 +794,10 @@ void HorizonFusion::Impl::build(const HorizonFusionOptions& o) {
 // meet; a column's block (and so its super-block) and maxTop take the
 // line's highest top, so that a walk skipping a block skips no wall step.
 void HorizonFusion::Impl::buildWalls() {
-  // A third of the tolerance for the plane and for the gaps the chains
-  // close: two members lie at most 2 tau / 3 apart across the plane, so a
-  // crack closed between them is narrower than tau (proof, step 7).
-  walls = WallOccluders(tris, wallTolerance() / 3.0, 0.25);
+  // A quarter of the tolerance for the plane and for the gaps the covers
+  // close, an eighth for the joints: every crack closed between members,
+  // or between two joined lines, is narrower than tau (proof, steps 7-8).
+  walls = WallOccluders(tris, wallTolerance() / 4.0, 0.25, wallTolerance() / 8.0);
   std::vector<std::pair<uint32_t, uint32_t>> entries;  // (column index, line)
   for (size_t k = 0; k < walls.size(); ++k)
     for (uint32_t t : walls.triangles(k)) {
@@ -792,9 +808,8 @@ void HorizonFusion::Impl::buildWalls() {
     }
   std::sort(entries.begin(), entries.end());
   entries.erase(std::unique(entries.begin(), entries.end()), entries.end());
-  wallStart.assign(columns.size() + 1, 0);
-  for (const auto& [c, k] : entries) ++wallStart[c + 1];
-  for (size_t c = 0; c < columns.size(); ++c) wallStart[c + 1] += wallStart[c];
+  for (const auto& [c, k] : entries) ++columns[c + 1].firstWall;
+  for (size_t c = 0; c + 1 < columns.size(); ++c) columns[c + 1].firstWall += columns[c].firstWall;
   wallLineIds.resize(entries.size());
   for (size_t n = 0; n < entries.size(); ++n) wallLineIds[n] = entries[n].second;
   // Raise the bounds the walks skip by.
@@ -1104,10 +1119,11 @@ struct HorizonQuery {
       }
       const double tout = std::min({tx, tz, t1});
       ++stats.columnSteps;
-      const glm::vec2 column = w.columns[w.columnIndex(i, j)];
-      const double h = column.x;
-      if (h != double(kNoTop) && double(column.y) <= lowest && !isExcluded(i, j)) {
-        Step st{0.0, 0.0, double(column.y)};
+      const size_t c = w.columnIndex(i, j);
+      const HorizonFusion::Impl::Column& column = w.columns[c];
+      const double h = column.top;
+      if (h != double(kNoTop) && double(column.base) <= lowest && !isExcluded(i, j)) {
+        Step st{0.0, 0.0, double(column.base)};
         if (h > y) {
           st.d = tin;
           st.slope = tin > 1e-9 ? (h - y) / tin : -kInf;
@@ -1121,11 +1137,8 @@ struct HorizonQuery {
           found = hides(st);
         }
       }
-      if (!w.wallStart.empty()) {
-        const size_t c = w.columnIndex(i, j);
-        for (uint32_t n = w.wallStart[c]; n < w.wallStart[c + 1]; ++n)
-          wallStep(w.wallLineIds[n], org, dir, tin, tout, reach, walk.pending);
-      }
+      for (uint32_t n = column.firstWall; n < w.columns[c + 1].firstWall; ++n)
+        wallStep(w.wallLineIds[n], org, dir, tin, tout, reach, walk.pending);
       // Nothing farther can rise above `best`: every later square starts at
       // tout or beyond and no top exceeds maxTop.
       if (w.maxTop > y && best * tout >= w.maxTop - y) {
@@ -1202,28 +1215,33 @@ struct HorizonQuery {
     const double rp = w.shrinkRadius + 2.0 * w.wallTolerance();
     const std::optional<uint32_t> run = w.walls.runOf(k, u);
     if (!run) return std::nullopt;
-    int side[2] = {0, 0};
-    Chain chain;
-    for (int e = 0; e < 2; ++e) {
-      const std::optional<Chain> found =
-          follow(k, *run, u, e == 0 ? 1 : -1, 0, chain, org, dir, rp, reach, side[e]);
-      if (!found) return std::nullopt;
-      chain = *found;
+    // Way 0 along the line's tangent leaves by the side `first`, way 1 by
+    // the other; the side the line itself heads for first.
+    const double heads = glm::dot(glm::dvec2(-dir.y, dir.x), w.walls.line(k).t);
+    std::optional<Chain> chain;
+    for (const int first : {heads >= 0.0 ? 1 : -1, heads >= 0.0 ? -1 : 1}) {
+      const std::optional<Chain> way0 =
+          follow(k, *run, u, 1, first, 0, Chain{}, org, dir, rp, reach);
+      if (!way0) continue;
+      chain = follow(k, *run, u, -1, -first, 0, *way0, org, dir, rp, reach);
+      if (chain) break;
     }
-    if (side[0] == 0 || side[0] != -side[1]) return std::nullopt;
-    const double near = chain.amin - rp, far = chain.amax + rp, y = s.y;
-    return Step{far, chain.top > y ? (chain.top - y) / far : (chain.top - y) / near, chain.base};
+    if (!chain) return std::nullopt;
+    const double near = chain->amin - rp, far = chain->amax + rp, y = s.y;
+    return Step{far, chain->top > y ? (chain->top - y) / far : (chain->top - y) / near,
+                chain->base};
   }
 
   // Follows run `run` of line k from tangential coordinate u in direction
   // sign (+1: the line's tangent), through at most kMaxJoints - joints more
-  // joints, until it leaves the strip |perp . (x - org)| <= rp; `acc` grown
-  // by the pieces followed, and `side` the sign of the strip's side left
-  // by. Nothing when a piece is not covered, its base is not below the
-  // cell, or the chain comes within rp of the sample or of the reach.
-  std::optional<Chain> follow(uint32_t k, uint32_t run, double u, int sign, int joints, Chain acc,
-                              glm::dvec2 org, glm::dvec2 dir, double rp, double reach,
-                              int& side) const {
+  // joints, until it leaves the strip |perp . (x - org)| <= rp by the side
+  // `side` (the sign of perp . x there); `acc` grown by the pieces
+  // followed. Nothing when no way does, a piece is not covered, its base is
+  // not below the cell, or the chain comes within rp of the sample or of
+  // the reach.
+  std::optional<Chain> follow(uint32_t k, uint32_t run, double u, int sign, int side, int joints,
+                              Chain acc, glm::dvec2 org, glm::dvec2 dir, double rp,
+                              double reach) const {
     const WallLine& line = w.walls.line(k);
     const glm::dvec2 perp(-dir.y, dir.x), m = double(sign) * line.t;
     const double b = glm::dot(perp, line.at(u) - org), rate = glm::dot(perp, m);
@@ -1251,7 +1269,7 @@ struct HorizonQuery {
     }
     if (!(acc.amin - rp > 1e-9) || !(acc.amax + rp <= reach)) return std::nullopt;
     if (out) {
-      side = leaves;
+      if (leaves != side) return std::nullopt;
       return acc;
     }
     if (joints == kMaxJoints) return std::nullopt;
@@ -1259,7 +1277,7 @@ struct HorizonQuery {
       const WallRun& next = w.walls.run(j.run);
       for (int s2 : {1, -1}) {
         if (double(s2) * ((s2 > 0 ? next.ub : next.ua) - j.u) <= 1e-9) continue;
-        if (auto r = follow(j.line, j.run, j.u, s2, joints + 1, acc, org, dir, rp, reach, side))
+        if (auto r = follow(j.line, j.run, j.u, s2, side, joints + 1, acc, org, dir, rp, reach))
           return r;
       }
     }

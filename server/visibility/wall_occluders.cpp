@@ -118,10 +118,12 @@ std::pair<glm::dvec2, glm::dvec2> farthestXzCorners(const FlatTriangles& tris, s
   return {a, b};
 }
 
-WallOccluders::WallOccluders(const FlatTriangles& tris, double tolerance, double binSize)
-    : binSize_(binSize), tolerance_(tolerance) {
+WallOccluders::WallOccluders(const FlatTriangles& tris, double tolerance, double binSize,
+                             double jointTolerance)
+    : binSize_(binSize), tolerance_(tolerance), jointTolerance_(jointTolerance) {
   VS_CHECK(std::isfinite(tolerance) && tolerance > 0.0);
   VS_CHECK(std::isfinite(binSize) && binSize > 0.0);
+  VS_CHECK(std::isfinite(jointTolerance) && jointTolerance > 0.0 && jointTolerance < 0.2);
   const double tol = tolerance;
   // Keys: lines of about the same direction and offset fall together;
   // membership is then checked exactly against a reference line.
@@ -240,7 +242,9 @@ WallOccluders::WallOccluders(const FlatTriangles& tris, double tolerance, double
       const size_t s0 = size_t(std::upper_bound(breaks.begin(), breaks.end(), x0) -
                                breaks.begin());  // sub-span s0 - 1 holds x0
       double base = -std::numeric_limits<double>::infinity(), top = -base;
+      bool any = false;
       for (size_t k = s0 == 0 ? 0 : s0 - 1; k < spans && breaks[k] < x1; ++k) {
+        any = true;
         // The top is linear over the sub-span: its lowest over the part
         // inside [x0, x1] is at one end of that part.
         const double p = breaks[k], q = breaks[k + 1];
@@ -254,7 +258,7 @@ WallOccluders::WallOccluders(const FlatTriangles& tris, double tolerance, double
       base += 1e-6;
       top -= 1e-6;
       glm::vec2 cover(0.0f, -1.0f);
-      if (top > base) {
+      if (any && top > base) {
         cover = {std::nextafter(float(base), std::numeric_limits<float>::infinity()),
                  std::nextafter(float(top), -std::numeric_limits<float>::infinity())};
         if (cover.y < cover.x) cover = {0.0f, -1.0f};
@@ -318,10 +322,10 @@ uint32_t WallOccluders::tailBin(const WallLine& line, double u) const {
 }
 
 void WallOccluders::buildJoints() {
-  const double tol = tolerance_;
+  const double tol = jointTolerance_;
   // Run ends hashed by cells of kCell metres; each run is sampled every
   // half cell and the 3 x 3 cells around each sample read, which finds
-  // every end within tol (< kCell / 4) of it.
+  // every end within tol (< kCell / 4, checked) of it.
   constexpr double kCell = 1.0;
   auto cellOf = [](glm::dvec2 p) {
     return std::pair{int64_t(std::floor(p.x / kCell)), int64_t(std::floor(p.y / kCell))};
@@ -391,6 +395,7 @@ std::optional<glm::dvec2> WallOccluders::cover(size_t k, double ua, double ub) c
   const uint32_t head = headBin(line, run.ua), tail = tailBin(line, run.ub);
   const uint32_t b0 = std::max(head, headBin(line, ua)),
                  b1 = std::min(tail, std::max(b0, tailBin(line, ub)));
+  if (b1 < b0) return std::nullopt;  // a point at a run's end on a bin side
   double base = -std::numeric_limits<double>::infinity(), top = -base;
   for (uint32_t b = b0; b <= b1; ++b) {
     const glm::vec2 c = b == head ? run.head : (b == tail ? run.tail : bins_[line.firstBin + b]);

@@ -15,11 +15,13 @@
 //
 // Runs and joints: a line's cover is cut into runs, the stretches between
 // its gaps, each exact to the triangle corners it ends at. The end of a run
-// that lies within `tolerance` of another line's plane, at a tangential
-// coordinate within `tolerance` of one of that line's runs, is joined to
-// it there (a building's corner; a wall ending on another): a chain of
-// walls may turn from one to the other across a crack narrower than
-// 2 x `tolerance`.
+// (a triangle corner projected on its line's plane) that lies within
+// `jointTolerance` of another line's plane, at a tangential coordinate
+// within `jointTolerance` of one of that line's runs, is joined to it there
+// (a building's corner; a wall ending on another): a chain of walls may
+// turn from one to the other. Between the triangles of the two lines the
+// crack is then at most 3 x `tolerance` + sqrt(2) x `jointTolerance` wide
+// (each line's triangles off its plane, one cover's joining along it).
 //
 // Frames and units: the scene's local frame, metres, Y up. The normal n of a
 // line is horizontal, of unit length, with n.x > 0 or (n.x == 0, n.y > 0)
@@ -80,10 +82,11 @@ class WallOccluders {
  public:
   WallOccluders() = default;
   // Groups the non-degenerate triangles of `tris` that stand within
-  // `tolerance` metres of a vertical plane and are taller than it, and
-  // computes each line's covered heights. Both parameters positive and
-  // finite (VS_CHECK).
-  WallOccluders(const FlatTriangles& tris, double tolerance, double binSize);
+  // `tolerance` metres of a vertical plane and are taller than it, computes
+  // each line's covered heights and joins run ends within `jointTolerance`
+  // of another line. Every parameter positive and finite (VS_CHECK),
+  // `jointTolerance` below 0.2 m.
+  WallOccluders(const FlatTriangles& tris, double tolerance, double binSize, double jointTolerance);
 
   size_t size() const { return lines_.size(); }
   const WallLine& line(size_t k) const { return lines_[k]; }
@@ -105,6 +108,7 @@ class WallOccluders {
   }
   double binSize() const { return binSize_; }
   double tolerance() const { return tolerance_; }
+  double jointTolerance() const { return jointTolerance_; }
 
  private:
   void buildJoints();
@@ -119,7 +123,7 @@ class WallOccluders {
   std::vector<WallRun> runs_;
   std::vector<uint32_t> jointStart_;  // CSR over run ends (2 r, 2 r + 1)
   std::vector<WallJoint> joints_;
-  double binSize_ = 0.25, tolerance_ = 1e-3;
+  double binSize_ = 0.25, tolerance_ = 1e-3, jointTolerance_ = 5e-4;
 };
 
 }  // namespace vistream

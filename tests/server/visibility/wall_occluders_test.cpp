@@ -29,7 +29,7 @@ struct Walls {
     triangles.push_back({n, n + 2, n + 3});
   }
   WallOccluders build() const {
-    return WallOccluders(flattenMesh(positions, triangles), kTolerance, 0.25);
+    return WallOccluders(flattenMesh(positions, triangles), kTolerance, 0.25, 0.5 * kTolerance);
   }
 };
 
@@ -112,7 +112,7 @@ TEST(WallOccluders, StacksPanelsThatMeetAndLeavesOutTiltedOnes) {
 // sight rising through y = 3 passes): no line covers both, although both lie
 // within 10 mm of a plane between them; the same panels 2 mm apart (a crack
 // read as closed) make one line covering [0, 6]. The horizons give the
-// class a third of their 1 cm tolerance (proof, step 7).
+// class a quarter of their 1 cm tolerance (proof, step 7).
 TEST(WallOccluders, StacksPanelsOnlyWhenTheyAreCloserAcrossTheirPlaneThanTheTolerance) {
   for (const float apart : {0.018f, 0.002f}) {
     Walls w;
@@ -122,7 +122,7 @@ TEST(WallOccluders, StacksPanelsOnlyWhenTheyAreCloserAcrossTheirPlaneThanTheTole
     // reference a group is measured against, each panel half the distance
     // from it.
     w.quad({10.0f, 0.5f * apart}, {30.0f, 0.5f * apart}, 0.0f, 6.0f);
-    const WallOccluders walls(flattenMesh(w.positions, w.triangles), 0.01 / 3.0, 0.25);
+    const WallOccluders walls(flattenMesh(w.positions, w.triangles), 0.01 / 4.0, 0.25, 0.01 / 8.0);
     bool spansBoth = false;
     for (size_t k = 0; k < walls.size(); ++k) {
       const WallLine& line = walls.line(k);
@@ -258,7 +258,7 @@ TEST(WallOccluders, EveryCoverItReportsIsCoveredPointByPoint) {
       s += len + (unit(rng) < 0.3f ? 0.05f + 0.15f * unit(rng) : 0.0f);
     }
     const FlatTriangles tris = flattenMesh(w.positions, w.triangles);
-    const WallOccluders walls(tris, kTolerance, 0.25);
+    const WallOccluders walls(tris, kTolerance, 0.25, 0.5 * kTolerance);
     ASSERT_GE(walls.size(), 1u);
     for (size_t k = 0; k < walls.size(); ++k) {
       const WallLine& line = walls.line(k);
