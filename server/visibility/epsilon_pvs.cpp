@@ -530,9 +530,12 @@ PvsResult EpsilonPvs::compute(const Box3f& cell, const PvsOptions& options) cons
            std::binary_search(options.candidateFaces->begin(), options.candidateFaces->end(), face);
   };
 
-  // Solids fused within a plane, for the faces no single occluder hides.
-  PlanarFusion::CellPlanes planes =
-      options.planarFusion && planar_ ? planar_->planesFor(cell) : PlanarFusion::CellPlanes{};
+  // Solids fused within a plane, for the faces no single occluder hides,
+  // where no occlusion horizons follow (PvsOptions::planarFusion).
+  const bool horizonsFollow = options.fusion && fusion_;
+  PlanarFusion::CellPlanes planes = options.planarFusion && planar_ && !horizonsFollow
+                                        ? planar_->planesFor(cell)
+                                        : PlanarFusion::CellPlanes{};
   const CellSupport support(cell);
   auto faceAway = [&](const Face& f) {
     return f.solid != kNoHit && facesAway(f, cell, support, solidFloor_[f.solid]);
